@@ -1,0 +1,30 @@
+//! `imu-lab`: the pico-imu host lab. Each subcommand lives in `cmd/<name>.rs` and stays thin
+//! over the library crates.
+use clap::{Parser, Subcommand};
+
+mod cmd;
+mod input;
+
+#[derive(Parser)]
+#[command(name = "imu-lab", version, about = "Characterise and calibrate low-cost IMUs")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Allan-family deviation of one column, with 68.3 % confidence bounds.
+    Adev(cmd::adev::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Adev(a) => cmd::adev::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

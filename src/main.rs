@@ -1,0 +1,3 @@
+//! Placeholder until the firmware lands.
+#![no_std]
+#![no_main]
