@@ -1,0 +1,130 @@
+#!/usr/bin/env node
+// pico-imu-sim: run the firmware ELF on an emulated RP2040 with simulated sensors.
+//
+//   node src/cli.js run   --elf FW.elf [--seconds 10] [--stream S.csv | --seed N] [--port P]
+//                         [--fault SPEC]... [--served DIR] [--summary FILE] [--log FILE]
+//   node src/cli.js gen-stream --out S.csv [--seconds 60] [--seed 1] [--sine AMP,FREQ]
+//   node src/cli.js bench --elf FW.elf [--seconds 2] --report FILE.md
+//
+// Exit status: 0 = ran to the end; 1 = the firmware stopped (panic/UDF), deadlocked or a
+// model/harness error (the decoded defmt log is printed); 2 = bad arguments.
+
+import { parseArgs } from 'node:util';
+import { writeFileSync } from 'node:fs';
+import { Session, parseFault, parseDuration } from './session.js';
+import { loadStreamCsv, generateStream, streamToCsv } from './stream.js';
+import { benchReport } from './bench.js';
+
+const usage = `usage:
+  pico-imu-sim run --elf FW.elf [--seconds S] [--stream S.csv | --seed N] [--port P | --port-file F]
+                   [--warmup S] [--fault SPEC]... [--instant-i2c] [--served DIR] [--summary F.json]
+                   [--log F.txt] [--quiet]
+  pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
+  pico-imu-sim bench --elf FW.elf [--seconds S] [--report F.md] [--json F.json]
+fault SPEC: nack:mpu@5s:3 | vanish:qmc@10s:2s | stuck@20s | overflow@30s:120ms`;
+
+function fail(msg, code = 2) {
+  process.stderr.write(`pico-imu-sim: ${msg}\n`);
+  process.exit(code);
+}
+
+function streamFrom(v, seconds) {
+  if (v.stream) return loadStreamCsv(v.stream);
+  const sine = v.sine ? v.sine.split(',').map(Number) : null;
+  return generateStream({
+    seed: Number(v.seed ?? 1),
+    seconds: Math.max(1, Math.ceil(seconds)),
+    sine: sine ? { amplitude: sine[0], frequency: sine[1] } : null,
+  });
+}
+
+async function cmdRun(v) {
+  if (!v.elf) fail('run: --elf is required');
+  const seconds = Number(v.seconds ?? 10);
+  const warmup = v.warmup ? parseDuration(v.warmup) : 0;
+  const faults = (v.fault ?? []).map(parseFault);
+  const stream = streamFrom(v, seconds);
+  const s = new Session({ elf: v.elf, stream, faults, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
+  if (!s.decoder.available) process.stderr.write('pico-imu-sim: defmt-print not found (cargo install defmt-print): RTT kept raw\n');
+  const stopAt = seconds * 1e9;
+  let stop = null;
+  if (v.port !== undefined || v['port-file']) {
+    // Boot and run the warm-up before the port opens; afterwards emulated time advances only
+    // while a host is connected (a closed port would otherwise race ahead of the host).
+    if (warmup) stop = await s.run(warmup);
+    const port = await s.listen(Number(v.port ?? 0));
+    process.stderr.write(`pico-imu-sim: USB CDC on tcp:127.0.0.1:${port}\n`);
+    if (v['port-file']) writeFileSync(v['port-file'], `${port}\n`);
+    const onSignal = () => {
+      s.emu.stop({ kind: 'signal', message: 'stopped by signal' });
+    };
+    process.on('SIGINT', onSignal);
+    process.on('SIGTERM', onSignal);
+    if (!stop) stop = await s.run(stopAt, { shouldPause: () => !s.client });
+    if (stop && stop.kind === 'signal') stop = null;
+  } else {
+    stop = await s.run(stopAt);
+  }
+  await s.close();
+  const summary = s.summary();
+  if (v.served) s.writeServed(v.served);
+  if (v.summary) writeFileSync(v.summary, JSON.stringify(summary, null, 2));
+  if (v.log) writeFileSync(v.log, s.logLines.join('\n') + '\n');
+  if (!s.decoder.available && v.log) writeFileSync(`${v.log}.rtt`, s.decoder.rawBytes());
+  const line = `emulated ${summary.emulated_s.toFixed(3)} s in ${summary.wall_s.toFixed(2)} s wall (${(summary.emulated_per_wall ?? 0).toFixed(3)} emulated s per wall s), CPU load ${summary.cpu_load_percent.toFixed(2)} %, I2C ${summary.i2c.transactions} transactions / ${summary.i2c.nacks} NACKs, MPU samples produced ${summary.mpu.produced} served ${summary.mpu.servedFifo + summary.mpu.servedRegs}, QMC produced ${summary.qmc.produced} served ${summary.qmc.served}`;
+  process.stderr.write(`pico-imu-sim: ${line}\n`);
+  if (stop) {
+    process.stderr.write(`pico-imu-sim: FAILED at ${(stop.nanos / 1e9).toFixed(6)} s emulated: ${stop.message}\n`);
+    process.stderr.write('--- decoded defmt log (last 60 lines) ---\n');
+    process.stderr.write(s.logLines.slice(-60).join('\n') + '\n');
+    process.exit(1);
+  }
+}
+
+async function cmdGen(v) {
+  if (!v.out) fail('gen-stream: --out is required');
+  const st = streamFrom(v, Number(v.seconds ?? 60));
+  writeFileSync(v.out, streamToCsv(st));
+}
+
+async function main() {
+  const [cmd, ...rest] = process.argv.slice(2);
+  let parsed;
+  try {
+    parsed = parseArgs({
+      args: rest,
+      options: {
+        elf: { type: 'string' },
+        seconds: { type: 'string' },
+        stream: { type: 'string' },
+        seed: { type: 'string' },
+        sine: { type: 'string' },
+        port: { type: 'string' },
+        'port-file': { type: 'string' },
+        warmup: { type: 'string' },
+        fault: { type: 'string', multiple: true },
+        'instant-i2c': { type: 'boolean' },
+        served: { type: 'string' },
+        summary: { type: 'string' },
+        log: { type: 'string' },
+        out: { type: 'string' },
+        report: { type: 'string' },
+        json: { type: 'string' },
+        quiet: { type: 'boolean' },
+      },
+    });
+  } catch (e) {
+    fail(`${e.message}\n${usage}`);
+  }
+  const v = parsed.values;
+  try {
+    if (cmd === 'run') await cmdRun(v);
+    else if (cmd === 'gen-stream') await cmdGen(v);
+    else if (cmd === 'bench') await benchReport(v);
+    else fail(usage);
+  } catch (e) {
+    fail(e.stack ?? String(e), 1);
+  }
+}
+
+main();

@@ -1,0 +1,124 @@
+// Register-level model of the QST QMC5883L magnetometer (I2C address 0x0D).
+// Reference: QST QMC5883L datasheet rev C (2016): registers 00H–05H X/Y/Z LSB/MSB, 06H status
+// (DRDY bit 0, OVL bit 1, DOR bit 2), 07H–08H temperature (100 LSB/°C, offset uncalibrated),
+// 09H control 1 (MODE 1:0, ODR 3:2 = 10/50/100/200 Hz, RNG 5:4 = ±2 G / ±8 G, OSR 7:6),
+// 0AH control 2 (INT_ENB 0, ROL_PNT 6, SOFT_RST 7), 0BH SET/RESET period, 0DH chip id 0xFF.
+// Sensitivity 12000 LSB/G at ±2 G and 3000 LSB/G at ±8 G; 1 G = 100 µT.
+
+import { RegisterDevice } from './i2c-bus.js';
+
+export const ODR_HZ = [10, 50, 100, 200];
+export const LSB_PER_UT = [120, 30]; // RNG 0 (±2 G), RNG 1 (±8 G)
+
+export class Qmc5883l extends RegisterDevice {
+  constructor(stream, { record = true } = {}) {
+    super();
+    this.stream = stream;
+    this.record = record;
+    this.samples = [];
+    this.stats = { produced: 0, overflows: 0, dataOverruns: 0, served: 0, resets: 0 };
+    this.powerOnReset(0);
+  }
+
+  powerOnReset() {
+    this.regs = new Uint8Array(16);
+    this.regs[0x0d] = 0xff;
+    this.nextSample = null;
+    this.latest = null;
+    this.dataRead = 0;
+    this.stats.resets++;
+  }
+
+  get continuous() {
+    return (this.regs[0x09] & 3) === 1;
+  }
+
+  get periodNanos() {
+    return 1e9 / ODR_HZ[(this.regs[0x09] >> 2) & 3];
+  }
+
+  advance(nanos) {
+    if (this.nextSample === null) return;
+    while (this.nextSample <= nanos) {
+      this.produce(this.nextSample);
+      this.nextSample += this.periodNanos;
+    }
+  }
+
+  produce(t) {
+    const p = this.stream.magAt(t);
+    const rng = (this.regs[0x09] >> 4) & 1;
+    const lsb = LSB_PER_UT[rng];
+    const raw = new Int16Array(4);
+    let ovl = false;
+    [p.mx, p.my, p.mz].forEach((v, i) => {
+      const c = Math.round(v * lsb);
+      if (c > 32767 || c < -32768) ovl = true;
+      raw[i] = Math.max(-32768, Math.min(32767, c));
+    });
+    raw[3] = Math.max(-32768, Math.min(32767, Math.round(p.temp * 100)));
+    const status = this.regs[0x06];
+    let s = 0x01 | (ovl ? 0x02 : 0);
+    if (status & 0x01) {
+      // The previous sample was never read: data skipped.
+      s |= 0x04;
+      this.stats.dataOverruns++;
+    }
+    if (ovl) this.stats.overflows++;
+    this.regs[0x06] = s;
+    for (let i = 0; i < 3; i++) {
+      this.regs[2 * i] = raw[i] & 0xff;
+      this.regs[2 * i + 1] = (raw[i] >> 8) & 0xff;
+    }
+    this.regs[0x07] = raw[3] & 0xff;
+    this.regs[0x08] = (raw[3] >> 8) & 0xff;
+    const sample = { k: this.stats.produced++, t, raw, served: 0 };
+    if (this.record) this.samples.push(sample);
+    this.latest = sample;
+    this.dataRead = 0;
+  }
+
+  start(mode, nanos) {
+    super.start(mode);
+    this.advance(nanos);
+  }
+
+  nextPointer(p) {
+    if (this.regs[0x0a] & 0x40 && p === 0x06) return 0x00; // ROL_PNT
+    return (p + 1) & 0x0f;
+  }
+
+  readRegister(r, nanos) {
+    this.advance(nanos);
+    r &= 0x0f;
+    const v = this.regs[r];
+    if (r <= 0x05) {
+      // Reading any data register clears DRDY and DOR.
+      this.regs[0x06] &= ~0x05;
+      this.dataRead |= 1 << r;
+      if (this.dataRead === 0x3f && this.latest && !this.latest.served) {
+        this.latest.served = nanos;
+        this.stats.served++;
+      }
+    }
+    return v;
+  }
+
+  writeRegister(r, v, nanos) {
+    this.advance(nanos);
+    r &= 0x0f;
+    if (r === 0x0a && v & 0x80) {
+      this.powerOnReset();
+      return;
+    }
+    if (r <= 0x08 || r === 0x0d) return; // read-only
+    this.regs[r] = v;
+    if (r === 0x09) this.nextSample = this.continuous ? nanos + this.periodNanos : null;
+  }
+
+  servedCsv() {
+    const out = ['k,t_ns,mx,my,mz,temp,served_ns'];
+    for (const s of this.samples) if (s.served) out.push([s.k, s.t, ...s.raw, s.served].join(','));
+    return out.join('\n') + '\n';
+  }
+}

@@ -1,0 +1,147 @@
+// Run-time patches for rp2040js 1.4.1 (see docs/emulator.md, "Emulator bugs patched at run time").
+// Each patch is applied to one RP2040 instance; nothing in node_modules is modified.
+
+const IC_INTR_MASK = 0x30;
+const USB_BUF_CTRL_AVAILABLE = 1 << 10;
+const USB_BUF_CTRL_FULL = 1 << 15;
+const USB_BUF_CTRL_LEN_MASK = 0x3ff;
+const EP0_IN_BUFFER_CONTROL = 0x80;
+const EP15_OUT_BUFFER_CONTROL = 0xfc;
+
+/** Bug 1: I2C ignores writes to IC_INTR_MASK, so the I2C IRQ never fires and async I2C deadlocks. */
+export function patchI2cInterruptMask(mcu) {
+  for (const i2c of mcu.i2c) {
+    const write = i2c.writeUint32.bind(i2c);
+    i2c.writeUint32 = (offset, value) => {
+      if (offset === IC_INTR_MASK) {
+        i2c.intEnable = value & 0x1fff;
+        i2c.checkInterrupts();
+        return;
+      }
+      write(offset, value);
+    };
+  }
+}
+
+/**
+ * Bug 2: SEV only logs "SEV". The logger installed here turns that message into the event
+ * register being set (ARMv6-M ARM B1.5.18: SEV sets the event register of the executing core).
+ * Other messages go to `sink(level, component, message)`.
+ */
+export function patchSevLogger(mcu, sink) {
+  const core = mcu.core;
+  mcu.logger = {
+    debug() {},
+    info(component, message) {
+      if (message === 'SEV') {
+        core.eventRegistered = true;
+        return;
+      }
+      if (message === 'Yield') return;
+      sink('info', component, message);
+    },
+    warn(component, message) {
+      sink('warn', component, message);
+    },
+    error(component, message) {
+      sink('error', component, message);
+    },
+  };
+}
+
+/**
+ * Bug 3: rp2040js clears AVAILABLE as soon as firmware arms an OUT buffer and its host helper
+ * answers every arm with a zero-length packet. With this patch an armed OUT endpoint (>= 1) stays
+ * AVAILABLE (the host NAKs) until `UsbOutQueue.push` has data for it.
+ */
+export class UsbOutQueue {
+  constructor(mcu, delayNanos = 10_000) {
+    this.mcu = mcu;
+    this.usb = mcu.usbCtrl;
+    this.armed = new Map(); // endpoint -> requested length
+    this.pending = new Map(); // endpoint -> array of byte arrays
+    this.delayNanos = delayNanos;
+    this.deliveries = 0;
+    const original = this.usb.DPRAMUpdated.bind(this.usb);
+    this.usb.DPRAMUpdated = (offset, value) => {
+      if (
+        !this.usb.hostMode &&
+        value & USB_BUF_CTRL_AVAILABLE &&
+        offset >= EP0_IN_BUFFER_CONTROL + 8 &&
+        offset <= EP15_OUT_BUFFER_CONTROL &&
+        offset & 4
+      ) {
+        const endpoint = (offset - EP0_IN_BUFFER_CONTROL) >> 3;
+        this.armed.set(endpoint, value & USB_BUF_CTRL_LEN_MASK);
+        this.tryDeliver(endpoint);
+        return;
+      }
+      original(offset, value);
+    };
+    this.alarm = mcu.clock.createAlarm(() => this.deliverDue());
+    this.due = [];
+  }
+
+  /** Bytes the host sends to OUT endpoint `endpoint`. */
+  push(endpoint, bytes) {
+    if (!bytes.length) return;
+    const q = this.pending.get(endpoint) ?? [];
+    q.push(Uint8Array.from(bytes));
+    this.pending.set(endpoint, q);
+    this.tryDeliver(endpoint);
+  }
+
+  queuedBytes(endpoint) {
+    return (this.pending.get(endpoint) ?? []).reduce((n, b) => n + b.length, 0);
+  }
+
+  tryDeliver(endpoint) {
+    const q = this.pending.get(endpoint);
+    if (!q || !q.length || !this.armed.has(endpoint)) return;
+    if (this.due.includes(endpoint)) return;
+    this.due.push(endpoint);
+    // (rp2040js never clears ClockAlarm.scheduled after firing: track it ourselves.)
+    if (this.due.length === 1) this.alarm.schedule(this.delayNanos);
+  }
+
+  deliverDue() {
+    const due = this.due;
+    this.due = [];
+    for (const endpoint of due) {
+      const q = this.pending.get(endpoint);
+      const max = this.armed.get(endpoint);
+      if (!q || !q.length || max === undefined) continue;
+      // One USB packet: up to `max` bytes gathered from the queue.
+      const packet = [];
+      while (q.length && packet.length < max) {
+        const head = q[0];
+        const take = Math.min(head.length, max - packet.length);
+        for (let i = 0; i < take; i++) packet.push(head[i]);
+        if (take === head.length) q.shift();
+        else q[0] = head.subarray(take);
+      }
+      this.armed.delete(endpoint);
+      const dv = this.mcu.usbDPRAMView;
+      const ctrlOffset = EP0_IN_BUFFER_CONTROL + endpoint * 8 + 4;
+      const bufferOffset = this.usb.getEndpointBufferOffset(endpoint, true);
+      this.mcu.usbDPRAM.set(packet, bufferOffset);
+      let ctrl = dv.getUint32(ctrlOffset, true);
+      ctrl &= ~(USB_BUF_CTRL_AVAILABLE | USB_BUF_CTRL_LEN_MASK);
+      ctrl |= USB_BUF_CTRL_FULL | packet.length;
+      dv.setUint32(ctrlOffset, ctrl, true);
+      this.deliveries++;
+      this.usb.indicateBufferReady(endpoint, true);
+      if (q.length) this.tryDeliver(endpoint);
+    }
+  }
+}
+
+/** Bug 4: XIP_CTRL (0x14000000) is unmapped; embassy-rp's in-RAM flash routine polls it. */
+export function patchXipCtrl(mcu) {
+  const stub = {
+    readUint32: () => 0,
+    writeUint32: () => {},
+    writeUint32Atomic: () => {},
+  };
+  mcu.peripherals[(0x14000000 >>> 14) << 2] = stub;
+}

@@ -1,0 +1,177 @@
+// A complete emulated board: firmware + I2C0 with an MPU-6050 at 0x68 and a QMC5883L at 0x0D
+// (GP4 SDA / GP5 SCL), defmt log decoding, the USB CDC port, fault injection and reports.
+
+import { createServer } from 'node:net';
+import { writeFileSync, mkdirSync } from 'node:fs';
+import { join } from 'node:path';
+import { Emulator, CdcHost } from './emulator.js';
+import { I2cBus } from './devices/i2c-bus.js';
+import { Mpu6050 } from './devices/mpu6050.js';
+import { Qmc5883l } from './devices/qmc5883l.js';
+import { DefmtDecoder } from './defmt.js';
+
+export const MPU_ADDR = 0x68;
+export const QMC_ADDR = 0x0d;
+
+/** Parses a duration like "2s", "150ms", "20us", "5" (seconds) into ns. */
+export function parseDuration(s) {
+  const m = /^([0-9]*\.?[0-9]+)\s*(s|ms|us|µs|ns)?$/.exec(String(s).trim());
+  if (!m) throw new Error(`bad duration '${s}' (expected e.g. 2s, 150ms, 20us)`);
+  const v = Number(m[1]);
+  const unit = { s: 1e9, ms: 1e6, us: 1e3, µs: 1e3, ns: 1 }[m[2] ?? 's'];
+  return v * unit;
+}
+
+/**
+ * Fault spec grammar (one per --fault):
+ *   nack:<mpu|qmc>@<time>[:<count>]   NACK the next <count> (default 1) address phases
+ *   vanish:<mpu|qmc>@<time>[:<dur>]   the sensor is unpowered for <dur> (default 2s)
+ *   stuck@<time>                      a slave holds SDA low until 9 SCL pulses are clocked
+ *   overflow@<time>[:<dur>]           the CPU stalls <dur> (default 120ms) so the FIFO overflows
+ */
+export function parseFault(spec) {
+  const m = /^(nack|vanish|stuck|overflow)(?::(mpu|qmc))?@([^:]+)(?::(.+))?$/.exec(spec.trim());
+  if (!m) throw new Error(`bad fault '${spec}' (expected e.g. nack:mpu@5s:3, vanish:qmc@10s:2s, stuck@20s, overflow@30s)`);
+  const [, kind, target, at, arg] = m;
+  if ((kind === 'nack' || kind === 'vanish') && !target) throw new Error(`fault '${spec}': say which sensor (mpu or qmc)`);
+  return {
+    kind,
+    target: target ?? null,
+    at: parseDuration(at),
+    count: kind === 'nack' ? Number(arg ?? 1) : undefined,
+    duration: kind === 'vanish' ? parseDuration(arg ?? '2s') : kind === 'overflow' ? parseDuration(arg ?? '120ms') : undefined,
+    spec,
+  };
+}
+
+export class Session {
+  constructor({ elf, stream, instantI2c = false, faults = [], echoLog = false, markerSymbol } = {}) {
+    this.logLines = [];
+    this.decoder = new DefmtDecoder(elf, {
+      onLine: (l) => {
+        this.logLines.push(l);
+        if (echoLog) process.stderr.write(`[fw] ${l}\n`);
+      },
+    });
+    this.emu = new Emulator({ elf, markerSymbol, onRtt: (b) => this.decoder.push(b) });
+    this.bus = new I2cBus(this.emu.mcu, { index: 0, sda: 4, scl: 5, instant: instantI2c });
+    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream));
+    this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream));
+    this.usb = new CdcHost(this.emu);
+    this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0 };
+    this.client = null;
+    this.usb.onData = (buf) => {
+      if (this.client) {
+        this.usbStats.toHost += buf.length;
+        this.client.write(Buffer.from(buf));
+      } else {
+        this.usbStats.droppedToHost += buf.length;
+      }
+    };
+    this.faults = faults.map((f) => ({ ...f, fired: null }));
+    for (const f of this.faults) this.scheduleFault(f);
+  }
+
+  scheduleFault(f) {
+    const emu = this.emu;
+    const alarm = emu.clock.createAlarm(() => {
+      f.fired = emu.clock.nanos;
+      const dev = f.target === 'mpu' ? this.mpu : f.target === 'qmc' ? this.qmc : null;
+      const addr = f.target === 'mpu' ? MPU_ADDR : QMC_ADDR;
+      switch (f.kind) {
+        case 'nack':
+          this.bus.injectNacks(addr, f.count);
+          break;
+        case 'vanish':
+          dev.vanish(emu.clock.nanos, emu.clock.nanos + f.duration);
+          break;
+        case 'stuck':
+          this.bus.injectStuckBus();
+          break;
+        case 'overflow':
+          emu.stallCpu(f.duration);
+          break;
+      }
+    });
+    alarm.schedule(Math.max(0, f.at - emu.clock.nanos));
+  }
+
+  /** Opens the CDC port as a TCP server on 127.0.0.1 (port 0 = any free port). */
+  listen(port = 0) {
+    return new Promise((resolve, reject) => {
+      this.server = createServer((sock) => {
+        if (this.client) {
+          sock.end();
+          return;
+        }
+        sock.setNoDelay(true);
+        this.client = sock;
+        sock.on('data', (d) => {
+          this.usbStats.fromHost += d.length;
+          if (this.usb.connected) this.usb.write(d);
+          else this.pendingFromHost = Buffer.concat([this.pendingFromHost ?? Buffer.alloc(0), d]);
+        });
+        const drop = () => {
+          if (this.client === sock) this.client = null;
+        };
+        sock.on('close', drop);
+        sock.on('error', drop);
+      });
+      this.server.on('error', reject);
+      this.server.listen(port, '127.0.0.1', () => resolve(this.server.address().port));
+    });
+  }
+
+  flushPendingHost() {
+    if (this.pendingFromHost && this.usb.connected) {
+      this.usb.write(this.pendingFromHost);
+      this.pendingFromHost = null;
+    }
+  }
+
+  async run(untilNanos, opts = {}) {
+    this.emu.pollHooks.push(() => this.flushPendingHost());
+    const t0 = process.hrtime.bigint();
+    const n0 = this.emu.clock.nanos;
+    const stop = await this.emu.run(untilNanos, opts);
+    this.wallSeconds = (this.wallSeconds ?? 0) + Number(process.hrtime.bigint() - t0) / 1e9;
+    this.emulatedSeconds = (this.emulatedSeconds ?? 0) + (this.emu.clock.nanos - n0) / 1e9;
+    return stop;
+  }
+
+  async close() {
+    if (this.client) this.client.end();
+    if (this.server) await new Promise((r) => this.server.close(r));
+    await this.decoder.close();
+  }
+
+  summary() {
+    const e = this.emu;
+    const marks = e.markReport();
+    return {
+      emulated_s: e.clock.nanos / 1e9,
+      wall_s: this.wallSeconds ?? 0,
+      emulated_per_wall: this.wallSeconds ? (this.emulatedSeconds ?? 0) / this.wallSeconds : null,
+      cpu_load_percent: 100 * e.cpuLoad,
+      executed_cycles: e.core.cycles,
+      stop: e.stopReason,
+      rtt_bytes: e.rtt ? e.rtt.bytes : null,
+      i2c: this.bus.stats,
+      mpu: this.mpu.stats,
+      qmc: this.qmc.stats,
+      stream_wraps: this.mpu.stream.wraps,
+      usb: { ...this.usbStats, enumerated: this.usb.connected, out_packets: e.usbOut.deliveries },
+      flash: e.stats,
+      faults: this.faults.map((f) => ({ spec: f.spec, fired_s: f.fired === null ? null : f.fired / 1e9 })),
+      marks: marks ? { cycles: Object.fromEntries(marks.cycles), entries: Object.fromEntries(marks.entries) } : null,
+      diagnostics: e.diagnostics.slice(0, 20),
+    };
+  }
+
+  /** Writes the exact raw samples the models served (mpu_served.csv, qmc_served.csv). */
+  writeServed(dir) {
+    mkdirSync(dir, { recursive: true });
+    writeFileSync(join(dir, 'mpu_served.csv'), this.mpu.servedCsv());
+    writeFileSync(join(dir, 'qmc_served.csv'), this.qmc.servedCsv());
+  }
+}
