@@ -29,3 +29,95 @@ export function readRegs(dev, nanos, reg, n) {
 }
 
 export const ms = (x) => x * 1e6;
+
+/**
+ * Builds a minimal ELF32 ARM image: PT_LOAD segments (vaddr = paddr) and a symbol table.
+ * @param segments [{ paddr, data: Uint8Array }]
+ * @param symbols { name: address }
+ */
+export function buildElf(segments, symbols = {}) {
+  const names = Object.keys(symbols);
+  const enc = new TextEncoder();
+  const strParts = [new Uint8Array([0])];
+  const nameOff = [];
+  let strLen = 1;
+  for (const n of names) {
+    nameOff.push(strLen);
+    const b = enc.encode(n + '\0');
+    strParts.push(b);
+    strLen += b.length;
+  }
+  const strtab = new Uint8Array(strLen);
+  let o = 0;
+  for (const p of strParts) {
+    strtab.set(p, o);
+    o += p.length;
+  }
+  const symtab = new Uint8Array(16 * (names.length + 1));
+  const sdv = new DataView(symtab.buffer);
+  names.forEach((n, i) => {
+    sdv.setUint32(16 * (i + 1), nameOff[i], true);
+    sdv.setUint32(16 * (i + 1) + 4, symbols[n], true);
+    sdv.setUint32(16 * (i + 1) + 8, 4, true);
+  });
+  const ehsize = 52, phsize = 32, shsize = 40;
+  let off = ehsize + phsize * segments.length;
+  const segOff = segments.map((s) => {
+    const at = off;
+    off += s.data.length;
+    return at;
+  });
+  const symOff = off;
+  off += symtab.length;
+  const strOff = off;
+  off += strtab.length;
+  const shOff = off;
+  const total = shOff + 3 * shsize;
+  const b = new Uint8Array(total);
+  const dv = new DataView(b.buffer);
+  b.set([0x7f, 0x45, 0x4c, 0x46, 1, 1, 1], 0);
+  dv.setUint16(18, 40, true);
+  dv.setUint32(24, segments[0]?.paddr ?? 0, true);
+  dv.setUint32(28, ehsize, true);
+  dv.setUint32(32, shOff, true);
+  dv.setUint16(42, phsize, true);
+  dv.setUint16(44, segments.length, true);
+  dv.setUint16(46, shsize, true);
+  dv.setUint16(48, 3, true);
+  segments.forEach((s, i) => {
+    const p = ehsize + i * phsize;
+    dv.setUint32(p, 1, true);
+    dv.setUint32(p + 4, segOff[i], true);
+    dv.setUint32(p + 8, s.paddr, true);
+    dv.setUint32(p + 12, s.paddr, true);
+    dv.setUint32(p + 16, s.data.length, true);
+    dv.setUint32(p + 20, s.data.length, true);
+    b.set(s.data, segOff[i]);
+  });
+  b.set(symtab, symOff);
+  b.set(strtab, strOff);
+  const s1 = shOff + shsize;
+  dv.setUint32(s1 + 4, 2, true);
+  dv.setUint32(s1 + 16, symOff, true);
+  dv.setUint32(s1 + 20, symtab.length, true);
+  dv.setUint32(s1 + 24, 2, true);
+  dv.setUint32(s1 + 36, 16, true);
+  const s2 = shOff + 2 * shsize;
+  dv.setUint32(s2 + 4, 3, true);
+  dv.setUint32(s2 + 16, strOff, true);
+  dv.setUint32(s2 + 20, strtab.length, true);
+  return b;
+}
+
+/**
+ * A flash image: 256 bytes of (fake) boot2, the vector table at 0x10000100 (SP, reset → 0x141)
+ * and Thumb halfwords `code` from 0x10000140.
+ */
+export function flashImage(code) {
+  const img = new Uint8Array(0x140 + 2 * code.length);
+  const dv = new DataView(img.buffer);
+  dv.setUint32(0x100, 0x20040000, true);
+  dv.setUint32(0x104, 0x10000141, true);
+  code.forEach((h, i) => dv.setUint16(0x140 + 2 * i, h, true));
+  return { paddr: 0x10000000, data: img };
+}
