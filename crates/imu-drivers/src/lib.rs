@@ -1,1 +1,58 @@
+//! MPU-6050 and QMC5883L/QMC5883P drivers on embedded-hal 1.0, blocking and async.
+//!
+//! ```text
+//! imu_drivers::mpu6050   register layer: reg/bits, Config (+ enums), ChipId, RawSample, Scale, Error
+//! imu_drivers::qmc5883   register layer: reg_l/reg_p, Config (+ enums), Chip, Variant, MagSample, Error
+//! imu_drivers::blocking  Mpu6050<I2C>, Qmc5883<I2C> over embedded_hal::i2c::I2c
+//! imu_drivers::asynch    Mpu6050<I2C>, Qmc5883<I2C> over embedded_hal_async::i2c::I2c (same methods, async)
+//! imu_drivers::recovery  recover_bus(): 9 SCL pulses + STOP for a stuck SDA
+//! ```
+//!
+//! The two driver flavours are one source text expanded twice (see `driver.rs`), so every
+//! sequence is written once; all register values come from the pure register layer.
+//!
+//! # MPU-6050
+//! ```ignore
+//! use imu_drivers::{asynch::Mpu6050, mpu6050::{Address, Config}};
+//! let mut imu = Mpu6050::new(i2c, Address::Ad0Low);
+//! let chip = imu.init(&mut delay, &Config::default()).await?;  // seed: ±250 °/s, ±4 g, 5 Hz DLPF, 1 kHz, FIFO accel+gyro
+//! let one = imu.read_all().await?;                              // 14-byte burst, RawSample { accel, temp, gyro }
+//! let mut frames = [RawSample::default(); 32];
+//! match imu.read_fifo(&mut frames).await {                      // whole frames only
+//!     Ok(n) => { let si = imu.scale().convert(&frames[0]); /* m/s², °/s, °C */ }
+//!     Err(mpu6050::Error::FifoOverflow) => imu.reset_fifo().await?,
+//!     Err(e) => return Err(e),
+//! }
+//! ```
+//! Other methods: `probe`, `who_am_i`, `int_status`, `read_if_ready` (NotReady when
+//! DATA_RDY is clear), `fifo_count`, `self_test(&mut delay)`, `chip`, `config`, `release`.
+//!
+//! # QMC5883L / QMC5883P
+//! ```ignore
+//! use imu_drivers::{asynch::Qmc5883, qmc5883::{Chip, Config, Variant}};
+//! let variant = match Qmc5883::detect(&mut i2c).await { Chip::Qmc5883P => Variant::P, _ => Variant::L };
+//! let mut mag = Qmc5883::new_variant(i2c, variant);            // or Qmc5883::new(i2c) for the L
+//! mag.init(&mut delay, &Config::default()).await?;              // seed: ±2 G, 200 Hz, OSR 512, continuous
+//! let s = mag.read().await?;   // MagSample { xyz, temp, overflow, skipped }; Error::NotReady if DRDY clear
+//! let ut = mag.microtesla(&s);
+//! ```
+//!
+//! No method panics on any byte returned by the bus; unknown identities give
+//! `Error::WrongChip { found }`.
 #![cfg_attr(not(feature = "std"), no_std)]
+#![deny(missing_docs)]
+
+mod driver;
+pub mod mpu6050;
+pub mod qmc5883;
+pub mod recovery;
+
+/// Blocking drivers over `embedded_hal::i2c::I2c` and `embedded_hal::delay::DelayNs`.
+pub mod blocking {
+    crate::driver::drivers!(; ; embedded_hal::i2c::I2c; embedded_hal::delay::DelayNs);
+}
+
+/// Async drivers over `embedded_hal_async::i2c::I2c` and `embedded_hal_async::delay::DelayNs`.
+pub mod asynch {
+    crate::driver::drivers!(async; await; embedded_hal_async::i2c::I2c; embedded_hal_async::delay::DelayNs);
+}

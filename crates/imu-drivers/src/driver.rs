@@ -1,0 +1,404 @@
+//! The driver logic, written once and expanded twice: blocking (`embedded_hal::i2c::I2c`,
+//! `embedded_hal::delay::DelayNs`) and async (`embedded_hal_async::i2c::I2c`,
+//! `embedded_hal_async::delay::DelayNs`). The only difference between the two expansions is
+//! the `async` keyword on each method and `.await` after each bus or delay call; every
+//! register value, sequence and decoding step comes from [`crate::mpu6050`] and
+//! [`crate::qmc5883`].
+
+macro_rules! drivers {
+    ($($async:ident)?; $($await:ident)?; $I2c:path; $Delay:path) => {
+        use embedded_hal::i2c::ErrorType;
+
+        use crate::mpu6050::{
+            self as m, bits as mb, reg as mr, Address, ChipId, Config, Family, IntStatus,
+            RawSample, Scale, SelfTestReport,
+        };
+        use crate::qmc5883::{self as q, Chip, MagSample, Status, Variant};
+
+        /// Error type of [`Mpu6050`] on bus `I2C`.
+        pub type MpuError<I2C> = m::Error<<I2C as ErrorType>::Error>;
+        /// Error type of [`Qmc5883`] on bus `I2C`.
+        pub type MagError<I2C> = q::Error<<I2C as ErrorType>::Error>;
+
+        /// Frames moved per FIFO burst read: 16 × 14 bytes = 224 bytes of stack.
+        const FIFO_CHUNK_FRAMES: usize = 16;
+
+        /// MPU-6050 (and register-compatible clones) driver.
+        ///
+        /// `new` does no I/O; `init` checks WHO_AM_I, resets and configures the chip.
+        #[derive(Debug)]
+        pub struct Mpu6050<I2C> {
+            i2c: I2C,
+            address: u8,
+            chip: Option<ChipId>,
+            config: Config,
+        }
+
+        impl<I2C: $I2c> Mpu6050<I2C> {
+            /// Wrap a bus; no I/O.
+            pub fn new(i2c: I2C, address: Address) -> Self {
+                Mpu6050 {
+                    i2c,
+                    address: address.addr(),
+                    chip: None,
+                    config: Config::default(),
+                }
+            }
+
+            /// Give the bus back.
+            pub fn release(self) -> I2C {
+                self.i2c
+            }
+
+            /// Chip identified by the last `init`/`probe`.
+            pub fn chip(&self) -> Option<ChipId> {
+                self.chip
+            }
+
+            /// Configuration applied by the last `init`.
+            pub fn config(&self) -> &Config {
+                &self.config
+            }
+
+            /// Conversion factors for the applied configuration and the chip found (MPU-6050
+            /// temperature formula before `init`).
+            pub fn scale(&self) -> Scale {
+                self.config.scale(self.chip.unwrap_or(ChipId::Mpu6050))
+            }
+
+            $($async)? fn write_reg(&mut self, reg: u8, value: u8) -> Result<(), MpuError<I2C>> {
+                self.i2c.write(self.address, &[reg, value]) $(.$await)? ?;
+                Ok(())
+            }
+
+            $($async)? fn read_regs(&mut self, reg: u8, buf: &mut [u8]) -> Result<(), MpuError<I2C>> {
+                self.i2c.write_read(self.address, &[reg], buf) $(.$await)? ?;
+                Ok(())
+            }
+
+            /// Read WHO_AM_I (0x75).
+            pub $($async)? fn who_am_i(&mut self) -> Result<u8, MpuError<I2C>> {
+                let mut b = [0u8; 1];
+                self.read_regs(mr::WHO_AM_I, &mut b) $(.$await)? ?;
+                Ok(b[0])
+            }
+
+            /// Check WHO_AM_I against the MPU-6050 and its known clones.
+            pub $($async)? fn probe(&mut self) -> Result<ChipId, MpuError<I2C>> {
+                let found = self.who_am_i() $(.$await)? ?;
+                let chip = ChipId::from_who_am_i(found).ok_or(m::Error::WrongChip { found })?;
+                self.chip = Some(chip);
+                Ok(chip)
+            }
+
+            /// Identify, reset and configure the chip (sequence and values: docs/drivers.md):
+            /// 1. WHO_AM_I check; 2. PWR_MGMT_1 = DEVICE_RESET, wait 100 ms;
+            /// 3. PWR_MGMT_1 = 0x01 (awake, PLL with gyro X reference);
+            /// 4. one burst SMPLRT_DIV, CONFIG, GYRO_CONFIG, ACCEL_CONFIG (+ ACCEL_CONFIG2 on
+            ///    6500-family clones); 5. INT_PIN_CFG, INT_ENABLE;
+            /// 6. FIFO: USER_CTRL = FIFO_RESET, FIFO_EN = frame mask, USER_CTRL = FIFO_EN
+            ///    (or FIFO_EN = 0 and USER_CTRL = 0 when the FIFO is off).
+            pub $($async)? fn init<D: $Delay>(
+                &mut self,
+                delay: &mut D,
+                config: &Config,
+            ) -> Result<ChipId, MpuError<I2C>> {
+                let chip = self.probe() $(.$await)? ?;
+                self.write_reg(mr::PWR_MGMT_1, mb::DEVICE_RESET) $(.$await)? ?;
+                delay.delay_ms(m::RESET_DELAY_MS) $(.$await)?;
+                self.write_reg(mr::PWR_MGMT_1, mb::CLKSEL_PLL_GYRO_X) $(.$await)? ?;
+                let (burst, len) = config.config_burst(chip);
+                self.i2c.write(self.address, &burst[..len]) $(.$await)? ?;
+                self.write_reg(mr::INT_PIN_CFG, config.interrupt.pin_cfg_bits()) $(.$await)? ?;
+                self.write_reg(mr::INT_ENABLE, config.interrupt.enable_bits()) $(.$await)? ?;
+                self.config = *config;
+                match config.fifo {
+                    Some(frame) => {
+                        self.write_reg(mr::USER_CTRL, mb::USER_FIFO_RESET) $(.$await)? ?;
+                        self.write_reg(mr::FIFO_EN, frame.fifo_en_bits()) $(.$await)? ?;
+                        self.write_reg(mr::USER_CTRL, mb::USER_FIFO_EN) $(.$await)? ?;
+                    }
+                    None => {
+                        self.write_reg(mr::FIFO_EN, 0) $(.$await)? ?;
+                        self.write_reg(mr::USER_CTRL, 0) $(.$await)? ?;
+                    }
+                }
+                Ok(chip)
+            }
+
+            /// One 14-byte burst from ACCEL_XOUT_H: accel, temperature and gyro of the same
+            /// sampling instant (RM 4.17-4.20; the chip latches the set for a burst read).
+            pub $($async)? fn read_all(&mut self) -> Result<RawSample, MpuError<I2C>> {
+                let mut b = [0u8; 14];
+                self.read_regs(mr::ACCEL_XOUT_H, &mut b) $(.$await)? ?;
+                Ok(m::decode_measurements(&b))
+            }
+
+            /// Read (and thereby clear, RM 4.17) INT_STATUS.
+            pub $($async)? fn int_status(&mut self) -> Result<IntStatus, MpuError<I2C>> {
+                let mut b = [0u8; 1];
+                self.read_regs(mr::INT_STATUS, &mut b) $(.$await)? ?;
+                Ok(IntStatus::from_bits(b[0]))
+            }
+
+            /// `read_all` if DATA_RDY_INT is set, else [`m::Error::NotReady`].
+            pub $($async)? fn read_if_ready(&mut self) -> Result<RawSample, MpuError<I2C>> {
+                if !self.int_status() $(.$await)? ?.data_ready {
+                    return Err(m::Error::NotReady);
+                }
+                self.read_all() $(.$await)?
+            }
+
+            /// Bytes waiting in the FIFO (FIFO_COUNT_H/L read in one burst, RM 4.30).
+            pub $($async)? fn fifo_count(&mut self) -> Result<u16, MpuError<I2C>> {
+                let mut b = [0u8; 2];
+                self.read_regs(mr::FIFO_COUNT_H, &mut b) $(.$await)? ?;
+                Ok(m::decode_fifo_count(b))
+            }
+
+            /// Read whole FIFO frames into `out`; returns how many were written. Never reads
+            /// a partial frame: the remainder stays in the FIFO for the next call.
+            ///
+            /// Returns [`m::Error::FifoOverflow`] if INT_STATUS.FIFO_OFLOW_INT is set or the
+            /// count reached the FIFO capacity (the chip then overwrites the oldest bytes and
+            /// frame alignment is lost); call [`Self::reset_fifo`] to recover.
+            /// [`m::Error::NotConfigured`] if `init` did not enable the FIFO.
+            pub $($async)? fn read_fifo(&mut self, out: &mut [RawSample]) -> Result<usize, MpuError<I2C>> {
+                let frame = self.config.fifo.ok_or(m::Error::NotConfigured)?;
+                let chip = self.chip.ok_or(m::Error::NotConfigured)?;
+                if self.int_status() $(.$await)? ?.fifo_overflow {
+                    return Err(m::Error::FifoOverflow);
+                }
+                let count = self.fifo_count() $(.$await)? ?;
+                if count >= chip.fifo_capacity() {
+                    return Err(m::Error::FifoOverflow);
+                }
+                let available = count as usize / frame.bytes();
+                let wanted = available.min(out.len());
+                let mut buf = [0u8; FIFO_CHUNK_FRAMES * 14];
+                let mut done = 0;
+                while done < wanted {
+                    let n = (wanted - done).min(FIFO_CHUNK_FRAMES);
+                    let bytes = &mut buf[..n * frame.bytes()];
+                    self.read_regs(mr::FIFO_R_W, bytes) $(.$await)? ?;
+                    for (slot, chunk) in out[done..done + n]
+                        .iter_mut()
+                        .zip(bytes.chunks_exact(frame.bytes()))
+                    {
+                        if let Some(s) = m::decode_fifo_frame(chunk, frame) {
+                            *slot = s;
+                        }
+                    }
+                    done += n;
+                }
+                Ok(done)
+            }
+
+            /// Empty the FIFO and clear a pending overflow: USER_CTRL = FIFO_RESET (with
+            /// FIFO_EN = 0, as RM 4.27 requires), USER_CTRL = FIFO_EN, then read INT_STATUS.
+            pub $($async)? fn reset_fifo(&mut self) -> Result<(), MpuError<I2C>> {
+                if self.config.fifo.is_none() {
+                    return Err(m::Error::NotConfigured);
+                }
+                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_RESET) $(.$await)? ?;
+                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_EN) $(.$await)? ?;
+                self.int_status() $(.$await)? ?;
+                Ok(())
+            }
+
+            $($async)? fn average<D: $Delay>(&mut self, delay: &mut D) -> Result<([f32; 3], [f32; 3]), MpuError<I2C>> {
+                let mut a = [0i32; 3];
+                let mut g = [0i32; 3];
+                for _ in 0..m::SELF_TEST_SAMPLES {
+                    let s = self.read_all() $(.$await)? ?;
+                    for i in 0..3 {
+                        a[i] += s.accel[i] as i32;
+                        g[i] += s.gyro[i] as i32;
+                    }
+                    delay.delay_ms(2) $(.$await)?;
+                }
+                let n = m::SELF_TEST_SAMPLES as f32;
+                Ok((a.map(|v| v as f32 / n), g.map(|v| v as f32 / n)))
+            }
+
+            /// Factory self-test (RM 4.1, PS 6.1/6.2), genuine MPU-6050 only: outputs are
+            /// averaged with self-test on and off at ±250 °/s and ±8 g, the difference is
+            /// compared with the factory trim from SELF_TEST_X..A. The configured ranges are
+            /// restored afterwards. Takes about 0.6 s.
+            pub $($async)? fn self_test<D: $Delay>(&mut self, delay: &mut D) -> Result<SelfTestReport, MpuError<I2C>> {
+                let chip = self.chip.ok_or(m::Error::NotConfigured)?;
+                if chip.family() != Family::Mpu6050 {
+                    return Err(m::Error::SelfTestUnsupported);
+                }
+                let g = m::GyroRange::Dps250.bits();
+                let a = m::AccelRange::G8.bits();
+                self.write_reg(mr::GYRO_CONFIG, g | mb::SELF_TEST_XYZ) $(.$await)? ?;
+                self.write_reg(mr::ACCEL_CONFIG, a | mb::SELF_TEST_XYZ) $(.$await)? ?;
+                delay.delay_ms(m::SELF_TEST_SETTLE_MS) $(.$await)?;
+                let (on_a, on_g) = self.average(delay) $(.$await)? ?;
+                self.write_reg(mr::GYRO_CONFIG, g) $(.$await)? ?;
+                self.write_reg(mr::ACCEL_CONFIG, a) $(.$await)? ?;
+                delay.delay_ms(m::SELF_TEST_SETTLE_MS) $(.$await)?;
+                let (off_a, off_g) = self.average(delay) $(.$await)? ?;
+                let mut trim = [0u8; 4];
+                self.read_regs(mr::SELF_TEST_X, &mut trim) $(.$await)? ?;
+                self.write_reg(mr::GYRO_CONFIG, self.config.gyro_range.bits()) $(.$await)? ?;
+                self.write_reg(mr::ACCEL_CONFIG, self.config.accel_range.bits()) $(.$await)? ?;
+                Ok(m::self_test_report(on_a, on_g, off_a, off_g, trim))
+            }
+        }
+
+        /// QMC5883L / QMC5883P magnetometer driver.
+        #[derive(Debug)]
+        pub struct Qmc5883<I2C> {
+            i2c: I2C,
+            variant: Variant,
+            config: q::Config,
+        }
+
+        impl<I2C: $I2c> Qmc5883<I2C> {
+            /// A QMC5883L at 0x0D; no I/O.
+            pub fn new(i2c: I2C) -> Self {
+                Self::new_variant(i2c, Variant::L)
+            }
+
+            /// A given variant (QMC5883P at 0x2C with [`Variant::P`]); no I/O.
+            pub fn new_variant(i2c: I2C, variant: Variant) -> Self {
+                Qmc5883 { i2c, variant, config: q::Config::default() }
+            }
+
+            /// Give the bus back.
+            pub fn release(self) -> I2C {
+                self.i2c
+            }
+
+            /// Variant driven.
+            pub fn variant(&self) -> Variant {
+                self.variant
+            }
+
+            /// Configuration applied by the last `init`.
+            pub fn config(&self) -> &q::Config {
+                &self.config
+            }
+
+            /// Probe the three addresses and report which magnetometer answers with the right
+            /// identity: QMC5883L (0x0D: reg 0x0D = 0xFF), QMC5883P (0x2C: reg 0x00 = 0x80),
+            /// HMC5883L (0x1E: regs 10..12 = "H43"). A NACK or another id counts as absent.
+            pub $($async)? fn detect(i2c: &mut I2C) -> Chip {
+                let mut b = [0u8; 1];
+                if i2c.write_read(q::QMC5883L_ADDR, &[q::reg_l::CHIP_ID], &mut b) $(.$await)?.is_ok()
+                    && b[0] == q::reg_l::CHIP_ID_VALUE
+                {
+                    return Chip::Qmc5883L;
+                }
+                if i2c.write_read(q::QMC5883P_ADDR, &[q::reg_p::CHIP_ID], &mut b) $(.$await)?.is_ok()
+                    && b[0] == q::reg_p::CHIP_ID_VALUE
+                {
+                    return Chip::Qmc5883P;
+                }
+                let mut id = [0u8; 3];
+                if i2c.write_read(q::HMC5883L_ADDR, &[q::reg_hmc::ID_A], &mut id) $(.$await)?.is_ok()
+                    && id == q::reg_hmc::ID_VALUE
+                {
+                    return Chip::Hmc5883L;
+                }
+                Chip::None
+            }
+
+            $($async)? fn write_reg(&mut self, reg: u8, value: u8) -> Result<(), MagError<I2C>> {
+                self.i2c.write(self.variant.addr(), &[reg, value]) $(.$await)? ?;
+                Ok(())
+            }
+
+            $($async)? fn read_regs(&mut self, reg: u8, buf: &mut [u8]) -> Result<(), MagError<I2C>> {
+                self.i2c.write_read(self.variant.addr(), &[reg], buf) $(.$await)? ?;
+                Ok(())
+            }
+
+            /// Read the chip-id register of the variant.
+            pub $($async)? fn chip_id(&mut self) -> Result<u8, MagError<I2C>> {
+                let mut b = [0u8; 1];
+                self.read_regs(self.variant.chip_id().0, &mut b) $(.$await)? ?;
+                Ok(b[0])
+            }
+
+            /// Check the chip id, soft-reset and configure (values: docs/drivers.md).
+            /// QMC5883L: CONTROL2 = SOFT_RST, wait, SET/RESET period (0x0B), CONTROL2, CONTROL1.
+            /// QMC5883P: CONTROL2 = SOFT_RST, wait, axis sign (0x29 = 0x06), CONTROL2, CONTROL1.
+            pub $($async)? fn init<D: $Delay>(&mut self, delay: &mut D, config: &q::Config) -> Result<(), MagError<I2C>> {
+                if config.range.lsb_per_gauss(self.variant).is_none() {
+                    return Err(q::Error::InvalidConfig);
+                }
+                let found = self.chip_id() $(.$await)? ?;
+                if found != self.variant.chip_id().1 {
+                    return Err(q::Error::WrongChip { found });
+                }
+                match self.variant {
+                    Variant::L => {
+                        let c1 = config.control1_l().ok_or(q::Error::InvalidConfig)?;
+                        self.write_reg(q::reg_l::CONTROL2, q::bits::SOFT_RST) $(.$await)? ?;
+                        delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
+                        self.write_reg(q::reg_l::SET_RESET_PERIOD, config.set_reset_period) $(.$await)? ?;
+                        self.write_reg(q::reg_l::CONTROL2, config.control2_l()) $(.$await)? ?;
+                        self.write_reg(q::reg_l::CONTROL1, c1) $(.$await)? ?;
+                    }
+                    Variant::P => {
+                        self.write_reg(q::reg_p::CONTROL2, q::bits::SOFT_RST) $(.$await)? ?;
+                        delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
+                        self.write_reg(q::reg_p::AXIS_SIGN, q::reg_p::AXIS_SIGN_VALUE) $(.$await)? ?;
+                        self.write_reg(q::reg_p::CONTROL2, config.control2_p()) $(.$await)? ?;
+                        self.write_reg(q::reg_p::CONTROL1, config.control1_p()) $(.$await)? ?;
+                    }
+                }
+                self.config = *config;
+                Ok(())
+            }
+
+            /// Read the status register.
+            pub $($async)? fn status(&mut self) -> Result<Status, MagError<I2C>> {
+                let mut b = [0u8; 1];
+                self.read_regs(self.variant.status_reg(), &mut b) $(.$await)? ?;
+                Ok(Status::from_bits(b[0], self.variant))
+            }
+
+            /// Read one measurement: status (with the L's temperature in the same burst),
+            /// then the 6 data bytes. [`q::Error::NotReady`] if DRDY is clear — the data
+            /// registers are then not read, so DOR keeps counting skipped samples.
+            pub $($async)? fn read(&mut self) -> Result<MagSample, MagError<I2C>> {
+                let (status, temp) = match self.variant {
+                    Variant::L => {
+                        let mut b = [0u8; 3];
+                        self.read_regs(q::reg_l::STATUS, &mut b) $(.$await)? ?;
+                        (Status::from_bits(b[0], Variant::L), Some(i16::from_le_bytes([b[1], b[2]])))
+                    }
+                    Variant::P => (self.status() $(.$await)? ?, None),
+                };
+                if !status.ready {
+                    return Err(q::Error::NotReady);
+                }
+                let mut d = [0u8; 6];
+                self.read_regs(self.variant.data_reg(), &mut d) $(.$await)? ?;
+                Ok(MagSample {
+                    xyz: q::decode_xyz(d),
+                    temp,
+                    overflow: status.overflow,
+                    skipped: status.skipped,
+                })
+            }
+
+            /// Sensitivity of the applied configuration, LSB/G.
+            pub fn lsb_per_gauss(&self) -> f32 {
+                // `init` rejects ranges the variant lacks; the fallback is the L's ±2 G.
+                self.config.range.lsb_per_gauss(self.variant).unwrap_or(12000.0)
+            }
+
+            /// Field of `sample` in µT (1 G = 100 µT).
+            pub fn microtesla(&self, sample: &MagSample) -> [f32; 3] {
+                q::to_microtesla(sample.xyz, self.lsb_per_gauss())
+            }
+        }
+    };
+}
+
+pub(crate) use drivers;

@@ -1,0 +1,752 @@
+//! MPU-6050 register layer: addresses, typed configuration, chip identification, decoding and
+//! unit conversion. Everything here is pure (no I/O); the blocking and async drivers in
+//! [`crate::blocking`] and [`crate::asynch`] execute the same sequences on a bus.
+//!
+//! References (InvenSense documents, cited by section throughout):
+//! - "MPU-6000 and MPU-6050 Register Map and Descriptions", RM-MPU-6000A-00 rev 4.2 (RM).
+//! - "MPU-6000 and MPU-6050 Product Specification", PS-MPU-6000A-00 rev 3.4 (PS).
+//! - "MPU-6500 Register Map and Descriptions", RM-MPU-6500A-00 rev 2.1 (RM-6500), for clones.
+
+/// Register addresses (RM section 3, "Register Map").
+pub mod reg {
+    /// SELF_TEST_X..Z, SELF_TEST_A: factory trim codes (RM 4.1).
+    pub const SELF_TEST_X: u8 = 0x0D;
+    /// Sample-rate divider (RM 4.2).
+    pub const SMPLRT_DIV: u8 = 0x19;
+    /// EXT_SYNC_SET and DLPF_CFG (RM 4.3).
+    pub const CONFIG: u8 = 0x1A;
+    /// Gyro self-test bits and FS_SEL (RM 4.4).
+    pub const GYRO_CONFIG: u8 = 0x1B;
+    /// Accel self-test bits and AFS_SEL (RM 4.5).
+    pub const ACCEL_CONFIG: u8 = 0x1C;
+    /// MPU-6500 family only: accelerometer DLPF (RM-6500 4.8). Reserved on the MPU-6050.
+    pub const ACCEL_CONFIG2: u8 = 0x1D;
+    /// Which sensor outputs are written to the FIFO (RM 4.7).
+    pub const FIFO_EN: u8 = 0x23;
+    /// INT pin / bypass configuration (RM 4.15).
+    pub const INT_PIN_CFG: u8 = 0x37;
+    /// Interrupt enables (RM 4.16).
+    pub const INT_ENABLE: u8 = 0x38;
+    /// Interrupt status, cleared on read (RM 4.17).
+    pub const INT_STATUS: u8 = 0x3A;
+    /// First of the 14 measurement bytes: accel X/Y/Z, temperature, gyro X/Y/Z, big-endian (RM 4.17-4.20).
+    pub const ACCEL_XOUT_H: u8 = 0x3B;
+    /// Signal path reset (RM 4.26).
+    pub const SIGNAL_PATH_RESET: u8 = 0x68;
+    /// FIFO enable/reset (RM 4.27).
+    pub const USER_CTRL: u8 = 0x6A;
+    /// Device reset, sleep, clock source (RM 4.28).
+    pub const PWR_MGMT_1: u8 = 0x6B;
+    /// FIFO byte count, high byte first (RM 4.30).
+    pub const FIFO_COUNT_H: u8 = 0x72;
+    /// FIFO read port; burst reads keep popping this register (RM 4.31).
+    pub const FIFO_R_W: u8 = 0x74;
+    /// Chip identity (RM 4.32).
+    pub const WHO_AM_I: u8 = 0x75;
+}
+
+/// Register bit fields.
+pub mod bits {
+    /// PWR_MGMT_1.DEVICE_RESET (RM 4.28): resets all registers, self-clearing.
+    pub const DEVICE_RESET: u8 = 1 << 7;
+    /// PWR_MGMT_1.SLEEP (RM 4.28).
+    pub const SLEEP: u8 = 1 << 6;
+    /// PWR_MGMT_1.CLKSEL = 1: PLL with X-axis gyroscope reference (RM 4.28, table).
+    pub const CLKSEL_PLL_GYRO_X: u8 = 0x01;
+    /// USER_CTRL.FIFO_EN (RM 4.27).
+    pub const USER_FIFO_EN: u8 = 1 << 6;
+    /// USER_CTRL.FIFO_RESET (RM 4.27): only acts while FIFO_EN = 0; self-clearing.
+    pub const USER_FIFO_RESET: u8 = 1 << 2;
+    /// FIFO_EN.TEMP_FIFO_EN (RM 4.7).
+    pub const FIFO_TEMP: u8 = 1 << 7;
+    /// FIFO_EN.XG/YG/ZG_FIFO_EN (RM 4.7).
+    pub const FIFO_GYRO_XYZ: u8 = (1 << 6) | (1 << 5) | (1 << 4);
+    /// FIFO_EN.ACCEL_FIFO_EN (RM 4.7).
+    pub const FIFO_ACCEL: u8 = 1 << 3;
+    /// INT_ENABLE.FIFO_OFLOW_EN and INT_STATUS.FIFO_OFLOW_INT (RM 4.16, 4.17).
+    pub const INT_FIFO_OFLOW: u8 = 1 << 4;
+    /// INT_ENABLE.DATA_RDY_EN and INT_STATUS.DATA_RDY_INT (RM 4.16, 4.17).
+    pub const INT_DATA_RDY: u8 = 1 << 0;
+    /// INT_PIN_CFG.INT_LEVEL: 1 = active low (RM 4.15).
+    pub const INT_LEVEL_LOW: u8 = 1 << 7;
+    /// INT_PIN_CFG.INT_OPEN: 1 = open drain (RM 4.15).
+    pub const INT_OPEN_DRAIN: u8 = 1 << 6;
+    /// INT_PIN_CFG.LATCH_INT_EN: 1 = held until cleared (RM 4.15).
+    pub const LATCH_INT_EN: u8 = 1 << 5;
+    /// INT_PIN_CFG.INT_RD_CLEAR: 1 = any read clears the status (RM 4.15).
+    pub const INT_RD_CLEAR: u8 = 1 << 4;
+    /// GYRO_CONFIG XG_ST|YG_ST|ZG_ST and ACCEL_CONFIG XA_ST|YA_ST|ZA_ST (RM 4.4, 4.5).
+    pub const SELF_TEST_XYZ: u8 = 0xE0;
+}
+
+/// Delay after DEVICE_RESET before the registers are written again, in ms. PS 6.3 gives a
+/// 100 ms start-up time for register read/write; RM 4.28 notes the reset bit self-clears.
+pub const RESET_DELAY_MS: u32 = 100;
+/// Settling time after switching self-test on or off, in ms (PS 6.1 lists a 50 ms gyro
+/// start-up; with the 5 Hz DLPF the 19 ms filter delay needs several time constants too).
+pub const SELF_TEST_SETTLE_MS: u32 = 250;
+/// Samples averaged for each self-test phase.
+pub const SELF_TEST_SAMPLES: u32 = 16;
+
+/// Standard gravity in m/s² (CGPM 1901), the "g" of the accelerometer full-scale ranges.
+pub const STANDARD_GRAVITY: f32 = 9.806_65;
+
+/// I²C address, selected by the AD0 pin (PS 9.2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Address {
+    /// AD0 low: 0x68.
+    #[default]
+    Ad0Low,
+    /// AD0 high: 0x69.
+    Ad0High,
+}
+
+impl Address {
+    /// The 7-bit address.
+    pub const fn addr(self) -> u8 {
+        match self {
+            Address::Ad0Low => 0x68,
+            Address::Ad0High => 0x69,
+        }
+    }
+}
+
+/// Register-compatible family of the chip found; decides the clone differences the driver
+/// has to honour (temperature formula, FIFO size, separate accelerometer DLPF, self-test).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Family {
+    /// MPU-6050/MPU-6000 register map (RM).
+    Mpu6050,
+    /// MPU-6500/MPU-9250 register map (RM-6500): ACCEL_CONFIG2, 512-byte FIFO, other temperature scale.
+    Mpu6500,
+    /// Later InvenSense/TDK parts on the 6500 map with a 326.8 LSB/°C, 25 °C temperature sensor.
+    Icm,
+}
+
+/// Chip identified by WHO_AM_I (RM 4.32 and the clone data sheets).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ChipId {
+    /// Genuine MPU-6050 / MPU-6000: 0x68.
+    Mpu6050,
+    /// MPU-6500 (sold on many "GY-521 MPU-6050" boards): 0x70.
+    Mpu6500,
+    /// MPU-9250 (its accel/gyro die is an MPU-6500): 0x71.
+    Mpu9250,
+    /// Unbranded MPU-9250/6500 variant seen on cheap boards: 0x72.
+    Mpu92xxVariant,
+    /// MPU-9255: 0x73.
+    Mpu9255,
+    /// MPU-6515: 0x74.
+    Mpu6515,
+    /// ICM-20689 (also on boards sold as MPU-6050): 0x98.
+    Icm20689,
+    /// MPU-6886: 0x19.
+    Mpu6886,
+    /// ICM-20602: 0x12.
+    Icm20602,
+    /// ICM-20608-G: 0xAF.
+    Icm20608,
+}
+
+impl ChipId {
+    /// Identify a WHO_AM_I value; `None` for anything not register-compatible.
+    pub const fn from_who_am_i(value: u8) -> Option<ChipId> {
+        Some(match value {
+            0x68 => ChipId::Mpu6050,
+            0x70 => ChipId::Mpu6500,
+            0x71 => ChipId::Mpu9250,
+            0x72 => ChipId::Mpu92xxVariant,
+            0x73 => ChipId::Mpu9255,
+            0x74 => ChipId::Mpu6515,
+            0x98 => ChipId::Icm20689,
+            0x19 => ChipId::Mpu6886,
+            0x12 => ChipId::Icm20602,
+            0xAF => ChipId::Icm20608,
+            _ => return None,
+        })
+    }
+
+    /// The WHO_AM_I value of this chip.
+    pub const fn who_am_i(self) -> u8 {
+        match self {
+            ChipId::Mpu6050 => 0x68,
+            ChipId::Mpu6500 => 0x70,
+            ChipId::Mpu9250 => 0x71,
+            ChipId::Mpu92xxVariant => 0x72,
+            ChipId::Mpu9255 => 0x73,
+            ChipId::Mpu6515 => 0x74,
+            ChipId::Icm20689 => 0x98,
+            ChipId::Mpu6886 => 0x19,
+            ChipId::Icm20602 => 0x12,
+            ChipId::Icm20608 => 0xAF,
+        }
+    }
+
+    /// Register family.
+    pub const fn family(self) -> Family {
+        match self {
+            ChipId::Mpu6050 => Family::Mpu6050,
+            ChipId::Mpu6500
+            | ChipId::Mpu9250
+            | ChipId::Mpu92xxVariant
+            | ChipId::Mpu9255
+            | ChipId::Mpu6515 => Family::Mpu6500,
+            ChipId::Icm20689 | ChipId::Mpu6886 | ChipId::Icm20602 | ChipId::Icm20608 => Family::Icm,
+        }
+    }
+
+    /// FIFO size in bytes: 1024 (RM 4.30) for the MPU-6050, 512 for the MPU-6500 family
+    /// (RM-6500 4.40 default FIFO_SIZE), 1024 for the ICM parts (their 4 KB variants are
+    /// not relied on).
+    pub const fn fifo_capacity(self) -> u16 {
+        match self.family() {
+            Family::Mpu6050 => 1024,
+            Family::Mpu6500 => 512,
+            Family::Icm => 1024,
+        }
+    }
+
+    /// Temperature conversion of this chip.
+    pub const fn temperature_scale(self) -> TemperatureScale {
+        match self.family() {
+            // RM 4.18: Temperature in degrees C = (TEMP_OUT Register Value as a signed quantity)/340 + 36.53
+            Family::Mpu6050 => TemperatureScale {
+                lsb_per_c: 340.0,
+                offset_c: 36.53,
+            },
+            // RM-6500 4.23: TEMP_degC = TEMP_OUT/Temp_Sensitivity + 21, sensitivity 333.87 LSB/°C (PS-6500 3.4).
+            Family::Mpu6500 => TemperatureScale {
+                lsb_per_c: 333.87,
+                offset_c: 21.0,
+            },
+            // ICM-20689 / MPU-6886 data sheets: 326.8 LSB/°C, 25 °C at 0 LSB.
+            Family::Icm => TemperatureScale {
+                lsb_per_c: 326.8,
+                offset_c: 25.0,
+            },
+        }
+    }
+}
+
+/// Gyroscope full-scale range, GYRO_CONFIG.FS_SEL (RM 4.4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum GyroRange {
+    /// ±250 °/s, 131 LSB/(°/s).
+    #[default]
+    Dps250 = 0,
+    /// ±500 °/s, 65.5 LSB/(°/s).
+    Dps500 = 1,
+    /// ±1000 °/s, 32.8 LSB/(°/s).
+    Dps1000 = 2,
+    /// ±2000 °/s, 16.4 LSB/(°/s).
+    Dps2000 = 3,
+}
+
+impl GyroRange {
+    /// Sensitivity in LSB per °/s (PS 6.1, "Sensitivity Scale Factor").
+    pub const fn lsb_per_dps(self) -> f32 {
+        match self {
+            GyroRange::Dps250 => 131.0,
+            GyroRange::Dps500 => 65.5,
+            GyroRange::Dps1000 => 32.8,
+            GyroRange::Dps2000 => 16.4,
+        }
+    }
+    /// GYRO_CONFIG value (FS_SEL in bits 4:3, self-test off).
+    pub const fn bits(self) -> u8 {
+        (self as u8) << 3
+    }
+}
+
+/// Accelerometer full-scale range, ACCEL_CONFIG.AFS_SEL (RM 4.5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AccelRange {
+    /// ±2 g, 16384 LSB/g.
+    G2 = 0,
+    /// ±4 g, 8192 LSB/g.
+    #[default]
+    G4 = 1,
+    /// ±8 g, 4096 LSB/g.
+    G8 = 2,
+    /// ±16 g, 2048 LSB/g.
+    G16 = 3,
+}
+
+impl AccelRange {
+    /// Sensitivity in LSB per g (PS 6.2).
+    pub const fn lsb_per_g(self) -> f32 {
+        match self {
+            AccelRange::G2 => 16384.0,
+            AccelRange::G4 => 8192.0,
+            AccelRange::G8 => 4096.0,
+            AccelRange::G16 => 2048.0,
+        }
+    }
+    /// ACCEL_CONFIG value (AFS_SEL in bits 4:3, self-test off).
+    pub const fn bits(self) -> u8 {
+        (self as u8) << 3
+    }
+}
+
+/// Digital low-pass filter, CONFIG.DLPF_CFG (RM 4.3 table). Bandwidths are accel / gyro.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Dlpf {
+    /// 260 Hz / 256 Hz, gyro output rate 8 kHz.
+    Hz260 = 0,
+    /// 184 Hz / 188 Hz.
+    Hz184 = 1,
+    /// 94 Hz / 98 Hz.
+    Hz94 = 2,
+    /// 44 Hz / 42 Hz.
+    Hz44 = 3,
+    /// 21 Hz / 20 Hz.
+    Hz21 = 4,
+    /// 10 Hz / 10 Hz.
+    Hz10 = 5,
+    /// 5 Hz / 5 Hz (delay 19.0 / 18.6 ms): the seed configuration.
+    #[default]
+    Hz5 = 6,
+}
+
+impl Dlpf {
+    /// Gyroscope output rate in Hz that SMPLRT_DIV divides (RM 4.2: 8 kHz when DLPF_CFG = 0 or 7,
+    /// otherwise 1 kHz).
+    pub const fn gyro_output_rate_hz(self) -> u32 {
+        match self {
+            Dlpf::Hz260 => 8000,
+            _ => 1000,
+        }
+    }
+    /// MPU-6500 family ACCEL_CONFIG2.A_DLPF_CFG with the nearest bandwidth (RM-6500 4.8 table:
+    /// 0 = 218 Hz, 1 = 218 Hz, 2 = 99 Hz, 3 = 44.8 Hz, 4 = 21.2 Hz, 5 = 10.2 Hz, 6 = 5.05 Hz);
+    /// ACCEL_FCHOICE_B = 0 (bit 3) so the filter is in use.
+    pub const fn accel_config2_bits(self) -> u8 {
+        self as u8
+    }
+}
+
+/// Which measurements each FIFO frame holds (RM 4.7; order in the FIFO is by register
+/// address: accel, temperature, gyro — RM 4.31).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FifoFrame {
+    /// 12-byte frames: accel X/Y/Z, gyro X/Y/Z.
+    #[default]
+    AccelGyro,
+    /// 14-byte frames: accel X/Y/Z, temperature, gyro X/Y/Z.
+    AccelTempGyro,
+}
+
+impl FifoFrame {
+    /// Bytes per frame.
+    pub const fn bytes(self) -> usize {
+        match self {
+            FifoFrame::AccelGyro => 12,
+            FifoFrame::AccelTempGyro => 14,
+        }
+    }
+    /// FIFO_EN value.
+    pub const fn fifo_en_bits(self) -> u8 {
+        match self {
+            FifoFrame::AccelGyro => bits::FIFO_ACCEL | bits::FIFO_GYRO_XYZ,
+            FifoFrame::AccelTempGyro => bits::FIFO_ACCEL | bits::FIFO_GYRO_XYZ | bits::FIFO_TEMP,
+        }
+    }
+}
+
+/// Interrupt pin configuration (RM 4.15, 4.16).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct InterruptConfig {
+    /// Raise INT when a sample is ready (DATA_RDY_EN).
+    pub data_ready: bool,
+    /// Raise INT on FIFO overflow (FIFO_OFLOW_EN).
+    pub fifo_overflow: bool,
+    /// INT active low instead of high.
+    pub active_low: bool,
+    /// INT open drain instead of push-pull.
+    pub open_drain: bool,
+    /// Hold INT until the status is cleared instead of a 50 µs pulse.
+    pub latch: bool,
+    /// Clear the status by any read instead of only by reading INT_STATUS.
+    pub clear_on_any_read: bool,
+}
+
+impl Default for InterruptConfig {
+    /// Data-ready on a 50 µs active-high push-pull pulse, cleared by reading INT_STATUS.
+    fn default() -> Self {
+        InterruptConfig {
+            data_ready: true,
+            fifo_overflow: false,
+            active_low: false,
+            open_drain: false,
+            latch: false,
+            clear_on_any_read: false,
+        }
+    }
+}
+
+impl InterruptConfig {
+    /// INT_PIN_CFG value.
+    pub const fn pin_cfg_bits(&self) -> u8 {
+        (if self.active_low {
+            bits::INT_LEVEL_LOW
+        } else {
+            0
+        }) | (if self.open_drain {
+            bits::INT_OPEN_DRAIN
+        } else {
+            0
+        }) | (if self.latch { bits::LATCH_INT_EN } else { 0 })
+            | (if self.clear_on_any_read {
+                bits::INT_RD_CLEAR
+            } else {
+                0
+            })
+    }
+    /// INT_ENABLE value.
+    pub const fn enable_bits(&self) -> u8 {
+        (if self.data_ready {
+            bits::INT_DATA_RDY
+        } else {
+            0
+        }) | (if self.fifo_overflow {
+            bits::INT_FIFO_OFLOW
+        } else {
+            0
+        })
+    }
+}
+
+/// MPU-6050 configuration. [`Config::default`] is the seed configuration: ±250 °/s, ±4 g,
+/// DLPF_CFG 6 (5 Hz), SMPLRT_DIV 0 → 1 kHz, FIFO with accel + gyro, data-ready interrupt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Gyroscope range.
+    pub gyro_range: GyroRange,
+    /// Accelerometer range.
+    pub accel_range: AccelRange,
+    /// Low-pass filter.
+    pub dlpf: Dlpf,
+    /// Sample rate = gyro output rate / (1 + divider) (RM 4.2).
+    pub sample_rate_divider: u8,
+    /// FIFO contents, or `None` to leave the FIFO off.
+    pub fifo: Option<FifoFrame>,
+    /// Interrupt pin.
+    pub interrupt: InterruptConfig,
+}
+
+impl Config {
+    /// Sample rate in Hz (RM 4.2: Sample Rate = Gyroscope Output Rate / (1 + SMPLRT_DIV)).
+    pub fn sample_rate_hz(&self) -> f32 {
+        self.dlpf.gyro_output_rate_hz() as f32 / (1.0 + self.sample_rate_divider as f32)
+    }
+
+    /// The burst written from SMPLRT_DIV (0x19) upward: SMPLRT_DIV, CONFIG, GYRO_CONFIG,
+    /// ACCEL_CONFIG and, on the 6500 family, ACCEL_CONFIG2. Returns the buffer (register
+    /// address first) and its used length.
+    pub fn config_burst(&self, chip: ChipId) -> ([u8; 6], usize) {
+        let mut b = [
+            reg::SMPLRT_DIV,
+            self.sample_rate_divider,
+            self.dlpf as u8,
+            self.gyro_range.bits(),
+            self.accel_range.bits(),
+            self.dlpf.accel_config2_bits(),
+        ];
+        let len = match chip.family() {
+            Family::Mpu6050 => 5,
+            Family::Mpu6500 | Family::Icm => 6,
+        };
+        if len == 5 {
+            b[5] = 0;
+        }
+        (b, len)
+    }
+
+    /// Conversion factors for this configuration on `chip`.
+    pub const fn scale(&self, chip: ChipId) -> Scale {
+        Scale {
+            accel_lsb_per_g: self.accel_range.lsb_per_g(),
+            gyro_lsb_per_dps: self.gyro_range.lsb_per_dps(),
+            temperature: chip.temperature_scale(),
+        }
+    }
+}
+
+/// Temperature sensor transfer function: °C = raw / `lsb_per_c` + `offset_c`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TemperatureScale {
+    /// Sensitivity in LSB/°C.
+    pub lsb_per_c: f32,
+    /// Temperature at raw 0, in °C.
+    pub offset_c: f32,
+}
+
+/// Raw counts to physical units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Scale {
+    /// Accelerometer sensitivity, LSB/g.
+    pub accel_lsb_per_g: f32,
+    /// Gyroscope sensitivity, LSB/(°/s).
+    pub gyro_lsb_per_dps: f32,
+    /// Temperature sensor transfer function.
+    pub temperature: TemperatureScale,
+}
+
+impl Scale {
+    /// Acceleration in m/s²: raw / (LSB/g) × g₀.
+    pub fn accel_ms2(&self, raw: [i16; 3]) -> [f32; 3] {
+        raw.map(|r| r as f32 / self.accel_lsb_per_g * STANDARD_GRAVITY)
+    }
+    /// Angular rate in °/s: raw / (LSB/(°/s)).
+    pub fn gyro_dps(&self, raw: [i16; 3]) -> [f32; 3] {
+        raw.map(|r| r as f32 / self.gyro_lsb_per_dps)
+    }
+    /// Temperature in °C (RM 4.18 for the MPU-6050; see [`ChipId::temperature_scale`]).
+    pub fn temperature_c(&self, raw: i16) -> f32 {
+        raw as f32 / self.temperature.lsb_per_c + self.temperature.offset_c
+    }
+    /// Convert a whole sample.
+    pub fn convert(&self, s: &RawSample) -> Sample {
+        Sample {
+            accel_ms2: self.accel_ms2(s.accel),
+            gyro_dps: self.gyro_dps(s.gyro),
+            temperature_c: s.temp.map(|t| self.temperature_c(t)),
+        }
+    }
+}
+
+/// One sample in raw counts, all axes from the same sampling instant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RawSample {
+    /// Accelerometer X, Y, Z.
+    pub accel: [i16; 3],
+    /// Temperature; `None` for FIFO frames that do not carry it.
+    pub temp: Option<i16>,
+    /// Gyroscope X, Y, Z.
+    pub gyro: [i16; 3],
+}
+
+/// One sample in physical units.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Sample {
+    /// Acceleration, m/s².
+    pub accel_ms2: [f32; 3],
+    /// Angular rate, °/s.
+    pub gyro_dps: [f32; 3],
+    /// Die temperature, °C.
+    pub temperature_c: Option<f32>,
+}
+
+fn be(b: &[u8], i: usize) -> i16 {
+    // Callers pass fixed-size arrays whose length covers i + 1.
+    i16::from_be_bytes([b[i], b[i + 1]])
+}
+
+/// Decode the 14 bytes read from ACCEL_XOUT_H (RM 4.17-4.20, big-endian).
+pub fn decode_measurements(b: &[u8; 14]) -> RawSample {
+    RawSample {
+        accel: [be(b, 0), be(b, 2), be(b, 4)],
+        temp: Some(be(b, 6)),
+        gyro: [be(b, 8), be(b, 10), be(b, 12)],
+    }
+}
+
+/// Decode one FIFO frame; returns `None` if `b` is shorter than the frame.
+pub fn decode_fifo_frame(b: &[u8], frame: FifoFrame) -> Option<RawSample> {
+    let b: &[u8] = b.get(..frame.bytes())?;
+    let accel = [be(b, 0), be(b, 2), be(b, 4)];
+    Some(match frame {
+        FifoFrame::AccelGyro => RawSample {
+            accel,
+            temp: None,
+            gyro: [be(b, 6), be(b, 8), be(b, 10)],
+        },
+        FifoFrame::AccelTempGyro => RawSample {
+            accel,
+            temp: Some(be(b, 6)),
+            gyro: [be(b, 8), be(b, 10), be(b, 12)],
+        },
+    })
+}
+
+/// FIFO_COUNT decode: high byte first (RM 4.30). The 6500 family uses 13 bits, the
+/// MPU-6050 never exceeds 1024, so the top three bits are masked.
+pub fn decode_fifo_count(b: [u8; 2]) -> u16 {
+    u16::from_be_bytes(b) & 0x1FFF
+}
+
+/// Interrupt status flags (RM 4.17).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IntStatus {
+    /// FIFO_OFLOW_INT.
+    pub fifo_overflow: bool,
+    /// DATA_RDY_INT.
+    pub data_ready: bool,
+}
+
+impl IntStatus {
+    /// Decode INT_STATUS.
+    pub const fn from_bits(b: u8) -> Self {
+        IntStatus {
+            fifo_overflow: b & bits::INT_FIFO_OFLOW != 0,
+            data_ready: b & bits::INT_DATA_RDY != 0,
+        }
+    }
+}
+
+/// Result of the self-test (RM 4.1, PS 6.1/6.2): change of the self-test response from the
+/// factory trim, in percent, per axis. Passes when every axis lies within ±14 %.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SelfTestReport {
+    /// Gyroscope X, Y, Z change from factory trim, %.
+    pub gyro_change_pct: [f32; 3],
+    /// Accelerometer X, Y, Z change from factory trim, %.
+    pub accel_change_pct: [f32; 3],
+}
+
+/// Pass limit of the self-test change from factory trim, % (PS 6.1 and 6.2 tables).
+pub const SELF_TEST_LIMIT_PCT: f32 = 14.0;
+
+impl SelfTestReport {
+    /// `true` when all six axes are within ±[`SELF_TEST_LIMIT_PCT`] (NaN fails).
+    pub fn passed(&self) -> bool {
+        self.gyro_change_pct
+            .iter()
+            .chain(self.accel_change_pct.iter())
+            .all(|c| c.abs() <= SELF_TEST_LIMIT_PCT)
+    }
+}
+
+/// Factory-trim codes decoded from SELF_TEST_X..SELF_TEST_A (RM 4.1): 5-bit gyro codes in
+/// bits 4:0 of SELF_TEST_X/Y/Z; 5-bit accel codes = bits 7:5 of SELF_TEST_X/Y/Z (high 3 bits)
+/// and the 2-bit pairs of SELF_TEST_A (5:4 for X, 3:2 for Y, 1:0 for Z).
+pub fn decode_trim_codes(b: [u8; 4]) -> ([u8; 3], [u8; 3]) {
+    let g = [b[0] & 0x1F, b[1] & 0x1F, b[2] & 0x1F];
+    let a = [
+        ((b[0] >> 5) << 2) | ((b[3] >> 4) & 0x03),
+        ((b[1] >> 5) << 2) | ((b[3] >> 2) & 0x03),
+        ((b[2] >> 5) << 2) | (b[3] & 0x03),
+    ];
+    (g, a)
+}
+
+/// Gyro factory trim in LSB (RM 4.1): FT = 25·131·1.046^(code−1), negated for Y, 0 for code 0.
+pub fn gyro_factory_trim(code: u8, axis: usize) -> f32 {
+    if code == 0 {
+        return 0.0;
+    }
+    let ft = 25.0 * 131.0 * libm::powf(1.046, code as f32 - 1.0);
+    if axis == 1 {
+        -ft
+    } else {
+        ft
+    }
+}
+
+/// Accel factory trim in LSB (RM 4.1): FT = 4096·0.34·(0.92/0.34)^((code−1)/(2⁵−2)), 0 for code 0.
+pub fn accel_factory_trim(code: u8) -> f32 {
+    if code == 0 {
+        return 0.0;
+    }
+    4096.0 * 0.34 * libm::powf(0.92 / 0.34, (code as f32 - 1.0) / 30.0)
+}
+
+/// Change from factory trim in % (RM 4.1): 100·(STR − FT)/FT. A zero trim gives NaN, which
+/// [`SelfTestReport::passed`] treats as a failure.
+pub fn change_from_trim_pct(self_test_response: f32, factory_trim: f32) -> f32 {
+    if factory_trim == 0.0 {
+        return f32::NAN;
+    }
+    100.0 * (self_test_response - factory_trim) / factory_trim
+}
+
+/// Build the report from the averaged outputs with self-test on and off (taken at
+/// ±250 °/s and ±8 g as RM 4.1 requires) and the four SELF_TEST registers.
+pub fn self_test_report(
+    on_accel: [f32; 3],
+    on_gyro: [f32; 3],
+    off_accel: [f32; 3],
+    off_gyro: [f32; 3],
+    trim_regs: [u8; 4],
+) -> SelfTestReport {
+    let (gc, ac) = decode_trim_codes(trim_regs);
+    let mut g = [0.0; 3];
+    let mut a = [0.0; 3];
+    for i in 0..3 {
+        g[i] = change_from_trim_pct(on_gyro[i] - off_gyro[i], gyro_factory_trim(gc[i], i));
+        a[i] = change_from_trim_pct(on_accel[i] - off_accel[i], accel_factory_trim(ac[i]));
+    }
+    SelfTestReport {
+        gyro_change_pct: g,
+        accel_change_pct: a,
+    }
+}
+
+/// MPU-6050 driver error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Error<E> {
+    /// The I²C bus failed (NACK, arbitration loss, ...).
+    Bus(E),
+    /// WHO_AM_I held a value that is neither an MPU-6050 nor a known compatible clone.
+    WrongChip {
+        /// The WHO_AM_I byte read.
+        found: u8,
+    },
+    /// INT_STATUS.FIFO_OFLOW_INT was set: frames were lost and the frame alignment of the
+    /// FIFO is gone. Call `reset_fifo()`.
+    FifoOverflow,
+    /// No new sample is available (DATA_RDY_INT clear).
+    NotReady,
+    /// The operation needs something the configuration leaves off (e.g. `read_fifo` with
+    /// the FIFO disabled) or the driver has not been initialised.
+    NotConfigured,
+    /// The chip found has no MPU-6050 factory self-test (6500/ICM families use other registers).
+    SelfTestUnsupported,
+}
+
+impl<E> From<E> for Error<E> {
+    fn from(e: E) -> Self {
+        Error::Bus(e)
+    }
+}
+
+impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Error::Bus(e) => write!(f, "MPU-6050: I2C bus error: {e:?}"),
+            Error::WrongChip { found } => write!(
+                f,
+                "MPU-6050: WHO_AM_I (0x75) read 0x{found:02X}, not an MPU-6050 or known clone"
+            ),
+            Error::FifoOverflow => {
+                write!(f, "MPU-6050: FIFO overflowed, frames lost; reset the FIFO")
+            }
+            Error::NotReady => write!(f, "MPU-6050: no new sample (DATA_RDY clear)"),
+            Error::NotConfigured => write!(f, "MPU-6050: driver not initialised or FIFO disabled"),
+            Error::SelfTestUnsupported => {
+                write!(
+                    f,
+                    "MPU-6050: factory self-test only exists on a genuine MPU-6050"
+                )
+            }
+        }
+    }
+}
+
+impl<E: core::fmt::Debug> core::error::Error for Error<E> {}

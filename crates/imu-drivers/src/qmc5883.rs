@@ -1,0 +1,399 @@
+//! QMC5883L / QMC5883P register layer (pure, no I/O) and chip detection constants.
+//!
+//! References:
+//! - QST "QMC5883L 3-Axis Magnetic Sensor" datasheet rev C (2016) (QMC-L), sections 9.1 (register
+//!   map) and 9.2 (register definition), 7.2 (typical application: SET/RESET period = 0x01).
+//! - QST "QMC5883P 3-Axis Magnetic Sensor" datasheet rev A (QMC-P), section 8 (registers).
+//! - Honeywell HMC5883L datasheet (2013), register map table 2 (identification registers 10-12).
+
+/// QMC5883L 7-bit I²C address (QMC-L 9.1).
+pub const QMC5883L_ADDR: u8 = 0x0D;
+/// QMC5883P 7-bit I²C address (QMC-P 8.1).
+pub const QMC5883P_ADDR: u8 = 0x2C;
+/// HMC5883L 7-bit I²C address (HMC5883L "I2C interface").
+pub const HMC5883L_ADDR: u8 = 0x1E;
+
+/// QMC5883L registers (QMC-L 9.1).
+pub mod reg_l {
+    /// X LSB; X, Y, Z follow little-endian up to 0x05.
+    pub const DATA_X_LSB: u8 = 0x00;
+    /// Status: DRDY (bit 0), OVL (bit 1), DOR (bit 2).
+    pub const STATUS: u8 = 0x06;
+    /// Temperature LSB (0x08 MSB), 100 LSB/°C, offset not calibrated.
+    pub const TEMP_LSB: u8 = 0x07;
+    /// Control 1: OSR[7:6] RNG[5:4] ODR[3:2] MODE[1:0].
+    pub const CONTROL1: u8 = 0x09;
+    /// Control 2: SOFT_RST (bit 7), ROL_PNT (bit 6), INT_ENB (bit 0).
+    pub const CONTROL2: u8 = 0x0A;
+    /// SET/RESET period (FBR); datasheet recommends 0x01.
+    pub const SET_RESET_PERIOD: u8 = 0x0B;
+    /// Chip id, reads 0xFF.
+    pub const CHIP_ID: u8 = 0x0D;
+    /// Expected CHIP_ID value.
+    pub const CHIP_ID_VALUE: u8 = 0xFF;
+}
+
+/// QMC5883P registers (QMC-P 8.2).
+pub mod reg_p {
+    /// Chip id, reads 0x80.
+    pub const CHIP_ID: u8 = 0x00;
+    /// Expected CHIP_ID value.
+    pub const CHIP_ID_VALUE: u8 = 0x80;
+    /// X LSB; X, Y, Z follow little-endian up to 0x06.
+    pub const DATA_X_LSB: u8 = 0x01;
+    /// Status: DRDY (bit 0), OVFL (bit 1).
+    pub const STATUS: u8 = 0x09;
+    /// Control 1: OSR2[7:6] (down-sampling) OSR1[5:4] ODR[3:2] MODE[1:0].
+    pub const CONTROL1: u8 = 0x0A;
+    /// Control 2: SOFT_RST (bit 7), SELF_TEST (bit 6), RNG[3:2], SET_RESET mode[1:0].
+    pub const CONTROL2: u8 = 0x0B;
+    /// Axis sign definition register; the datasheet's set-up example writes 0x06.
+    pub const AXIS_SIGN: u8 = 0x29;
+    /// Value the datasheet example writes to [`AXIS_SIGN`].
+    pub const AXIS_SIGN_VALUE: u8 = 0x06;
+}
+
+/// HMC5883L identification registers A/B/C (10..12) read 'H', '4', '3'.
+pub mod reg_hmc {
+    /// Identification register A.
+    pub const ID_A: u8 = 10;
+    /// Expected bytes.
+    pub const ID_VALUE: [u8; 3] = *b"H43";
+}
+
+/// Status bits (same positions on L and P; DOR exists only on the L).
+pub mod bits {
+    /// Data ready.
+    pub const DRDY: u8 = 1 << 0;
+    /// Overflow: a channel exceeded the range.
+    pub const OVL: u8 = 1 << 1;
+    /// Data skipped: a measurement was overwritten before being read (QMC5883L only).
+    pub const DOR: u8 = 1 << 2;
+    /// Control 2 soft reset.
+    pub const SOFT_RST: u8 = 1 << 7;
+    /// QMC5883L control 2 INT_ENB: 1 disables the DRDY pin.
+    pub const INT_DISABLE: u8 = 1 << 0;
+}
+
+/// Soft-reset recovery time in ms (QMC-L 8.2 gives a 350 µs power-on time; 1 ms margin,
+/// and QMC-P gives no figure, so the same is used).
+pub const SOFT_RESET_DELAY_MS: u32 = 1;
+
+/// Which magnetometer answered (see [`crate::blocking::detect_magnetometer`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Chip {
+    /// QMC5883L at 0x0D, CHIP_ID 0xFF.
+    Qmc5883L,
+    /// QMC5883P at 0x2C, CHIP_ID 0x80.
+    Qmc5883P,
+    /// HMC5883L at 0x1E (detected only; not driven by this crate).
+    Hmc5883L,
+    /// Nothing recognised answered.
+    None,
+}
+
+/// Variant driven by [`crate::blocking::Qmc5883`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Variant {
+    /// QMC5883L.
+    #[default]
+    L,
+    /// QMC5883P.
+    P,
+}
+
+impl Variant {
+    /// 7-bit address.
+    pub const fn addr(self) -> u8 {
+        match self {
+            Variant::L => QMC5883L_ADDR,
+            Variant::P => QMC5883P_ADDR,
+        }
+    }
+    /// Register and value that identify the chip.
+    pub const fn chip_id(self) -> (u8, u8) {
+        match self {
+            Variant::L => (reg_l::CHIP_ID, reg_l::CHIP_ID_VALUE),
+            Variant::P => (reg_p::CHIP_ID, reg_p::CHIP_ID_VALUE),
+        }
+    }
+    /// Status register.
+    pub const fn status_reg(self) -> u8 {
+        match self {
+            Variant::L => reg_l::STATUS,
+            Variant::P => reg_p::STATUS,
+        }
+    }
+    /// First data register.
+    pub const fn data_reg(self) -> u8 {
+        match self {
+            Variant::L => reg_l::DATA_X_LSB,
+            Variant::P => reg_p::DATA_X_LSB,
+        }
+    }
+    /// The detect result for this variant.
+    pub const fn chip(self) -> Chip {
+        match self {
+            Variant::L => Chip::Qmc5883L,
+            Variant::P => Chip::Qmc5883P,
+        }
+    }
+}
+
+/// Full-scale range.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Range {
+    /// ±2 G (L: 12000 LSB/G; P: 15000 LSB/G).
+    #[default]
+    G2,
+    /// ±8 G (L: 3000 LSB/G; P: 3750 LSB/G).
+    G8,
+    /// ±12 G, QMC5883P only (2500 LSB/G).
+    G12,
+    /// ±30 G, QMC5883P only (1000 LSB/G).
+    G30,
+}
+
+impl Range {
+    /// Sensitivity in LSB per gauss (QMC-L 2.1 "Field Resolution"; QMC-P 2.1 "Sensitivity");
+    /// `None` if the variant lacks the range.
+    pub const fn lsb_per_gauss(self, v: Variant) -> Option<f32> {
+        match (v, self) {
+            (Variant::L, Range::G2) => Some(12000.0),
+            (Variant::L, Range::G8) => Some(3000.0),
+            (Variant::L, _) => None,
+            (Variant::P, Range::G2) => Some(15000.0),
+            (Variant::P, Range::G8) => Some(3750.0),
+            (Variant::P, Range::G12) => Some(2500.0),
+            (Variant::P, Range::G30) => Some(1000.0),
+        }
+    }
+}
+
+/// Output data rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Odr {
+    /// 10 Hz.
+    Hz10 = 0,
+    /// 50 Hz.
+    Hz50 = 1,
+    /// 100 Hz.
+    Hz100 = 2,
+    /// 200 Hz (seed).
+    #[default]
+    Hz200 = 3,
+}
+
+impl Odr {
+    /// Rate in Hz.
+    pub const fn hz(self) -> u32 {
+        match self {
+            Odr::Hz10 => 10,
+            Odr::Hz50 => 50,
+            Odr::Hz100 => 100,
+            Odr::Hz200 => 200,
+        }
+    }
+}
+
+/// Over-sampling ratio, most filtering first. On the QMC5883P it maps onto OSR1 (8, 4, 2, 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Osr {
+    /// L: 512, P: OSR1 = 8 (the maximum of each; seed).
+    #[default]
+    Max = 0,
+    /// L: 256, P: 4.
+    High = 1,
+    /// L: 128, P: 2.
+    Low = 2,
+    /// L: 64, P: 1.
+    Min = 3,
+}
+
+/// Operating mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Mode {
+    /// Standby (L) / suspend (P).
+    Standby,
+    /// Continuous measurement at the ODR (seed).
+    #[default]
+    Continuous,
+}
+
+/// Magnetometer configuration. The default is the seed: ±2 G, 200 Hz, maximum oversampling,
+/// continuous, SET/RESET period 0x01, DRDY pin enabled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Config {
+    /// Range.
+    pub range: Range,
+    /// Output data rate.
+    pub odr: Odr,
+    /// Over-sampling.
+    pub osr: Osr,
+    /// Mode.
+    pub mode: Mode,
+    /// QMC5883L SET/RESET period register 0x0B (QMC-L 9.2.4 recommends 0x01). Unused on the P.
+    pub set_reset_period: u8,
+    /// QMC5883L: drive the DRDY pin (INT_ENB = 0). Unused on the P (no pin).
+    pub drdy_pin: bool,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            range: Range::G2,
+            odr: Odr::Hz200,
+            osr: Osr::Max,
+            mode: Mode::Continuous,
+            set_reset_period: 0x01,
+            drdy_pin: true,
+        }
+    }
+}
+
+impl Config {
+    /// QMC5883L CONTROL1 (0x09): OSR[7:6] RNG[5:4] ODR[3:2] MODE[1:0] (QMC-L 9.2.2).
+    /// `None` if the range is not available on the L.
+    pub const fn control1_l(&self) -> Option<u8> {
+        let rng = match self.range {
+            Range::G2 => 0,
+            Range::G8 => 1,
+            _ => return None,
+        };
+        let mode = match self.mode {
+            Mode::Standby => 0,
+            Mode::Continuous => 1,
+        };
+        Some(((self.osr as u8) << 6) | (rng << 4) | ((self.odr as u8) << 2) | mode)
+    }
+
+    /// QMC5883L CONTROL2 (0x0A): INT_ENB in bit 0, roll-over and soft reset off.
+    pub const fn control2_l(&self) -> u8 {
+        if self.drdy_pin {
+            0
+        } else {
+            bits::INT_DISABLE
+        }
+    }
+
+    /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) [7:6], OSR1 [5:4], ODR [3:2],
+    /// MODE [1:0] with 0b11 = continuous, 0b00 = suspend (QMC-P 8.2).
+    pub const fn control1_p(&self) -> u8 {
+        let mode = match self.mode {
+            Mode::Standby => 0,
+            Mode::Continuous => 3,
+        };
+        ((self.osr as u8) << 4) | ((self.odr as u8) << 2) | mode
+    }
+
+    /// QMC5883P CONTROL2 (0x0B): RNG [3:2] (0 = ±30 G, 1 = ±12 G, 2 = ±8 G, 3 = ±2 G),
+    /// SET/RESET mode [1:0] = 0 (set and reset on).
+    pub const fn control2_p(&self) -> u8 {
+        let rng = match self.range {
+            Range::G30 => 0,
+            Range::G12 => 1,
+            Range::G8 => 2,
+            Range::G2 => 3,
+        };
+        rng << 2
+    }
+}
+
+/// One magnetometer sample in raw counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MagSample {
+    /// X, Y, Z.
+    pub xyz: [i16; 3],
+    /// QMC5883L relative temperature (100 LSB/°C, uncalibrated offset); `None` on the P.
+    pub temp: Option<i16>,
+    /// OVL: a channel exceeded the range; the values are not valid field readings.
+    pub overflow: bool,
+    /// DOR: at least one measurement was skipped (not read in time). Always false on the P.
+    pub skipped: bool,
+}
+
+/// Status register flags.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    /// DRDY.
+    pub ready: bool,
+    /// OVL / OVFL.
+    pub overflow: bool,
+    /// DOR (L only).
+    pub skipped: bool,
+}
+
+impl Status {
+    /// Decode the status byte of `v`.
+    pub const fn from_bits(b: u8, v: Variant) -> Self {
+        Status {
+            ready: b & bits::DRDY != 0,
+            overflow: b & bits::OVL != 0,
+            skipped: matches!(v, Variant::L) && b & bits::DOR != 0,
+        }
+    }
+}
+
+/// Decode 6 little-endian data bytes (X, Y, Z).
+pub fn decode_xyz(b: [u8; 6]) -> [i16; 3] {
+    [
+        i16::from_le_bytes([b[0], b[1]]),
+        i16::from_le_bytes([b[2], b[3]]),
+        i16::from_le_bytes([b[4], b[5]]),
+    ]
+}
+
+/// QMC5883L temperature sensitivity, LSB/°C (QMC-L 9.2.1: "100 LSB/°C"; offset uncalibrated).
+pub const TEMP_LSB_PER_C: f32 = 100.0;
+
+/// Raw counts to microtesla: raw / (LSB/G) × 100 µT/G.
+pub fn to_microtesla(xyz: [i16; 3], lsb_per_gauss: f32) -> [f32; 3] {
+    xyz.map(|r| r as f32 / lsb_per_gauss * 100.0)
+}
+
+/// Magnetometer driver error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Error<E> {
+    /// The I²C bus failed.
+    Bus(E),
+    /// The chip-id register held another value.
+    WrongChip {
+        /// The byte read.
+        found: u8,
+    },
+    /// DRDY was clear: no new measurement.
+    NotReady,
+    /// The configuration asks for something the variant lacks (e.g. ±30 G on the L).
+    InvalidConfig,
+}
+
+impl<E> From<E> for Error<E> {
+    fn from(e: E) -> Self {
+        Error::Bus(e)
+    }
+}
+
+impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Error::Bus(e) => write!(f, "QMC5883: I2C bus error: {e:?}"),
+            Error::WrongChip { found } => {
+                write!(f, "QMC5883: chip-id register read 0x{found:02X}")
+            }
+            Error::NotReady => write!(f, "QMC5883: no new measurement (DRDY clear)"),
+            Error::InvalidConfig => write!(f, "QMC5883: range not available on this variant"),
+        }
+    }
+}
+
+impl<E: core::fmt::Debug> core::error::Error for Error<E> {}
