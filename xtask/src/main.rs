@@ -5,6 +5,10 @@ use std::process::Command;
 
 use anyhow::{bail, Context, Result};
 
+mod emu;
+mod emu_check;
+mod emu_link;
+
 /// Packages that only build for the device (thumbv6m-none-eabi).
 const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
 
@@ -13,8 +17,11 @@ fn main() -> Result<()> {
     let (cmd, rest) = args.split_first().map(|(c, r)| (c.as_str(), r)).unwrap_or(("help", &[]));
     match cmd {
         "test" => test(rest),
+        "e2e" => emu::e2e(rest),
+        "bench-emu" => emu::bench(rest),
+        "demo" => emu::demo(rest),
         "help" | "--help" | "-h" => {
-            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests");
+            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e     end-to-end test on the emulated board (60 s emulated)\n  bench-emu  emulated cycle budget report (out/emu/bench.md)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
             Ok(())
         }
         other => bail!("unknown xtask command `{other}` (try `cargo xtask help`)"),
@@ -48,5 +55,6 @@ fn test(extra: &[String]) -> Result<()> {
         c.args(["--exclude", p]);
     }
     c.args(extra);
-    run(&mut c)
+    run(&mut c)?;
+    if emu::node_available() { emu::e2e(&[]) } else { eprintln!("xtask: node >= 20 not found: emulator end-to-end test skipped"); Ok(()) }
 }

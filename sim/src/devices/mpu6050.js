@@ -43,11 +43,14 @@ export class Mpu6050 extends RegisterDevice {
   }
 
   powerOnReset(nanos = 0) {
+    // A power cycle loses whatever was in flight: leave a hole in the sample index so that a
+    // host replaying the served samples sees the discontinuity (k jumps).
+    if (this.stats && this.stats.produced > 0) this.stats.produced++;
     this.regs = new Uint8Array(128);
     this.regs[REG.PWR_MGMT_1] = 0x40; // SLEEP
     this.regs[REG.WHO_AM_I] = 0x68;
     this.fifo = new Uint8Array(FIFO_SIZE);
-    this.fifoOwner = new Int32Array(FIFO_SIZE); // sample index of each byte
+    this.fifoOwner = new Array(FIFO_SIZE); // the sample each byte belongs to
     this.fifoHead = 0; // read index
     this.fifoCount = 0;
     this.filter = null;
@@ -132,8 +135,8 @@ export class Mpu6050 extends RegisterDevice {
     if (en & 0x10) words.push(6);
     sample.fifoBytes = words.length * 2;
     for (const w of words) {
-      this.fifoPush((sample.raw[w] >> 8) & 0xff, sample.k);
-      this.fifoPush(sample.raw[w] & 0xff, sample.k);
+      this.fifoPush((sample.raw[w] >> 8) & 0xff, sample);
+      this.fifoPush(sample.raw[w] & 0xff, sample);
     }
   }
 
@@ -158,15 +161,11 @@ export class Mpu6050 extends RegisterDevice {
     const owner = this.fifoOwner[this.fifoHead];
     this.fifoHead = (this.fifoHead + 1) % FIFO_SIZE;
     this.fifoCount--;
-    if (this.record) {
-      const s = this.samples[owner - this.samples[0].k];
-      if (s) {
-        s.bytesRead++;
-        if (s.bytesRead === s.fifoBytes && !s.served) {
-          s.served = nanos;
-          this.stats.servedFifo++;
-        }
-      }
+    this.fifoOwner[this.fifoHead === 0 ? FIFO_SIZE - 1 : this.fifoHead - 1] = undefined;
+    owner.bytesRead++;
+    if (owner.bytesRead === owner.fifoBytes && !owner.served) {
+      owner.served = nanos;
+      this.stats.servedFifo++;
     }
     return b;
   }

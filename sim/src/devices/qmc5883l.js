@@ -21,6 +21,9 @@ export class Qmc5883l extends RegisterDevice {
   }
 
   powerOnReset() {
+    // A power cycle loses whatever was in flight: leave a hole in the sample index so that a
+    // host replaying the served samples sees the discontinuity (k jumps).
+    if (this.stats && this.stats.produced > 0) this.stats.produced++;
     this.regs = new Uint8Array(16);
     this.regs[0x0d] = 0xff;
     this.nextSample = null;
