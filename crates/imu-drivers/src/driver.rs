@@ -110,7 +110,7 @@ macro_rules! drivers {
                 let (burst, len) = config.config_burst(chip);
                 self.i2c.write(self.address, &burst[..len]) $(.$await)? ?;
                 self.write_reg(mr::INT_PIN_CFG, config.interrupt.pin_cfg_bits()) $(.$await)? ?;
-                self.write_reg(mr::INT_ENABLE, config.interrupt.enable_bits()) $(.$await)? ?;
+                self.write_reg(mr::INT_ENABLE, config.int_enable_bits()) $(.$await)? ?;
                 self.config = *config;
                 match config.fifo {
                     Some(frame) => {

@@ -426,7 +426,7 @@ impl InterruptConfig {
 
 /// MPU-6050 configuration. [`Config::default`] is the seed configuration: ±250 °/s, ±4 g,
 /// DLPF_CFG 6 (5 Hz), SMPLRT_DIV 0 → 1 kHz, FIFO with accel + gyro, data-ready interrupt.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Config {
     /// Gyroscope range.
@@ -441,6 +441,19 @@ pub struct Config {
     pub fifo: Option<FifoFrame>,
     /// Interrupt pin.
     pub interrupt: InterruptConfig,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            gyro_range: GyroRange::Dps250,
+            accel_range: AccelRange::G4,
+            dlpf: Dlpf::Hz5,
+            sample_rate_divider: 0,
+            fifo: Some(FifoFrame::AccelGyro),
+            interrupt: InterruptConfig::default(),
+        }
+    }
 }
 
 impl Config {
@@ -469,6 +482,17 @@ impl Config {
             b[5] = 0;
         }
         (b, len)
+    }
+
+    /// INT_ENABLE value: the interrupt configuration, plus FIFO_OFLOW_EN whenever the FIFO is
+    /// on, so that INT_STATUS.FIFO_OFLOW_INT reports an overflow (RM 4.16/4.17).
+    pub const fn int_enable_bits(&self) -> u8 {
+        self.interrupt.enable_bits()
+            | if self.fifo.is_some() {
+                bits::INT_FIFO_OFLOW
+            } else {
+                0
+            }
     }
 
     /// Conversion factors for this configuration on `chip`.

@@ -1,0 +1,234 @@
+//! Register-level model of the QMC5883L (QST datasheet rev C, 9.1/9.2) and QMC5883P (QST
+//! datasheet rev A, section 8):
+//!
+//! - in continuous mode a measurement is made every 1/ODR (10/50/100/200 Hz from ODR[3:2]);
+//! - each measurement writes X/Y/Z little-endian, sets DRDY; if DRDY was still set (the last
+//!   result was never read) the L sets DOR ("data skipped");
+//! - OVL is set when any axis exceeds the configured range (and cleared by an in-range result);
+//! - reading any data register clears DRDY and DOR;
+//! - SOFT_RST in CONTROL2 restores the power-on registers (all zero: standby);
+//! - the L has a relative temperature sensor at 0x07/0x08, 100 LSB/°C.
+
+use embedded_hal::i2c::{NoAcknowledgeSource, Operation};
+
+use crate::SimError;
+
+/// Which chip is modelled.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QmcVariant {
+    /// QMC5883L at 0x0D.
+    L,
+    /// QMC5883P at 0x2C.
+    P,
+}
+
+/// Field source: sample index → field in gauss.
+pub type FieldFn = Box<dyn FnMut(u64) -> [f64; 3]>;
+
+/// The model.
+pub struct QmcModel {
+    /// Variant.
+    pub variant: QmcVariant,
+    /// Field source.
+    pub field: FieldFn,
+    /// Die temperature, °C (L only; the model's uncalibrated offset is 0).
+    pub temp_c: f64,
+    /// Chip-id byte answered (0xFF on the L, 0x80 on the P unless a test changes it).
+    pub chip_id: u8,
+    /// When false the chip NACKs everything.
+    pub present: bool,
+    regs: [u8; 0x30],
+    ptr: u8,
+    next_ns: Option<u64>,
+    /// Measurements made.
+    pub measurements: u64,
+}
+
+impl QmcModel {
+    /// A chip of `variant` in a constant field of (0.2, −0.1, 0.4) G, 25 °C.
+    pub fn new(variant: QmcVariant) -> Self {
+        QmcModel {
+            variant,
+            field: Box::new(|_| [0.2, -0.1, 0.4]),
+            temp_c: 25.0,
+            chip_id: match variant {
+                QmcVariant::L => 0xFF,
+                QmcVariant::P => 0x80,
+            },
+            present: true,
+            regs: [0; 0x30],
+            ptr: 0,
+            next_ns: None,
+            measurements: 0,
+        }
+    }
+
+    /// 7-bit address.
+    pub fn address(&self) -> u8 {
+        match self.variant {
+            QmcVariant::L => 0x0D,
+            QmcVariant::P => 0x2C,
+        }
+    }
+
+    /// Register value without side effects.
+    pub fn reg(&self, r: u8) -> u8 {
+        self.regs[r as usize % 0x30]
+    }
+
+    fn ctrl1(&self) -> u8 {
+        match self.variant {
+            QmcVariant::L => self.regs[0x09],
+            QmcVariant::P => self.regs[0x0A],
+        }
+    }
+
+    fn status_reg(&self) -> usize {
+        match self.variant {
+            QmcVariant::L => 0x06,
+            QmcVariant::P => 0x09,
+        }
+    }
+
+    fn data_regs(&self) -> std::ops::RangeInclusive<u8> {
+        match self.variant {
+            QmcVariant::L => 0x00..=0x05,
+            QmcVariant::P => 0x01..=0x06,
+        }
+    }
+
+    fn continuous(&self) -> bool {
+        let mode = self.ctrl1() & 0x03;
+        match self.variant {
+            QmcVariant::L => mode == 0x01,
+            QmcVariant::P => mode == 0x01 || mode == 0x03,
+        }
+    }
+
+    /// Measurement period, ns.
+    pub fn period_ns(&self) -> u64 {
+        let hz = [10u64, 50, 100, 200][((self.ctrl1() >> 2) & 3) as usize];
+        1_000_000_000 / hz
+    }
+
+    /// (LSB per gauss, full scale in gauss) of the configured range.
+    pub fn range(&self) -> (f64, f64) {
+        match self.variant {
+            QmcVariant::L => match (self.regs[0x09] >> 4) & 3 {
+                0 => (12000.0, 2.0),
+                _ => (3000.0, 8.0),
+            },
+            QmcVariant::P => match (self.regs[0x0B] >> 2) & 3 {
+                0 => (1000.0, 30.0),
+                1 => (2500.0, 12.0),
+                2 => (3750.0, 8.0),
+                _ => (15000.0, 2.0),
+            },
+        }
+    }
+
+    /// Make every measurement due by `now_ns`.
+    pub fn advance_to(&mut self, now_ns: u64) {
+        if !self.continuous() {
+            self.next_ns = None;
+            return;
+        }
+        let period = self.period_ns();
+        let mut next = self.next_ns.unwrap_or(now_ns + period);
+        while next <= now_ns {
+            self.measure();
+            next += period;
+        }
+        self.next_ns = Some(next);
+    }
+
+    fn measure(&mut self) {
+        let f = (self.field)(self.measurements);
+        self.measurements += 1;
+        let (lsb, fs) = self.range();
+        let base = *self.data_regs().start() as usize;
+        let mut over = false;
+        for (i, &g) in f.iter().enumerate() {
+            over |= g.abs() > fs;
+            let raw = (g * lsb).round().clamp(-32768.0, 32767.0) as i16;
+            let [lo, hi] = raw.to_le_bytes();
+            self.regs[base + 2 * i] = lo;
+            self.regs[base + 2 * i + 1] = hi;
+        }
+        let st = self.status_reg();
+        let mut s = self.regs[st];
+        if s & 0x01 != 0 && self.variant == QmcVariant::L {
+            s |= 0x04;
+        }
+        s |= 0x01;
+        s = if over { s | 0x02 } else { s & !0x02 };
+        self.regs[st] = s;
+        if self.variant == QmcVariant::L {
+            let t = (self.temp_c * 100.0).round().clamp(-32768.0, 32767.0) as i16;
+            let [lo, hi] = t.to_le_bytes();
+            self.regs[0x07] = lo;
+            self.regs[0x08] = hi;
+        }
+    }
+
+    fn read_byte(&mut self) -> u8 {
+        let r = self.ptr;
+        let v = if (self.variant == QmcVariant::L && r == 0x0D)
+            || (self.variant == QmcVariant::P && r == 0x00)
+        {
+            self.chip_id
+        } else {
+            self.regs[r as usize % 0x30]
+        };
+        if self.data_regs().contains(&r) {
+            let st = self.status_reg();
+            self.regs[st] &= !0x05;
+        }
+        self.ptr = (r + 1) % 0x30;
+        v
+    }
+
+    fn write_byte(&mut self, v: u8) {
+        let r = self.ptr;
+        let ctrl2 = match self.variant {
+            QmcVariant::L => 0x0A,
+            QmcVariant::P => 0x0B,
+        };
+        if r == ctrl2 && v & 0x80 != 0 {
+            self.regs = [0; 0x30];
+            self.next_ns = None;
+        } else if !self.data_regs().contains(&r) && r as usize != self.status_reg() {
+            let was = self.continuous();
+            self.regs[r as usize % 0x30] = v;
+            if was != self.continuous() {
+                self.next_ns = None;
+            }
+        }
+        self.ptr = (r + 1) % 0x30;
+    }
+
+    /// Execute one I²C transaction addressed to this chip.
+    pub fn transaction(&mut self, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
+        if !self.present {
+            return Err(SimError::Nack(NoAcknowledgeSource::Address));
+        }
+        for op in ops {
+            match op {
+                Operation::Write(bytes) => {
+                    if let Some((&r, data)) = bytes.split_first() {
+                        self.ptr = r % 0x30;
+                        for &v in data {
+                            self.write_byte(v);
+                        }
+                    }
+                }
+                Operation::Read(buf) => {
+                    for b in buf.iter_mut() {
+                        *b = self.read_byte();
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,459 @@
+//! MPU-6050 driver against embedded-hal-mock transaction lists, blocking and async.
+//! Every expected byte is derived here from the Register Map (RM rev 4.2), not from the
+//! driver's constants, so a wrong register value fails.
+
+use embassy_futures::block_on;
+use embedded_hal::i2c::{ErrorKind, NoAcknowledgeSource};
+use embedded_hal_mock::eh1::delay::{CheckedDelay, NoopDelay, Transaction as D};
+use embedded_hal_mock::eh1::i2c::{Mock, Transaction as T};
+use imu_drivers::mpu6050::{
+    AccelRange, Address, ChipId, Config, Dlpf, Error, FifoFrame, GyroRange, InterruptConfig,
+    RawSample,
+};
+use imu_drivers::{asynch, blocking};
+
+const A: u8 = 0x68;
+
+/// Seed init on a chip answering `who`: RM 4.28 reset, CLKSEL=1, burst 0x19..0x1C
+/// (SMPLRT_DIV 0, DLPF_CFG 6, FS_SEL 0 → 0x00, AFS_SEL 1 → 0x08), INT_PIN_CFG 0,
+/// INT_ENABLE DATA_RDY|FIFO_OFLOW = 0x11, FIFO reset, FIFO_EN accel+XYZ gyro = 0x78, FIFO on.
+fn seed_init(who: u8, burst: Vec<u8>) -> Vec<T> {
+    vec![
+        T::write_read(A, vec![0x75], vec![who]),
+        T::write(A, vec![0x6B, 0x80]),
+        T::write(A, vec![0x6B, 0x01]),
+        T::write(A, burst),
+        T::write(A, vec![0x37, 0x00]),
+        T::write(A, vec![0x38, 0x11]),
+        T::write(A, vec![0x6A, 0x04]),
+        T::write(A, vec![0x23, 0x78]),
+        T::write(A, vec![0x6A, 0x40]),
+    ]
+}
+
+fn seed_burst_6050() -> Vec<u8> {
+    vec![0x19, 0x00, 0x06, 0x00, 0x08]
+}
+
+/// Run the same expectations through the blocking and the async driver.
+fn both<R: PartialEq + std::fmt::Debug>(
+    exp: &[T],
+    b: impl FnOnce(&mut blocking::Mpu6050<Mock>) -> R,
+    a: impl AsyncFnOnce(&mut asynch::Mpu6050<Mock>) -> R,
+) -> R {
+    let mut d1 = blocking::Mpu6050::new(Mock::new(exp), Address::Ad0Low);
+    let r1 = b(&mut d1);
+    d1.release().done();
+    let mut d2 = asynch::Mpu6050::new(Mock::new(exp), Address::Ad0Low);
+    let r2 = block_on(a(&mut d2));
+    d2.release().done();
+    assert_eq!(r1, r2, "blocking and async results differ");
+    r1
+}
+
+#[test]
+fn seed_init_sequence_and_reset_delay() {
+    let exp = seed_init(0x68, seed_burst_6050());
+    let chip = both(
+        &exp,
+        |d| {
+            let mut delay = CheckedDelay::new(&[D::delay_ms(100)]);
+            let r = d.init(&mut delay, &Config::default()).unwrap();
+            delay.done();
+            r
+        },
+        async |d| {
+            let mut delay = CheckedDelay::new(&[D::delay_ms(100)]);
+            let r = d.init(&mut delay, &Config::default()).await.unwrap();
+            delay.done();
+            r
+        },
+    );
+    assert_eq!(chip, ChipId::Mpu6050);
+}
+
+#[test]
+fn seed_config_is_the_papers() {
+    let c = Config::default();
+    assert_eq!(c.gyro_range, GyroRange::Dps250);
+    assert_eq!(c.accel_range, AccelRange::G4);
+    assert_eq!(c.dlpf, Dlpf::Hz5);
+    assert_eq!(c.sample_rate_divider, 0);
+    assert_eq!(c.sample_rate_hz(), 1000.0);
+    assert_eq!(c.fifo, Some(FifoFrame::AccelGyro));
+}
+
+#[test]
+fn clone_ids_accepted_and_6500_family_gets_accel_config2() {
+    // MPU-6500 family (0x70, 0x71, 0x72, 0x73) and ICM parts (0x98, 0x19): ACCEL_CONFIG2 (0x1D)
+    // = A_DLPF_CFG 6 (5.05 Hz, RM-6500 4.8) appended to the burst.
+    for (who, chip) in [
+        (0x70, ChipId::Mpu6500),
+        (0x71, ChipId::Mpu9250),
+        (0x72, ChipId::Mpu92xxVariant),
+        (0x73, ChipId::Mpu9255),
+        (0x98, ChipId::Icm20689),
+        (0x19, ChipId::Mpu6886),
+    ] {
+        let exp = seed_init(who, vec![0x19, 0x00, 0x06, 0x00, 0x08, 0x06]);
+        let got = both(
+            &exp,
+            |d| d.init(&mut NoopDelay, &Config::default()).unwrap(),
+            async |d| d.init(&mut NoopDelay, &Config::default()).await.unwrap(),
+        );
+        assert_eq!(got, chip, "WHO_AM_I 0x{who:02X}");
+    }
+}
+
+#[test]
+fn wrong_chip_stops_before_any_write() {
+    for who in [0x00, 0xFF, 0x69, 0x34, 0xEA] {
+        let exp = [T::write_read(A, vec![0x75], vec![who])];
+        let e = both(
+            &exp,
+            |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
+            async |d| {
+                d.init(&mut NoopDelay, &Config::default())
+                    .await
+                    .unwrap_err()
+            },
+        );
+        assert_eq!(e, Error::WrongChip { found: who });
+    }
+}
+
+#[test]
+fn nack_on_address_is_a_bus_error() {
+    let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
+    let exp = [T::write_read(A, vec![0x75], vec![0]).with_error(nack)];
+    let e = both(
+        &exp,
+        |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default())
+                .await
+                .unwrap_err()
+        },
+    );
+    assert_eq!(e, Error::Bus(nack));
+}
+
+#[test]
+fn nack_midway_through_init_is_reported() {
+    let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Data);
+    let exp = [
+        T::write_read(A, vec![0x75], vec![0x68]),
+        T::write(A, vec![0x6B, 0x80]),
+        T::write(A, vec![0x6B, 0x01]).with_error(nack),
+    ];
+    let e = both(
+        &exp,
+        |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default())
+                .await
+                .unwrap_err()
+        },
+    );
+    assert_eq!(e, Error::Bus(nack));
+}
+
+#[test]
+fn custom_config_bytes() {
+    // ±2000 °/s (FS_SEL 3 → 0x18), ±16 g (AFS_SEL 3 → 0x18), DLPF 0 (260 Hz, 8 kHz gyro rate),
+    // divider 7 → 1 kHz; FIFO with temperature (FIFO_EN 0xF8); interrupt active low, open
+    // drain, latched, cleared by any read (INT_PIN_CFG 0xF0); only FIFO overflow enabled.
+    let cfg = Config {
+        gyro_range: GyroRange::Dps2000,
+        accel_range: AccelRange::G16,
+        dlpf: Dlpf::Hz260,
+        sample_rate_divider: 7,
+        fifo: Some(FifoFrame::AccelTempGyro),
+        interrupt: InterruptConfig {
+            data_ready: false,
+            fifo_overflow: true,
+            active_low: true,
+            open_drain: true,
+            latch: true,
+            clear_on_any_read: true,
+        },
+    };
+    assert_eq!(cfg.sample_rate_hz(), 1000.0);
+    let exp = [
+        T::write_read(A + 1, vec![0x75], vec![0x68]),
+        T::write(A + 1, vec![0x6B, 0x80]),
+        T::write(A + 1, vec![0x6B, 0x01]),
+        T::write(A + 1, vec![0x19, 0x07, 0x00, 0x18, 0x18]),
+        T::write(A + 1, vec![0x37, 0xF0]),
+        T::write(A + 1, vec![0x38, 0x10]),
+        T::write(A + 1, vec![0x6A, 0x04]),
+        T::write(A + 1, vec![0x23, 0xF8]),
+        T::write(A + 1, vec![0x6A, 0x40]),
+    ];
+    let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0High);
+    d.init(&mut NoopDelay, &cfg).unwrap();
+    d.release().done();
+}
+
+#[test]
+fn fifo_off_config_disables_fifo() {
+    let cfg = Config {
+        fifo: None,
+        ..Config::default()
+    };
+    let exp = [
+        T::write_read(A, vec![0x75], vec![0x68]),
+        T::write(A, vec![0x6B, 0x80]),
+        T::write(A, vec![0x6B, 0x01]),
+        T::write(A, seed_burst_6050()),
+        T::write(A, vec![0x37, 0x00]),
+        T::write(A, vec![0x38, 0x01]),
+        T::write(A, vec![0x23, 0x00]),
+        T::write(A, vec![0x6A, 0x00]),
+    ];
+    let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0Low);
+    d.init(&mut NoopDelay, &cfg).unwrap();
+    // With the FIFO off, FIFO reads are refused without touching the bus.
+    let mut out = [RawSample::default(); 2];
+    assert_eq!(d.read_fifo(&mut out), Err(Error::NotConfigured));
+    assert_eq!(d.reset_fifo(), Err(Error::NotConfigured));
+    d.release().done();
+}
+
+#[test]
+fn read_all_is_one_14_byte_burst() {
+    // accel (1000, -2, 8192), temp -521, gyro (131, -131, 32767), big-endian (RM 4.17-4.20).
+    let bytes = vec![
+        0x03, 0xE8, 0xFF, 0xFE, 0x20, 0x00, 0xFD, 0xF7, 0x00, 0x83, 0xFF, 0x7D, 0x7F, 0xFF,
+    ];
+    let exp = [T::write_read(A, vec![0x3B], bytes)];
+    let s = both(
+        &exp,
+        |d| d.read_all().unwrap(),
+        async |d| d.read_all().await.unwrap(),
+    );
+    assert_eq!(
+        s,
+        RawSample {
+            accel: [1000, -2, 8192],
+            temp: Some(-521),
+            gyro: [131, -131, 32767]
+        }
+    );
+}
+
+#[test]
+fn conversions_to_si_units() {
+    let d = blocking::Mpu6050::new(Mock::new(&[]), Address::Ad0Low);
+    let sc = d.scale();
+    let s = sc.convert(&RawSample {
+        accel: [8192, -8192, 0],
+        temp: Some(-521),
+        gyro: [131, -262, 0],
+    });
+    // ±4 g: 8192 LSB = 1 g = 9.80665 m/s² exactly in f32 rounding (tolerance 1e-5 m/s²).
+    assert!((s.accel_ms2[0] - 9.80665).abs() < 1e-5);
+    assert!((s.accel_ms2[1] + 9.80665).abs() < 1e-5);
+    assert_eq!(s.gyro_dps, [1.0, -2.0, 0.0]);
+    // RM 4.18: -521/340 + 36.53 = 34.9976 °C (tolerance 1e-4 °C, f32 rounding).
+    assert!((s.temperature_c.unwrap() - 34.997_6).abs() < 1e-4);
+    d.release().done();
+}
+
+#[test]
+fn read_if_ready_respects_data_ready() {
+    let bytes = vec![0u8; 14];
+    let exp = [
+        T::write_read(A, vec![0x3A], vec![0x00]),
+        T::write_read(A, vec![0x3A], vec![0x01]),
+        T::write_read(A, vec![0x3B], bytes),
+    ];
+    let r = both(
+        &exp,
+        |d| (d.read_if_ready(), d.read_if_ready().map(|s| s.accel)),
+        async |d| {
+            (
+                d.read_if_ready().await,
+                d.read_if_ready().await.map(|s| s.accel),
+            )
+        },
+    );
+    assert_eq!(r.0, Err(Error::NotReady));
+    assert_eq!(r.1, Ok([0, 0, 0]));
+}
+
+fn inited(extra: &[T]) -> Vec<T> {
+    let mut v = seed_init(0x68, seed_burst_6050());
+    v.extend_from_slice(extra);
+    v
+}
+
+fn frame12(i: i16) -> Vec<u8> {
+    [i, i + 1, i + 2, i + 3, i + 4, i + 5]
+        .iter()
+        .flat_map(|v| v.to_be_bytes())
+        .collect()
+}
+
+#[test]
+fn fifo_read_takes_whole_frames_only() {
+    // 40 bytes waiting = 3 whole 12-byte frames + 4 bytes of a frame being written.
+    let mut data = frame12(10);
+    data.extend(frame12(20));
+    data.extend(frame12(30));
+    let exp = inited(&[
+        T::write_read(A, vec![0x3A], vec![0x01]),
+        T::write_read(A, vec![0x72], vec![0x00, 40]),
+        T::write_read(A, vec![0x74], data),
+    ]);
+    let (n, out) = both(
+        &exp,
+        |d| {
+            d.init(&mut NoopDelay, &Config::default()).unwrap();
+            let mut out = [RawSample::default(); 8];
+            (d.read_fifo(&mut out).unwrap(), out)
+        },
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+            let mut out = [RawSample::default(); 8];
+            (d.read_fifo(&mut out).await.unwrap(), out)
+        },
+    );
+    assert_eq!(n, 3);
+    assert_eq!(out[1].accel, [20, 21, 22]);
+    assert_eq!(out[1].gyro, [23, 24, 25]);
+    assert_eq!(out[1].temp, None);
+    assert_eq!(out[3], RawSample::default());
+}
+
+#[test]
+fn fifo_read_limited_by_output_and_chunked() {
+    // 40 frames waiting, room for 20: one 16-frame burst then one 4-frame burst.
+    let burst = |from: i16, n: i16| -> Vec<u8> { (0..n).flat_map(|k| frame12(from + k)).collect() };
+    let exp = inited(&[
+        T::write_read(A, vec![0x3A], vec![0x00]),
+        T::write_read(A, vec![0x72], vec![0x01, 0xE0]),
+        T::write_read(A, vec![0x74], burst(0, 16)),
+        T::write_read(A, vec![0x74], burst(16, 4)),
+    ]);
+    let (n, last) = both(
+        &exp,
+        |d| {
+            d.init(&mut NoopDelay, &Config::default()).unwrap();
+            let mut out = [RawSample::default(); 20];
+            (d.read_fifo(&mut out).unwrap(), out[19])
+        },
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+            let mut out = [RawSample::default(); 20];
+            (d.read_fifo(&mut out).await.unwrap(), out[19])
+        },
+    );
+    assert_eq!(n, 20);
+    assert_eq!(last.accel, [19, 20, 21]);
+}
+
+#[test]
+fn fifo_overflow_flag_then_reset() {
+    let exp = inited(&[
+        T::write_read(A, vec![0x3A], vec![0x11]),
+        // reset_fifo: FIFO_RESET with FIFO_EN = 0, FIFO_EN again, clear INT_STATUS.
+        T::write(A, vec![0x6A, 0x04]),
+        T::write(A, vec![0x6A, 0x40]),
+        T::write_read(A, vec![0x3A], vec![0x00]),
+        T::write_read(A, vec![0x3A], vec![0x00]),
+        T::write_read(A, vec![0x72], vec![0x00, 0x00]),
+    ]);
+    let r = both(
+        &exp,
+        |d| {
+            d.init(&mut NoopDelay, &Config::default()).unwrap();
+            let mut out = [RawSample::default(); 4];
+            let first = d.read_fifo(&mut out);
+            d.reset_fifo().unwrap();
+            (first, d.read_fifo(&mut out))
+        },
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+            let mut out = [RawSample::default(); 4];
+            let first = d.read_fifo(&mut out).await;
+            d.reset_fifo().await.unwrap();
+            (first, d.read_fifo(&mut out).await)
+        },
+    );
+    assert_eq!(r, (Err(Error::FifoOverflow), Ok(0)));
+}
+
+#[test]
+fn fifo_full_count_is_overflow_even_without_the_flag() {
+    // 1024 bytes (RM 4.30 FIFO size) is not a whole number of 12-byte frames: it can only
+    // be reached by overflowing, so the driver refuses to read misaligned frames.
+    let exp = inited(&[
+        T::write_read(A, vec![0x3A], vec![0x00]),
+        T::write_read(A, vec![0x72], vec![0x04, 0x00]),
+    ]);
+    let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0Low);
+    d.init(&mut NoopDelay, &Config::default()).unwrap();
+    let mut out = [RawSample::default(); 4];
+    assert_eq!(d.read_fifo(&mut out), Err(Error::FifoOverflow));
+    d.release().done();
+}
+
+#[test]
+fn fifo_with_temperature_frames() {
+    let cfg = Config {
+        fifo: Some(FifoFrame::AccelTempGyro),
+        ..Config::default()
+    };
+    let mut exp = seed_init(0x68, seed_burst_6050());
+    exp[7] = T::write(A, vec![0x23, 0xF8]);
+    let frame: Vec<u8> = [1i16, 2, 3, -100, 4, 5, 6]
+        .iter()
+        .flat_map(|v| v.to_be_bytes())
+        .collect();
+    exp.extend([
+        T::write_read(A, vec![0x3A], vec![0x00]),
+        T::write_read(A, vec![0x72], vec![0x00, 14]),
+        T::write_read(A, vec![0x74], frame),
+    ]);
+    let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0Low);
+    d.init(&mut NoopDelay, &cfg).unwrap();
+    let mut out = [RawSample::default(); 4];
+    assert_eq!(d.read_fifo(&mut out), Ok(1));
+    assert_eq!(
+        out[0],
+        RawSample {
+            accel: [1, 2, 3],
+            temp: Some(-100),
+            gyro: [4, 5, 6]
+        }
+    );
+    d.release().done();
+}
+
+#[test]
+fn fifo_count_masks_to_13_bits() {
+    let exp = [T::write_read(A, vec![0x72], vec![0xFF, 0xFF])];
+    let n = both(
+        &exp,
+        |d| d.fifo_count().unwrap(),
+        async |d| d.fifo_count().await.unwrap(),
+    );
+    assert_eq!(n, 0x1FFF);
+}
+
+#[test]
+fn self_test_refused_on_clones() {
+    let exp = [T::write_read(A, vec![0x75], vec![0x70])];
+    let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0Low);
+    assert_eq!(d.probe(), Ok(ChipId::Mpu6500));
+    assert_eq!(d.self_test(&mut NoopDelay), Err(Error::SelfTestUnsupported));
+    d.release().done();
+}
+
+#[test]
+fn error_messages_name_the_register() {
+    let e: Error<ErrorKind> = Error::WrongChip { found: 0x42 };
+    let msg = e.to_string();
+    assert!(msg.contains("WHO_AM_I") && msg.contains("0x42"), "{msg}");
+}
