@@ -1,1 +1,67 @@
+//! Allan-family deviations for IMU characterisation.
+//!
+//! Two places compute them and they must agree:
+//!
+//! * [`stream`] — the `no_std`, allocation-free, integer-exact streaming octave engine that runs
+//!   on the RP2040 for 9 channels at 1 kHz in bounded memory ([`stream::DeviceEngine`]).
+//! * `batch` (feature `std`) — exact estimators over a recording (ADEV, OADEV, MDEV, HDEV,
+//!   OHDEV, TDEV, TOTDEV) with 68.3 % confidence bounds from Greenhall's EDF, and the host-side
+//!   "stride" estimator that computes exactly what the streaming engine computes.
+//!
+//! All estimators work through the phase `θ`, the integral of the rate (seed eqs. 8–9):
+//! cluster averages are `(θ[k+m] − θ[k])/τ`, so every Allan-type variance is a sum of squared
+//! finite differences of `θ`. References: NIST SP 1065 (Riley, *Handbook of Frequency Stability
+//! Analysis*, 2008) for each estimator, Greenhall & Riley (PTTI 2003) for the EDF; each function
+//! cites its equation. docs/allan.md explains the conventions and the streaming design.
 #![cfg_attr(not(feature = "std"), no_std)]
+#![deny(missing_docs)]
+
+pub mod ci;
+pub mod stream;
+
+#[cfg(feature = "std")]
+pub mod batch;
+#[cfg(feature = "std")]
+pub mod noise_id;
+
+pub use stream::{DeviceEngine, Engine, LevelSums};
+
+#[cfg(feature = "std")]
+pub use batch::{deviation, stride_sums, Estimator, Row, Stat, TauSet};
+
+/// Errors of the batch estimators. Each names what was wrong and where.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AllanError {
+    /// Fewer samples than the statistic needs.
+    TooShort {
+        /// Samples given.
+        samples: usize,
+        /// Samples needed for even one row.
+        needed: usize,
+    },
+    /// A sample is NaN or infinite.
+    NotFinite {
+        /// Index of the first bad sample.
+        index: usize,
+    },
+    /// The sample period is not a positive finite number.
+    BadTau0(f64),
+    /// A tau-set parameter is invalid (e.g. 0 points per octave, m = 0 in a list).
+    BadTauSet(&'static str),
+}
+
+impl core::fmt::Display for AllanError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            AllanError::TooShort { samples, needed } => {
+                write!(f, "{samples} samples given, at least {needed} needed")
+            }
+            AllanError::NotFinite { index } => write!(f, "sample {index} is not a finite number"),
+            AllanError::BadTau0(t) => write!(f, "sample period {t} s is not positive and finite"),
+            AllanError::BadTauSet(why) => write!(f, "invalid tau set: {why}"),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for AllanError {}

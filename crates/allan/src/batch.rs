@@ -1,0 +1,555 @@
+//! Exact batch estimators over a recording, with 68.3 % confidence bounds.
+//!
+//! Input is rate samples `y_i` (deg/s, m/s², …) taken every `τ0`. Following AllanTools
+//! (`frequency2phase`), the mean rate is removed and the phase is the cumulative sum with a
+//! leading zero, `x[0] = 0, x[k] = Σ_{i<k} (y_i − ȳ)` (seed eq. 8). Working in units of
+//! "rate × samples" makes `τ0` cancel from every deviation except TDEV, which is a time.
+//! Removing the mean changes none of the difference-based estimators (a constant rate is a
+//! linear phase, annihilated by second and third differences); it only keeps `x` small.
+use crate::ci::{self, Variance};
+use crate::noise_id;
+use crate::stream::LevelSums;
+use crate::AllanError;
+
+/// The statistic to compute.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Stat {
+    /// Allan deviation, non-overlapping (SP 1065 eq. 7–8).
+    Adev,
+    /// Overlapping Allan deviation (SP 1065 eq. 11; seed eq. 7).
+    Oadev,
+    /// Modified Allan deviation (SP 1065 eq. 14).
+    Mdev,
+    /// Hadamard deviation, non-overlapping (SP 1065 eq. 17).
+    Hdev,
+    /// Overlapping Hadamard deviation (SP 1065 eq. 18).
+    Ohdev,
+    /// Time deviation, `τ·MDEV/√3` (SP 1065 eq. 15); unit: rate unit × s.
+    Tdev,
+    /// Total deviation (SP 1065 eq. 25, reflection at both ends).
+    Totdev,
+}
+
+impl Stat {
+    /// Every statistic, in display order.
+    pub const ALL: [Stat; 7] = [
+        Stat::Adev,
+        Stat::Oadev,
+        Stat::Mdev,
+        Stat::Hdev,
+        Stat::Ohdev,
+        Stat::Tdev,
+        Stat::Totdev,
+    ];
+
+    /// The short lower-case name used on the command line and in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Stat::Adev => "adev",
+            Stat::Oadev => "oadev",
+            Stat::Mdev => "mdev",
+            Stat::Hdev => "hdev",
+            Stat::Ohdev => "ohdev",
+            Stat::Tdev => "tdev",
+            Stat::Totdev => "totdev",
+        }
+    }
+
+    /// Parse a short name (`adev`, `oadev`, …).
+    pub fn parse(s: &str) -> Option<Stat> {
+        Stat::ALL.into_iter().find(|st| st.name() == s)
+    }
+
+    /// Whether the deviation has the unit of time × rate (TDEV) rather than of the rate.
+    pub fn is_time(self) -> bool {
+        self == Stat::Tdev
+    }
+
+    fn difference_order(self) -> u32 {
+        match self {
+            Stat::Hdev | Stat::Ohdev => 3,
+            _ => 2,
+        }
+    }
+}
+
+/// The averaging factors `m` (τ = m·τ0) to evaluate.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TauSet {
+    /// m = 1, 2, 4, 8, … (AllanTools `taus='octave'`).
+    Octave,
+    /// m = 1, 2, 4, 10, 20, 40, 100, … (Stable32 / AllanTools `decade`).
+    Decade,
+    /// Every m = 1, 2, 3, …
+    All,
+    /// k log-spaced points per octave, m = round(2^(i/k)), duplicates removed.
+    PerOctave(u32),
+    /// An explicit list of m.
+    List(Vec<u64>),
+}
+
+impl TauSet {
+    /// Parse `octave`, `decade`, `all`, `N/octave` or a comma list of m.
+    pub fn parse(s: &str) -> Result<TauSet, AllanError> {
+        Ok(match s {
+            "octave" => TauSet::Octave,
+            "decade" => TauSet::Decade,
+            "all" => TauSet::All,
+            _ => {
+                if let Some(k) = s.strip_suffix("/octave") {
+                    let k: u32 = k.parse().map_err(|_| {
+                        AllanError::BadTauSet("N in N/octave must be a positive integer")
+                    })?;
+                    if k == 0 {
+                        return Err(AllanError::BadTauSet("N in N/octave must be at least 1"));
+                    }
+                    TauSet::PerOctave(k)
+                } else {
+                    let ms: Result<Vec<u64>, _> =
+                        s.split(',').map(|v| v.trim().parse::<u64>()).collect();
+                    let ms = ms.map_err(|_| {
+                        AllanError::BadTauSet(
+                            "expected octave, decade, all, N/octave or a list of m",
+                        )
+                    })?;
+                    if ms.contains(&0) {
+                        return Err(AllanError::BadTauSet("m = 0 in the list"));
+                    }
+                    TauSet::List(ms)
+                }
+            }
+        })
+    }
+
+    /// The candidate m values up to `max_m`, sorted, without duplicates.
+    pub fn ms(&self, max_m: u64) -> Result<Vec<u64>, AllanError> {
+        let mut out = Vec::new();
+        match self {
+            TauSet::Octave => {
+                let mut m = 1u64;
+                while m <= max_m {
+                    out.push(m);
+                    m *= 2;
+                }
+            }
+            TauSet::Decade => {
+                let mut dec = 1u64;
+                'outer: loop {
+                    for k in [1, 2, 4] {
+                        let m = k * dec;
+                        if m > max_m {
+                            break 'outer;
+                        }
+                        out.push(m);
+                    }
+                    dec *= 10;
+                }
+            }
+            TauSet::All => out.extend(1..=max_m),
+            TauSet::PerOctave(k) => {
+                if *k == 0 {
+                    return Err(AllanError::BadTauSet("0 points per octave"));
+                }
+                let mut i = 0u32;
+                loop {
+                    let m = 2f64.powf(i as f64 / *k as f64).round() as u64;
+                    if m > max_m {
+                        break;
+                    }
+                    out.push(m);
+                    i += 1;
+                }
+            }
+            TauSet::List(ms) => {
+                if ms.contains(&0) {
+                    return Err(AllanError::BadTauSet("m = 0 in the list"));
+                }
+                out.extend(ms.iter().copied().filter(|&m| m <= max_m));
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        Ok(out)
+    }
+}
+
+/// Which estimator produced a row.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Estimator {
+    /// The exact estimator over the whole phase record.
+    Exact,
+    /// The stride-`stride` overlapping estimator of the streaming engine (bounded memory).
+    Stride {
+        /// Samples between successive differences.
+        stride: u64,
+    },
+}
+
+impl Estimator {
+    /// `exact` or `stride-N`.
+    pub fn label(&self) -> String {
+        match self {
+            Estimator::Exact => "exact".into(),
+            Estimator::Stride { stride } => format!("stride-{stride}"),
+        }
+    }
+}
+
+/// One row of a deviation table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// Cluster time τ = m·τ0, in s.
+    pub tau: f64,
+    /// Averaging factor.
+    pub m: u64,
+    /// The deviation, in the rate unit (TDEV: rate unit × s).
+    pub dev: f64,
+    /// Number of terms in the sum.
+    pub n: u64,
+    /// Noise exponent used for the EDF (`S_y ∝ f^alpha`).
+    pub alpha: i32,
+    /// Equivalent degrees of freedom.
+    pub edf: f64,
+    /// Lower 68.3 % bound.
+    pub lo: f64,
+    /// Upper 68.3 % bound.
+    pub hi: f64,
+    /// Which estimator produced the row.
+    pub estimator: Estimator,
+}
+
+/// Phase in "rate × samples" units with the mean rate removed and a leading 0.
+fn phase_from_rate(y: &[f64]) -> Vec<f64> {
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let mut x = Vec::with_capacity(y.len() + 1);
+    let mut acc = 0.0;
+    x.push(0.0);
+    for v in y {
+        acc += v - mean;
+        x.push(acc);
+    }
+    x
+}
+
+fn check(y: &[f64], tau0: f64) -> Result<(), AllanError> {
+    if !(tau0 > 0.0 && tau0.is_finite()) {
+        return Err(AllanError::BadTau0(tau0));
+    }
+    if let Some(index) = y.iter().position(|v| !v.is_finite()) {
+        return Err(AllanError::NotFinite { index });
+    }
+    if y.len() < 3 {
+        return Err(AllanError::TooShort {
+            samples: y.len(),
+            needed: 3,
+        });
+    }
+    Ok(())
+}
+
+/// Sum of squared d-th differences at lag m over start indices 0, stride, 2·stride, …
+fn diff_sum(x: &[f64], m: usize, d: u32, stride: usize) -> (f64, u64) {
+    let span = d as usize * m;
+    if x.len() <= span {
+        return (0.0, 0);
+    }
+    let (mut s, mut n) = (0.0, 0u64);
+    let mut i = 0;
+    while i + span < x.len() {
+        let v = if d == 2 {
+            x[i + 2 * m] - 2.0 * x[i + m] + x[i]
+        } else {
+            x[i + 3 * m] - 3.0 * x[i + 2 * m] + 3.0 * x[i + m] - x[i]
+        };
+        s += v * v;
+        n += 1;
+        i += stride;
+    }
+    (s, n)
+}
+
+/// Modified Allan variance sum: Σ_j [Σ_{i=j}^{j+m−1} (x[i+2m] − 2x[i+m] + x[i])]² (SP 1065 eq. 14).
+fn mod_sum(x: &[f64], m: usize) -> (f64, u64) {
+    let np = x.len();
+    if np < 3 * m + 1 {
+        return (0.0, 0);
+    }
+    let d2 = |i: usize| x[i + 2 * m] - 2.0 * x[i + m] + x[i];
+    let mut inner: f64 = (0..m).map(d2).sum();
+    let mut s = inner * inner;
+    let n = (np - 3 * m + 1) as u64;
+    for j in 1..n as usize {
+        inner += d2(j + m - 1) - d2(j - 1);
+        s += inner * inner;
+    }
+    (s, n)
+}
+
+/// Total variance sum with reflection at both ends (SP 1065 eq. 25; AllanTools `totdev`).
+fn tot_sum(x: &[f64], m: usize) -> (f64, u64) {
+    let np = x.len();
+    // x*[1−j] = 2x[0] − x[j], x*[np−2+j] = 2x[np−1] − x[np−1−j], j = 1..np−2
+    let at = |i: isize| -> f64 {
+        let last = np as isize - 1;
+        if i < 0 {
+            2.0 * x[0] - x[(-i) as usize]
+        } else if i > last {
+            2.0 * x[last as usize] - x[(2 * last - i) as usize]
+        } else {
+            x[i as usize]
+        }
+    };
+    let mut s = 0.0;
+    for i in 1..np - 1 {
+        let i = i as isize;
+        let v = at(i - m as isize) - 2.0 * at(i) + at(i + m as isize);
+        s += v * v;
+    }
+    (s, (np - 2) as u64)
+}
+
+fn largest_m(stat: Stat, np: u64) -> u64 {
+    match stat {
+        Stat::Totdev => (np - 1) / 2,
+        Stat::Hdev | Stat::Ohdev | Stat::Mdev | Stat::Tdev => np / 3,
+        _ => np / 2,
+    }
+}
+
+/// The deviation `stat` of rate samples `y` (every `tau0` s) at the averaging factors in
+/// `taus`, each row with its EDF and 68.3 % bounds. Rows with fewer than 2 terms are dropped
+/// (as AllanTools does).
+pub fn deviation(y: &[f64], tau0: f64, stat: Stat, taus: &TauSet) -> Result<Vec<Row>, AllanError> {
+    check(y, tau0)?;
+    let x = phase_from_rate(y);
+    deviation_of_phase(&x, Some(y), tau0, stat, taus)
+}
+
+/// The same from phase data `x` in seconds (e.g. Stable32's PHASE.DAT), every `tau0` s.
+pub fn deviation_from_phase(
+    x: &[f64],
+    tau0: f64,
+    stat: Stat,
+    taus: &TauSet,
+) -> Result<Vec<Row>, AllanError> {
+    check(x, tau0)?;
+    let xs: Vec<f64> = x.iter().map(|v| v / tau0).collect();
+    let y: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).collect();
+    deviation_of_phase(&xs, Some(&y), tau0, stat, taus)
+}
+
+fn deviation_of_phase(
+    x: &[f64],
+    y: Option<&[f64]>,
+    tau0: f64,
+    stat: Stat,
+    taus: &TauSet,
+) -> Result<Vec<Row>, AllanError> {
+    let np = x.len() as u64;
+    let ms = taus.ms(largest_m(stat, np))?;
+    let mut rows = Vec::with_capacity(ms.len());
+    let mut last_alpha = 0;
+    for m in ms {
+        let mu = m as usize;
+        let mf = m as f64;
+        let (sum, n, denom) = match stat {
+            Stat::Adev => {
+                let (s, n) = diff_sum(x, mu, 2, mu);
+                (s, n, 2.0 * mf * mf)
+            }
+            Stat::Oadev => {
+                let (s, n) = diff_sum(x, mu, 2, 1);
+                (s, n, 2.0 * mf * mf)
+            }
+            Stat::Hdev => {
+                let (s, n) = diff_sum(x, mu, 3, mu);
+                (s, n, 6.0 * mf * mf)
+            }
+            Stat::Ohdev => {
+                let (s, n) = diff_sum(x, mu, 3, 1);
+                (s, n, 6.0 * mf * mf)
+            }
+            Stat::Mdev | Stat::Tdev => {
+                let (s, n) = mod_sum(x, mu);
+                (s, n, 2.0 * mf.powi(4))
+            }
+            Stat::Totdev => {
+                let (s, n) = tot_sum(x, mu);
+                (s, n, 2.0 * mf * mf)
+            }
+        };
+        if n < 2 {
+            continue;
+        }
+        let mut dev = (sum / (denom * n as f64)).sqrt();
+        let tau = mf * tau0;
+        if stat == Stat::Tdev {
+            dev *= tau / 3f64.sqrt();
+        }
+        let alpha = identify(y, x, mu, stat).unwrap_or(last_alpha);
+        last_alpha = alpha;
+        let edf = edf_for(stat, alpha, mf, np as f64);
+        let (lo, hi) = bounds(dev, edf);
+        rows.push(Row {
+            tau,
+            m,
+            dev,
+            n,
+            alpha,
+            edf,
+            lo,
+            hi,
+            estimator: Estimator::Exact,
+        });
+    }
+    Ok(rows)
+}
+
+fn bounds(dev: f64, edf: f64) -> (f64, f64) {
+    if edf.is_finite() && edf > 0.0 {
+        ci::chi2_bounds(dev, edf, ci::ONE_SIGMA)
+    } else {
+        (f64::NAN, f64::NAN)
+    }
+}
+
+/// Noise exponent at averaging factor m: lag-1 ACF with ≥ 30 averages, else B1 with R(n).
+///
+/// `None` when too few averages remain for either method; the caller then keeps the exponent of
+/// the previous (shorter) τ, or white FM (0) if there is none.
+fn identify(y: Option<&[f64]>, x: &[f64], m: usize, stat: Stat) -> Option<i32> {
+    let d = stat.difference_order();
+    let y = y?;
+    let alpha = noise_id::acf_alpha(y, m, d).or_else(|| {
+        let (sa, na) = diff_sum(x, m, 2, 1);
+        if na == 0 || sa <= 0.0 {
+            return None;
+        }
+        let avar = sa / (2.0 * (m as f64).powi(2) * na as f64);
+        let (sm, nm) = mod_sum(x, m);
+        let rn = (nm > 0).then(|| sm / (2.0 * (m as f64).powi(4) * nm as f64) / avar);
+        noise_id::b1_alpha(y, m, rn)
+    });
+    alpha.map(|a| a.clamp(2 - 2 * d as i32, 2))
+}
+
+fn edf_for(stat: Stat, alpha: i32, m: f64, np: f64) -> f64 {
+    let var = match stat {
+        Stat::Adev => Variance::Unmodified {
+            d: 2,
+            s_factor: 1.0,
+        },
+        Stat::Oadev => Variance::Unmodified { d: 2, s_factor: m },
+        Stat::Hdev => Variance::Unmodified {
+            d: 3,
+            s_factor: 1.0,
+        },
+        Stat::Ohdev => Variance::Unmodified { d: 3, s_factor: m },
+        Stat::Mdev | Stat::Tdev => Variance::Modified,
+        Stat::Totdev => return ci::edf_totdev(alpha, m, np),
+    };
+    ci::edf_greenhall(alpha, m, np, var).unwrap_or(f64::NAN)
+}
+
+/// The host "stride" estimator: exactly the integer sums the streaming engine
+/// [`crate::Engine`]`<P, L, _>` accumulates over the same samples, computed directly from the
+/// phase array. `segments` are runs of samples separated by gaps.
+pub fn stride_sums(segments: &[&[i32]], p: usize, levels: usize) -> Vec<LevelSums> {
+    let mut out: Vec<LevelSums> = (0..levels)
+        .map(|k| {
+            let m = 1u32 << k;
+            LevelSums {
+                m,
+                stride: if m as usize <= p { 1 } else { m / p as u32 },
+                ..Default::default()
+            }
+        })
+        .collect();
+    for seg in segments {
+        let mut theta = Vec::with_capacity(seg.len() + 1);
+        let mut acc = 0i64;
+        theta.push(0i64);
+        for &y in *seg {
+            acc = acc.wrapping_add(y as i64);
+            theta.push(acc);
+        }
+        let n = seg.len() as u64;
+        for lv in out.iter_mut() {
+            let (m, s) = (lv.m as u64, lv.stride as u64);
+            let mut t = (2 * m).div_ceil(s) * s;
+            while t <= n {
+                let th = |i: u64| theta[i as usize] as i128;
+                let d2 = th(t) - 2 * th(t - m) + th(t - 2 * m);
+                lv.sum2 += (d2 * d2) as u128;
+                lv.n2 += 1;
+                if t >= 3 * m {
+                    let d3 = th(t) - 3 * th(t - m) + 3 * th(t - 2 * m) - th(t - 3 * m);
+                    lv.sum3 += (d3 * d3) as u128;
+                    lv.n3 += 1;
+                }
+                t += s;
+            }
+        }
+    }
+    out
+}
+
+/// Table rows from streaming-engine sums: OADEV (or OHDEV with `hadamard`) in input units ×
+/// `scale`, EDF by Greenhall with the estimator's stride factor S = m/stride, and the noise
+/// exponent read from the slope to the neighbouring level.
+pub fn stream_rows(levels: &[LevelSums], tau0: f64, scale: f64, hadamard: bool) -> Vec<Row> {
+    let d = if hadamard { 3 } else { 2 };
+    let var = |l: &LevelSums| if hadamard { l.ohdev(1.0) } else { l.oadev(1.0) };
+    let mut rows = Vec::new();
+    for (k, l) in levels.iter().enumerate() {
+        let n = if hadamard { l.n3 } else { l.n2 };
+        let Some(dev) = var(l).filter(|_| n >= 2) else {
+            continue;
+        };
+        let neighbour = levels
+            .get(k + 1)
+            .and_then(|h| var(h).filter(|_| (if hadamard { h.n3 } else { h.n2 }) >= 2))
+            .map(|v| (dev, v))
+            .or_else(|| {
+                k.checked_sub(1)
+                    .and_then(|j| var(&levels[j]))
+                    .map(|v| (v, dev))
+            });
+        let alpha = neighbour
+            .map(|(a, b)| ci::alpha_from_slope(a * a, b * b, 2.0, d))
+            .unwrap_or(0);
+        let m = l.m as f64;
+        let np = (n - 1) as f64 * l.stride as f64 + d as f64 * m + 1.0;
+        let edf = ci::edf_greenhall(
+            alpha,
+            m,
+            np,
+            Variance::Unmodified {
+                d,
+                s_factor: m / l.stride as f64,
+            },
+        )
+        .unwrap_or(f64::NAN);
+        let dev = dev * scale;
+        let (lo, hi) = bounds(dev, edf);
+        let estimator = if l.stride == 1 {
+            Estimator::Exact
+        } else {
+            Estimator::Stride {
+                stride: l.stride as u64,
+            }
+        };
+        rows.push(Row {
+            tau: m * tau0,
+            m: l.m as u64,
+            dev,
+            n,
+            alpha,
+            edf,
+            lo,
+            hi,
+            estimator,
+        });
+    }
+    rows
+}
