@@ -1,0 +1,154 @@
+//! Fixed-point vs float corrections: ≤ 1 LSB over the whole i16 input range (issue 4 §4).
+#![allow(clippy::needless_range_loop)]
+//!
+//! The float reference is the correction with the *unquantised* f64 parameters,
+//! `out = M·(raw − o)` (gyro: `o = b + k·(T − T_ref)`), rounded to the nearest count.
+//! Tolerance: 1 LSB, from the bound in `device`'s docs (≤ 0.51 LSB from the exact value plus the
+//! reference's own ≤ 0.5 LSB rounding). We also check the tighter |fixed − exact| ≤ 0.52 LSB.
+use imu_cal::device::{Affine, Calibration, GyroCorrection, Sensor};
+use proptest::prelude::*;
+
+/// Parameters drawn over the ranges the device accepts: gains 0.5–1.6 on the diagonal,
+/// off-diagonal up to ±0.3 (misalignment / soft iron), offsets up to ±3000 LSB.
+#[derive(Debug, Clone)]
+struct Params {
+    m: [[f64; 3]; 3],
+    o: [f64; 3],
+    k: [f64; 3],
+    t_ref: i16,
+}
+
+fn params() -> impl Strategy<Value = Params> {
+    (
+        proptest::array::uniform3(0.5f64..1.6),
+        proptest::array::uniform6(-0.3f64..0.3),
+        proptest::array::uniform3(-3000.0f64..3000.0),
+        proptest::array::uniform3(-0.05f64..0.05),
+        any::<i16>(),
+    )
+        .prop_map(|(d, off, o, k, t_ref)| Params {
+            m: [
+                [d[0], off[0], off[1]],
+                [off[2], d[1], off[3]],
+                [off[4], off[5], d[2]],
+            ],
+            o,
+            k,
+            t_ref,
+        })
+}
+
+fn exact(p: &Params, raw: [i16; 3], dt: f64) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    for (i, o) in out.iter_mut().enumerate() {
+        for j in 0..3 {
+            *o += p.m[i][j] * (raw[j] as f64 - p.o[j] - p.k[j] * dt);
+        }
+    }
+    out
+}
+
+fn check(fixed: [i32; 3], ex: [f64; 3], what: &str) {
+    for i in 0..3 {
+        let e = (fixed[i] as f64 - ex[i]).abs();
+        assert!(
+            e <= 0.52,
+            "{what}: axis {i} fixed {} exact {} (err {e})",
+            fixed[i],
+            ex[i]
+        );
+        assert!((fixed[i] as f64 - ex[i].round()).abs() <= 1.0);
+    }
+}
+
+/// Deterministic generator for the exhaustive sweeps (SplitMix64).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Exhaustive: for 8 parameter sets, every i16 value on each axis, with the other two axes at
+/// random values and at the extremes (the error is a sum of per-axis terms, so sweeping each
+/// axis over its whole range with the others at their extremes covers the worst cases).
+#[test]
+fn exhaustive_each_axis_full_i16_range() {
+    let mut rng = Rng(0x5eed);
+    for set in 0..8 {
+        let mut m = [[0.0; 3]; 3];
+        for (i, row) in m.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = if i == j {
+                    rng.uniform(0.5, 1.6)
+                } else {
+                    rng.uniform(-0.3, 0.3)
+                };
+            }
+        }
+        let p = Params {
+            m,
+            o: [0; 3].map(|_| rng.uniform(-3000.0, 3000.0)),
+            k: [0; 3].map(|_| rng.uniform(-0.05, 0.05)),
+            t_ref: (rng.next() as i16) / 2,
+        };
+        let acc = Affine::from_float(Sensor::Accel, p.m, p.o).unwrap();
+        let gyr = GyroCorrection::from_float(p.m, p.o, p.k, p.t_ref).unwrap();
+        let cal = Calibration::new(acc, gyr, acc).unwrap();
+        for axis in 0..3 {
+            for other in [i16::MIN, i16::MAX, 0, rng.next() as i16] {
+                for v in i16::MIN..=i16::MAX {
+                    let mut raw = [other; 3];
+                    raw[axis] = v;
+                    check(
+                        cal.apply_accel(raw),
+                        exact(&p, raw, 0.0),
+                        &format!("set {set} accel"),
+                    );
+                }
+            }
+            // Temperature over its full range too (clamped difference, see GyroCorrection).
+            let raw = [rng.next() as i16, rng.next() as i16, rng.next() as i16];
+            for t in (i16::MIN..=i16::MAX).step_by(7) {
+                let dt = (t as i32 - p.t_ref as i32).clamp(-32768, 32767) as f64;
+                check(
+                    cal.apply_gyro(raw, t),
+                    exact(&p, raw, dt),
+                    &format!("set {set} gyro"),
+                );
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(4000))]
+    #[test]
+    fn random_params_and_inputs(p in params(), raw in proptest::array::uniform3(any::<i16>()), t in any::<i16>()) {
+        let acc = Affine::from_float(Sensor::Accel, p.m, p.o).unwrap();
+        let gyr = GyroCorrection::from_float(p.m, p.o, p.k, p.t_ref).unwrap();
+        let cal = Calibration::new(acc, gyr, acc).unwrap();
+        check(cal.apply_accel(raw), exact(&p, raw, 0.0), "accel");
+        check(cal.apply_mag(raw), exact(&p, raw, 0.0), "mag");
+        let dt = (t as i32 - p.t_ref as i32).clamp(-32768, 32767) as f64;
+        check(cal.apply_gyro(raw, t), exact(&p, raw, dt), "gyro");
+    }
+}
+
+/// Parameters outside the fixed-point range are refused, not silently wrapped.
+#[test]
+fn out_of_range_parameters_are_rejected() {
+    let big = [[3.0, 0.9, 0.2], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    assert!(Affine::from_float(Sensor::Mag, big, [0.0; 3]).is_err());
+    let id = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    assert!(Affine::from_float(Sensor::Accel, id, [70000.0, 0.0, 0.0]).is_err());
+    assert!(Affine::from_float(Sensor::Accel, id, [f64::NAN, 0.0, 0.0]).is_err());
+    assert!(GyroCorrection::from_float(id, [0.0; 3], [2.5, 0.0, 0.0], 0).is_err());
+}
