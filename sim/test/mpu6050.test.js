@@ -82,7 +82,7 @@ test('DATA_RDY_INT is set by each new sample and cleared by reading INT_STATUS',
   assert.equal(readRegs(m, ms(1) + 2, REG.INT_STATUS, 1)[0] & 1, 0);
 });
 
-test('DLPF: a step is smoothed with the 5 Hz bandwidth but passes with 184 Hz', () => {
+test('DLPF: one sample after a step, the 5 Hz setting passes 1 − exp(−2π·5 Hz·1 ms) of it', () => {
   // One-pole response after one 1 ms sample: 1 - exp(-2π·5·0.001) ≈ 0.031 of the step
   const step = constantStream({ gx: 100 });
   const slow = awake(step, { dlpf: 6 });
