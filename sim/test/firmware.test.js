@@ -1,0 +1,23 @@
+// Runs the real firmware for 1.5 s of emulated time when it has been built
+// (`cargo build --release` in the repository root); skipped otherwise.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { existsSync } from 'node:fs';
+import { fileURLToPath } from 'node:url';
+import { Session } from '../src/session.js';
+import { generateStream } from '../src/stream.js';
+
+const elf = process.env.PICO_IMU_ELF ?? fileURLToPath(new URL('../../target/thumbv6m-none-eabi/release/pico-imu', import.meta.url));
+
+test('the firmware boots, enumerates USB and reads both sensors at their rates', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
+  const s = new Session({ elf, stream: generateStream({ seed: 2, seconds: 3 }) });
+  const stop = await s.run(1.5e9);
+  await s.close();
+  assert.equal(stop, null, stop?.message + '\n' + s.logLines.slice(-30).join('\n'));
+  assert.ok(s.usb.connected, 'USB CDC enumerated');
+  assert.ok(s.emu.rtt?.bytes > 0, 'defmt-RTT output seen');
+  // After set-up (≤ 0.5 s) the 1 kHz MPU and the 200 Hz QMC are read continuously:
+  // at least 900 and 180 samples served in 1.5 s.
+  assert.ok(s.mpu.stats.servedFifo + s.mpu.stats.servedRegs >= 900, `MPU served ${s.mpu.stats.servedFifo}`);
+  assert.ok(s.qmc.stats.served >= 180, `QMC served ${s.qmc.stats.served}`);
+});
