@@ -17,7 +17,7 @@ import { benchReport } from './bench.js';
 
 const usage = `usage:
   pico-imu-sim run --elf FW.elf [--seconds S] [--stream S.csv | --seed N] [--port P | --port-file F]
-                   [--warmup S] [--fault SPEC]... [--instant-i2c] [--served DIR] [--summary F.json]
+                   [--warmup S] [--exit-on-disconnect] [--fault SPEC]... [--instant-i2c] [--served DIR] [--summary F.json]
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--report F.md] [--json F.json]
@@ -60,8 +60,15 @@ async function cmdRun(v) {
     };
     process.on('SIGINT', onSignal);
     process.on('SIGTERM', onSignal);
-    if (!stop) stop = await s.run(stopAt, { shouldPause: () => !s.client });
-    if (stop && stop.kind === 'signal') stop = null;
+    // --exit-on-disconnect: the run ends (successfully) when the host that connected goes away.
+    let seenClient = false;
+    const shouldPause = () => {
+      if (s.client) seenClient = true;
+      else if (seenClient && v['exit-on-disconnect']) s.emu.stop({ kind: 'disconnect', message: 'host disconnected' });
+      return !s.client;
+    };
+    if (!stop) stop = await s.run(stopAt, { shouldPause });
+    if (stop && (stop.kind === 'signal' || stop.kind === 'disconnect')) stop = null;
   } else {
     stop = await s.run(stopAt);
   }
@@ -104,6 +111,7 @@ async function main() {
         warmup: { type: 'string' },
         fault: { type: 'string', multiple: true },
         'instant-i2c': { type: 'boolean' },
+        'exit-on-disconnect': { type: 'boolean' },
         served: { type: 'string' },
         summary: { type: 'string' },
         log: { type: 'string' },

@@ -297,7 +297,9 @@ export class Emulator {
   /** Runs in slices, yielding to the event loop between them (sockets, child processes). */
   async run(untilNanos, { sliceNanos = 2e6, shouldPause = () => false } = {}) {
     while (!this.stopReason && this.clock.nanos < untilNanos) {
+      const p0 = performance.now();
       while (shouldPause() && !this.stopReason) await new Promise((r) => setTimeout(r, 5));
+      this.pausedWallSeconds = (this.pausedWallSeconds ?? 0) + (performance.now() - p0) / 1000;
       this.runUntil(Math.min(untilNanos, this.clock.nanos + sliceNanos));
       await new Promise((r) => setImmediate(r));
     }

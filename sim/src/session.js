@@ -133,8 +133,10 @@ export class Session {
     this.emu.pollHooks.push(() => this.flushPendingHost());
     const t0 = process.hrtime.bigint();
     const n0 = this.emu.clock.nanos;
+    const paused0 = this.emu.pausedWallSeconds ?? 0;
     const stop = await this.emu.run(untilNanos, opts);
-    this.wallSeconds = (this.wallSeconds ?? 0) + Number(process.hrtime.bigint() - t0) / 1e9;
+    // Wall time spent running (time paused waiting for a host to connect excluded).
+    this.wallSeconds = (this.wallSeconds ?? 0) + Number(process.hrtime.bigint() - t0) / 1e9 - ((this.emu.pausedWallSeconds ?? 0) - paused0);
     this.emulatedSeconds = (this.emulatedSeconds ?? 0) + (this.emu.clock.nanos - n0) / 1e9;
     return stop;
   }
