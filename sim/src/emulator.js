@@ -5,7 +5,7 @@ import { readFileSync } from 'node:fs';
 import { RP2040, USBCDC } from 'rp2040js';
 import { parseElf } from './elf.js';
 import { buildRom, HC_LOOKUP, ROM_FUNCTIONS } from './rom.js';
-import { patchI2cInterruptMask, patchSevLogger, patchXipCtrl, UsbOutQueue } from './patches.js';
+import { patchDmaAbort, patchI2cInterruptMask, patchSevLogger, patchXipCtrl, UsbOutQueue } from './patches.js';
 import { RttReader } from './rtt.js';
 
 const FLASH_BASE = 0x10000000;
@@ -38,7 +38,8 @@ export class Emulator {
       onLog(level, component, message);
     });
     patchI2cInterruptMask(this.mcu);
-    patchXipCtrl(this.mcu);
+    this.xip = patchXipCtrl(this.mcu);
+    patchDmaAbort(this.mcu);
     this.usbOut = new UsbOutQueue(this.mcu);
     this.rom = buildRom();
     this.mcu.loadBootrom(this.rom.image); // resets the chip and erases flash: do it before loading

@@ -1,6 +1,8 @@
 // Run-time patches for rp2040js 1.4.1 (see docs/emulator.md, "Emulator bugs patched at run time").
 // Each patch is applied to one RP2040 instance; nothing in node_modules is modified.
 
+import { BasePeripheral } from 'rp2040js';
+
 const IC_INTR_MASK = 0x30;
 const USB_BUF_CTRL_AVAILABLE = 1 << 10;
 const USB_BUF_CTRL_FULL = 1 << 15;
@@ -136,12 +138,94 @@ export class UsbOutQueue {
   }
 }
 
-/** Bug 4: XIP_CTRL (0x14000000) is unmapped; embassy-rp's in-RAM flash routine polls it. */
+/**
+ * Bug 4: XIP_CTRL (0x14000000) is unmapped, and embassy-rp's in-RAM flash routine and its async
+ * `Flash::background_read` use it. This model implements the XIP streaming interface of RP2040
+ * datasheet §2.6.3.4: STREAM_ADDR/STREAM_CTR start a stream of words from flash, read through
+ * STREAM_FIFO or the XIP_AUX port (0x50400000) with DREQ_XIP_STREAM (37) asserted while words
+ * remain. STAT reports FLUSH_READY and FIFO_EMPTY. The stream is instantaneous (no QSPI timing).
+ */
+export class XipCtrl extends BasePeripheral {
+  constructor(mcu) {
+    super(mcu, 'XIP_CTRL');
+    this.mcu = mcu;
+    this.ctrl = 0x3;
+    this.streamAddr = 0;
+    this.streamCtr = 0;
+    this.words = 0;
+  }
+
+  pop() {
+    if (this.streamCtr === 0) return 0;
+    const off = (this.streamAddr - 0x10000000) >>> 0;
+    const v = off + 3 < this.mcu.flash.length ? this.mcu.flashView.getUint32(off, true) : 0;
+    this.streamAddr = (this.streamAddr + 4) >>> 0;
+    this.streamCtr--;
+    this.words++;
+    if (this.streamCtr === 0) this.mcu.dma.clearDREQ(DREQ_XIP_STREAM);
+    return v;
+  }
+
+  readUint32(offset) {
+    switch (offset) {
+      case 0x00:
+        return this.ctrl;
+      case 0x08:
+        return 0x1 | (this.streamCtr === 0 ? 0x2 : 0);
+      case 0x0c:
+      case 0x10:
+        return 0;
+      case 0x14:
+        return this.streamAddr;
+      case 0x18:
+        return this.streamCtr;
+      case 0x1c:
+        return this.pop();
+      default:
+        return 0;
+    }
+  }
+
+  writeUint32(offset, value) {
+    switch (offset) {
+      case 0x00:
+        this.ctrl = value;
+        return;
+      case 0x14:
+        this.streamAddr = value & ~3;
+        return;
+      case 0x18:
+        this.streamCtr = value & 0x3fffff;
+        if (this.streamCtr) this.mcu.dma.setDREQ(DREQ_XIP_STREAM);
+        else this.mcu.dma.clearDREQ(DREQ_XIP_STREAM);
+        return;
+      default:
+    }
+  }
+}
+
+const DREQ_XIP_STREAM = 37;
+
 export function patchXipCtrl(mcu) {
-  const stub = {
-    readUint32: () => 0,
+  const xip = new XipCtrl(mcu);
+  mcu.peripherals[(0x14000000 >>> 14) << 2] = xip;
+  // XIP_AUX: the streaming FIFO seen from the DMA's bus port.
+  mcu.peripherals[(0x50400000 >>> 14) << 2] = {
+    readUint32: () => xip.pop(),
     writeUint32: () => {},
     writeUint32Atomic: () => {},
   };
-  mcu.peripherals[(0x14000000 >>> 14) << 2] = stub;
+  return xip;
+}
+
+/**
+ * Bug 7 (found with the pico-imu firmware): DMA CHAN_ABORT (0x444) reads fall through to
+ * "unimplemented" (0xFFFFFFFF), so embassy-rp's `Transfer` drop, which waits for the abort bits to
+ * clear, spins forever. rp2040js aborts synchronously on the write, so the register reads 0.
+ * FIFO_LEVELS (0x440) also reads 0 (the DMA has no FIFOs in the model).
+ */
+export function patchDmaAbort(mcu) {
+  const dma = mcu.dma;
+  const read = dma.readUint32.bind(dma);
+  dma.readUint32 = (offset) => (offset === 0x444 || offset === 0x440 ? 0 : read(offset));
 }
