@@ -14,6 +14,7 @@ import { writeFileSync } from 'node:fs';
 import { Session, parseFault, parseDuration } from './session.js';
 import { loadStreamCsv, generateStream, streamToCsv } from './stream.js';
 import { benchReport } from './bench.js';
+import { profile } from './profile.js';
 
 const usage = `usage:
   pico-imu-sim run --elf FW.elf [--seconds S] [--stream S.csv | --seed N] [--port P | --port-file F]
@@ -21,6 +22,7 @@ const usage = `usage:
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--report F.md] [--json F.json]
+  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N]   (PC samples by function)
 fault SPEC: nack:mpu@5s:3 | vanish:qmc@10s:2s | stuck@20s | overflow@30s:120ms`;
 
 function fail(msg, code = 2) {
@@ -119,6 +121,7 @@ async function main() {
         report: { type: 'string' },
         json: { type: 'string' },
         quiet: { type: 'boolean' },
+        top: { type: 'string' },
       },
     });
   } catch (e) {
@@ -129,6 +132,7 @@ async function main() {
     if (cmd === 'run') await cmdRun(v);
     else if (cmd === 'gen-stream') await cmdGen(v);
     else if (cmd === 'bench') await benchReport(v);
+    else if (cmd === 'profile') await profile(v);
     else fail(usage);
   } catch (e) {
     fail(e.stack ?? String(e), 1);

@@ -1,0 +1,64 @@
+// Statistical profile of the firmware: after each executed instruction batch the PC is sampled
+// every `periodCycles` executed cycles and attributed to the function symbol containing it.
+
+import { Session } from './session.js';
+import { generateStream } from './stream.js';
+
+/** Strips a Rust legacy-mangled name to its path (`_ZN3foo3bar17h…E` → `foo::bar`). */
+export function demangle(name) {
+  const m = /^_ZN(.*)E$/.exec(name);
+  if (!m) return name;
+  const parts = [];
+  let s = m[1];
+  while (s.length) {
+    const d = /^(\d+)/.exec(s);
+    if (!d) break;
+    const n = Number(d[1]);
+    const part = s.slice(d[1].length, d[1].length + n);
+    s = s.slice(d[1].length + n);
+    if (/^h[0-9a-f]{16}$/.test(part)) continue;
+    parts.push(part.replace(/\$LT\$/g, '<').replace(/\$GT\$/g, '>').replace(/\$u20\$/g, ' ').replace(/\$C\$/g, ',').replace(/\.\./g, '::').replace(/\$RF\$/g, '&').replace(/\$BP\$/g, '*').replace(/\$u7b\$/g, '{').replace(/\$u7d\$/g, '}'));
+  }
+  return parts.join('::');
+}
+
+export async function profile(v) {
+  const seconds = Number(v.seconds ?? 2);
+  const s = new Session({ elf: v.elf, stream: generateStream({ seed: 1, seconds: seconds + 3 }), echoLog: false });
+  await s.run(1e9);
+  const syms = [...s.emu.elf.symbols.entries()]
+    .filter(([, x]) => x.size > 0 && x.value >= 0x10000000 && x.value < 0x20042000)
+    .map(([n, x]) => ({ n, a: x.value & ~1, e: (x.value & ~1) + x.size }))
+    .sort((a, b) => a.a - b.a);
+  const find = (pc) => {
+    let lo = 0;
+    let hi = syms.length - 1;
+    while (lo <= hi) {
+      const mid = (lo + hi) >> 1;
+      if (pc < syms[mid].a) hi = mid - 1;
+      else if (pc >= syms[mid].e) lo = mid + 1;
+      else return syms[mid].n;
+    }
+    return `0x${pc.toString(16)}`;
+  };
+  const hist = new Map();
+  const core = s.emu.core;
+  let next = core.cycles;
+  let samples = 0;
+  const end = s.emu.clock.nanos + seconds * 1e9;
+  s.emu.pollHooks.push(() => {});
+  // Sample inside the run by stepping in small slices.
+  while (s.emu.clock.nanos < end && !s.emu.stopReason) {
+    s.emu.runUntil(s.emu.clock.nanos + 2000);
+    if (core.cycles >= next && !core.waiting) {
+      const f = find(core.PC >>> 0);
+      hist.set(f, (hist.get(f) ?? 0) + 1);
+      samples++;
+      next = core.cycles + 97;
+    }
+  }
+  await s.close();
+  const rows = [...hist.entries()].sort((a, b) => b[1] - a[1]).slice(0, Number(v.top ?? 25));
+  process.stdout.write(`# PC samples while executing: ${samples} over ${seconds} s emulated\n`);
+  for (const [n, c] of rows) process.stdout.write(`${((100 * c) / samples).toFixed(1).padStart(5)} %  ${demangle(n)}\n`);
+}
