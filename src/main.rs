@@ -1,3 +1,578 @@
-//! Placeholder until the firmware lands.
+//! pico-imu firmware for the Raspberry Pi Pico W: samples an MPU-6050 (1 kHz FIFO) and a
+//! QMC5883L (200 Hz) on I2C0, corrects them in fixed point, runs the streaming Allan engines for
+//! ten channels, and reports over USB CDC-ACM (imu-proto frames) and defmt-RTT.
+//!
+//! Tasks (docs/firmware.md has the diagram):
+//! * `imu_task`     — MPU-6050 FIFO bursts every 10 ms (timer-driven), fault handling;
+//! * `mag_task`     — QMC5883L at 200 Hz, fault handling;
+//! * `process_task` — the pipeline and host requests (`pico_imu::device::Device`), calibration
+//!   storage (the only flash writer);
+//! * `usb_task`, `usb_tx_task`, `usb_rx_task` — embassy-usb device, frames out, frames in.
+//!
+//! Tasks talk only through the embassy-sync channel, pipe, watch and signal below; the I2C bus
+//! is shared through an embassy-sync mutex.
 #![no_std]
 #![no_main]
+
+mod bus;
+mod cpu;
+mod storage;
+
+use defmt::{info, warn};
+use embassy_executor::Spawner;
+use embassy_futures::select::{select3, Either3};
+use embassy_rp::bind_interrupts;
+use embassy_rp::i2c::{self, I2c};
+use embassy_rp::peripherals::{I2C0, USB};
+use embassy_rp::usb::{self, Driver};
+use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::channel::Channel;
+use embassy_sync::mutex::Mutex;
+use embassy_sync::pipe::Pipe;
+use embassy_sync::watch::Watch;
+use embassy_time::{Duration, Instant, Ticker, Timer};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
+use embassy_usb::UsbDevice;
+use imu_drivers::asynch::{Mpu6050, Qmc5883};
+use imu_drivers::mpu6050::{self as mpu, Address, FifoFrame, RawSample};
+use imu_drivers::qmc5883 as qmc;
+use imu_proto::{Channel as Ch, DecodeError, FrameReader, HostFrame, Scales, Sensor, Vec};
+use pico_imu::device::{Device, Fault, SensorMsg, IMU_PERIOD_US, MAG_PERIOD_US};
+use pico_imu::health::Health;
+use pico_imu::outbox::FrameSink;
+use pico_imu::stage::{self, Stage};
+use static_cell::StaticCell;
+use {defmt_rtt as _, panic_probe as _};
+
+use crate::bus::{BusDevice, SharedBus};
+
+bind_interrupts!(struct Irqs {
+    I2C0_IRQ => i2c::InterruptHandler<I2C0>;
+    USBCTRL_IRQ => usb::InterruptHandler<USB>;
+});
+
+/// I2C0 clock: 400 kHz fast mode (both sensors support it).
+const I2C_HZ: u32 = 400_000;
+/// IMU FIFO service period: 10 ms ≈ 10 frames of 14 bytes, far below the 1024-byte FIFO (73
+/// frames = 73 ms of headroom).
+const IMU_BURST_MS: u64 = 10;
+/// Encoded device→host frames waiting for USB; a full pipe drops whole frames (counted).
+const OUT_PIPE: usize = 8192;
+/// Largest host frame accepted (a SetCalibration with a 256-byte blob is ~270 bytes).
+const MAX_HOST_FRAME: usize = 512;
+
+type OutPipe = Pipe<NoopRawMutex, OUT_PIPE>;
+type SensorChannel = Channel<NoopRawMutex, SensorMsg, 8>;
+type HostChannel = Channel<NoopRawMutex, HostIn, 4>;
+/// `true` while measuring; the processing task clears it around a flash write.
+type RunWatch = Watch<NoopRawMutex, bool, 2>;
+
+/// What the USB receiver passes on.
+#[allow(clippy::large_enum_variant)] // no heap: requests travel inline
+enum HostIn {
+    Frame(HostFrame),
+    Rejected(DecodeError),
+}
+
+struct PipeSink<'a>(&'a OutPipe);
+
+impl FrameSink for PipeSink<'_> {
+    fn room(&self) -> usize {
+        self.0.free_capacity()
+    }
+    fn put(&mut self, frame: &[u8]) {
+        // `room()` was checked by the caller and only this task writes, so it fits whole.
+        let _ = self.0.try_write(frame);
+    }
+}
+
+static OUT: StaticCell<OutPipe> = StaticCell::new();
+static SENSORS: StaticCell<SensorChannel> = StaticCell::new();
+static HOST: StaticCell<HostChannel> = StaticCell::new();
+static RUN: StaticCell<RunWatch> = StaticCell::new();
+static BUS: StaticCell<SharedBus> = StaticCell::new();
+static DEVICE: StaticCell<Device> = StaticCell::new();
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    let p = embassy_rp::init(Default::default());
+    info!("pico-imu {} booting", env!("CARGO_PKG_VERSION"));
+
+    // --- USB CDC-ACM ---------------------------------------------------------------------
+    let driver = Driver::new(p.USB, Irqs);
+    let mut config = embassy_usb::Config::new(0x2e8a, 0x000a);
+    config.manufacturer = Some("pico-imu");
+    config.product = Some("pico-imu IMU lab");
+    config.serial_number = Some("0001");
+    config.max_power = 100;
+    config.max_packet_size_0 = 64;
+    static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+    static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+    static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
+    static CDC_STATE: StaticCell<State> = StaticCell::new();
+    let mut builder = embassy_usb::Builder::new(
+        driver,
+        config,
+        CONFIG_DESC.init([0; 256]),
+        BOS_DESC.init([0; 256]),
+        &mut [],
+        CONTROL_BUF.init([0; 64]),
+    );
+    let class = CdcAcmClass::new(&mut builder, CDC_STATE.init(State::new()), 64);
+    let usb = builder.build();
+    let (tx, rx) = class.split();
+
+    // --- I2C0 on GP4 (SDA) / GP5 (SCL), 400 kHz --------------------------------------------
+    let mut i2c_config = i2c::Config::default();
+    i2c_config.frequency = I2C_HZ;
+    let i2c = I2c::new_async(p.I2C0, p.PIN_5, p.PIN_4, Irqs, i2c_config);
+    let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(i2c, i2c_config)));
+
+    // --- channels ---------------------------------------------------------------------------
+    let out: &'static OutPipe = OUT.init(Pipe::new());
+    let sensors: &'static SensorChannel = SENSORS.init(Channel::new());
+    let host: &'static HostChannel = HOST.init(Channel::new());
+    let run: &'static RunWatch = RUN.init(Watch::new());
+    run.sender().send(true);
+
+    // --- calibration from flash -------------------------------------------------------------
+    let mut store = storage::Store::new(p.FLASH);
+    let device = DEVICE.init(Device::new(
+        scales(),
+        concat!("pico-imu ", env!("CARGO_PKG_VERSION")),
+    ));
+    let mut blob = [0u8; imu_proto::MAX_CAL_BLOB];
+    match store.load(&mut blob).await {
+        Ok(Some(n)) => device.load_stored(Some(&blob[..n])),
+        Ok(None) => device.load_stored(None),
+        Err(()) => device.flash_unreadable(),
+    }
+    info!("calibration: {}", device.cal_status());
+
+    spawner.spawn(usb_task(usb).expect("spawn usb_task"));
+    spawner.spawn(usb_tx_task(tx, out).expect("spawn usb_tx_task"));
+    spawner.spawn(usb_rx_task(rx, host).expect("spawn usb_rx_task"));
+    spawner.spawn(imu_task(bus, sensors, run).expect("spawn imu_task"));
+    spawner.spawn(mag_task(bus, sensors, run).expect("spawn mag_task"));
+    spawner
+        .spawn(process_task(device, store, sensors, host, out, run).expect("spawn process_task"));
+}
+
+/// Contract-unit scales of the configured ranges (the corrected counts keep the nominal LSB,
+/// see `imu_cal::device`): ±2 g, ±250 deg/s, ±2 G.
+fn scales() -> Scales {
+    let cfg = imu_config();
+    let s = cfg.scale(mpu::ChipId::Mpu6050);
+    Scales {
+        accel: mpu::STANDARD_GRAVITY / s.accel_lsb_per_g,
+        gyro: 1.0 / s.gyro_lsb_per_dps,
+        // LSB/G → µT per LSB (1 G = 100 µT).
+        mag: 100.0
+            / qmc::Config::default()
+                .range
+                .lsb_per_gauss(qmc::Variant::L)
+                .unwrap_or(12000.0),
+        temp: 1.0 / s.temperature.lsb_per_c,
+        temp_offset: s.temperature.offset_c,
+    }
+}
+
+/// MPU-6050: 1 kHz (DLPF 184 Hz, SMPLRT_DIV 0), ±2 g, ±250 deg/s, FIFO with temperature.
+fn imu_config() -> mpu::Config {
+    mpu::Config {
+        gyro_range: mpu::GyroRange::Dps250,
+        accel_range: mpu::AccelRange::G2,
+        dlpf: mpu::Dlpf::Hz184,
+        sample_rate_divider: 0,
+        fifo: Some(FifoFrame::AccelTempGyro),
+        interrupt: mpu::InterruptConfig {
+            data_ready: false,
+            ..Default::default()
+        },
+    }
+}
+
+#[embassy_executor::task]
+async fn usb_task(mut usb: UsbDevice<'static, Driver<'static, USB>>) -> ! {
+    usb.run().await
+}
+
+/// Moves encoded frames from the pipe to the IN endpoint, 64 bytes a packet.
+#[embassy_executor::task]
+async fn usb_tx_task(mut tx: Sender<'static, Driver<'static, USB>>, out: &'static OutPipe) -> ! {
+    let mut pkt = [0u8; 64];
+    loop {
+        tx.wait_connection().await;
+        info!("usb: host connected");
+        loop {
+            let n = out.read(&mut pkt).await;
+            if tx.write_packet(&pkt[..n]).await.is_err() {
+                warn!("usb: host gone");
+                break;
+            }
+        }
+    }
+}
+
+/// Reads host frames; every decoded or rejected frame goes to the processing task.
+#[embassy_executor::task]
+async fn usb_rx_task(
+    mut rx: Receiver<'static, Driver<'static, USB>>,
+    host: &'static HostChannel,
+) -> ! {
+    let mut reader = FrameReader::<MAX_HOST_FRAME>::new();
+    let mut pkt = [0u8; 64];
+    loop {
+        rx.wait_connection().await;
+        loop {
+            let n = match rx.read_packet(&mut pkt).await {
+                Ok(n) => n,
+                Err(_) => break,
+            };
+            for &b in &pkt[..n] {
+                match reader.push::<HostFrame>(b) {
+                    Some(Ok(f)) => host.send(HostIn::Frame(f)).await,
+                    Some(Err(e)) => host.send(HostIn::Rejected(e)).await,
+                    None => {}
+                }
+            }
+        }
+    }
+}
+
+fn now_us() -> u64 {
+    Instant::now().as_micros()
+}
+
+/// Waits while measurement is paused (flash write); returns whether it was paused.
+async fn wait_running(
+    run: &mut embassy_sync::watch::Receiver<'static, NoopRawMutex, bool, 2>,
+) -> bool {
+    if run.try_get() != Some(false) {
+        return false;
+    }
+    while !run.changed().await {}
+    true
+}
+
+/// MPU-6050: FIFO bursts every 10 ms. A failed transfer is counted; a lost sensor is retried
+/// with bus recovery and re-initialised, and reports how long it was down.
+#[embassy_executor::task]
+async fn imu_task(
+    bus: &'static SharedBus,
+    out: &'static SensorChannel,
+    run: &'static RunWatch,
+) -> ! {
+    let mut run = run.receiver().expect("watch receiver for imu_task");
+    let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
+    let cfg = imu_config();
+    let mut health = Health::new(Sensor::Imu);
+    let mut ready = false;
+    let mut last_read_us = now_us();
+    let mut frames = [RawSample::default(); 32];
+    let mut ticker = Ticker::every(Duration::from_millis(IMU_BURST_MS));
+    loop {
+        ticker.next().await;
+        if wait_running(&mut run).await && ready {
+            // The FIFO kept filling during the pause: drop it and mark the gap.
+            let _ = imu.reset_fifo().await;
+            last_read_us = now_us();
+            out.send(SensorMsg::Resumed { t_us: last_read_us }).await;
+            continue;
+        }
+        let t = now_us();
+        if !ready {
+            if health.state() == imu_proto::SensorState::Missing && !health.retry_due(t) {
+                continue;
+            }
+            let mut recoveries = 0;
+            if health.state() == imu_proto::SensorState::Missing {
+                recoveries = bus.lock().await.recover();
+            }
+            match imu.init(&mut embassy_time::Delay, &cfg).await {
+                Ok(chip) => {
+                    let t = now_us();
+                    info!("imu: {} ready", chip);
+                    let event = health.ok(t);
+                    let lost = match event {
+                        Some(imu_proto::Event::SensorBack { down_us, .. }) => {
+                            (down_us / IMU_PERIOD_US) as u32
+                        }
+                        _ => 0,
+                    };
+                    ready = true;
+                    last_read_us = t;
+                    out.send(SensorMsg::Fault(Fault {
+                        sensor: Sensor::Imu,
+                        i2c_errors: 0,
+                        recoveries,
+                        state: health.state(),
+                        event,
+                        lost,
+                    }))
+                    .await;
+                }
+                Err(e) => {
+                    let event = health.error(now_us());
+                    if event.is_some() {
+                        warn!("imu: not answering ({})", defmt::Debug2Format(&e));
+                    }
+                    out.send(SensorMsg::Fault(Fault {
+                        sensor: Sensor::Imu,
+                        i2c_errors: 1,
+                        recoveries,
+                        state: health.state(),
+                        event,
+                        lost: 0,
+                    }))
+                    .await;
+                }
+            }
+            continue;
+        }
+        // Drain the FIFO: up to 32 frames a read, repeated while it returns full buffers.
+        loop {
+            stage::enter(Stage::I2c);
+            let r = imu.read_fifo(&mut frames).await;
+            stage::leave();
+            let t = now_us();
+            match r {
+                Ok(0) => break,
+                Ok(n) => {
+                    if let Some(e) = health.ok(t) {
+                        out.send(SensorMsg::Fault(Fault {
+                            sensor: Sensor::Imu,
+                            i2c_errors: 0,
+                            recoveries: 0,
+                            state: health.state(),
+                            event: Some(e),
+                            lost: 0,
+                        }))
+                        .await;
+                    }
+                    last_read_us = t;
+                    let samples = Vec::from_slice(&frames[..n]).unwrap_or_default();
+                    out.send(SensorMsg::Imu { t_us: t, samples }).await;
+                    if n < frames.len() {
+                        break;
+                    }
+                }
+                Err(mpu::Error::FifoOverflow) => {
+                    // 1024 bytes held 73 frames; the rest of the time since the last read is lost.
+                    let elapsed = (t.saturating_sub(last_read_us) / IMU_PERIOD_US) as u32;
+                    let lost = elapsed.saturating_sub(73).max(1);
+                    warn!("imu: FIFO overflow, ~{} samples lost", lost);
+                    let _ = imu.reset_fifo().await;
+                    last_read_us = now_us();
+                    out.send(SensorMsg::ImuOverflow { t_us: t, lost }).await;
+                    break;
+                }
+                Err(e) => {
+                    let event = health.error(t);
+                    if event.is_some() {
+                        warn!("imu: lost ({})", defmt::Debug2Format(&e));
+                        ready = false;
+                    }
+                    out.send(SensorMsg::Fault(Fault {
+                        sensor: Sensor::Imu,
+                        i2c_errors: 1,
+                        recoveries: 0,
+                        state: health.state(),
+                        event,
+                        lost: 0,
+                    }))
+                    .await;
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// QMC5883L at 200 Hz: one DRDY-checked read per 5 ms tick.
+#[embassy_executor::task]
+async fn mag_task(
+    bus: &'static SharedBus,
+    out: &'static SensorChannel,
+    run: &'static RunWatch,
+) -> ! {
+    let mut run = run.receiver().expect("watch receiver for mag_task");
+    let mut mag = Qmc5883::new(BusDevice::new(bus));
+    let cfg = qmc::Config::default();
+    let mut health = Health::new(Sensor::Mag);
+    let mut ready = false;
+    let mut ticker = Ticker::every(Duration::from_micros(MAG_PERIOD_US));
+    loop {
+        ticker.next().await;
+        if wait_running(&mut run).await && ready {
+            out.send(SensorMsg::Resumed { t_us: now_us() }).await;
+        }
+        let t = now_us();
+        if !ready {
+            if health.state() == imu_proto::SensorState::Missing && !health.retry_due(t) {
+                continue;
+            }
+            let mut recoveries = 0;
+            if health.state() == imu_proto::SensorState::Missing {
+                recoveries = bus.lock().await.recover();
+            }
+            match mag.init(&mut embassy_time::Delay, &cfg).await {
+                Ok(()) => {
+                    info!("mag: ready");
+                    let event = health.ok(now_us());
+                    ready = true;
+                    out.send(SensorMsg::Fault(Fault {
+                        sensor: Sensor::Mag,
+                        i2c_errors: 0,
+                        recoveries,
+                        state: health.state(),
+                        event,
+                        lost: 0,
+                    }))
+                    .await;
+                }
+                Err(e) => {
+                    let event = health.error(now_us());
+                    if event.is_some() {
+                        warn!("mag: not answering ({})", defmt::Debug2Format(&e));
+                    }
+                    out.send(SensorMsg::Fault(Fault {
+                        sensor: Sensor::Mag,
+                        i2c_errors: 1,
+                        recoveries,
+                        state: health.state(),
+                        event,
+                        lost: 0,
+                    }))
+                    .await;
+                }
+            }
+            continue;
+        }
+        match mag.read().await {
+            Ok(s) => {
+                if let Some(e) = health.ok(t) {
+                    out.send(SensorMsg::Fault(Fault {
+                        sensor: Sensor::Mag,
+                        i2c_errors: 0,
+                        recoveries: 0,
+                        state: health.state(),
+                        event: Some(e),
+                        lost: 0,
+                    }))
+                    .await;
+                }
+                out.send(SensorMsg::Mag {
+                    t_us: now_us(),
+                    xyz: s.xyz,
+                })
+                .await;
+            }
+            // DRDY not yet set: the 200 Hz tick and the sensor's own clock drift apart; the
+            // next tick reads it.
+            Err(qmc::Error::NotReady) => {}
+            Err(e) => {
+                let event = health.error(t);
+                if event.is_some() {
+                    warn!("mag: lost ({})", defmt::Debug2Format(&e));
+                    ready = false;
+                }
+                out.send(SensorMsg::Fault(Fault {
+                    sensor: Sensor::Mag,
+                    i2c_errors: 1,
+                    recoveries: 0,
+                    state: health.state(),
+                    event,
+                    lost: 0,
+                }))
+                .await;
+            }
+        }
+    }
+}
+
+/// The pipeline, host requests, periodic status/tables, and flash writes on request.
+#[embassy_executor::task]
+async fn process_task(
+    device: &'static mut Device,
+    mut store: storage::Store,
+    sensors: &'static SensorChannel,
+    host: &'static HostChannel,
+    out: &'static OutPipe,
+    run: &'static RunWatch,
+) -> ! {
+    let mut sink = PipeSink(out);
+    let mut tick = Ticker::every(Duration::from_millis(100));
+    let mut last_status = Instant::now();
+    let mut last_tables = Instant::now();
+    let mut cpu = cpu::Meter::new();
+    loop {
+        match select3(sensors.receive(), host.receive(), tick.next()).await {
+            Either3::First(msg) => device.on_sensor(&msg, &mut sink),
+            Either3::Second(HostIn::Rejected(e)) => {
+                warn!("host frame rejected: {}", e);
+                device.rejected_frame();
+            }
+            Either3::Second(HostIn::Frame(f)) => {
+                let load = cpu.last_permille();
+                if let Some(req) = device.handle(f, now_us(), load, &mut sink) {
+                    // Flash write: pause sampling, let the tasks see it, write, resume.
+                    run.sender().send(false);
+                    Timer::after_millis(2 * IMU_BURST_MS).await;
+                    let ok = store.save(&req.blob).await.is_ok();
+                    run.sender().send(true);
+                    info!("calibration persisted: {}", ok);
+                    device.persisted(req.id, ok, &mut sink);
+                }
+            }
+            Either3::Third(()) => {
+                let now = Instant::now();
+                let status_ms = u64::from(device.status_interval_ms());
+                if status_ms > 0 && (now - last_status).as_millis() >= status_ms {
+                    last_status = now;
+                    let load = cpu.sample();
+                    device.send_status(now.as_micros(), load, &mut sink);
+                    let st = device.status(now.as_micros(), load);
+                    info!(
+                        "status: {} samples, {} dropped, {} overflows, {} I2C errors, cpu {}‰, imu {}, mag {}",
+                        st.samples_taken, st.samples_dropped, st.fifo_overflows, st.i2c_errors, load, st.imu, st.mag
+                    );
+                }
+                let tables_ms = u64::from(device.tables_interval_ms());
+                if tables_ms > 0
+                    && (now - last_tables).as_millis() >= tables_ms
+                    && !device.tables_pending()
+                {
+                    last_tables = now;
+                    device.start_tables();
+                    log_tables(device);
+                }
+            }
+        }
+        // Tables go out one channel at a time, as the USB pipe drains.
+        while device.tables_pending() {
+            if device.tables_step(&mut sink).is_none() {
+                break;
+            }
+        }
+    }
+}
+
+/// The Allan tables over defmt, so a probe user sees them without the host tool.
+fn log_tables(device: &Device) {
+    for ch in Ch::ALL {
+        let t = device.table(ch);
+        for l in &t.levels {
+            info!(
+                "adev {} tau={}s dev={} [{}, {}] {} n={}",
+                ch.name(),
+                l.tau_s,
+                l.dev,
+                l.lo,
+                l.hi,
+                ch.unit(),
+                l.n2
+            );
+        }
+    }
+}

@@ -167,13 +167,13 @@ pub struct AllanLevel {
     /// Spacing of the second differences that were summed (1 = fully overlapping).
     pub stride: u32,
     /// Number of second differences summed.
-    pub n: u64,
+    pub n2: u64,
     /// Σ (θ[k+2m] − 2θ[k+m] + θ[k])², θ the integer phase (cumulative sum of the samples).
-    pub sum_sq2: u128,
+    pub sum2: u128,
     /// Number of third differences summed.
     pub n3: u64,
     /// Σ (θ[k+3m] − 3θ[k+2m] + 3θ[k+m] − θ[k])².
-    pub sum_sq3: u128,
+    pub sum3: u128,
     /// τ, s.
     pub tau_s: f32,
     /// Overlapping Allan deviation in the channel's contract unit.

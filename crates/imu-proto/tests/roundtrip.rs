@@ -52,11 +52,11 @@ fn table() -> AllanTable {
             .push(AllanLevel {
                 m: 1 << k,
                 stride: if k < 3 { 1 } else { 1 << (k - 3) },
-                n: 60_000 - (2u64 << k).min(59_999),
+                n2: 60_000 - (2u64 << k).min(59_999),
                 // Values beyond u64 to exercise the u128 varint path.
-                sum_sq2: (u128::from(u64::MAX) << 20) + u128::from(k),
+                sum2: (u128::from(u64::MAX) << 20) + u128::from(k),
                 n3: 59_000,
-                sum_sq3: u128::MAX - u128::from(k),
+                sum3: u128::MAX - u128::from(k),
                 tau_s: 0.001 * (1u64 << k) as f32,
                 dev: 0.01 / (k as f32 + 1.0),
                 lo: 0.009,

@@ -1,0 +1,606 @@
+//! The per-sample pipeline and the host request handling, as one state machine owned by the
+//! processing task.
+//!
+//! Per IMU sample, in a straight line: fixed-point correction (`imu_cal::device`) → one
+//! `push` per channel into the streaming Allan engines (`allan::stream`) → append to the
+//! sample batch → when the batch is full, one frame to the outbox. The magnetometer path is the
+//! same at 200 Hz. Nothing on this path allocates, divides or touches floating point.
+//!
+//! Gaps (FIFO overflow, a lost sensor, a pause for a flash write) call `gap()` on the
+//! affected engines, so no Allan difference ever straddles missing data.
+use allan::stream::{DeviceEngine, LevelSums};
+use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
+use imu_drivers::mpu6050::RawSample;
+use imu_proto::{
+    AllanLevel, AllanTable, CalFault, CalSource, CalStatus, Channel, DeviceMsg, ErrorCode, Event,
+    HostFrame, Identity, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, SensorState,
+    Status, StreamMode, Vec, MAX_CAL_BLOB, PROTOCOL_VERSION,
+};
+
+use crate::outbox::{FrameSink, Outbox, Sent};
+
+/// IMU output data rate, Hz (MPU-6050: 1 kHz gyro rate with the DLPF on, SMPLRT_DIV = 0).
+pub const IMU_RATE_HZ: u32 = 1000;
+/// IMU sample period, µs.
+pub const IMU_PERIOD_US: u64 = 1_000_000 / IMU_RATE_HZ as u64;
+/// Magnetometer output data rate, Hz (QMC5883L ODR = 200 Hz).
+pub const MAG_RATE_HZ: u32 = 200;
+/// Magnetometer sample period, µs.
+pub const MAG_PERIOD_US: u64 = 1_000_000 / MAG_RATE_HZ as u64;
+/// Channels with an Allan engine (ax ay az gx gy gz mx my mz temp).
+pub const CHANNELS: usize = 10;
+/// Allan engine overlap factor and levels (must match `allan::stream::DeviceEngine`).
+pub const ALLAN_OVERLAP: u8 = 8;
+pub const ALLAN_LEVELS: u8 = 24;
+
+/// What the sensor tasks tell the processing task.
+#[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant)] // no heap: the burst travels inline through the channel
+pub enum SensorMsg {
+    /// FIFO frames in arrival order; the last one was read at `t_us`.
+    Imu {
+        t_us: u64,
+        samples: Vec<RawSample, 32>,
+    },
+    /// The FIFO overflowed and was reset; about `lost` samples are gone.
+    ImuOverflow { t_us: u64, lost: u32 },
+    /// One magnetometer reading.
+    Mag { t_us: u64, xyz: [i16; 3] },
+    /// A failed transfer, a loss, a recovery or a return.
+    Fault(Fault),
+    /// Sampling resumed after a pause (flash write): a gap in every channel.
+    Resumed { t_us: u64 },
+}
+
+/// A sensor task's fault report.
+#[derive(Debug, Clone, Copy)]
+pub struct Fault {
+    pub sensor: imu_proto::Sensor,
+    /// Failed I2C transfers since the last report.
+    pub i2c_errors: u32,
+    /// Bus recoveries performed since the last report.
+    pub recoveries: u32,
+    /// Health after this report.
+    pub state: SensorState,
+    /// Lost/back event to forward to the host.
+    pub event: Option<Event>,
+    /// Samples not taken during an outage that ended now.
+    pub lost: u32,
+}
+
+/// A calibration the host asked to persist; the firmware pauses sampling, writes it and
+/// reports back through [`Device::persisted`].
+#[derive(Debug, Clone)]
+pub struct PersistRequest {
+    pub id: u16,
+    pub blob: Vec<u8, MAX_CAL_BLOB>,
+}
+
+/// Counters reported in [`Status`].
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Counters {
+    pub samples_taken: u64,
+    pub samples_dropped: u64,
+    pub mag_samples: u64,
+    pub fifo_overflows: u32,
+    pub i2c_errors: u32,
+    pub bus_recoveries: u32,
+    pub frames_rejected: u32,
+}
+
+const IMU_CHANNELS: [usize; 7] = [0, 1, 2, 3, 4, 5, 9];
+const MAG_CHANNELS: [usize; 3] = [6, 7, 8];
+
+/// The device state machine.
+pub struct Device {
+    cal: Calibration,
+    cal_status: CalStatus,
+    engines: [DeviceEngine; CHANNELS],
+    scales: Scales,
+    mode: StreamMode,
+    status_ms: u32,
+    tables_ms: u32,
+    batch: SampleBatch,
+    imu_seq: u32,
+    mag_seq: u32,
+    pub counters: Counters,
+    imu_state: SensorState,
+    mag_state: SensorState,
+    last_temp: Option<i16>,
+    /// Next channel of a table round in progress.
+    table_next: Option<usize>,
+    outbox: Outbox,
+    firmware: &'static str,
+}
+
+impl Device {
+    /// A device with identity corrections, streaming calibrated samples, status every 1 s and
+    /// tables every 10 s. `scales` converts corrected counts to contract units.
+    pub fn new(scales: Scales, firmware: &'static str) -> Self {
+        Self {
+            cal: Calibration::identity(),
+            cal_status: CalStatus {
+                source: CalSource::Identity,
+                fault: None,
+            },
+            engines: core::array::from_fn(|_| DeviceEngine::new()),
+            scales,
+            mode: StreamMode::Calibrated,
+            status_ms: 1000,
+            tables_ms: 10_000,
+            batch: SampleBatch {
+                calibrated: true,
+                scales,
+                imu: Vec::new(),
+                mag: Vec::new(),
+            },
+            imu_seq: 0,
+            mag_seq: 0,
+            counters: Counters::default(),
+            imu_state: SensorState::Unknown,
+            mag_state: SensorState::Unknown,
+            last_temp: None,
+            table_next: None,
+            outbox: Outbox::new(),
+            firmware,
+        }
+    }
+
+    /// Use a blob read from flash at boot; a bad one is reported and identity kept.
+    pub fn load_stored(&mut self, blob: Option<&[u8]>) {
+        match blob.map(decode_blob) {
+            None => {
+                self.cal_status = CalStatus {
+                    source: CalSource::Identity,
+                    fault: None,
+                }
+            }
+            Some(Ok(cal)) => {
+                self.cal = cal;
+                self.cal_status = CalStatus {
+                    source: CalSource::Flash,
+                    fault: None,
+                };
+            }
+            Some(Err(e)) => {
+                self.cal = Calibration::identity();
+                self.cal_status = CalStatus {
+                    source: CalSource::Identity,
+                    fault: Some(cal_fault(e)),
+                };
+            }
+        }
+    }
+
+    /// The flash could not be read at boot.
+    pub fn flash_unreadable(&mut self) {
+        self.cal_status = CalStatus {
+            source: CalSource::Identity,
+            fault: Some(CalFault::Flash),
+        };
+    }
+
+    pub fn cal_status(&self) -> CalStatus {
+        self.cal_status
+    }
+
+    pub fn mode(&self) -> StreamMode {
+        self.mode
+    }
+
+    /// Status frame interval, ms (0 = off).
+    pub fn status_interval_ms(&self) -> u32 {
+        self.status_ms
+    }
+
+    /// Table round interval, ms (0 = off).
+    pub fn tables_interval_ms(&self) -> u32 {
+        self.tables_ms
+    }
+
+    /// The engine of one channel (for tests and the defmt log).
+    pub fn engine(&self, ch: Channel) -> &DeviceEngine {
+        &self.engines[ch.index()]
+    }
+
+    /// Frames dropped because the host was not reading.
+    pub fn frames_unsent(&self) -> u32 {
+        self.outbox.unsent
+    }
+
+    /// Feed one sensor message through the pipeline.
+    pub fn on_sensor(&mut self, msg: &SensorMsg, sink: &mut impl FrameSink) {
+        match msg {
+            SensorMsg::Imu { t_us, samples } => self.imu_burst(samples, *t_us, sink),
+            SensorMsg::ImuOverflow { t_us, lost } => {
+                self.counters.fifo_overflows = self.counters.fifo_overflows.saturating_add(1);
+                self.counters.samples_dropped = self
+                    .counters
+                    .samples_dropped
+                    .saturating_add(u64::from(*lost));
+                for c in IMU_CHANNELS {
+                    self.engines[c].gap();
+                }
+                self.send(
+                    &DeviceMsg::Event(Event::FifoOverflow {
+                        t_us: *t_us,
+                        lost: *lost,
+                    }),
+                    sink,
+                );
+            }
+            SensorMsg::Mag { t_us, xyz } => self.mag_sample(*xyz, *t_us, sink),
+            SensorMsg::Fault(f) => {
+                self.counters.i2c_errors = self.counters.i2c_errors.saturating_add(f.i2c_errors);
+                self.counters.bus_recoveries =
+                    self.counters.bus_recoveries.saturating_add(f.recoveries);
+                let chans: &[usize] = match f.sensor {
+                    imu_proto::Sensor::Imu => {
+                        self.imu_state = f.state;
+                        &IMU_CHANNELS
+                    }
+                    imu_proto::Sensor::Mag => {
+                        self.mag_state = f.state;
+                        &MAG_CHANNELS
+                    }
+                };
+                if f.state != SensorState::Ok {
+                    for &c in chans {
+                        self.engines[c].gap();
+                    }
+                }
+                if f.sensor == imu_proto::Sensor::Imu {
+                    self.counters.samples_dropped = self
+                        .counters
+                        .samples_dropped
+                        .saturating_add(u64::from(f.lost));
+                }
+                if let Some(e) = f.event {
+                    self.send(&DeviceMsg::Event(e), sink);
+                }
+            }
+            SensorMsg::Resumed { .. } => {
+                for e in &mut self.engines {
+                    e.gap();
+                }
+            }
+        }
+    }
+
+    /// The per-sample path for one FIFO burst. Sample `i` of `n` is stamped
+    /// `t_read − (n−1−i)·1 ms`: the FIFO is paced by the sensor's own clock, so the
+    /// timestamps are reconstructed from the read time (docs/firmware.md).
+    fn imu_burst(&mut self, samples: &[RawSample], t_read_us: u64, sink: &mut impl FrameSink) {
+        let n = samples.len() as u64;
+        for (i, s) in samples.iter().enumerate() {
+            let temp = s.temp.or(self.last_temp).unwrap_or(0);
+            self.last_temp = Some(temp);
+            let accel = self.cal.apply_accel(s.accel);
+            let gyro = self.cal.apply_gyro(s.gyro, temp);
+            for k in 0..3 {
+                self.engines[k].push(accel[k]);
+                self.engines[3 + k].push(gyro[k]);
+            }
+            self.engines[9].push(i32::from(temp));
+            let seq = self.imu_seq;
+            self.imu_seq = self.imu_seq.wrapping_add(1);
+            self.counters.samples_taken += 1;
+            if self.mode == StreamMode::Off {
+                continue;
+            }
+            let raw = self.mode == StreamMode::Raw;
+            let t_us = t_read_us.saturating_sub((n - 1 - i as u64) * IMU_PERIOD_US);
+            let out = ImuSample {
+                seq,
+                t_us,
+                accel: if raw { s.accel.map(i32::from) } else { accel },
+                gyro: if raw { s.gyro.map(i32::from) } else { gyro },
+                temp: i32::from(temp),
+            };
+            if self.batch.imu.push(out).is_err() {
+                self.flush(sink);
+                // The batch was just emptied, so this cannot fail; ignore rather than panic.
+                let _ = self.batch.imu.push(out);
+            }
+            if self.batch.imu.is_full() {
+                self.flush(sink);
+            }
+        }
+    }
+
+    fn mag_sample(&mut self, xyz: [i16; 3], t_us: u64, sink: &mut impl FrameSink) {
+        let mag = self.cal.apply_mag(xyz);
+        for (e, &v) in self.engines[6..9].iter_mut().zip(&mag) {
+            e.push(v);
+        }
+        let seq = self.mag_seq;
+        self.mag_seq = self.mag_seq.wrapping_add(1);
+        self.counters.mag_samples += 1;
+        if self.mode == StreamMode::Off {
+            return;
+        }
+        let out = MagSample {
+            seq,
+            t_us,
+            mag: if self.mode == StreamMode::Raw {
+                xyz.map(i32::from)
+            } else {
+                mag
+            },
+        };
+        if self.batch.mag.push(out).is_err() {
+            self.flush(sink);
+            let _ = self.batch.mag.push(out);
+        }
+        if self.batch.mag.is_full() {
+            self.flush(sink);
+        }
+    }
+
+    /// Send the batch assembled so far (if any).
+    pub fn flush(&mut self, sink: &mut impl FrameSink) {
+        if self.batch.imu.is_empty() && self.batch.mag.is_empty() {
+            return;
+        }
+        self.batch.calibrated = self.mode != StreamMode::Raw;
+        self.batch.scales = self.scales;
+        let msg = DeviceMsg::Samples(core::mem::replace(
+            &mut self.batch,
+            SampleBatch {
+                calibrated: true,
+                scales: self.scales,
+                imu: Vec::new(),
+                mag: Vec::new(),
+            },
+        ));
+        self.send(&msg, sink);
+    }
+
+    fn send(&mut self, msg: &DeviceMsg, sink: &mut impl FrameSink) -> Sent {
+        self.outbox.send(msg, sink)
+    }
+
+    /// Counters and health now.
+    pub fn status(&self, uptime_us: u64, cpu_load_permille: u16) -> Status {
+        let s = self.scales;
+        let temp_milli_c = self
+            .last_temp
+            .map(|t| ((f32::from(t) * s.temp + s.temp_offset) * 1000.0) as i32)
+            .unwrap_or(i32::MIN);
+        Status {
+            uptime_us,
+            samples_taken: self.counters.samples_taken,
+            samples_dropped: self.counters.samples_dropped,
+            mag_samples: self.counters.mag_samples,
+            fifo_overflows: self.counters.fifo_overflows,
+            i2c_errors: self.counters.i2c_errors,
+            bus_recoveries: self.counters.bus_recoveries,
+            frames_rejected: self.counters.frames_rejected,
+            frames_unsent: self.outbox.unsent,
+            cpu_load_permille,
+            temp_milli_c,
+            imu: self.imu_state,
+            mag: self.mag_state,
+            cal: self.cal_status,
+            mode: self.mode,
+        }
+    }
+
+    /// Send a status frame.
+    pub fn send_status(
+        &mut self,
+        uptime_us: u64,
+        cpu_load_permille: u16,
+        sink: &mut impl FrameSink,
+    ) -> Sent {
+        let st = self.status(uptime_us, cpu_load_permille);
+        self.send(&DeviceMsg::Status(st), sink)
+    }
+
+    /// Start a round of table frames (one per channel, sent by [`Device::tables_step`]).
+    pub fn start_tables(&mut self) {
+        self.table_next = Some(0);
+    }
+
+    /// Whether a table round is in progress.
+    pub fn tables_pending(&self) -> bool {
+        self.table_next.is_some()
+    }
+
+    /// Send the next table of the round if the queue has room for a table frame; returns the
+    /// channel sent. Tables wait for room rather than being dropped.
+    pub fn tables_step(&mut self, sink: &mut impl FrameSink) -> Option<Channel> {
+        let c = self.table_next?;
+        if sink.room() < TABLE_FRAME_ROOM {
+            return None;
+        }
+        let ch = Channel::ALL[c];
+        let t = self.table(ch);
+        self.send(&DeviceMsg::Table(t), sink);
+        self.table_next = if c + 1 < CHANNELS { Some(c + 1) } else { None };
+        Some(ch)
+    }
+
+    /// The Allan table of one channel: the engine's exact sums plus the deviation and its
+    /// 68.3 % bounds in contract units (EDF by Greenhall & Riley 2003 for white FM, χ² bounds
+    /// per NIST SP 1065 eq. 45; see `allan::ci`).
+    pub fn table(&self, ch: Channel) -> AllanTable {
+        let e = &self.engines[ch.index()];
+        let (tau0_us, scale) = match ch {
+            Channel::Mx | Channel::My | Channel::Mz => (MAG_PERIOD_US as u32, self.scales.mag),
+            _ => (IMU_PERIOD_US as u32, self.scales.of(ch)),
+        };
+        let mut levels = Vec::new();
+        let all: Vec<LevelSums, { imu_proto::MAX_LEVELS }> = e.levels().collect();
+        for (k, l) in all.iter().enumerate().filter(|(_, l)| l.n2 > 0) {
+            let _ = levels.push(level_row(l, tau0_us, scale, alpha_at(&all, k)));
+        }
+        AllanTable {
+            channel: ch,
+            tau0_us,
+            scale,
+            pushed: e.samples(),
+            gaps: e.gaps(),
+            levels,
+        }
+    }
+
+    /// Who we are.
+    pub fn identity(&self) -> Identity {
+        Identity {
+            protocol: PROTOCOL_VERSION,
+            firmware: imu_proto::String::try_from(self.firmware).unwrap_or_default(),
+            board: imu_proto::String::try_from("Raspberry Pi Pico W").unwrap_or_default(),
+            imu_rate_hz: IMU_RATE_HZ as u16,
+            mag_rate_hz: MAG_RATE_HZ as u16,
+            allan_overlap: ALLAN_OVERLAP,
+            allan_levels: ALLAN_LEVELS,
+        }
+    }
+
+    /// Handle one host request. Returns a [`PersistRequest`] when the calibration must be
+    /// written to flash (the reply then comes from [`Device::persisted`]).
+    pub fn handle(
+        &mut self,
+        frame: HostFrame,
+        uptime_us: u64,
+        cpu: u16,
+        sink: &mut impl FrameSink,
+    ) -> Option<PersistRequest> {
+        let id = frame.id;
+        let reply = match frame.req {
+            Request::Identify => Reply::Identity(self.identity()),
+            Request::GetStatus => Reply::Status(self.status(uptime_us, cpu)),
+            Request::GetCalibration => {
+                let mut buf = [0u8; MAX_BLOB_LEN];
+                match encode_blob(&self.cal, &mut buf) {
+                    Ok(b) => Reply::Calibration {
+                        blob: Vec::from_slice(b).unwrap_or_default(),
+                        status: self.cal_status,
+                    },
+                    Err(_) => Reply::Error(ErrorCode::BadCalibration),
+                }
+            }
+            Request::SetCalibration { blob, persist } => match decode_blob(&blob) {
+                Ok(cal) => {
+                    self.cal = cal;
+                    self.cal_status = CalStatus {
+                        source: CalSource::Host,
+                        fault: None,
+                    };
+                    // New corrections change the engines' input: old sums would mix scales.
+                    self.reset_allan();
+                    if persist {
+                        return Some(PersistRequest { id, blob });
+                    }
+                    Reply::Ok
+                }
+                Err(_) => Reply::Error(ErrorCode::BadCalibration),
+            },
+            Request::ResetAllan => {
+                self.reset_allan();
+                Reply::Ok
+            }
+            Request::SetMode(m) => {
+                self.flush(sink);
+                self.mode = m;
+                Reply::Ok
+            }
+            Request::SetIntervals {
+                status_ms,
+                tables_ms,
+            } => {
+                self.status_ms = status_ms;
+                self.tables_ms = tables_ms;
+                Reply::Ok
+            }
+            Request::GetTables => {
+                self.start_tables();
+                Reply::Ok
+            }
+        };
+        self.send(&DeviceMsg::Reply { id, reply }, sink);
+        None
+    }
+
+    /// Report the outcome of a [`PersistRequest`].
+    pub fn persisted(&mut self, id: u16, ok: bool, sink: &mut impl FrameSink) {
+        let reply = if ok {
+            self.cal_status = CalStatus {
+                source: CalSource::Flash,
+                fault: None,
+            };
+            Reply::Ok
+        } else {
+            self.cal_status.fault = Some(CalFault::Flash);
+            Reply::Error(ErrorCode::FlashWrite)
+        };
+        self.send(&DeviceMsg::Reply { id, reply }, sink);
+    }
+
+    /// A host frame was rejected by the decoder.
+    pub fn rejected_frame(&mut self) {
+        self.counters.frames_rejected = self.counters.frames_rejected.saturating_add(1);
+    }
+
+    /// Forget all Allan state and restart the sample numbering.
+    pub fn reset_allan(&mut self) {
+        for e in &mut self.engines {
+            e.reset();
+        }
+        self.imu_seq = 0;
+        self.mag_seq = 0;
+    }
+}
+
+/// Queue room a table frame needs (a full table with worst-case varints is < 2.2 KiB).
+pub const TABLE_FRAME_ROOM: usize = 2304;
+
+fn cal_fault(e: BlobError) -> CalFault {
+    match e {
+        BlobError::WrongVersion { found, .. } => CalFault::OldVersion(found.min(255) as u8),
+        _ => CalFault::Corrupt,
+    }
+}
+
+/// One table row from the engine's sums (off the hot path: f64 on the M0+ is soft-float).
+/// `alpha` is the noise exponent used for the EDF (Greenhall & Riley 2003).
+pub fn level_row(l: &LevelSums, tau0_us: u32, scale: f32, alpha: i32) -> AllanLevel {
+    use allan::ci;
+    let dev = l.oadev(f64::from(scale)).unwrap_or(0.0);
+    let s_factor = f64::from(l.m) / f64::from(l.stride.max(1));
+    let edf = ci::edf_greenhall(
+        alpha,
+        f64::from(l.m),
+        l.phase_points(),
+        ci::Variance::Unmodified { d: 2, s_factor },
+    )
+    .unwrap_or(l.n2 as f64);
+    let (lo, hi) = ci::chi2_bounds(dev, edf, ci::ONE_SIGMA);
+    AllanLevel {
+        m: l.m,
+        stride: l.stride,
+        n2: l.n2,
+        sum2: l.sum2,
+        n3: l.n3,
+        sum3: l.sum3,
+        tau_s: (f64::from(l.m) * f64::from(tau0_us) * 1e-6) as f32,
+        dev: dev as f32,
+        lo: lo as f32,
+        hi: hi as f32,
+    }
+}
+
+/// Noise exponent at level `k` from the slope of the Allan variance to the neighbouring level
+/// (`allan::ci::alpha_from_slope`); 0 (white FM) when there is no neighbour yet.
+fn alpha_at(levels: &[LevelSums], k: usize) -> i32 {
+    let var = |l: &LevelSums| l.oadev(1.0).map(|d| d * d).unwrap_or(0.0);
+    let (a, b) = if k + 1 < levels.len() && levels[k + 1].n2 > 0 {
+        (k, k + 1)
+    } else if k > 0 {
+        (k - 1, k)
+    } else {
+        return 0;
+    };
+    allan::ci::alpha_from_slope(var(&levels[a]), var(&levels[b]), 2.0, 2)
+}

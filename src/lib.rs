@@ -1,0 +1,13 @@
+//! The device-independent part of the pico-imu firmware: everything the tasks decide, kept free
+//! of embassy and of the HAL so it is host-tested (tests/tests/firmware_*.rs) against the driver
+//! mocks. The tasks in `main.rs` only move bytes between the hardware and these types.
+//!
+//! * [`outbox`]: frames queued whole or dropped and counted, never blocking the sampler;
+//! * [`health`]: the sensor fault state machine (lost, retry with bus recovery, back);
+//! * [`device`]: per-sample pipeline (corrections → Allan → batch) and host request handling.
+#![no_std]
+
+pub mod device;
+pub mod health;
+pub mod outbox;
+pub mod stage;

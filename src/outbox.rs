@@ -1,0 +1,63 @@
+//! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
+//! split and never waited for, so a host that stops reading cannot stall the sampling path.
+use imu_proto::{DeviceMsg, FrameEncoder, MAX_FRAME};
+
+/// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
+pub trait FrameSink {
+    /// Bytes that can be queued now.
+    fn room(&self) -> usize;
+    /// Queue `frame` (called only when `frame.len() <= room()`).
+    fn put(&mut self, frame: &[u8]);
+}
+
+/// Result of [`Outbox::send`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum Sent {
+    Queued(usize),
+    /// No room: the frame was dropped and counted.
+    Dropped,
+    /// The message did not encode (larger than `MAX_PAYLOAD`): a firmware bug, counted.
+    TooLarge,
+}
+
+/// Encoder, frame buffer and drop counter.
+pub struct Outbox {
+    enc: FrameEncoder,
+    buf: [u8; MAX_FRAME],
+    /// Frames dropped because the queue was full.
+    pub unsent: u32,
+}
+
+impl Default for Outbox {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Outbox {
+    pub const fn new() -> Self {
+        Self {
+            enc: FrameEncoder::new(),
+            buf: [0; MAX_FRAME],
+            unsent: 0,
+        }
+    }
+
+    /// Encode `msg` and queue it on `sink` if it fits whole.
+    pub fn send(&mut self, msg: &DeviceMsg, sink: &mut impl FrameSink) -> Sent {
+        let n = match self.enc.encode(msg, &mut self.buf) {
+            Ok(n) => n,
+            Err(_) => {
+                self.unsent = self.unsent.saturating_add(1);
+                return Sent::TooLarge;
+            }
+        };
+        if n > sink.room() {
+            self.unsent = self.unsent.saturating_add(1);
+            return Sent::Dropped;
+        }
+        sink.put(&self.buf[..n]);
+        Sent::Queued(n)
+    }
+}
