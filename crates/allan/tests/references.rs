@@ -244,3 +244,56 @@ fn stable32_oadev_every_m() {
         );
     }
 }
+
+/// AllanTools 2024.06 `oadev(y, rate=100, data_type='freq', taus='octave')` on a real
+/// MPU-6050 recording, every channel and every row: the same τ set (octave, to m ≈ N/2, rows
+/// with n ≤ 1 dropped), the same n, and the deviation to 1e-9 relative.
+#[test]
+fn allantools_oadev_on_real_mpu6050_recording() {
+    let path = format!(
+        "{}/tests/data/mpu6050_static_449s.csv",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let text = std::fs::read_to_string(path).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(5)
+        .map(|l| l.split(',').map(|v| v.trim().parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 44_930);
+    let reference = std::fs::read_to_string(format!(
+        "{}/tests/data/mpu6050_static_449s_oadev_allantools.txt",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    for (ch, name) in ["ax", "ay", "az", "gx", "gy", "gz"].iter().enumerate() {
+        let y: Vec<f64> = rows.iter().map(|r| r[ch]).collect();
+        let ours = deviation(&y, 0.01, Stat::Oadev, &TauSet::Octave).unwrap();
+        let theirs: Vec<(f64, f64, u64)> = reference
+            .lines()
+            .filter(|l| l.starts_with(name))
+            .map(|l| {
+                let f: Vec<&str> = l.split_whitespace().collect();
+                (
+                    f[1].parse().unwrap(),
+                    f[2].parse().unwrap(),
+                    f[3].parse().unwrap(),
+                )
+            })
+            .collect();
+        assert_eq!(ours.len(), theirs.len(), "{name}: number of octave rows");
+        for (r, (tau, dev, n)) in ours.iter().zip(theirs) {
+            assert!(
+                (r.tau - tau).abs() < 1e-12,
+                "{name}: tau {} vs {tau}",
+                r.tau
+            );
+            assert_eq!(r.n, n, "{name} tau={tau}: n");
+            assert!(
+                (r.dev / dev - 1.0).abs() < 1e-9,
+                "{name} tau={tau}: {} vs AllanTools {dev}",
+                r.dev
+            );
+        }
+    }
+}

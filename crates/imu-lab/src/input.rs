@@ -1,0 +1,343 @@
+//! The CSV input contract shared by every subcommand.
+//!
+//! * A header row, then one sample per row. Columns are chosen by name among
+//!   `t` (s), `ax ay az` (m/s²), `gx gy gz` (deg/s), `mx my mz` (µT) and `temp` (°C);
+//!   other columns are ignored.
+//! * The sample rate comes from `--rate`, or else from `t` as (N − 1)/duration.
+//! * Other layouts are read with flags: `--skip-lines N` skips metadata lines before the header,
+//!   `--rename OLD=NEW` maps a column name onto the contract, `--scale K --unit U` converts raw
+//!   counts (every selected column except `t` is multiplied by K and reported in U).
+//! * A malformed file is refused with an error naming the line and the field.
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read};
+use std::path::PathBuf;
+
+use anyhow::{anyhow, bail, Context, Result};
+
+/// Flags for reading a recording (flattened into each subcommand).
+#[derive(clap::Args, Debug, Clone)]
+pub struct InputArgs {
+    /// CSV recording (header row; columns t, ax ay az, gx gy gz, mx my mz, temp).
+    pub file: PathBuf,
+    /// Sample rate in Hz (default: from the `t` column).
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Metadata lines to skip before the header row.
+    #[arg(long, default_value_t = 0)]
+    pub skip_lines: usize,
+    /// Multiply the selected columns (not `t`) by this factor, e.g. 0.0076336 for ±250 °/s counts.
+    #[arg(long)]
+    pub scale: Option<f64>,
+    /// Unit of the selected columns after scaling (default: the contract's unit for the name).
+    #[arg(long)]
+    pub unit: Option<String>,
+    /// Rename columns onto the contract, OLD=NEW (comma-separated or repeated), e.g. mx_gauss=mx.
+    #[arg(long, value_delimiter = ',')]
+    pub rename: Vec<String>,
+}
+
+/// One selected column.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Contract name (`gz`, `mx`, …).
+    pub name: String,
+    /// Unit of `values`.
+    pub unit: String,
+    /// The samples.
+    pub values: Vec<f64>,
+}
+
+/// The columns read from a recording, with its rate.
+#[derive(Debug, Clone)]
+pub struct Recording {
+    /// Sample rate in Hz.
+    pub rate_hz: f64,
+    /// The `t` column in s, when present.
+    pub t: Option<Vec<f64>>,
+    /// The requested columns, in the order asked.
+    pub columns: Vec<Series>,
+}
+
+impl Recording {
+    /// The column called `name`.
+    pub fn column(&self, name: &str) -> Option<&Series> {
+        self.columns.iter().find(|c| c.name == name)
+    }
+}
+
+/// The contract's unit for a column name, if it is a contract column.
+pub fn contract_unit(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "t" => "s",
+        "ax" | "ay" | "az" => "m/s²",
+        "gx" | "gy" | "gz" => "deg/s",
+        "mx" | "my" | "mz" => "µT",
+        "temp" => "°C",
+        _ => return None,
+    })
+}
+
+/// Read the columns `wanted` (contract names, after renaming) from the recording.
+pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
+    let path = &args.file;
+    let shown = path.display();
+    let file = File::open(path).with_context(|| format!("cannot open {shown}"))?;
+    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let progress = progress_bar(size);
+    let mut reader = BufReader::new(progress.wrap_read(file));
+    let mut line = String::new();
+    for i in 0..args.skip_lines {
+        line.clear();
+        if reader
+            .read_line(&mut line)
+            .with_context(|| format!("{shown}: reading line {}", i + 1))?
+            == 0
+        {
+            bail!(
+                "{shown}: the file has only {i} lines, but --skip-lines {} was given",
+                args.skip_lines
+            );
+        }
+    }
+    let mut renames = Vec::new();
+    for r in &args.rename {
+        let (old, new) = r
+            .split_once('=')
+            .ok_or_else(|| anyhow!("--rename {r:?}: expected OLD=NEW"))?;
+        renames.push((old.trim().to_string(), new.trim().to_string()));
+    }
+    let mut csv = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .trim(csv::Trim::All)
+        .comment(None)
+        .from_reader(Box::new(reader) as Box<dyn Read>);
+    let header_line = args.skip_lines + 1;
+    let headers: Vec<String> = csv
+        .headers()
+        .with_context(|| format!("{shown}: line {header_line}: cannot read the header row"))?
+        .iter()
+        .map(|h| {
+            renames
+                .iter()
+                .find(|(old, _)| old == h)
+                .map(|(_, new)| new.clone())
+                .unwrap_or_else(|| h.to_string())
+        })
+        .collect();
+
+    let mut want: Vec<&str> = wanted.to_vec();
+    let has_t = headers.iter().any(|h| h == "t");
+    if has_t && !want.contains(&"t") {
+        want.push("t");
+    }
+    let mut idx = Vec::with_capacity(want.len());
+    for w in &want {
+        let i = headers.iter().position(|h| h == w).ok_or_else(|| {
+            anyhow!(
+                "{shown}: line {header_line}: no column named {w:?} in the header ({}); use --rename OLD={w} or --skip-lines to reach the header",
+                headers.join(", ")
+            )
+        })?;
+        idx.push(i);
+    }
+    let mut data: Vec<Vec<f64>> = vec![Vec::new(); want.len()];
+    let mut record = csv::StringRecord::new();
+    loop {
+        match csv.read_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => {
+                let line = e
+                    .position()
+                    .map(|p| p.line() as usize + args.skip_lines)
+                    .unwrap_or(0);
+                bail!("{shown}: line {line}: malformed CSV: {e}");
+            }
+        }
+        let line = record
+            .position()
+            .map(|p| p.line() as usize + args.skip_lines)
+            .unwrap_or(0);
+        for (k, &i) in idx.iter().enumerate() {
+            let field = record.get(i).unwrap_or("");
+            let v: f64 = field.parse().map_err(|_| {
+                anyhow!(
+                    "{shown}: line {line}: field {:?} (column {}) is {field:?}, not a number",
+                    want[k],
+                    i + 1
+                )
+            })?;
+            if !v.is_finite() {
+                bail!("{shown}: line {line}: field {:?} (column {}) is {field:?}, not a finite number", want[k], i + 1);
+            }
+            data[k].push(v);
+        }
+    }
+    progress.finish_and_clear();
+
+    let n = data.first().map(Vec::len).unwrap_or(0);
+    if n == 0 {
+        bail!("{shown}: no data rows after the header (line {header_line})");
+    }
+    let t = has_t.then(|| data[want.iter().position(|w| *w == "t").unwrap()].clone());
+    let rate_hz = match (args.rate, &t) {
+        (Some(r), _) if r > 0.0 && r.is_finite() => r,
+        (Some(r), _) => bail!("--rate {r}: the rate must be a positive number of Hz"),
+        (None, Some(t)) => rate_from_t(t)
+            .with_context(|| format!("{shown}: deriving the rate from column \"t\""))?,
+        (None, None) => bail!("{shown}: no --rate given and no \"t\" column to derive it from"),
+    };
+    let scale = args.scale.unwrap_or(1.0);
+    if !(scale.is_finite() && scale != 0.0) {
+        bail!("--scale {scale}: must be a non-zero number");
+    }
+    let mut columns = Vec::with_capacity(wanted.len());
+    for (k, w) in want.iter().enumerate().take(wanted.len()) {
+        let unit = match (&args.unit, contract_unit(w)) {
+            (Some(u), _) => u.clone(),
+            (None, Some(u)) => u.to_string(),
+            (None, None) => bail!("column {w:?} is not in the contract: give its unit with --unit"),
+        };
+        let values = if scale == 1.0 {
+            std::mem::take(&mut data[k])
+        } else {
+            data[k].iter().map(|v| v * scale).collect()
+        };
+        columns.push(Series {
+            name: w.to_string(),
+            unit,
+            values,
+        });
+    }
+    Ok(Recording {
+        rate_hz,
+        t,
+        columns,
+    })
+}
+
+/// (N − 1)/duration, refusing a non-increasing time column.
+fn rate_from_t(t: &[f64]) -> Result<f64> {
+    if t.len() < 2 {
+        bail!("need at least two samples");
+    }
+    if let Some(i) = t.windows(2).position(|w| w[1] < w[0]) {
+        bail!(
+            "time goes backwards between data rows {} and {} ({} s → {} s)",
+            i + 1,
+            i + 2,
+            t[i],
+            t[i + 1]
+        );
+    }
+    let duration = t[t.len() - 1] - t[0];
+    if duration <= 0.0 {
+        bail!("the recording lasts {duration} s");
+    }
+    Ok((t.len() - 1) as f64 / duration)
+}
+
+fn progress_bar(bytes: u64) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if bytes < 8 << 20 || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let pb = indicatif::ProgressBar::new(bytes);
+    pb.set_style(
+        indicatif::ProgressStyle::with_template("reading {bytes}/{total_bytes} [{bar:40}] {eta}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    pb
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    fn args(file: &tempfile::NamedTempFile) -> InputArgs {
+        InputArgs {
+            file: file.path().to_path_buf(),
+            rate: None,
+            skip_lines: 0,
+            scale: None,
+            unit: None,
+            rename: vec![],
+        }
+    }
+
+    fn csv(text: &str) -> tempfile::NamedTempFile {
+        let mut f = tempfile::NamedTempFile::new().unwrap();
+        f.write_all(text.as_bytes()).unwrap();
+        f
+    }
+
+    #[test]
+    fn rate_from_t_and_units() {
+        let f = csv("t,gz,other\n0.0,1.5,x\n0.01,2.5,y\n0.02,3.5,z\n");
+        let r = load(&args(&f), &["gz"]).unwrap();
+        assert!((r.rate_hz - 100.0).abs() < 1e-9);
+        let gz = r.column("gz").unwrap();
+        assert_eq!(gz.unit, "deg/s");
+        assert_eq!(gz.values, vec![1.5, 2.5, 3.5]);
+    }
+
+    #[test]
+    fn malformed_field_names_line_and_field() {
+        let f = csv("t,gz\n0,1\n0.01,abc\n");
+        let e = format!("{:#}", load(&args(&f), &["gz"]).unwrap_err());
+        assert!(
+            e.contains("line 3") && e.contains("\"gz\"") && e.contains("abc"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn nan_is_refused_with_its_place() {
+        let f = csv("t,gz\n0,1\n0.01,NaN\n");
+        let e = format!("{:#}", load(&args(&f), &["gz"]).unwrap_err());
+        assert!(
+            e.contains("line 3") && e.contains("not a finite number"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn ragged_row_is_refused() {
+        let f = csv("t,gz\n0,1\n0.01\n");
+        let e = format!("{:#}", load(&args(&f), &["gz"]).unwrap_err());
+        assert!(e.contains("line 3") && e.contains("malformed"), "{e}");
+    }
+
+    #[test]
+    fn skip_lines_scale_unit_and_rename() {
+        let f = csv("Fs,100\nmeta,1\nax,gyro_z\n1,131\n2,262\n");
+        let mut a = args(&f);
+        a.skip_lines = 2;
+        a.rate = Some(100.0);
+        a.scale = Some(1.0 / 131.0);
+        a.rename = vec!["gyro_z=gz".into()];
+        let r = load(&a, &["gz"]).unwrap();
+        let gz = r.column("gz").unwrap();
+        assert_eq!(gz.unit, "deg/s");
+        assert!((gz.values[1] - 2.0).abs() < 1e-12);
+        assert!(r.t.is_none());
+    }
+
+    #[test]
+    fn missing_column_lists_the_header() {
+        let f = csv("t,gx\n0,1\n1,2\n");
+        let e = format!("{:#}", load(&args(&f), &["gz"]).unwrap_err());
+        assert!(
+            e.contains("no column named \"gz\"") && e.contains("t, gx"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn backwards_time_is_refused() {
+        let f = csv("t,gz\n0,1\n0.02,2\n0.01,3\n");
+        let e = format!("{:#}", load(&args(&f), &["gz"]).unwrap_err());
+        assert!(e.contains("time goes backwards"), "{e}");
+    }
+}
