@@ -145,7 +145,7 @@ impl SimBus {
             return m.transaction(now, ops);
         }
         if let Some(m) = w.mag.as_mut().filter(|m| m.address() == address) {
-            return m.transaction(ops);
+            return m.transaction(now, ops);
         }
         if w.hmc5883l && address == 0x1E {
             return hmc_transaction(ops);

@@ -270,7 +270,8 @@ impl Mpu6050Model {
                 let was_sleeping = self.sleeping();
                 self.regs[r as usize] = v;
                 if was_sleeping && !self.sleeping() {
-                    self.next_sample_ns = None;
+                    // First sample one period after wake-up.
+                    self.next_sample_ns = Some(now_ns + self.sample_period_ns());
                 }
             }
             USER_CTRL => {

@@ -188,7 +188,7 @@ impl QmcModel {
         v
     }
 
-    fn write_byte(&mut self, v: u8) {
+    fn write_byte(&mut self, now_ns: u64, v: u8) {
         let r = self.ptr;
         let ctrl2 = match self.variant {
             QmcVariant::L => 0x0A,
@@ -200,7 +200,10 @@ impl QmcModel {
         } else if !self.data_regs().contains(&r) && r as usize != self.status_reg() {
             let was = self.continuous();
             self.regs[r as usize % 0x30] = v;
-            if was != self.continuous() {
+            if !was && self.continuous() {
+                // The first measurement completes one period after the mode change.
+                self.next_ns = Some(now_ns + self.period_ns());
+            } else if was && !self.continuous() {
                 self.next_ns = None;
             }
         }
@@ -208,7 +211,7 @@ impl QmcModel {
     }
 
     /// Execute one I²C transaction addressed to this chip.
-    pub fn transaction(&mut self, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
+    pub fn transaction(&mut self, now_ns: u64, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
         if !self.present {
             return Err(SimError::Nack(NoAcknowledgeSource::Address));
         }
@@ -218,7 +221,7 @@ impl QmcModel {
                     if let Some((&r, data)) = bytes.split_first() {
                         self.ptr = r % 0x30;
                         for &v in data {
-                            self.write_byte(v);
+                            self.write_byte(now_ns, v);
                         }
                     }
                 }

@@ -1,0 +1,283 @@
+//! QMC5883L/P driver against embedded-hal-mock transaction lists, blocking and async.
+//! Expected bytes are derived from the QST data sheets (QMC-L 9.2, QMC-P 8.2).
+
+use embassy_futures::block_on;
+use embedded_hal::i2c::{ErrorKind, NoAcknowledgeSource};
+use embedded_hal_mock::eh1::delay::{CheckedDelay, NoopDelay, Transaction as D};
+use embedded_hal_mock::eh1::i2c::{Mock, Transaction as T};
+use imu_drivers::qmc5883::{Chip, Config, Error, MagSample, Mode, Odr, Osr, Range, Variant};
+use imu_drivers::{asynch, blocking};
+
+const L: u8 = 0x0D;
+const P: u8 = 0x2C;
+const NACK: ErrorKind = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
+
+fn both<R: PartialEq + std::fmt::Debug>(
+    variant: Variant,
+    exp: &[T],
+    b: impl FnOnce(&mut blocking::Qmc5883<Mock>) -> R,
+    a: impl AsyncFnOnce(&mut asynch::Qmc5883<Mock>) -> R,
+) -> R {
+    let mut d1 = blocking::Qmc5883::new_variant(Mock::new(exp), variant);
+    let r1 = b(&mut d1);
+    d1.release().done();
+    let mut d2 = asynch::Qmc5883::new_variant(Mock::new(exp), variant);
+    let r2 = block_on(a(&mut d2));
+    d2.release().done();
+    assert_eq!(r1, r2, "blocking and async results differ");
+    r1
+}
+
+/// QMC5883L seed: chip id 0x0D = 0xFF; CONTROL2 (0x0A) = 0x80 soft reset; SET/RESET period
+/// (0x0B) = 0x01; CONTROL2 = 0x00 (DRDY pin on); CONTROL1 (0x09) = OSR 512 (00) | RNG 2 G (00)
+/// | ODR 200 Hz (11) | continuous (01) = 0b0000_1101 = 0x0D.
+fn l_seed() -> Vec<T> {
+    vec![
+        T::write_read(L, vec![0x0D], vec![0xFF]),
+        T::write(L, vec![0x0A, 0x80]),
+        T::write(L, vec![0x0B, 0x01]),
+        T::write(L, vec![0x0A, 0x00]),
+        T::write(L, vec![0x09, 0x0D]),
+    ]
+}
+
+#[test]
+fn l_seed_init() {
+    both(
+        Variant::L,
+        &l_seed(),
+        |d| {
+            let mut delay = CheckedDelay::new(&[D::delay_ms(1)]);
+            d.init(&mut delay, &Config::default()).unwrap();
+            delay.done();
+        },
+        async |d| {
+            let mut delay = CheckedDelay::new(&[D::delay_ms(1)]);
+            d.init(&mut delay, &Config::default()).await.unwrap();
+            delay.done();
+        },
+    );
+}
+
+#[test]
+fn l_other_settings() {
+    // OSR 64 (11), 8 G (01), 10 Hz (00), standby (00) = 0b1101_0000 = 0xD0; pin off: 0x0A = 0x01.
+    let cfg = Config {
+        range: Range::G8,
+        odr: Odr::Hz10,
+        osr: Osr::Min,
+        mode: Mode::Standby,
+        set_reset_period: 0x01,
+        drdy_pin: false,
+    };
+    let exp = [
+        T::write_read(L, vec![0x0D], vec![0xFF]),
+        T::write(L, vec![0x0A, 0x80]),
+        T::write(L, vec![0x0B, 0x01]),
+        T::write(L, vec![0x0A, 0x01]),
+        T::write(L, vec![0x09, 0xD0]),
+    ];
+    both(
+        Variant::L,
+        &exp,
+        |d| d.init(&mut NoopDelay, &cfg).unwrap(),
+        async |d| d.init(&mut NoopDelay, &cfg).await.unwrap(),
+    );
+}
+
+#[test]
+fn p_seed_init() {
+    // Chip id reg 0x00 = 0x80; CONTROL2 (0x0B) = 0x80 soft reset; 0x29 = 0x06 (axis sign);
+    // CONTROL2 = RNG ±2 G (11 in bits 3:2) = 0x0C, set/reset on; CONTROL1 (0x0A) =
+    // OSR2 1 (00) | OSR1 8 (00) | ODR 200 Hz (11) | continuous (11) = 0x0F.
+    let exp = [
+        T::write_read(P, vec![0x00], vec![0x80]),
+        T::write(P, vec![0x0B, 0x80]),
+        T::write(P, vec![0x29, 0x06]),
+        T::write(P, vec![0x0B, 0x0C]),
+        T::write(P, vec![0x0A, 0x0F]),
+    ];
+    both(
+        Variant::P,
+        &exp,
+        |d| d.init(&mut NoopDelay, &Config::default()).unwrap(),
+        async |d| d.init(&mut NoopDelay, &Config::default()).await.unwrap(),
+    );
+}
+
+#[test]
+fn p_30_gauss_range() {
+    let cfg = Config {
+        range: Range::G30,
+        ..Config::default()
+    };
+    let exp = [
+        T::write_read(P, vec![0x00], vec![0x80]),
+        T::write(P, vec![0x0B, 0x80]),
+        T::write(P, vec![0x29, 0x06]),
+        T::write(P, vec![0x0B, 0x00]),
+        T::write(P, vec![0x0A, 0x0F]),
+    ];
+    let mut d = blocking::Qmc5883::new_variant(Mock::new(&exp), Variant::P);
+    d.init(&mut NoopDelay, &cfg).unwrap();
+    assert_eq!(d.lsb_per_gauss(), 1000.0);
+    d.release().done();
+}
+
+#[test]
+fn l_rejects_p_only_range_without_bus_traffic() {
+    let cfg = Config {
+        range: Range::G12,
+        ..Config::default()
+    };
+    let e = both(
+        Variant::L,
+        &[],
+        |d| d.init(&mut NoopDelay, &cfg).unwrap_err(),
+        async |d| d.init(&mut NoopDelay, &cfg).await.unwrap_err(),
+    );
+    assert_eq!(e, Error::InvalidConfig);
+}
+
+#[test]
+fn wrong_chip_id() {
+    for (variant, addr, reg, found) in [(Variant::L, L, 0x0D, 0x00), (Variant::P, P, 0x00, 0xFF)] {
+        let exp = [T::write_read(addr, vec![reg], vec![found])];
+        let e = both(
+            variant,
+            &exp,
+            |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
+            async |d| {
+                d.init(&mut NoopDelay, &Config::default())
+                    .await
+                    .unwrap_err()
+            },
+        );
+        assert_eq!(e, Error::WrongChip { found });
+    }
+}
+
+#[test]
+fn nack_is_bus_error() {
+    let exp = [T::write_read(L, vec![0x0D], vec![0]).with_error(NACK)];
+    let e = both(
+        Variant::L,
+        &exp,
+        |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default())
+                .await
+                .unwrap_err()
+        },
+    );
+    assert_eq!(e, Error::Bus(NACK));
+}
+
+#[test]
+fn l_read_with_flags() {
+    // Status 0x07 = DRDY | OVL | DOR, temperature 2500 (0x09C4 LE), then X=-2 Y=1000 Z=32767.
+    let exp = [
+        T::write_read(L, vec![0x06], vec![0x07, 0xC4, 0x09]),
+        T::write_read(L, vec![0x00], vec![0xFE, 0xFF, 0xE8, 0x03, 0xFF, 0x7F]),
+    ];
+    let s = both(
+        Variant::L,
+        &exp,
+        |d| d.read().unwrap(),
+        async |d| d.read().await.unwrap(),
+    );
+    assert_eq!(
+        s,
+        MagSample {
+            xyz: [-2, 1000, 32767],
+            temp: Some(2500),
+            overflow: true,
+            skipped: true
+        }
+    );
+}
+
+#[test]
+fn l_not_ready_does_not_touch_data_registers() {
+    let exp = [T::write_read(L, vec![0x06], vec![0x06, 0, 0])];
+    let e = both(
+        Variant::L,
+        &exp,
+        |d| d.read().unwrap_err(),
+        async |d| d.read().await.unwrap_err(),
+    );
+    assert_eq!(e, Error::NotReady);
+}
+
+#[test]
+fn p_read() {
+    // P status 0x09: DRDY; bit 2 means nothing on the P (no DOR) and must not be reported.
+    let exp = [
+        T::write_read(P, vec![0x09], vec![0x05]),
+        T::write_read(P, vec![0x01], vec![0x01, 0x00, 0x00, 0x80, 0x10, 0x27]),
+        T::write_read(P, vec![0x09], vec![0x00]),
+    ];
+    let (s, e) = both(
+        Variant::P,
+        &exp,
+        |d| (d.read().unwrap(), d.read().unwrap_err()),
+        async |d| (d.read().await.unwrap(), d.read().await.unwrap_err()),
+    );
+    assert_eq!(
+        s,
+        MagSample {
+            xyz: [1, -32768, 10000],
+            temp: None,
+            overflow: false,
+            skipped: false
+        }
+    );
+    assert_eq!(e, Error::NotReady);
+}
+
+#[test]
+fn microtesla_conversion() {
+    let d = blocking::Qmc5883::new(Mock::new(&[]));
+    // L ±2 G: 12000 LSB/G (QMC-L 2.1), 1 G = 100 µT: 12000 → 100 µT, -600 → -5 µT.
+    let ut = d.microtesla(&MagSample {
+        xyz: [12000, -600, 0],
+        ..MagSample::default()
+    });
+    assert_eq!(ut, [100.0, -5.0, 0.0]);
+    d.release().done();
+}
+
+#[test]
+fn detect_each_chip() {
+    // QMC5883L present.
+    let exp = [T::write_read(L, vec![0x0D], vec![0xFF])];
+    let mut m = Mock::new(&exp);
+    assert_eq!(blocking::Qmc5883::detect(&mut m), Chip::Qmc5883L);
+    m.done();
+    // Only a QMC5883P.
+    let exp = [
+        T::write_read(L, vec![0x0D], vec![0]).with_error(NACK),
+        T::write_read(P, vec![0x00], vec![0x80]),
+    ];
+    let mut m = Mock::new(&exp);
+    assert_eq!(block_on(asynch::Qmc5883::detect(&mut m)), Chip::Qmc5883P);
+    m.done();
+    // Only an HMC5883L.
+    let exp = [
+        T::write_read(L, vec![0x0D], vec![0]).with_error(NACK),
+        T::write_read(P, vec![0x00], vec![0]).with_error(NACK),
+        T::write_read(0x1E, vec![10], b"H43".to_vec()),
+    ];
+    let mut m = Mock::new(&exp);
+    assert_eq!(blocking::Qmc5883::detect(&mut m), Chip::Hmc5883L);
+    m.done();
+    // Something answers everywhere with the wrong identity: none.
+    let exp = [
+        T::write_read(L, vec![0x0D], vec![0x00]),
+        T::write_read(P, vec![0x00], vec![0x00]),
+        T::write_read(0x1E, vec![10], b"H44".to_vec()),
+    ];
+    let mut m = Mock::new(&exp);
+    assert_eq!(blocking::Qmc5883::detect(&mut m), Chip::None);
+    m.done();
+}
