@@ -4,9 +4,25 @@
 //! * [`device`] — `no_std`: the versioned, CRC-checked calibration blob and the per-sample
 //!   fixed-point apply path the firmware calls (issue 4 §4, consumed by the firmware of issue 6).
 //! * `file` (`std`) — the human-editable TOML calibration file and its conversion to the blob.
-//! * `accel`, `gyro`, `mag`, `lab` (`std`) — models as sets of named effects, their fits, the
-//!   residuals, the noise floor and the diagnosis of the missing effect.
+//! * `accel`, `gyro`, `mag` (`std`) — models as sets of named effects and their fits.
+//! * `lab` (`std`) — residuals, the noise floor, the adequacy verdict and the diagnosis of the
+//!   missing effect; `solve` (`std`) — Levenberg–Marquardt and the statistics behind them.
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
+// `!(x > 0.0)` is used on purpose: it is also true for NaN, which must be rejected too.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod device;
+
+#[cfg(feature = "std")]
+pub mod accel;
+#[cfg(feature = "std")]
+pub mod file;
+#[cfg(feature = "std")]
+pub mod gyro;
+#[cfg(feature = "std")]
+pub mod lab;
+#[cfg(feature = "std")]
+pub mod mag;
+#[cfg(feature = "std")]
+pub mod solve;

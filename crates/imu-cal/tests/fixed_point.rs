@@ -1,10 +1,10 @@
 //! Fixed-point vs float corrections: ≤ 1 LSB over the whole i16 input range (issue 4 §4).
-#![allow(clippy::needless_range_loop)]
 //!
 //! The float reference is the correction with the *unquantised* f64 parameters,
 //! `out = M·(raw − o)` (gyro: `o = b + k·(T − T_ref)`), rounded to the nearest count.
 //! Tolerance: 1 LSB, from the bound in `device`'s docs (≤ 0.51 LSB from the exact value plus the
 //! reference's own ≤ 0.5 LSB rounding). We also check the tighter |fixed − exact| ≤ 0.52 LSB.
+#![allow(clippy::needless_range_loop)]
 use imu_cal::device::{Affine, Calibration, GyroCorrection, Sensor};
 use proptest::prelude::*;
 

@@ -1,0 +1,210 @@
+//! The human-editable calibration file (TOML) and its conversion to the device blob.
+//!
+//! Parameters are in the CSV contract's physical units; each section also says how many raw
+//! LSB make one unit at the device's configured range, which is what turns the physical
+//! correction into the raw-count correction of [`crate::device`]:
+//! if `raw = s·a` (s in LSB per unit) and `a_cal = M·(a − o)`, the device output in nominal
+//! LSB is `s·a_cal = M·(raw − s·o)`. Defaults are the seed's configuration (MPU-6050 ±4 g and
+//! ±250 °/s, QMC5883 ±2 G).
+//!
+//! ```toml
+//! version = 1
+//! [accel]                  # a_cal = T·K·(a − offset)
+//! lsb_per_unit = 835.3     # LSB per m/s² (8192 LSB/g at ±4 g)
+//! offset = [0.0, 0.0, 0.0] # m/s²
+//! scale = [1.0, 1.0, 1.0]
+//! misalignment_deg = [0.0, 0.0, 0.0]
+//! [gyro]                   # ω_cal = ω − bias − temp_coeff·(T − temp_ref)
+//! lsb_per_unit = 131.0     # LSB per deg/s (±250 °/s)
+//! bias = [0.0, 0.0, 0.0]   # deg/s
+//! temp_coeff = [0.0, 0.0, 0.0]  # deg/s per °C
+//! temp_ref = 25.0          # °C
+//! temp_lsb_per_c = 340.0   # MPU-6050: T = raw/340 + 36.53 °C
+//! temp_offset_c = 36.53
+//! [mag]                    # m_cal = soft_iron·(m − hard_iron)
+//! lsb_per_unit = 120.0     # LSB per µT (QMC5883 ±2 G: 12000 LSB/G)
+//! hard_iron = [0.0, 0.0, 0.0]   # µT
+//! soft_iron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+//! ```
+use crate::accel::correction_matrix;
+use crate::device::{Affine, BlobError, Calibration, GyroCorrection, Sensor};
+use crate::lab::{CalError, Params};
+use serde::{Deserialize, Serialize};
+
+/// The calibration file format version.
+pub const FILE_VERSION: u32 = 1;
+
+/// Accelerometer section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccelSection {
+    /// Raw LSB per m/s².
+    pub lsb_per_unit: f64,
+    /// m/s².
+    pub offset: [f64; 3],
+    /// Dimensionless.
+    pub scale: [f64; 3],
+    /// Degrees (lower-triangular T; see `accel`).
+    pub misalignment_deg: [f64; 3],
+}
+
+/// Gyroscope section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroSection {
+    /// Raw LSB per deg/s.
+    pub lsb_per_unit: f64,
+    /// deg/s at `temp_ref`.
+    pub bias: [f64; 3],
+    /// deg/s per °C.
+    pub temp_coeff: [f64; 3],
+    /// °C.
+    pub temp_ref: f64,
+    /// Temperature sensor LSB per °C.
+    pub temp_lsb_per_c: f64,
+    /// Temperature at raw 0 (°C).
+    pub temp_offset_c: f64,
+}
+
+/// Magnetometer section.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MagSection {
+    /// Raw LSB per µT.
+    pub lsb_per_unit: f64,
+    /// µT.
+    pub hard_iron: [f64; 3],
+    /// Dimensionless, applied after the hard iron.
+    pub soft_iron: [[f64; 3]; 3],
+}
+
+/// The whole file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalFile {
+    /// Must be [`FILE_VERSION`].
+    pub version: u32,
+    /// Accelerometer.
+    pub accel: AccelSection,
+    /// Gyroscope.
+    pub gyro: GyroSection,
+    /// Magnetometer.
+    pub mag: MagSection,
+}
+
+impl Default for CalFile {
+    fn default() -> Self {
+        CalFile {
+            version: FILE_VERSION,
+            accel: AccelSection {
+                lsb_per_unit: 8192.0 / crate::accel::G_STANDARD,
+                offset: [0.0; 3],
+                scale: [1.0; 3],
+                misalignment_deg: [0.0; 3],
+            },
+            gyro: GyroSection {
+                lsb_per_unit: 131.0,
+                bias: [0.0; 3],
+                temp_coeff: [0.0; 3],
+                temp_ref: 25.0,
+                temp_lsb_per_c: 340.0,
+                temp_offset_c: 36.53,
+            },
+            mag: MagSection {
+                lsb_per_unit: 120.0,
+                hard_iron: [0.0; 3],
+                soft_iron: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            },
+        }
+    }
+}
+
+impl CalFile {
+    /// Parse a TOML calibration file; errors name the field and line.
+    pub fn from_toml(text: &str) -> Result<CalFile, CalError> {
+        let f: CalFile =
+            toml::from_str(text).map_err(|e| CalError::Input(format!("calibration file: {e}")))?;
+        if f.version != FILE_VERSION {
+            return Err(CalError::Input(format!(
+                "calibration file version {} not supported (expected {FILE_VERSION})",
+                f.version
+            )));
+        }
+        Ok(f)
+    }
+
+    /// Write as TOML.
+    pub fn to_toml(&self) -> String {
+        let body = toml::to_string_pretty(self).unwrap_or_else(|e| format!("# error: {e}\n"));
+        format!(
+            "# pico-imu calibration file (units: m/s², deg/s, µT, °C; see docs/calibration.md)\n{body}"
+        )
+    }
+
+    /// Put the fitted parameters of one sensor into the file (effects absent from the fit are
+    /// reset to identity, so the file always describes exactly the last fitted model).
+    pub fn set(&mut self, sensor: &str, p: &Params) -> Result<(), CalError> {
+        match sensor {
+            "accel" => {
+                self.accel.offset = p.offset.unwrap_or([0.0; 3]);
+                self.accel.scale = p.scale.unwrap_or([1.0; 3]);
+                self.accel.misalignment_deg = p.misalignment_deg.unwrap_or([0.0; 3]);
+            }
+            "gyro" => {
+                self.gyro.bias = p.bias.unwrap_or([0.0; 3]);
+                self.gyro.temp_coeff = p.temp_coeff.unwrap_or([0.0; 3]);
+                if let Some(t) = p.temp_ref {
+                    self.gyro.temp_ref = t;
+                }
+            }
+            "mag" => {
+                self.mag.hard_iron = p.hard_iron.unwrap_or([0.0; 3]);
+                self.mag.soft_iron =
+                    p.soft_iron
+                        .unwrap_or([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+            }
+            other => return Err(CalError::Input(format!("unknown sensor '{other}'"))),
+        }
+        Ok(())
+    }
+
+    /// Convert to the device's fixed-point corrections (module docs).
+    pub fn to_device(&self) -> Result<Calibration, BlobError> {
+        let a = &self.accel;
+        let ap = Params {
+            scale: Some(a.scale),
+            misalignment_deg: Some(a.misalignment_deg),
+            ..Params::default()
+        };
+        let m = correction_matrix(&ap);
+        let am = [
+            [m[(0, 0)], m[(0, 1)], m[(0, 2)]],
+            [m[(1, 0)], m[(1, 1)], m[(1, 2)]],
+            [m[(2, 0)], m[(2, 1)], m[(2, 2)]],
+        ];
+        let accel = Affine::from_float(Sensor::Accel, am, a.offset.map(|o| o * a.lsb_per_unit))?;
+        let g = &self.gyro;
+        let id = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let t_ref_raw = ((g.temp_ref - g.temp_offset_c) * g.temp_lsb_per_c).round();
+        if !(t_ref_raw.abs() <= i16::MAX as f64) {
+            return Err(BlobError::OutOfRange {
+                sensor: Sensor::Gyro,
+                what: crate::device::Quantity::Offset,
+                axis: 0,
+            });
+        }
+        let gyro = GyroCorrection::from_float(
+            id,
+            g.bias.map(|b| b * g.lsb_per_unit),
+            g.temp_coeff.map(|k| k * g.lsb_per_unit / g.temp_lsb_per_c),
+            t_ref_raw as i16,
+        )?;
+        let mg = &self.mag;
+        let mag = Affine::from_float(
+            Sensor::Mag,
+            mg.soft_iron,
+            mg.hard_iron.map(|h| h * mg.lsb_per_unit),
+        )?;
+        Calibration::new(accel, gyro, mag)
+    }
+}

@@ -1,0 +1,549 @@
+//! Magnetometer hard and soft iron.
+//!
+//! Correction `m_cal = S · (m − h)`; the lab residual per sample is `|m_cal| − F`.
+//!
+//! * **hard_iron** (seed eq. 3): `h`, the centre of the sphere (initial value from the linear
+//!   least-squares sphere fit `|m|² = 2h·m + (F² − |h|²)`).
+//! * **soft_iron_2d** (seed eqs. 4–5, exactly): for data rotated in a plane, the ellipse of the
+//!   in-plane components has semi-major axis r, semi-minor q and tilt θ; the correction rotates by
+//!   `R(θ) = [[cos θ, sin θ], [−sin θ, cos θ]]` (eq. 4) and scales the first axis by `σ = q/r`
+//!   (eq. 5): `S₂ = diag(σ, 1)·R(θ)`. Initial values from the algebraic conic fit
+//!   `a x² + b xy + c y² + d x + e y = 1`, refined with the rest by Levenberg–Marquardt.
+//! * **soft_iron**: a symmetric 3×3 `S` from an ellipsoid fit: the algebraic quadric least
+//!   squares `Ax² + By² + Cz² + 2Dxy + 2Exz + 2Fyz + 2Gx + 2Hy + 2Iz = 1` (the design matrix of
+//!   Li & Griffiths 2004, without their ellipsoid-specific constraint, which a well-spread
+//!   recording does not need; a non-ellipsoid result is reported as an error), `S = F·Q̂^{1/2}`
+//!   with `Q̂` the normalised quadric, then Levenberg–Marquardt on Σ(|S(m − h)| − F)². With F
+//!   fitted, F and the scale of S are not separable; we report `S` with det S = 1 and F its
+//!   geometric-mean radius.
+//!
+//! **Planar data.** When the measurements lie in a plane (smallest principal standard deviation
+//! below [`PLANAR_RATIO`] of the largest), the axis closest to the plane normal is not excited:
+//! the problem becomes 2-D on the other two axes (hard iron in-plane only; `F` is the in-plane
+//! field) and only `soft_iron_2d` is identifiable. In 3-D data `soft_iron_2d` is not the answer
+//! and `soft_iron` is used instead (issue 4 §2).
+use crate::lab::{CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d};
+use crate::solve::{levenberg_marquardt, mean, sigma_second_diff};
+use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
+
+/// Ratio of principal standard deviations below which data counts as planar.
+pub const PLANAR_RATIO: f64 = 0.15;
+
+const EFFECTS: [Effect; 3] = [Effect::HardIron, Effect::SoftIron, Effect::SoftIron2d];
+
+/// The magnetometer problem.
+#[derive(Debug, Clone)]
+pub struct MagProblem {
+    /// Samples (µT).
+    pub m: Vec<Vector3<f64>>,
+    /// Field magnitude, when given.
+    pub field: Option<f64>,
+    /// For planar data: the two in-plane axes (the third is not excited).
+    pub plane: Option<[usize; 2]>,
+    /// Principal standard deviations, largest first (µT).
+    pub principal_sd: [f64; 3],
+    sigma: f64,
+}
+
+/// Seed-style hard iron: the midpoint of each axis' range over a full rotation.
+pub fn hard_iron_minmax(m: &[Vector3<f64>]) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    for (k, o) in out.iter_mut().enumerate() {
+        let lo = m.iter().map(|v| v[k]).fold(f64::INFINITY, f64::min);
+        let hi = m.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max);
+        *o = 0.5 * (lo + hi);
+    }
+    out
+}
+
+/// Linear least-squares sphere fit: centre and radius.
+pub fn sphere_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, f64), CalError> {
+    let n = m.len();
+    let a = DMatrix::from_fn(n, 4, |i, j| if j < 3 { 2.0 * m[i][j] } else { 1.0 });
+    let b = DVector::from_fn(n, |i, _| m[i].norm_squared());
+    let x = a
+        .svd(true, true)
+        .solve(&b, 1e-12)
+        .map_err(|e| CalError::Fit(format!("sphere fit: {e}")))?;
+    let c = Vector3::new(x[0], x[1], x[2]);
+    let r2 = x[3] + c.norm_squared();
+    if !(r2 > 0.0) {
+        return Err(CalError::Fit("sphere fit gives no real radius".into()));
+    }
+    Ok((c, r2.sqrt()))
+}
+
+/// Algebraic ellipse fit on 2-D points: (centre, r, q, θ in rad) — seed eqs. 4–5's parameters.
+pub fn ellipse_fit(p: &[Vector2<f64>]) -> Result<(Vector2<f64>, f64, f64, f64), CalError> {
+    let n = p.len();
+    // Centre the data first for conditioning.
+    let c0 = p.iter().fold(Vector2::zeros(), |a, v| a + v) / n as f64;
+    let sc = p.iter().map(|v| (v - c0).norm()).sum::<f64>() / n as f64;
+    let q: Vec<Vector2<f64>> = p.iter().map(|v| (v - c0) / sc).collect();
+    let a = DMatrix::from_fn(n, 5, |i, j| {
+        let (x, y) = (q[i].x, q[i].y);
+        [x * x, x * y, y * y, x, y][j]
+    });
+    let b = DVector::from_element(n, 1.0);
+    let s = a
+        .svd(true, true)
+        .solve(&b, 1e-12)
+        .map_err(|e| CalError::Fit(format!("ellipse fit: {e}")))?;
+    let qf = Matrix2::new(s[0], s[1] / 2.0, s[1] / 2.0, s[2]);
+    let l = Vector2::new(s[3], s[4]);
+    let x0 = -qf
+        .try_inverse()
+        .ok_or_else(|| CalError::Fit("ellipse fit is degenerate".into()))?
+        * l
+        / 2.0;
+    let kappa = 1.0 + x0.dot(&(qf * x0));
+    let eig = SymmetricEigen::new(qf / kappa);
+    let (i_min, i_max) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
+        (0, 1)
+    } else {
+        (1, 0)
+    };
+    let (l1, l2) = (eig.eigenvalues[i_min], eig.eigenvalues[i_max]);
+    if !(l1 > 0.0 && l2 > 0.0) {
+        return Err(CalError::Fit(
+            "the in-plane data do not form an ellipse".into(),
+        ));
+    }
+    let v = eig.eigenvectors.column(i_min);
+    let mut theta = v[1].atan2(v[0]);
+    if theta > std::f64::consts::FRAC_PI_2 {
+        theta -= std::f64::consts::PI;
+    } else if theta <= -std::f64::consts::FRAC_PI_2 {
+        theta += std::f64::consts::PI;
+    }
+    Ok((c0 + x0 * sc, sc / l1.sqrt(), sc / l2.sqrt(), theta))
+}
+
+/// Algebraic ellipsoid fit (module docs): centre and the normalised quadric Q̂ with
+/// (m − c)ᵀ Q̂ (m − c) = 1.
+pub fn ellipsoid_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, Matrix3<f64>), CalError> {
+    let n = m.len();
+    let c0 = m.iter().fold(Vector3::zeros(), |a, v| a + v) / n as f64;
+    let sc = m.iter().map(|v| (v - c0).norm()).sum::<f64>() / n as f64;
+    let q: Vec<Vector3<f64>> = m.iter().map(|v| (v - c0) / sc).collect();
+    let a = DMatrix::from_fn(n, 9, |i, j| {
+        let (x, y, z) = (q[i].x, q[i].y, q[i].z);
+        [
+            x * x,
+            y * y,
+            z * z,
+            2.0 * x * y,
+            2.0 * x * z,
+            2.0 * y * z,
+            2.0 * x,
+            2.0 * y,
+            2.0 * z,
+        ][j]
+    });
+    let s = a
+        .svd(true, true)
+        .solve(&DVector::from_element(n, 1.0), 1e-12)
+        .map_err(|e| CalError::Fit(format!("ellipsoid fit: {e}")))?;
+    let qf = Matrix3::new(s[0], s[3], s[4], s[3], s[1], s[5], s[4], s[5], s[2]);
+    let g = Vector3::new(s[6], s[7], s[8]);
+    let c = -qf
+        .try_inverse()
+        .ok_or_else(|| CalError::Fit("ellipsoid fit is degenerate".into()))?
+        * g;
+    let kappa = 1.0 + c.dot(&(qf * c));
+    let qn = qf / kappa;
+    let eig = SymmetricEigen::new(qn);
+    if eig.eigenvalues.iter().any(|&l| !(l > 0.0)) {
+        return Err(CalError::Fit(
+            "the measurements do not form an ellipsoid (rotate the sensor through more orientations)"
+                .into(),
+        ));
+    }
+    Ok((c0 + c * sc, qn / (sc * sc)))
+}
+
+/// Symmetric square root of a positive-definite matrix.
+fn sqrtm(a: &Matrix3<f64>) -> Matrix3<f64> {
+    let e = SymmetricEigen::new(*a);
+    let d = Matrix3::from_diagonal(&e.eigenvalues.map(|l| l.max(0.0).sqrt()));
+    e.eigenvectors * d * e.eigenvectors.transpose()
+}
+
+fn sym(x: &[f64]) -> Matrix3<f64> {
+    Matrix3::new(x[0], x[1], x[2], x[1], x[3], x[4], x[2], x[4], x[5])
+}
+
+fn s2d(theta: f64, sigma: f64) -> Matrix2<f64> {
+    let (s, c) = theta.sin_cos();
+    Matrix2::new(sigma, 0.0, 0.0, 1.0) * Matrix2::new(c, s, -s, c)
+}
+
+impl MagProblem {
+    /// Prepare the data: checks, principal axes, planarity, noise.
+    pub fn new(m: Vec<Vector3<f64>>, field: Option<f64>) -> Result<Self, CalError> {
+        if m.len() < 20 {
+            return Err(CalError::Input(format!(
+                "{} magnetometer samples; at least 20 are needed",
+                m.len()
+            )));
+        }
+        if let Some(i) = m.iter().position(|v| !v.iter().all(|x| x.is_finite())) {
+            return Err(CalError::Input(format!(
+                "magnetometer sample {i} is not finite"
+            )));
+        }
+        if let Some(f) = field {
+            if !(f > 0.0 && f.is_finite()) {
+                return Err(CalError::Input(format!(
+                    "field magnitude {f} µT is not positive"
+                )));
+            }
+        }
+        let c = m.iter().fold(Vector3::zeros(), |a, v| a + v) / m.len() as f64;
+        let cov = m
+            .iter()
+            .fold(Matrix3::zeros(), |a, v| a + (v - c) * (v - c).transpose())
+            / m.len() as f64;
+        let e = SymmetricEigen::new(cov);
+        let mut idx = [0usize, 1, 2];
+        idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
+        let sd = idx.map(|i| e.eigenvalues[i].max(0.0).sqrt());
+        let plane = if sd[2] < PLANAR_RATIO * sd[0] {
+            let normal = e.eigenvectors.column(idx[2]);
+            let k = (0..3)
+                .max_by(|&a, &b| normal[a].abs().total_cmp(&normal[b].abs()))
+                .unwrap_or(2);
+            let axes: Vec<usize> = (0..3).filter(|&a| a != k).collect();
+            Some([axes[0], axes[1]])
+        } else {
+            None
+        };
+        let axes: Vec<usize> = match plane {
+            Some(p) => p.to_vec(),
+            None => vec![0, 1, 2],
+        };
+        let s2: f64 = axes
+            .iter()
+            .map(|&k| {
+                let x: Vec<f64> = m.iter().map(|v| v[k]).collect();
+                sigma_second_diff(&x).powi(2)
+            })
+            .sum::<f64>()
+            / axes.len() as f64;
+        Ok(MagProblem {
+            m,
+            field,
+            plane,
+            principal_sd: sd,
+            sigma: s2.sqrt(),
+        })
+    }
+
+    /// Apply fitted params to a sample: `S·(m − h)`.
+    pub fn correct(params: &Params, m: Vector3<f64>) -> Vector3<f64> {
+        let h = Vector3::from(params.hard_iron.unwrap_or([0.0; 3]));
+        let s = params
+            .soft_iron
+            .map(|s| Matrix3::from_row_slice(&s.concat()))
+            .unwrap_or_else(Matrix3::identity);
+        s * (m - h)
+    }
+
+    fn fit_planar(&self, model: &[Effect], [i, j]: [usize; 2]) -> Result<Fitted, CalError> {
+        let p: Vec<Vector2<f64>> = self.m.iter().map(|v| Vector2::new(v[i], v[j])).collect();
+        let has_h = model.contains(&Effect::HardIron);
+        let has_2d = model.contains(&Effect::SoftIron2d);
+        let fit_f = self.field.is_none();
+        // Initial values.
+        let (mut c0, mut th0, mut sg0, mut f0) = (Vector2::zeros(), 0.0, 1.0, 0.0);
+        if has_2d {
+            let (c, r, q, th) = ellipse_fit(&p)?;
+            if has_h {
+                c0 = c;
+            }
+            th0 = th;
+            sg0 = q / r;
+            f0 = q;
+        } else if has_h {
+            let n = p.len();
+            let a = DMatrix::from_fn(n, 3, |k, l| if l < 2 { 2.0 * p[k][l] } else { 1.0 });
+            let b = DVector::from_fn(n, |k, _| p[k].norm_squared());
+            let x = a
+                .svd(true, true)
+                .solve(&b, 1e-12)
+                .map_err(|e| CalError::Fit(format!("circle fit: {e}")))?;
+            c0 = Vector2::new(x[0], x[1]);
+            f0 = (x[2] + c0.norm_squared()).max(0.0).sqrt();
+        }
+        if f0 == 0.0 {
+            f0 = p.iter().map(|v| (v - c0).norm()).sum::<f64>() / p.len() as f64;
+        }
+        let mut x0 = Vec::new();
+        if has_h {
+            x0.extend_from_slice(&[c0.x, c0.y]);
+        }
+        if has_2d {
+            x0.extend_from_slice(&[th0, sg0]);
+        }
+        if fit_f {
+            x0.push(f0);
+        }
+        let fgiven = self.field.unwrap_or(0.0);
+        let unpack = |x: &DVector<f64>| {
+            let mut k = 0;
+            let c = if has_h {
+                k += 2;
+                Vector2::new(x[0], x[1])
+            } else {
+                Vector2::zeros()
+            };
+            let s = if has_2d {
+                k += 2;
+                s2d(x[k - 2], x[k - 1])
+            } else {
+                Matrix2::identity()
+            };
+            let f = if fit_f { x[k] } else { fgiven };
+            (c, s, f)
+        };
+        let res = |x: &DVector<f64>| {
+            let (c, s, f) = unpack(x);
+            DVector::from_iterator(p.len(), p.iter().map(|v| (s * (v - c)).norm() - f))
+        };
+        let fit = if x0.is_empty() {
+            let r = res(&DVector::zeros(0));
+            crate::solve::LmFit {
+                rss: r.norm_squared(),
+                x: DVector::zeros(0),
+                r,
+                iterations: 0,
+            }
+        } else {
+            levenberg_marquardt(DVector::from_vec(x0), res, 300)
+        };
+        let (c, s, f) = unpack(&fit.x);
+        let mut h3 = [0.0; 3];
+        h3[i] = c.x;
+        h3[j] = c.y;
+        let mut s3 = [[0.0; 3]; 3];
+        let k = 3 - i - j;
+        s3[k][k] = 1.0;
+        for (a, &ra) in [i, j].iter().enumerate() {
+            for (b, &cb) in [i, j].iter().enumerate() {
+                s3[ra][cb] = s[(a, b)];
+            }
+        }
+        let si2d = if has_2d {
+            let n = fit.x.len() - fit_f as usize;
+            let (mut th, sg) = (fit.x[n - 2], fit.x[n - 1]);
+            // Keep θ in (−90°, 90°].
+            th = (th + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI)
+                - std::f64::consts::FRAC_PI_2;
+            // σ = q/r with F = q the corrected radius, so r = q/σ.
+            Some(SoftIron2d {
+                r: f / sg.abs(),
+                q: f,
+                theta_deg: th.to_degrees(),
+                sigma: sg.abs(),
+            })
+        } else {
+            None
+        };
+        let params = Params {
+            hard_iron: has_h.then_some(h3),
+            soft_iron: has_2d.then_some(s3),
+            soft_iron_2d: si2d,
+            field: Some(f),
+            ..Params::default()
+        };
+        Ok(Fitted {
+            model: model.to_vec(),
+            params,
+            residuals: fit.r.iter().copied().collect(),
+            n_params: 2 * has_h as usize + 2 * has_2d as usize + fit_f as usize,
+        })
+    }
+
+    fn fit_3d(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+        let has_h = model.contains(&Effect::HardIron);
+        let has_s = model.contains(&Effect::SoftIron);
+        let fit_f = self.field.is_none();
+        let m = &self.m;
+        // Initial values.
+        let (mut h0, w0, f0);
+        if has_s {
+            let (c, qn) = ellipsoid_fit(m)?;
+            let w = sqrtm(&qn); // |w (m − c)| ≈ 1
+            let fref = match self.field {
+                Some(f) => f,
+                None => w.determinant().powf(-1.0 / 3.0),
+            };
+            w0 = w * fref;
+            f0 = fref;
+            h0 = if has_h { c } else { Vector3::zeros() };
+        } else {
+            let (c, r) = sphere_fit(m)?;
+            h0 = if has_h { c } else { Vector3::zeros() };
+            f0 = if has_h {
+                r
+            } else {
+                m.iter().map(|v| v.norm()).sum::<f64>() / m.len() as f64
+            };
+            w0 = Matrix3::identity();
+        }
+        if !has_h {
+            h0 = Vector3::zeros();
+        }
+        let fgiven = self.field.unwrap_or(f0);
+        let mut x0 = Vec::new();
+        if has_h {
+            x0.extend(h0.iter());
+        }
+        if has_s {
+            x0.extend_from_slice(&[
+                w0[(0, 0)],
+                w0[(0, 1)],
+                w0[(0, 2)],
+                w0[(1, 1)],
+                w0[(1, 2)],
+                w0[(2, 2)],
+            ]);
+        }
+        // With soft iron, F is tied to the scale of S (module docs): it stays fixed in the LM.
+        let f_free = fit_f && !has_s;
+        if f_free {
+            x0.push(f0);
+        }
+        let unpack = |x: &DVector<f64>| {
+            let mut k = 0;
+            let h = if has_h {
+                k += 3;
+                Vector3::new(x[0], x[1], x[2])
+            } else {
+                Vector3::zeros()
+            };
+            let s = if has_s {
+                k += 6;
+                sym(&x.as_slice()[k - 6..k])
+            } else {
+                Matrix3::identity()
+            };
+            let f = if f_free { x[k] } else { fgiven };
+            (h, s, f)
+        };
+        let res = |x: &DVector<f64>| {
+            let (h, s, f) = unpack(x);
+            DVector::from_iterator(m.len(), m.iter().map(|v| (s * (v - h)).norm() - f))
+        };
+        let fit = if x0.is_empty() {
+            let r = res(&DVector::zeros(0));
+            crate::solve::LmFit {
+                rss: r.norm_squared(),
+                x: DVector::zeros(0),
+                r,
+                iterations: 0,
+            }
+        } else {
+            levenberg_marquardt(DVector::from_vec(x0), res, 300)
+        };
+        let (h, mut s, mut f) = unpack(&fit.x);
+        if has_s && fit_f {
+            let d = s.determinant();
+            if !(d > 0.0) {
+                return Err(CalError::Fit(
+                    "soft-iron fit gave a non-positive determinant".into(),
+                ));
+            }
+            let k = d.cbrt();
+            s /= k;
+            f /= k;
+        }
+        let params = Params {
+            hard_iron: has_h.then_some([h.x, h.y, h.z]),
+            soft_iron: has_s.then_some([
+                [s[(0, 0)], s[(0, 1)], s[(0, 2)]],
+                [s[(1, 0)], s[(1, 1)], s[(1, 2)]],
+                [s[(2, 0)], s[(2, 1)], s[(2, 2)]],
+            ]),
+            field: Some(f),
+            ..Params::default()
+        };
+        Ok(Fitted {
+            model: model.to_vec(),
+            params,
+            residuals: fit.r.iter().copied().collect(),
+            n_params: 3 * has_h as usize + 6 * has_s as usize + (fit_f && !has_s) as usize,
+        })
+    }
+}
+
+impl Problem for MagProblem {
+    fn sensor(&self) -> &'static str {
+        "mag"
+    }
+    fn unit(&self) -> &'static str {
+        "µT"
+    }
+    fn effects(&self) -> &'static [Effect] {
+        &EFFECTS
+    }
+    fn n(&self) -> usize {
+        self.m.len()
+    }
+
+    fn identifiable(&self, model: &[Effect], e: Effect) -> Result<(), String> {
+        let sd = self.principal_sd;
+        match (e, self.plane) {
+            (Effect::SoftIron, Some(_)) => Err(format!(
+                "the data are planar (principal s.d. {:.2}/{:.2}/{:.2} µT): a 3-D ellipsoid is \
+                 not determined; soft_iron_2d describes the plane",
+                sd[0], sd[1], sd[2]
+            )),
+            (Effect::SoftIron2d, None) => Err(format!(
+                "the data are rotated in 3-D (principal s.d. {:.2}/{:.2}/{:.2} µT): the seed's \
+                 planar ellipse does not apply; soft_iron does",
+                sd[0], sd[1], sd[2]
+            )),
+            (Effect::SoftIron, None) | (Effect::SoftIron2d, Some(_))
+                if model.contains(&Effect::SoftIron) || model.contains(&Effect::SoftIron2d) =>
+            {
+                Err("a soft-iron effect is already in the model".into())
+            }
+            _ => Ok(()),
+        }
+    }
+
+    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+        if model.contains(&Effect::SoftIron) && model.contains(&Effect::SoftIron2d) {
+            return Err(CalError::Input(
+                "use either soft_iron or soft_iron_2d, not both".into(),
+            ));
+        }
+        for &e in model {
+            if e != Effect::HardIron {
+                self.identifiable(&[], e).map_err(CalError::Fit)?;
+            }
+        }
+        match self.plane {
+            Some(p) => self.fit_planar(model, p),
+            None => self.fit_3d(model),
+        }
+    }
+
+    fn noise_floor(&self) -> NoiseFloor {
+        NoiseFloor {
+            sigma: self.sigma,
+            dof: (self.m.len() as f64 - 2.0).max(1.0),
+            method: "per-axis second differences (MAD)",
+        }
+    }
+}
+
+/// Mean of a set of vectors (helper for reports).
+pub fn centroid(m: &[Vector3<f64>]) -> Vector3<f64> {
+    Vector3::new(
+        mean(&m.iter().map(|v| v.x).collect::<Vec<_>>()),
+        mean(&m.iter().map(|v| v.y).collect::<Vec<_>>()),
+        mean(&m.iter().map(|v| v.z).collect::<Vec<_>>()),
+    )
+}

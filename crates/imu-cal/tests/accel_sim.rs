@@ -1,0 +1,124 @@
+//! Simulated accelerometer recordings: hidden misalignment is found, and controls are adequate.
+//!
+//! Set-up: 26 static poses of 3 s at 100 Hz (6 faces + random), 1 s hand moves in between,
+//! white noise σ = 0.02 m/s² per sample. A pose mean then has σ ≈ 0.0014 m/s², so with 26 poses
+//! offsets are determined to ≈ 0.001 m/s², scales to ≈ 2e-4 and angles to ≈ 0.01°.
+//! Tolerances (≈ 5–10 standard errors, so a failure means a real error, not bad luck):
+//! offset 0.01 m/s², scale 2e-3, misalignment 0.1°.
+mod common;
+use common::*;
+use imu_cal::accel::{detect_static, AccelProblem, StaticDetect, G_STANDARD};
+use imu_cal::lab::{analyse, Effect};
+use nalgebra::{Matrix3, Vector3};
+
+fn problem(seed: u64, mis_deg: [f64; 3]) -> (AccelProblem, usize) {
+    let mut rng = Rng::new(seed);
+    let s = Vector3::new(1.02, 0.985, 1.01);
+    let al = mis_deg.map(f64::to_radians);
+    let t = Matrix3::new(1.0, 0.0, 0.0, al[0], 1.0, 0.0, al[1], al[2], 1.0);
+    let tk = t * Matrix3::from_diagonal(&s);
+    let d = tk.try_inverse().unwrap();
+    let o = Vector3::new(0.35, -0.2, 0.5);
+    let n_poses = 26;
+    let rec = accel_recording(&mut rng, n_poses, 300, 100, d, o, 0.02, G_STANDARD);
+    let poses = detect_static([&rec[0], &rec[1], &rec[2]], 100.0, StaticDetect::default()).unwrap();
+    (
+        AccelProblem {
+            poses,
+            g: G_STANDARD,
+        },
+        n_poses,
+    )
+}
+
+#[test]
+fn static_detection_finds_every_pose() {
+    for seed in 1..=4 {
+        let (p, n) = problem(seed, [0.0; 3]);
+        assert_eq!(p.poses.len(), n, "seed {seed}");
+        for pose in &p.poses {
+            // Each pose holds 300 samples; detection trims at most the window at each end.
+            assert!(
+                pose.end - pose.start >= 200,
+                "seed {seed}: short pose {pose:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn hidden_misalignment_is_diagnosed_and_recovered() {
+    let truth = [1.5, -1.0, 2.0];
+    for seed in 1..=4 {
+        let (p, _) = problem(seed, truth);
+        let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
+        assert!(
+            !r.diagnosis.adequate,
+            "seed {seed}: {}",
+            r.diagnosis.explanation
+        );
+        assert_eq!(
+            r.diagnosis.missing,
+            Some(Effect::Misalignment),
+            "seed {seed}: {}",
+            r.diagnosis.explanation
+        );
+        let step = r.step.unwrap();
+        assert!(step.residual_rms_after < 0.2 * step.residual_rms_before);
+        let r2 = analyse(&p, &step.model).unwrap();
+        assert!(
+            r2.diagnosis.adequate,
+            "seed {seed}: {}",
+            r2.diagnosis.explanation
+        );
+        let m = r2.fitted.params.misalignment_deg.unwrap();
+        for k in 0..3 {
+            assert!(
+                (m[k] - truth[k]).abs() < 0.1,
+                "seed {seed}: misalignment {m:?}"
+            );
+        }
+        let o = r2.fitted.params.offset.unwrap();
+        for (k, t) in [0.35, -0.2, 0.5].iter().enumerate() {
+            assert!((o[k] - t).abs() < 0.01, "seed {seed}: offset {o:?}");
+        }
+        let s = r2.fitted.params.scale.unwrap();
+        for (k, t) in [1.02, 0.985, 1.01].iter().enumerate() {
+            assert!((s[k] - t).abs() < 2e-3, "seed {seed}: scale {s:?}");
+        }
+    }
+}
+
+#[test]
+fn control_without_misalignment_is_adequate() {
+    for seed in 11..=14 {
+        let (p, _) = problem(seed, [0.0; 3]);
+        let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
+        assert!(
+            r.diagnosis.adequate,
+            "seed {seed}: {}",
+            r.diagnosis.explanation
+        );
+        assert_eq!(r.diagnosis.missing, None);
+        // Residual RMS close to the floor: within a factor 1.5 (26 poses: the RMS of 20 d.o.f.
+        // scatters by ≈ ±16 %).
+        assert!(r.fitted.rms() < 1.5 * r.expected_rms, "seed {seed}");
+    }
+}
+
+#[test]
+fn offset_only_model_misses_scale_or_is_flagged() {
+    // Scale errors of 1.5–2 % are far above the noise: the offset-only model must not be
+    // adequate, and the diagnosis must name scale (not misalignment, which is absent).
+    for seed in 21..=23 {
+        let (p, _) = problem(seed, [0.0; 3]);
+        let r = analyse(&p, &[Effect::Offset]).unwrap();
+        assert!(!r.diagnosis.adequate);
+        assert_eq!(
+            r.diagnosis.missing,
+            Some(Effect::Scale),
+            "seed {seed}: {}",
+            r.diagnosis.explanation
+        );
+    }
+}
