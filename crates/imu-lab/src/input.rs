@@ -77,14 +77,78 @@ pub fn contract_unit(name: &str) -> Option<&'static str> {
     })
 }
 
-/// Read the columns `wanted` (contract names, after renaming) from the recording.
-pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
+/// A recording opened for row-by-row reading: constant memory, whatever the file's length.
+pub struct Rows {
+    shown: String,
+    skip_lines: usize,
+    csv: csv::Reader<Box<dyn Read>>,
+    record: csv::StringRecord,
+    /// Contract names read, in order: the wanted columns, then `t` when present.
+    pub names: Vec<String>,
+    idx: Vec<usize>,
+    progress: indicatif::ProgressBar,
+    /// Whether a `t` column is read (it is then the last of `names`).
+    pub has_t: bool,
+    /// File line of the last row read.
+    pub line: usize,
+}
+
+impl Rows {
+    /// Read the next row into `out` (one value per name, unscaled). `Ok(false)` at the end.
+    pub fn next_into(&mut self, out: &mut [f64]) -> Result<bool> {
+        match self.csv.read_record(&mut self.record) {
+            Ok(false) => {
+                self.progress.finish_and_clear();
+                return Ok(false);
+            }
+            Ok(true) => {}
+            Err(e) => {
+                let line = e
+                    .position()
+                    .map(|p| p.line() as usize + self.skip_lines)
+                    .unwrap_or(0);
+                bail!("{}: line {line}: malformed CSV: {e}", self.shown);
+            }
+        }
+        self.line = self
+            .record
+            .position()
+            .map(|p| p.line() as usize + self.skip_lines)
+            .unwrap_or(0);
+        for (k, &i) in self.idx.iter().enumerate() {
+            let field = self.record.get(i).unwrap_or("");
+            let v: f64 = field.parse().map_err(|_| {
+                anyhow!(
+                    "{}: line {}: field {:?} (column {}) is {field:?}, not a number",
+                    self.shown,
+                    self.line,
+                    self.names[k],
+                    i + 1
+                )
+            })?;
+            if !v.is_finite() {
+                bail!(
+                    "{}: line {}: field {:?} (column {}) is {field:?}, not a finite number",
+                    self.shown,
+                    self.line,
+                    self.names[k],
+                    i + 1
+                );
+            }
+            out[k] = v;
+        }
+        Ok(true)
+    }
+}
+
+/// Open the recording and find the columns `wanted` (contract names, after renaming).
+pub fn open(args: &InputArgs, wanted: &[&str]) -> Result<Rows> {
     let path = &args.file;
-    let shown = path.display();
+    let shown = path.display().to_string();
     let file = File::open(path).with_context(|| format!("cannot open {shown}"))?;
     let size = file.metadata().map(|m| m.len()).unwrap_or(0);
     let progress = progress_bar(size);
-    let mut reader = BufReader::new(progress.wrap_read(file));
+    let mut reader = BufReader::with_capacity(1 << 16, progress.wrap_read(file));
     let mut line = String::new();
     for i in 0..args.skip_lines {
         line.clear();
@@ -109,7 +173,6 @@ pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
     let mut csv = csv::ReaderBuilder::new()
         .has_headers(true)
         .trim(csv::Trim::All)
-        .comment(None)
         .from_reader(Box::new(reader) as Box<dyn Read>);
     let header_line = args.skip_lines + 1;
     let headers: Vec<String> = csv
@@ -124,14 +187,13 @@ pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
                 .unwrap_or_else(|| h.to_string())
         })
         .collect();
-
-    let mut want: Vec<&str> = wanted.to_vec();
-    let has_t = headers.iter().any(|h| h == "t");
-    if has_t && !want.contains(&"t") {
-        want.push("t");
+    let mut names: Vec<String> = wanted.iter().map(|w| w.to_string()).collect();
+    let has_t = headers.iter().any(|h| h == "t") && !wanted.contains(&"t");
+    if has_t {
+        names.push("t".into());
     }
-    let mut idx = Vec::with_capacity(want.len());
-    for w in &want {
+    let mut idx = Vec::with_capacity(names.len());
+    for w in &names {
         let i = headers.iter().position(|h| h == w).ok_or_else(|| {
             anyhow!(
                 "{shown}: line {header_line}: no column named {w:?} in the header ({}); use --rename OLD={w} or --skip-lines to reach the header",
@@ -140,68 +202,93 @@ pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
         })?;
         idx.push(i);
     }
-    let mut data: Vec<Vec<f64>> = vec![Vec::new(); want.len()];
-    let mut record = csv::StringRecord::new();
-    loop {
-        match csv.read_record(&mut record) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => {
-                let line = e
-                    .position()
-                    .map(|p| p.line() as usize + args.skip_lines)
-                    .unwrap_or(0);
-                bail!("{shown}: line {line}: malformed CSV: {e}");
-            }
-        }
-        let line = record
-            .position()
-            .map(|p| p.line() as usize + args.skip_lines)
-            .unwrap_or(0);
-        for (k, &i) in idx.iter().enumerate() {
-            let field = record.get(i).unwrap_or("");
-            let v: f64 = field.parse().map_err(|_| {
-                anyhow!(
-                    "{shown}: line {line}: field {:?} (column {}) is {field:?}, not a number",
-                    want[k],
-                    i + 1
-                )
-            })?;
-            if !v.is_finite() {
-                bail!("{shown}: line {line}: field {:?} (column {}) is {field:?}, not a finite number", want[k], i + 1);
-            }
-            data[k].push(v);
-        }
-    }
-    progress.finish_and_clear();
+    Ok(Rows {
+        shown,
+        skip_lines: args.skip_lines,
+        csv,
+        record: csv::StringRecord::new(),
+        names,
+        idx,
+        progress,
+        has_t,
+        line: header_line,
+    })
+}
 
-    let n = data.first().map(Vec::len).unwrap_or(0);
-    if n == 0 {
-        bail!("{shown}: no data rows after the header (line {header_line})");
+/// The unit of a selected column after the reading flags.
+pub fn unit_of(args: &InputArgs, name: &str) -> Result<String> {
+    match (&args.unit, contract_unit(name)) {
+        (Some(u), _) => Ok(u.clone()),
+        (None, Some(u)) => Ok(u.to_string()),
+        (None, None) => bail!("column {name:?} is not in the contract: give its unit with --unit"),
     }
-    let t = has_t.then(|| data[want.iter().position(|w| *w == "t").unwrap()].clone());
-    let rate_hz = match (args.rate, &t) {
-        (Some(r), _) if r > 0.0 && r.is_finite() => r,
-        (Some(r), _) => bail!("--rate {r}: the rate must be a positive number of Hz"),
-        (None, Some(t)) => rate_from_t(t)
-            .with_context(|| format!("{shown}: deriving the rate from column \"t\""))?,
-        (None, None) => bail!("{shown}: no --rate given and no \"t\" column to derive it from"),
-    };
+}
+
+/// The `--scale` factor (1 when absent), refusing 0 and non-finite values.
+pub fn scale_of(args: &InputArgs) -> Result<f64> {
     let scale = args.scale.unwrap_or(1.0);
     if !(scale.is_finite() && scale != 0.0) {
         bail!("--scale {scale}: must be a non-zero number");
     }
+    Ok(scale)
+}
+
+/// The sample rate from `--rate`, or else from the first and last `t` of `n` rows.
+pub fn rate_of(
+    args: &InputArgs,
+    shown: &str,
+    t_first_last: Option<(f64, f64)>,
+    n: usize,
+) -> Result<f64> {
+    match (args.rate, t_first_last) {
+        (Some(r), _) if r > 0.0 && r.is_finite() => Ok(r),
+        (Some(r), _) => bail!("--rate {r}: the rate must be a positive number of Hz"),
+        (None, Some((t0, t1))) if n >= 2 && t1 > t0 => Ok((n - 1) as f64 / (t1 - t0)),
+        (None, Some((t0, t1))) => bail!(
+            "{shown}: cannot derive the rate from column \"t\" ({n} rows from {t0} s to {t1} s)"
+        ),
+        (None, None) => bail!("{shown}: no --rate given and no \"t\" column to derive it from"),
+    }
+}
+
+/// Read the columns `wanted` (contract names, after renaming) from the recording.
+pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
+    let mut rows = open(args, wanted)?;
+    let shown = rows.shown.clone();
+    let mut data: Vec<Vec<f64>> = vec![Vec::new(); rows.names.len()];
+    let mut buf = vec![0.0; rows.names.len()];
+    while rows.next_into(&mut buf)? {
+        for (col, v) in data.iter_mut().zip(&buf) {
+            col.push(*v);
+        }
+    }
+    let n = data.first().map(Vec::len).unwrap_or(0);
+    if n == 0 {
+        bail!(
+            "{shown}: no data rows after the header (line {})",
+            args.skip_lines + 1
+        );
+    }
+    let t = if rows.has_t {
+        data.pop()
+    } else {
+        wanted
+            .iter()
+            .position(|w| *w == "t")
+            .map(|i| data[i].clone())
+    };
+    if let Some(t) = &t {
+        check_time(t).with_context(|| format!("{shown}: column \"t\""))?;
+    }
+    let rate_hz = rate_of(args, &shown, t.as_ref().map(|t| (t[0], t[t.len() - 1])), n)?;
+    let scale = scale_of(args)?;
     let mut columns = Vec::with_capacity(wanted.len());
-    for (k, w) in want.iter().enumerate().take(wanted.len()) {
-        let unit = match (&args.unit, contract_unit(w)) {
-            (Some(u), _) => u.clone(),
-            (None, Some(u)) => u.to_string(),
-            (None, None) => bail!("column {w:?} is not in the contract: give its unit with --unit"),
-        };
-        let values = if scale == 1.0 {
-            std::mem::take(&mut data[k])
+    for (w, values) in wanted.iter().zip(data) {
+        let unit = unit_of(args, w)?;
+        let values = if scale == 1.0 || *w == "t" {
+            values
         } else {
-            data[k].iter().map(|v| v * scale).collect()
+            values.iter().map(|v| v * scale).collect()
         };
         columns.push(Series {
             name: w.to_string(),
@@ -216,11 +303,8 @@ pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
     })
 }
 
-/// (N − 1)/duration, refusing a non-increasing time column.
-fn rate_from_t(t: &[f64]) -> Result<f64> {
-    if t.len() < 2 {
-        bail!("need at least two samples");
-    }
+/// Refuse a time column that goes backwards.
+fn check_time(t: &[f64]) -> Result<()> {
     if let Some(i) = t.windows(2).position(|w| w[1] < w[0]) {
         bail!(
             "time goes backwards between data rows {} and {} ({} s → {} s)",
@@ -230,11 +314,7 @@ fn rate_from_t(t: &[f64]) -> Result<f64> {
             t[i + 1]
         );
     }
-    let duration = t[t.len() - 1] - t[0];
-    if duration <= 0.0 {
-        bail!("the recording lasts {duration} s");
-    }
-    Ok((t.len() - 1) as f64 / duration)
+    Ok(())
 }
 
 fn progress_bar(bytes: u64) -> indicatif::ProgressBar {

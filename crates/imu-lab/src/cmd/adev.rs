@@ -1,6 +1,6 @@
 //! `imu-lab adev`: an Allan-family deviation table of one column.
 use allan::{deviation, Row, Stat, TauSet};
-use anyhow::{anyhow, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use serde::Serialize;
 
 use crate::input::{self, InputArgs};
@@ -22,6 +22,11 @@ pub struct Args {
     /// Print one JSON object on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Bounded memory: stream the file through the device's octave engine (P = 8) instead of
+    /// holding the phase (8 bytes a sample). The column must hold integer counts (scale them
+    /// with --scale); only oadev and ohdev, octave τ.
+    #[arg(long)]
+    pub bounded: bool,
 }
 
 #[derive(Serialize)]
@@ -71,6 +76,47 @@ pub fn table(
     Ok((rec, rows))
 }
 
+/// The bounded-memory table: rows streamed through the octave engine, integer-exact sums.
+/// Returns (rate in Hz, samples, rows).
+pub fn bounded_table(input: &InputArgs, column: &str, stat: Stat) -> Result<(f64, u64, Vec<Row>)> {
+    let hadamard = match stat {
+        Stat::Oadev => false,
+        Stat::Ohdev => true,
+        other => bail!(
+            "--bounded computes oadev and ohdev only, not {}",
+            other.name()
+        ),
+    };
+    let mut rows = input::open(input, &[column])?;
+    let shown = input.file.display().to_string();
+    let mut engine = Box::new(allan::Engine::<8, 32, 12>::new());
+    let mut buf = [0.0f64; 2];
+    let (mut t_first, mut t_last) = (None, 0.0);
+    while rows.next_into(&mut buf)? {
+        let v = buf[0];
+        if v.fract() != 0.0 || v.abs() > i32::MAX as f64 {
+            bail!("{shown}: line {}: field {column:?} is {v}, not an integer count: --bounded needs raw counts (convert with --scale)", rows.line);
+        }
+        engine.push(v as i32);
+        if rows.has_t {
+            t_first.get_or_insert(buf[1]);
+            t_last = buf[1];
+        }
+    }
+    let n = engine.samples();
+    if n < 3 {
+        bail!("{shown}: {n} samples, at least 3 needed");
+    }
+    let rate = input::rate_of(input, &shown, t_first.map(|t0| (t0, t_last)), n as usize)?;
+    let scale = input::scale_of(input)?;
+    let levels: Vec<_> = engine.levels().collect();
+    Ok((
+        rate,
+        n,
+        allan::batch::stream_rows(&levels, 1.0 / rate, scale, hadamard),
+    ))
+}
+
 pub fn run(args: Args) -> Result<()> {
     let stat = Stat::parse(&args.stat).ok_or_else(|| {
         anyhow!(
@@ -79,13 +125,24 @@ pub fn run(args: Args) -> Result<()> {
         )
     })?;
     let taus = TauSet::parse(&args.taus).map_err(|e| anyhow!("--taus {:?}: {e}", args.taus))?;
-    let (rec, rows) = table(&args.input, &args.column, stat, &taus)?;
-    let unit = stat_unit(stat, &rec.column(&args.column).expect("loaded").unit);
+    let (rate_hz, n_samples, rows) = if args.bounded {
+        if taus != TauSet::Octave {
+            bail!(
+                "--bounded computes octave τ only (got --taus {})",
+                args.taus
+            );
+        }
+        bounded_table(&args.input, &args.column, stat)?
+    } else {
+        let (rec, rows) = table(&args.input, &args.column, stat, &taus)?;
+        (rec.rate_hz, rec.columns[0].values.len() as u64, rows)
+    };
+    let unit = stat_unit(stat, &input::unit_of(&args.input, &args.column)?);
     if args.json {
         let out = JsonOut {
             column: &args.column,
             unit: &unit,
-            rate_hz: rec.rate_hz,
+            rate_hz,
             stat: stat.name(),
             adev: rows
                 .iter()
@@ -105,15 +162,14 @@ pub fn run(args: Args) -> Result<()> {
         println!("{}", serde_json::to_string(&out)?);
         return Ok(());
     }
-    let n_samples = rec.columns[0].values.len();
     println!(
         "{} of {} [{}] — {} samples at {:.6} Hz ({:.1} s); bounds are 68.3 % (Greenhall EDF, χ²)",
         stat.name().to_uppercase(),
         args.column,
         unit,
         n_samples,
-        rec.rate_hz,
-        n_samples as f64 / rec.rate_hz
+        rate_hz,
+        n_samples as f64 / rate_hz
     );
     let u = format!("[{unit}]");
     println!(
