@@ -1,0 +1,119 @@
+//! The TOML calibration file: round trip, errors, and agreement of its device form with the
+//! physical correction (≤ 1 LSB, the fixed-point bound of `device`).
+use imu_cal::device::{decode_blob, encode_blob, MAX_BLOB_LEN};
+use imu_cal::file::CalFile;
+use imu_cal::lab::{Params, SoftIron2d};
+
+fn fitted_file() -> CalFile {
+    let mut f = CalFile::default();
+    f.set(
+        "accel",
+        &Params {
+            offset: Some([0.42, -0.21, -1.1]),
+            scale: Some([1.005, 0.997, 0.979]),
+            misalignment_deg: Some([0.3, -0.2, 0.5]),
+            ..Params::default()
+        },
+    )
+    .unwrap();
+    f.set(
+        "gyro",
+        &Params {
+            bias: Some([-1.6022, 0.2899, 1.8464]),
+            temp_coeff: Some([0.004, -0.003, 0.002]),
+            temp_ref: Some(28.0),
+            ..Params::default()
+        },
+    )
+    .unwrap();
+    f.set(
+        "mag",
+        &Params {
+            hard_iron: Some([-7.7272842, -0.4699849, 1.3977473]),
+            soft_iron: Some([
+                [0.988, 0.034, 0.002],
+                [0.034, 1.11, -0.047],
+                [0.002, -0.047, 0.915],
+            ]),
+            soft_iron_2d: Some(SoftIron2d {
+                r: 1.0,
+                q: 1.0,
+                theta_deg: 0.0,
+                sigma: 1.0,
+            }),
+            ..Params::default()
+        },
+    )
+    .unwrap();
+    f
+}
+
+#[test]
+fn toml_round_trip_and_blob() {
+    let f = fitted_file();
+    let text = f.to_toml();
+    assert!(text.contains("[mag]") && text.contains("hard_iron"));
+    let g = CalFile::from_toml(&text).unwrap();
+    assert_eq!(f, g);
+    let cal = g.to_device().unwrap();
+    let mut buf = [0u8; MAX_BLOB_LEN];
+    let blob = encode_blob(&cal, &mut buf).unwrap();
+    assert_eq!(decode_blob(blob).unwrap(), cal);
+}
+
+#[test]
+fn device_form_matches_physical_correction() {
+    let f = fitted_file();
+    let cal = f.to_device().unwrap();
+    // Mag: out = s·S·(raw/s − h) in nominal LSB.
+    let s = f.mag.lsb_per_unit;
+    for raw in [
+        [0i16, 0, 0],
+        [1200, -3400, 560],
+        [-32768, 32767, 100],
+        [-927, -56, 168],
+    ] {
+        let out = cal.apply_mag(raw);
+        for i in 0..3 {
+            let mut e = 0.0;
+            for j in 0..3 {
+                e += f.mag.soft_iron[i][j] * (raw[j] as f64 / s - f.mag.hard_iron[j]) * s;
+            }
+            assert!(
+                (out[i] as f64 - e).abs() <= 1.0,
+                "mag {raw:?} axis {i}: {} vs {e}",
+                out[i]
+            );
+        }
+    }
+    // Gyro at the reference temperature and 10 °C above it.
+    let g = &f.gyro;
+    for (t_c, raw) in [(28.0, [-210i16, 38, 242]), (38.0, [0, 0, 0])] {
+        let t_raw = ((t_c - g.temp_offset_c) * g.temp_lsb_per_c).round() as i16;
+        let out = cal.apply_gyro(raw, t_raw);
+        let t_used = t_raw as f64 / g.temp_lsb_per_c + g.temp_offset_c;
+        for i in 0..3 {
+            let e = raw[i] as f64
+                - (g.bias[i] + g.temp_coeff[i] * (t_used - g.temp_ref)) * g.lsb_per_unit;
+            assert!(
+                (out[i] as f64 - e).abs() <= 1.0,
+                "gyro axis {i} at {t_c} °C: {} vs {e}",
+                out[i]
+            );
+        }
+    }
+}
+
+#[test]
+fn malformed_files_are_rejected_with_the_place() {
+    let text = fitted_file()
+        .to_toml()
+        .replace("lsb_per_unit = 131.0", "lsb_per_unit = \"x\"");
+    let e = CalFile::from_toml(&text).unwrap_err().to_string();
+    assert!(e.contains("lsb_per_unit") && e.contains("line"), "{e}");
+    let e = CalFile::from_toml("version = 2\n").unwrap_err().to_string();
+    assert!(e.contains("missing") || e.contains("version"), "{e}");
+    let mut f = fitted_file();
+    f.mag.soft_iron[0][0] = 9.0; // outside the device's fixed-point range
+    assert!(f.to_device().is_err());
+}

@@ -1,0 +1,168 @@
+//! The real recordings (tests/data, see PROVENANCE.md).
+mod common;
+use imu_cal::accel::{detect_static, AccelProblem, StaticDetect, G_STANDARD};
+use imu_cal::lab::{analyse, Effect};
+use imu_cal::mag::MagProblem;
+use nalgebra::Vector3;
+
+/// Read numeric CSV columns after `skip` metadata lines and a header.
+fn read_csv(path: &str, skip: usize) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(format!("{}/tests/data/{path}", env!("CARGO_MANIFEST_DIR")))
+        .expect("test data");
+    let mut lines = text.lines().skip(skip);
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let mut cols = vec![Vec::new(); header.len()];
+    for (i, l) in lines.enumerate() {
+        if l.trim().is_empty() {
+            continue;
+        }
+        for (k, f) in l.split(',').enumerate() {
+            cols[k].push(
+                f.trim()
+                    .parse::<f64>()
+                    .unwrap_or_else(|_| panic!("line {i} field {k}")),
+            );
+        }
+    }
+    (header, cols)
+}
+
+const LSB_PER_G: f64 = 16384.0;
+
+fn multipose() -> AccelProblem {
+    let (_, c) = read_csv("mpu6050-static/multipose_calibration.csv", 4);
+    let k = G_STANDARD / LSB_PER_G;
+    let a: Vec<Vec<f64>> = (0..3)
+        .map(|j| c[j].iter().map(|v| v * k).collect())
+        .collect();
+    let poses = detect_static([&a[0], &a[1], &a[2]], 100.0, StaticDetect::default()).unwrap();
+    AccelProblem {
+        poses,
+        g: G_STANDARD,
+    }
+}
+
+/// The multi-pose run (10 static poses: the 36.5 s initial rest + 9 poses) against the
+/// upstream repository's own fit. Upstream's model is `a = T·S_up·(raw + b_up)` with S_up in
+/// m/s² per LSB and b_up in LSB (its signs are the opposite of our `o`); converted to our
+/// parameters: `scale = S_up / (g/16384)`, `offset = −b_up · g/16384`.
+/// Agreement we state and assert: scale within 1.5e-3 (0.15 %), offset within 20 LSB
+/// (1.2 mg, 0.012 m/s²); measured: Δscale ≤ 6e-4, Δoffset ≤ 9 LSB. Upstream's misalignment is
+/// ≈ 1e-5 rad (0.0006°), i.e. none; our lab likewise finds offset + scale adequate and no
+/// misalignment significant (10 poses leave 1 degree of freedom for the 9-parameter model).
+#[test]
+fn multipose_accelerometer_vs_upstream() {
+    let p = multipose();
+    assert_eq!(p.poses.len(), 10, "poses {:?}", p.poses);
+    let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
+    eprintln!("{}", r.diagnosis.explanation);
+    assert!(r.diagnosis.adequate, "{}", r.diagnosis.explanation);
+    assert_eq!(r.diagnosis.missing, None);
+    let mis = r
+        .diagnosis
+        .candidates
+        .iter()
+        .find(|c| c.effect == Effect::Misalignment)
+        .unwrap();
+    assert!(
+        mis.p_value.unwrap() > 0.01,
+        "misalignment p = {:?}",
+        mis.p_value
+    );
+    // Residual: 4 mg-level at most (measured 0.0041 m/s²).
+    assert!(r.fitted.rms() < 0.01, "rms {}", r.fitted.rms());
+
+    // Nine values, one per line: misalignment ×3 (rad), scale ×3 (m/s² per LSB), bias ×3 (LSB).
+    let text = std::fs::read_to_string(format!(
+        "{}/tests/data/mpu6050-static/upstream_params_acc.csv",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    let up: Vec<f64> = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| l.trim().parse().unwrap())
+        .collect();
+    assert_eq!(up.len(), 9);
+    let k = G_STANDARD / LSB_PER_G;
+    let s = r.fitted.params.scale.unwrap();
+    let o = r.fitted.params.offset.unwrap();
+    for j in 0..3 {
+        let s_up = up[3 + j] / k;
+        let o_up_lsb = -up[6 + j];
+        let o_lsb = o[j] / k;
+        eprintln!(
+            "axis {j}: scale {:.5} vs upstream {:.5}; offset {:.1} vs upstream {:.1} LSB",
+            s[j], s_up, o_lsb, o_up_lsb
+        );
+        assert!(
+            (s[j] - s_up).abs() < 1.5e-3,
+            "axis {j} scale {} vs {}",
+            s[j],
+            s_up
+        );
+        assert!(
+            (o_lsb - o_up_lsb).abs() < 20.0,
+            "axis {j} offset {o_lsb} vs {o_up_lsb} LSB"
+        );
+    }
+}
+
+fn tilt_sphere() -> MagProblem {
+    let (_, c) = read_csv("mpu6050-hmc5883l-tilt-sphere/hmc5883l.csv", 0);
+    let m: Vec<Vector3<f64>> = (0..c[0].len())
+        .map(|i| Vector3::new(c[1][i], c[2][i], c[3][i]) * 100.0)
+        .collect();
+    MagProblem::new(m, None).unwrap()
+}
+
+/// tilt-sphere: hard iron alone leaves a 3 µT residual; the lab names soft_iron (3-D data, so
+/// not soft_iron_2d); the ellipsoid fit brings it to ≈ 0.44 µT. The remaining excess over the
+/// 0.17 µT floor is reported, not hidden. Reference (shared/reference README, a quick fit):
+/// centre (−0.004, 0.056, −0.206) G = (−0.4, 5.6, −20.6) µT, radii 59/54/47 µT; asserted within
+/// 0.5 µT (centre) and 2 µT (radii: the README gives two digits).
+#[test]
+fn tilt_sphere_soft_iron() {
+    let p = tilt_sphere();
+    assert!(
+        p.plane.is_none(),
+        "tilt-sphere must be 3-D: sd {:?}",
+        p.principal_sd
+    );
+    let r0 = analyse(&p, &[Effect::HardIron]).unwrap();
+    eprintln!("{}", r0.diagnosis.explanation);
+    assert!(!r0.diagnosis.adequate);
+    assert_eq!(r0.diagnosis.missing, Some(Effect::SoftIron));
+    let step = r0.step.as_ref().unwrap();
+    assert!(
+        step.residual_rms_before > 2.0 && step.residual_rms_after < 0.6,
+        "{step:?}"
+    );
+    let r1 = analyse(&p, &step.model).unwrap();
+    eprintln!("{}", r1.diagnosis.explanation);
+    // The catalogue is exhausted: nothing more is proposed.
+    assert_eq!(r1.diagnosis.missing, None);
+    let h = r1.fitted.params.hard_iron.unwrap();
+    for (k, t) in [-0.4, 5.6, -20.6].iter().enumerate() {
+        assert!((h[k] - t).abs() < 0.5, "hard iron {h:?}");
+    }
+    // Radii of the fitted ellipsoid: F / eigenvalues of S.
+    let s = nalgebra::Matrix3::from_row_slice(&r1.fitted.params.soft_iron.unwrap().concat());
+    let f = r1.fitted.params.field.unwrap();
+    let mut radii: Vec<f64> = s
+        .symmetric_eigen()
+        .eigenvalues
+        .iter()
+        .map(|l| f / l)
+        .collect();
+    radii.sort_by(|a, b| b.total_cmp(a));
+    eprintln!("radii {radii:?} µT, F {f} µT");
+    for (r, t) in radii.iter().zip([59.0, 54.0, 47.0]) {
+        assert!((r - t).abs() < 2.0, "radii {radii:?}");
+    }
+}
