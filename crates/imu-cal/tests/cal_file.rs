@@ -1,5 +1,6 @@
 //! The TOML calibration file: round trip, errors, and agreement of its device form with the
 //! physical correction (≤ 1 LSB, the fixed-point bound of `device`).
+#![allow(clippy::needless_range_loop)]
 use imu_cal::device::{decode_blob, encode_blob, MAX_BLOB_LEN};
 use imu_cal::file::CalFile;
 use imu_cal::lab::{Params, SoftIron2d};
