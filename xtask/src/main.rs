@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 mod emu;
 mod emu_check;
 mod emu_link;
+mod firmware;
 
 /// Packages that only build for the device (thumbv6m-none-eabi).
 const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
@@ -20,8 +21,9 @@ fn main() -> Result<()> {
         "e2e" => emu::e2e(rest),
         "bench-emu" => emu::bench(rest),
         "demo" => emu::demo(rest),
+        "firmware" => firmware::main(rest),
         "help" | "--help" | "-h" => {
-            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e     end-to-end test on the emulated board (60 s emulated)\n  bench-emu  emulated cycle budget report (out/emu/bench.md)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
+            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e     end-to-end test on the emulated board (60 s emulated)\n  bench-emu  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
             Ok(())
         }
         other => bail!("unknown xtask command `{other}` (try `cargo xtask help`)"),
