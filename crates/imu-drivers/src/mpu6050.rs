@@ -774,3 +774,57 @@ impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
 }
 
 impl<E: core::fmt::Debug> core::error::Error for Error<E> {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn factory_trim_formulas() {
+        // RM 4.1 at code 1: 25·131 = 3275 LSB (negated for Y); 4096·0.34 = 1392.64 LSB.
+        assert_eq!(gyro_factory_trim(1, 0), 3275.0);
+        assert_eq!(gyro_factory_trim(1, 1), -3275.0);
+        assert_eq!(gyro_factory_trim(0, 2), 0.0);
+        assert!((accel_factory_trim(1) - 1392.64).abs() < 1e-3);
+        // Code 31: (0.92/0.34)^(30/30) → 4096·0.92 = 3768.32 LSB (f32 powf: tolerance 0.01 LSB).
+        assert!((accel_factory_trim(31) - 3768.32).abs() < 0.01);
+        // Code 11: 3275·1.046^10 = 5134.855 LSB (double precision; f32 tolerance 0.05 LSB).
+        assert!((gyro_factory_trim(11, 0) - 5134.855).abs() < 0.05);
+    }
+
+    #[test]
+    fn trim_code_bit_layout() {
+        // XA_TEST = SELF_TEST_X[7:5] << 2 | SELF_TEST_A[5:4]; XG_TEST = SELF_TEST_X[4:0].
+        let (g, a) = decode_trim_codes([0b101_10011, 0b010_00001, 0b111_11111, 0b00_11_01_10]);
+        assert_eq!(g, [0b10011, 0b00001, 0b11111]);
+        assert_eq!(a, [0b10111, 0b01001, 0b11110]);
+    }
+
+    #[test]
+    fn zero_trim_fails_the_test() {
+        let r = self_test_report([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [0; 4]);
+        assert!(r.gyro_change_pct[0].is_nan());
+        assert!(!r.passed());
+    }
+
+    #[test]
+    fn who_am_i_round_trip() {
+        for v in 0..=255u8 {
+            if let Some(c) = ChipId::from_who_am_i(v) {
+                assert_eq!(c.who_am_i(), v);
+            }
+        }
+        assert_eq!(ChipId::from_who_am_i(0x68), Some(ChipId::Mpu6050));
+        assert_eq!(ChipId::from_who_am_i(0x34), None);
+    }
+
+    #[test]
+    fn sample_rates() {
+        let mut c = Config::default();
+        assert_eq!(c.sample_rate_hz(), 1000.0);
+        c.dlpf = Dlpf::Hz260;
+        assert_eq!(c.sample_rate_hz(), 8000.0);
+        c.sample_rate_divider = 255;
+        assert_eq!(c.sample_rate_hz(), 31.25);
+    }
+}
