@@ -253,6 +253,9 @@ fn diff_sum(x: &[f64], m: usize, d: u32, stride: usize) -> (f64, u64) {
     if x.len() <= span {
         return (0.0, 0);
     }
+    if stride == 1 {
+        return (overlapping_sum(x, m, d), (x.len() - span) as u64);
+    }
     let (mut s, mut n) = (0.0, 0u64);
     let mut i = 0;
     while i + span < x.len() {
@@ -266,6 +269,64 @@ fn diff_sum(x: &[f64], m: usize, d: u32, stride: usize) -> (f64, u64) {
         i += stride;
     }
     (s, n)
+}
+
+/// The fully overlapping sum over equal-length shifted slices, in eight independent lanes so
+/// the compiler can keep the loop in vector registers (the hot loop of every octave table).
+fn overlapping_sum(x: &[f64], m: usize, d: u32) -> f64 {
+    const LANES: usize = 8;
+    let n = x.len() - d as usize * m;
+    let mut acc = [0.0f64; LANES];
+    let mut tail = 0.0;
+    if d == 2 {
+        let (a, b, c) = (&x[..n], &x[m..m + n], &x[2 * m..2 * m + n]);
+        let mut ca = a.chunks_exact(LANES);
+        let mut cb = b.chunks_exact(LANES);
+        let mut cc = c.chunks_exact(LANES);
+        for ((a, b), c) in (&mut ca).zip(&mut cb).zip(&mut cc) {
+            for l in 0..LANES {
+                let v = c[l] - 2.0 * b[l] + a[l];
+                acc[l] += v * v;
+            }
+        }
+        for ((a, b), c) in ca
+            .remainder()
+            .iter()
+            .zip(cb.remainder())
+            .zip(cc.remainder())
+        {
+            let v = c - 2.0 * b + a;
+            tail += v * v;
+        }
+    } else {
+        let (a, b, c, e) = (
+            &x[..n],
+            &x[m..m + n],
+            &x[2 * m..2 * m + n],
+            &x[3 * m..3 * m + n],
+        );
+        let mut ca = a.chunks_exact(LANES);
+        let mut cb = b.chunks_exact(LANES);
+        let mut cc = c.chunks_exact(LANES);
+        let mut ce = e.chunks_exact(LANES);
+        for (((a, b), c), e) in (&mut ca).zip(&mut cb).zip(&mut cc).zip(&mut ce) {
+            for l in 0..LANES {
+                let v = e[l] - 3.0 * c[l] + 3.0 * b[l] - a[l];
+                acc[l] += v * v;
+            }
+        }
+        for (((a, b), c), e) in ca
+            .remainder()
+            .iter()
+            .zip(cb.remainder())
+            .zip(cc.remainder())
+            .zip(ce.remainder())
+        {
+            let v = e - 3.0 * c + 3.0 * b - a;
+            tail += v * v;
+        }
+    }
+    acc.iter().sum::<f64>() + tail
 }
 
 /// Modified Allan variance sum: Σ_j [Σ_{i=j}^{j+m−1} (x[i+2m] − 2x[i+m] + x[i])]² (SP 1065 eq. 14).
@@ -322,7 +383,7 @@ fn largest_m(stat: Stat, np: u64) -> u64 {
 pub fn deviation(y: &[f64], tau0: f64, stat: Stat, taus: &TauSet) -> Result<Vec<Row>, AllanError> {
     check(y, tau0)?;
     let x = phase_from_rate(y);
-    deviation_of_phase(&x, Some(y), tau0, stat, taus)
+    deviation_of_phase(&x, tau0, stat, taus)
 }
 
 /// The same from phase data `x` in seconds (e.g. Stable32's PHASE.DAT), every `tau0` s.
@@ -334,13 +395,11 @@ pub fn deviation_from_phase(
 ) -> Result<Vec<Row>, AllanError> {
     check(x, tau0)?;
     let xs: Vec<f64> = x.iter().map(|v| v / tau0).collect();
-    let y: Vec<f64> = xs.windows(2).map(|w| w[1] - w[0]).collect();
-    deviation_of_phase(&xs, Some(&y), tau0, stat, taus)
+    deviation_of_phase(&xs, tau0, stat, taus)
 }
 
 fn deviation_of_phase(
     x: &[f64],
-    y: Option<&[f64]>,
     tau0: f64,
     stat: Stat,
     taus: &TauSet,
@@ -386,7 +445,7 @@ fn deviation_of_phase(
         if stat == Stat::Tdev {
             dev *= tau / 3f64.sqrt();
         }
-        let alpha = identify(y, x, mu, stat).unwrap_or(last_alpha);
+        let alpha = identify(x, mu, stat).unwrap_or(last_alpha);
         last_alpha = alpha;
         let edf = edf_for(stat, alpha, mf, np as f64);
         let (lo, hi) = bounds(dev, edf);
@@ -417,10 +476,9 @@ fn bounds(dev: f64, edf: f64) -> (f64, f64) {
 ///
 /// `None` when too few averages remain for either method; the caller then keeps the exponent of
 /// the previous (shorter) τ, or white FM (0) if there is none.
-fn identify(y: Option<&[f64]>, x: &[f64], m: usize, stat: Stat) -> Option<i32> {
+fn identify(x: &[f64], m: usize, stat: Stat) -> Option<i32> {
     let d = stat.difference_order();
-    let y = y?;
-    let alpha = noise_id::acf_alpha(y, m, d).or_else(|| {
+    let alpha = noise_id::acf_alpha(x, m, d).or_else(|| {
         let (sa, na) = diff_sum(x, m, 2, 1);
         if na == 0 || sa <= 0.0 {
             return None;
@@ -428,7 +486,7 @@ fn identify(y: Option<&[f64]>, x: &[f64], m: usize, stat: Stat) -> Option<i32> {
         let avar = sa / (2.0 * (m as f64).powi(2) * na as f64);
         let (sm, nm) = mod_sum(x, m);
         let rn = (nm > 0).then(|| sm / (2.0 * (m as f64).powi(4) * nm as f64) / avar);
-        noise_id::b1_alpha(y, m, rn)
+        noise_id::b1_alpha(x, m, rn)
     });
     alpha.map(|a| a.clamp(2 - 2 * d as i32, 2))
 }

@@ -10,11 +10,11 @@
 //! `alpha` is the exponent of the rate (fractional frequency) PSD, `S_y(f) ∝ f^alpha`:
 //! +2 white PM, +1 flicker PM, 0 white FM, −1 flicker FM, −2 random-walk FM.
 
-/// Block averages of `y` over `m` samples (the incomplete tail is dropped).
-fn block_means(y: &[f64], m: usize) -> Vec<f64> {
-    y.chunks_exact(m)
-        .map(|c| c.iter().sum::<f64>() / m as f64)
-        .collect()
+/// Block averages of the rate over `m` samples, from the phase `x` (x[k] = Σ_{i<k} y_i):
+/// `(x[(i+1)m] − x[im])/m`, O(N/m) work (the incomplete tail is dropped).
+fn block_means(x: &[f64], m: usize) -> Vec<f64> {
+    let grid: Vec<f64> = x.iter().step_by(m).copied().collect();
+    grid.windows(2).map(|w| (w[1] - w[0]) / m as f64).collect()
 }
 
 fn detrend_linear(x: &mut [f64]) {
@@ -49,9 +49,10 @@ pub fn lag1_acf(x: &[f64]) -> f64 {
     }
 }
 
-/// Lag-1 ACF identification on rate data averaged by `m`; `None` with fewer than 30 averages.
-pub fn acf_alpha(y: &[f64], m: usize, d_max: u32) -> Option<i32> {
-    let mut x = block_means(y, m);
+/// Lag-1 ACF identification on the rate averaged by `m` (given its phase `x`); `None` with
+/// fewer than 30 averages.
+pub fn acf_alpha(x: &[f64], m: usize, d_max: u32) -> Option<i32> {
+    let mut x = block_means(x, m);
     if x.len() < 30 {
         return None;
     }
@@ -100,11 +101,11 @@ fn rn_theory(m: f64, alpha: i32) -> f64 {
 /// of its theoretical values and the caller keeps the exponent found at the shorter τ.
 pub const B1_MIN_AVERAGES: usize = 10;
 
-/// B1 / R(n) identification for short series (Barnes' B1: the standard variance of the `m`
-/// averages over their non-overlapping Allan variance); `rn` is the measured MVAR/AVAR at `m`.
+/// B1 / R(n) identification for short series, given the phase `x` (Barnes' B1: the standard
+/// variance of the `m` averages over their non-overlapping Allan variance); `rn` is the measured MVAR/AVAR at `m`.
 /// `None` with fewer than [`B1_MIN_AVERAGES`] averages.
-pub fn b1_alpha(y: &[f64], m: usize, rn: Option<f64>) -> Option<i32> {
-    let x = block_means(y, m);
+pub fn b1_alpha(x: &[f64], m: usize, rn: Option<f64>) -> Option<i32> {
+    let x = block_means(x, m);
     if x.len() < B1_MIN_AVERAGES {
         return None;
     }
