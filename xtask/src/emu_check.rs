@@ -93,8 +93,10 @@ pub fn imu_inputs(cal: &Calibration, s: &ImuRaw) -> [(Channel, i32); 7] {
     ]
 }
 
-/// Replays `n` pushes of one channel through a fresh engine, marking a gap wherever the model's
-/// sample index jumps (a sample was produced but never served).
+/// Replays the first `pushed` served samples of one channel through a fresh engine, marking a
+/// gap wherever the model's sample index jumps (a sample was produced but never served). A jump
+/// right after the last replayed sample is marked too: the device knows of a loss (a lost
+/// sensor, an overflow) before the next sample arrives.
 pub fn replay<T>(
     samples: &[T],
     pushed: u64,
@@ -103,7 +105,8 @@ pub fn replay<T>(
 ) -> Box<DeviceEngine> {
     let mut e = Box::new(DeviceEngine::new());
     let mut last: Option<u64> = None;
-    for s in samples.iter().take(pushed as usize) {
+    let n = (pushed as usize).min(samples.len());
+    for s in &samples[..n] {
         let k = k_of(s);
         if let Some(l) = last {
             if k != l + 1 {
@@ -112,6 +115,11 @@ pub fn replay<T>(
         }
         last = Some(k);
         e.push(value(s));
+    }
+    if let (Some(l), Some(next)) = (last, samples.get(n)) {
+        if k_of(next) != l + 1 {
+            e.gap();
+        }
     }
     e
 }

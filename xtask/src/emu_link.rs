@@ -84,7 +84,22 @@ impl Link {
             Err(_) => rejected += 1,
         });
         self.got.rejected_frames += rejected;
+        let debug = std::env::var_os("XTASK_EMU_DEBUG").is_some();
         for m in msgs {
+            if debug {
+                let kind = match &m {
+                    DeviceMsg::Reply { id, reply } => format!("reply {id} {reply:?}"),
+                    DeviceMsg::Samples(b) => {
+                        format!("samples imu={} mag={}", b.imu.len(), b.mag.len())
+                    }
+                    DeviceMsg::Table(t) => {
+                        format!("table {} pushed={}", t.channel.name(), t.pushed)
+                    }
+                    DeviceMsg::Status(s) => format!("status uptime={} µs", s.uptime_us),
+                    DeviceMsg::Event(e) => format!("event {e:?}"),
+                };
+                eprintln!("xtask: <- {kind}");
+            }
             match m {
                 DeviceMsg::Reply { id, reply } => {
                     self.pending_replies.insert(id, reply);
