@@ -5,11 +5,11 @@
 //!   rate is 8 kHz for DLPF_CFG 0 or 7 and 1 kHz otherwise (RM 4.2); none while asleep or
 //!   while DEVICE_RESET is in progress (100 ms, PS 6.3: the model NACKs in that window);
 //! - each sample updates ACCEL_XOUT_H..GYRO_ZOUT_L (big-endian) and, with USER_CTRL.FIFO_EN,
-//!   appends the FIFO_EN-selected outputs in register order (RM 4.7, 4.31);
+//!   appends the FIFO_EN-selected outputs in register order (RM 4.6, 4.31);
 //! - the FIFO holds `fifo_capacity` bytes (1024, RM 4.30); beyond that the oldest bytes are
 //!   dropped and FIFO_OFLOW_INT is raised (if enabled) — frame alignment is then lost;
 //! - INT_STATUS bits are set only for enabled interrupts and clear when INT_STATUS is read
-//!   (RM 4.17); reads of FIFO_R_W pop the FIFO without advancing the register pointer;
+//!   (RM 4.16); reads of FIFO_R_W pop the FIFO without advancing the register pointer;
 //! - FIFO_RESET acts only while FIFO_EN is 0 in the same write (RM 4.27);
 //! - self-test bits add a configured self-test response (LSB) to the outputs (RM 4.1).
 
@@ -171,7 +171,7 @@ impl Mpu6050Model {
     }
 
     fn temp_scale(&self) -> (f64, f64) {
-        // (LSB/°C, °C at 0 LSB): RM 4.18 for 0x68; MPU-6500 family RM-6500 4.23; ICM parts.
+        // (LSB/°C, °C at 0 LSB): RM 4.18 for 0x68; MPU-6500 family RM-6500 registers 65-66; ICM parts.
         match self.who_am_i {
             0x68 => (340.0, 36.53),
             0x70..=0x74 => (333.87, 21.0),

@@ -86,7 +86,7 @@ fn seed_config_is_the_papers() {
 #[test]
 fn clone_ids_accepted_and_6500_family_gets_accel_config2() {
     // MPU-6500 family (0x70, 0x71, 0x72, 0x73) and ICM parts (0x98, 0x19): ACCEL_CONFIG2 (0x1D)
-    // = A_DLPF_CFG 6 (5.05 Hz, RM-6500 4.8) appended to the burst.
+    // = A_DLPF_CFG 6 (5.05 Hz, RM-6500 register 29 (ACCEL_CONFIG 2)) appended to the burst.
     for (who, chip) in [
         (0x70, ChipId::Mpu6500),
         (0x71, ChipId::Mpu9250),
@@ -222,7 +222,7 @@ fn fifo_off_config_disables_fifo() {
 
 #[test]
 fn read_all_is_one_14_byte_burst() {
-    // accel (1000, -2, 8192), temp -521, gyro (131, -131, 32767), big-endian (RM 4.17-4.20).
+    // accel (1000, -2, 8192), temp -521, gyro (131, -131, 32767), big-endian (RM 4.17-4.19).
     let bytes = vec![
         0x03, 0xE8, 0xFF, 0xFE, 0x20, 0x00, 0xFD, 0xF7, 0x00, 0x83, 0xFF, 0x7D, 0x7F, 0xFF,
     ];

@@ -1,5 +1,5 @@
 //! QMC5883L/P driver against embedded-hal-mock transaction lists, blocking and async.
-//! Expected bytes are derived from the QST data sheets (QMC-L 9.2, QMC-P 8.2).
+//! Expected bytes are derived from the QST data sheets (QMC-L 9.2 and the QMC-P register map).
 
 use embassy_futures::block_on;
 use embedded_hal::i2c::{ErrorKind, NoAcknowledgeSource};
@@ -238,7 +238,7 @@ fn p_read() {
 #[test]
 fn microtesla_conversion() {
     let d = blocking::Qmc5883::new(Mock::new(&[]));
-    // L ±2 G: 12000 LSB/G (QMC-L 2.1), 1 G = 100 µT: 12000 → 100 µT, -600 → -5 µT.
+    // L ±2 G: 12000 LSB/G (QMC-L specification table), 1 G = 100 µT: 12000 → 100 µT, -600 → -5 µT.
     let ut = d.microtesla(&MagSample {
         xyz: [12000, -600, 0],
         ..MagSample::default()

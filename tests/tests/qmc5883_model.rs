@@ -25,7 +25,7 @@ fn l_seed_reads_field_temperature_and_rate() {
     assert_eq!(d.read(), Err(Error::NotReady));
     bus.advance_us(5_000);
     let s = d.read().unwrap();
-    // (0.2, −0.1, 0.4) G × 12000 LSB/G (±2 G, QMC-L 2.1).
+    // (0.2, −0.1, 0.4) G × 12000 LSB/G (±2 G, QMC-L specification table).
     assert_eq!(s.xyz, [2400, -1200, 4800]);
     assert_eq!(s.temp, Some(2500), "25 °C × 100 LSB/°C");
     assert!(!s.overflow && !s.skipped);

@@ -127,14 +127,14 @@ macro_rules! drivers {
             }
 
             /// One 14-byte burst from ACCEL_XOUT_H: accel, temperature and gyro of the same
-            /// sampling instant (RM 4.17-4.20; the chip latches the set for a burst read).
+            /// sampling instant (RM 4.17-4.19; the chip latches the set for a burst read).
             pub $($async)? fn read_all(&mut self) -> Result<RawSample, MpuError<I2C>> {
                 let mut b = [0u8; 14];
                 self.read_regs(mr::ACCEL_XOUT_H, &mut b) $(.$await)? ?;
                 Ok(m::decode_measurements(&b))
             }
 
-            /// Read (and thereby clear, RM 4.17) INT_STATUS.
+            /// Read (and thereby clear, RM 4.16) INT_STATUS.
             pub $($async)? fn int_status(&mut self) -> Result<IntStatus, MpuError<I2C>> {
                 let mut b = [0u8; 1];
                 self.read_regs(mr::INT_STATUS, &mut b) $(.$await)? ?;

@@ -19,17 +19,17 @@ pub mod reg {
     pub const GYRO_CONFIG: u8 = 0x1B;
     /// Accel self-test bits and AFS_SEL (RM 4.5).
     pub const ACCEL_CONFIG: u8 = 0x1C;
-    /// MPU-6500 family only: accelerometer DLPF (RM-6500 4.8). Reserved on the MPU-6050.
+    /// MPU-6500 family only: accelerometer DLPF (RM-6500 register 29, ACCEL_CONFIG 2). Reserved on the MPU-6050.
     pub const ACCEL_CONFIG2: u8 = 0x1D;
-    /// Which sensor outputs are written to the FIFO (RM 4.7).
+    /// Which sensor outputs are written to the FIFO (RM 4.6).
     pub const FIFO_EN: u8 = 0x23;
-    /// INT pin / bypass configuration (RM 4.15).
+    /// INT pin / bypass configuration (RM 4.14).
     pub const INT_PIN_CFG: u8 = 0x37;
-    /// Interrupt enables (RM 4.16).
+    /// Interrupt enables (RM 4.15).
     pub const INT_ENABLE: u8 = 0x38;
-    /// Interrupt status, cleared on read (RM 4.17).
+    /// Interrupt status, cleared on read (RM 4.16).
     pub const INT_STATUS: u8 = 0x3A;
-    /// First of the 14 measurement bytes: accel X/Y/Z, temperature, gyro X/Y/Z, big-endian (RM 4.17-4.20).
+    /// First of the 14 measurement bytes: accel X/Y/Z, temperature, gyro X/Y/Z, big-endian (RM 4.17-4.19).
     pub const ACCEL_XOUT_H: u8 = 0x3B;
     /// Signal path reset (RM 4.26).
     pub const SIGNAL_PATH_RESET: u8 = 0x68;
@@ -57,23 +57,23 @@ pub mod bits {
     pub const USER_FIFO_EN: u8 = 1 << 6;
     /// USER_CTRL.FIFO_RESET (RM 4.27): only acts while FIFO_EN = 0; self-clearing.
     pub const USER_FIFO_RESET: u8 = 1 << 2;
-    /// FIFO_EN.TEMP_FIFO_EN (RM 4.7).
+    /// FIFO_EN.TEMP_FIFO_EN (RM 4.6).
     pub const FIFO_TEMP: u8 = 1 << 7;
-    /// FIFO_EN.XG/YG/ZG_FIFO_EN (RM 4.7).
+    /// FIFO_EN.XG/YG/ZG_FIFO_EN (RM 4.6).
     pub const FIFO_GYRO_XYZ: u8 = (1 << 6) | (1 << 5) | (1 << 4);
-    /// FIFO_EN.ACCEL_FIFO_EN (RM 4.7).
+    /// FIFO_EN.ACCEL_FIFO_EN (RM 4.6).
     pub const FIFO_ACCEL: u8 = 1 << 3;
-    /// INT_ENABLE.FIFO_OFLOW_EN and INT_STATUS.FIFO_OFLOW_INT (RM 4.16, 4.17).
+    /// INT_ENABLE.FIFO_OFLOW_EN and INT_STATUS.FIFO_OFLOW_INT (RM 4.15, 4.16).
     pub const INT_FIFO_OFLOW: u8 = 1 << 4;
-    /// INT_ENABLE.DATA_RDY_EN and INT_STATUS.DATA_RDY_INT (RM 4.16, 4.17).
+    /// INT_ENABLE.DATA_RDY_EN and INT_STATUS.DATA_RDY_INT (RM 4.15, 4.16).
     pub const INT_DATA_RDY: u8 = 1 << 0;
-    /// INT_PIN_CFG.INT_LEVEL: 1 = active low (RM 4.15).
+    /// INT_PIN_CFG.INT_LEVEL: 1 = active low (RM 4.14).
     pub const INT_LEVEL_LOW: u8 = 1 << 7;
-    /// INT_PIN_CFG.INT_OPEN: 1 = open drain (RM 4.15).
+    /// INT_PIN_CFG.INT_OPEN: 1 = open drain (RM 4.14).
     pub const INT_OPEN_DRAIN: u8 = 1 << 6;
-    /// INT_PIN_CFG.LATCH_INT_EN: 1 = held until cleared (RM 4.15).
+    /// INT_PIN_CFG.LATCH_INT_EN: 1 = held until cleared (RM 4.14).
     pub const LATCH_INT_EN: u8 = 1 << 5;
-    /// INT_PIN_CFG.INT_RD_CLEAR: 1 = any read clears the status (RM 4.15).
+    /// INT_PIN_CFG.INT_RD_CLEAR: 1 = any read clears the status (RM 4.14).
     pub const INT_RD_CLEAR: u8 = 1 << 4;
     /// GYRO_CONFIG XG_ST|YG_ST|ZG_ST and ACCEL_CONFIG XA_ST|YA_ST|ZA_ST (RM 4.4, 4.5).
     pub const SELF_TEST_XYZ: u8 = 0xE0;
@@ -199,7 +199,7 @@ impl ChipId {
     }
 
     /// FIFO size in bytes: 1024 (RM 4.30) for the MPU-6050, 512 for the MPU-6500 family
-    /// (RM-6500 4.40 default FIFO_SIZE), 1024 for the ICM parts (their 4 KB variants are
+    /// (the 512-byte FIFO of the MPU-6500 product specification), 1024 for the ICM parts (their 4 KB variants are
     /// not relied on).
     pub const fn fifo_capacity(self) -> u16 {
         match self.family() {
@@ -217,7 +217,7 @@ impl ChipId {
                 lsb_per_c: 340.0,
                 offset_c: 36.53,
             },
-            // RM-6500 4.23: TEMP_degC = TEMP_OUT/Temp_Sensitivity + 21, sensitivity 333.87 LSB/°C (PS-6500 3.4).
+            // RM-6500 registers 65-66 (TEMP_OUT): TEMP_degC = TEMP_OUT/Temp_Sensitivity + 21, sensitivity 333.87 LSB/°C (MPU-6500 product specification, temperature sensor table).
             Family::Mpu6500 => TemperatureScale {
                 lsb_per_c: 333.87,
                 offset_c: 21.0,
@@ -323,7 +323,7 @@ impl Dlpf {
             _ => 1000,
         }
     }
-    /// MPU-6500 family ACCEL_CONFIG2.A_DLPF_CFG with the nearest bandwidth (RM-6500 4.8 table:
+    /// MPU-6500 family ACCEL_CONFIG2.A_DLPF_CFG with the nearest bandwidth (RM-6500 register 29 ACCEL_CONFIG 2, A_DLPF_CFG table:
     /// 0 = 218 Hz, 1 = 218 Hz, 2 = 99 Hz, 3 = 44.8 Hz, 4 = 21.2 Hz, 5 = 10.2 Hz, 6 = 5.05 Hz);
     /// ACCEL_FCHOICE_B = 0 (bit 3) so the filter is in use.
     pub const fn accel_config2_bits(self) -> u8 {
@@ -331,7 +331,7 @@ impl Dlpf {
     }
 }
 
-/// Which measurements each FIFO frame holds (RM 4.7; order in the FIFO is by register
+/// Which measurements each FIFO frame holds (RM 4.6; order in the FIFO is by register
 /// address: accel, temperature, gyro — RM 4.31).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -360,7 +360,7 @@ impl FifoFrame {
     }
 }
 
-/// Interrupt pin configuration (RM 4.15, 4.16).
+/// Interrupt pin configuration (RM 4.14, 4.15).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct InterruptConfig {
@@ -485,7 +485,7 @@ impl Config {
     }
 
     /// INT_ENABLE value: the interrupt configuration, plus FIFO_OFLOW_EN whenever the FIFO is
-    /// on, so that INT_STATUS.FIFO_OFLOW_INT reports an overflow (RM 4.16/4.17).
+    /// on, so that INT_STATUS.FIFO_OFLOW_INT reports an overflow (RM 4.15/4.16).
     pub const fn int_enable_bits(&self) -> u8 {
         self.interrupt.enable_bits()
             | if self.fifo.is_some() {
@@ -579,7 +579,7 @@ fn be(b: &[u8], i: usize) -> i16 {
     i16::from_be_bytes([b[i], b[i + 1]])
 }
 
-/// Decode the 14 bytes read from ACCEL_XOUT_H (RM 4.17-4.20, big-endian).
+/// Decode the 14 bytes read from ACCEL_XOUT_H (RM 4.17-4.19, big-endian).
 pub fn decode_measurements(b: &[u8; 14]) -> RawSample {
     RawSample {
         accel: [be(b, 0), be(b, 2), be(b, 4)],
@@ -612,7 +612,7 @@ pub fn decode_fifo_count(b: [u8; 2]) -> u16 {
     u16::from_be_bytes(b) & 0x1FFF
 }
 
-/// Interrupt status flags (RM 4.17).
+/// Interrupt status flags (RM 4.16).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct IntStatus {

@@ -2,18 +2,19 @@
 //!
 //! References:
 //! - QST "QMC5883L 3-Axis Magnetic Sensor" datasheet rev C (2016) (QMC-L), sections 9.1 (register
-//!   map) and 9.2 (register definition), 7.2 (typical application: SET/RESET period = 0x01).
-//! - QST "QMC5883P 3-Axis Magnetic Sensor" datasheet rev A (QMC-P), section 8 (registers).
+//!   map) and 9.2 (register definitions).
+//! - QST "QMC5883P 3-Axis Magnetic Sensor" datasheet rev A (QMC-P), register map and its
+//!   set-up example.
 //! - Honeywell HMC5883L datasheet (2013), register map table 2 (identification registers 10-12).
 
-/// QMC5883L 7-bit I²C address (QMC-L 9.1).
+/// QMC5883L 7-bit I²C address (QMC-L 9.1, register map).
 pub const QMC5883L_ADDR: u8 = 0x0D;
-/// QMC5883P 7-bit I²C address (QMC-P 8.1).
+/// QMC5883P 7-bit I²C address (QMC-P register map).
 pub const QMC5883P_ADDR: u8 = 0x2C;
 /// HMC5883L 7-bit I²C address (HMC5883L "I2C interface").
 pub const HMC5883L_ADDR: u8 = 0x1E;
 
-/// QMC5883L registers (QMC-L 9.1).
+/// QMC5883L registers (QMC-L 9.1, register map).
 pub mod reg_l {
     /// X LSB; X, Y, Z follow little-endian up to 0x05.
     pub const DATA_X_LSB: u8 = 0x00;
@@ -33,7 +34,7 @@ pub mod reg_l {
     pub const CHIP_ID_VALUE: u8 = 0xFF;
 }
 
-/// QMC5883P registers (QMC-P 8.2).
+/// QMC5883P registers (QMC-P register map).
 pub mod reg_p {
     /// Chip id, reads 0x80.
     pub const CHIP_ID: u8 = 0x00;
@@ -75,7 +76,7 @@ pub mod bits {
     pub const INT_DISABLE: u8 = 1 << 0;
 }
 
-/// Soft-reset recovery time in ms (QMC-L 8.2 gives a 350 µs power-on time; 1 ms margin,
+/// Soft-reset recovery time in ms (the QMC-L power-on time is 350 µs; 1 ms margin,
 /// and QMC-P gives no figure, so the same is used).
 pub const SOFT_RESET_DELAY_MS: u32 = 1;
 
@@ -158,7 +159,7 @@ pub enum Range {
 }
 
 impl Range {
-    /// Sensitivity in LSB per gauss (QMC-L 2.1 "Field Resolution"; QMC-P 2.1 "Sensitivity");
+    /// Sensitivity in LSB per gauss (QMC-L and QMC-P specification tables, "Sensitivity"/"Field Resolution");
     /// `None` if the variant lacks the range.
     pub const fn lsb_per_gauss(self, v: Variant) -> Option<f32> {
         match (v, self) {
@@ -239,7 +240,7 @@ pub struct Config {
     pub osr: Osr,
     /// Mode.
     pub mode: Mode,
-    /// QMC5883L SET/RESET period register 0x0B (QMC-L 9.2.4 recommends 0x01). Unused on the P.
+    /// QMC5883L SET/RESET period register 0x0B (QMC-L 9.2, SET/RESET period register 0BH: "recommended ... 0x01"). Unused on the P.
     pub set_reset_period: u8,
     /// QMC5883L: drive the DRDY pin (INT_ENB = 0). Unused on the P (no pin).
     pub drdy_pin: bool,
@@ -259,7 +260,7 @@ impl Default for Config {
 }
 
 impl Config {
-    /// QMC5883L CONTROL1 (0x09): OSR[7:6] RNG[5:4] ODR[3:2] MODE[1:0] (QMC-L 9.2.2).
+    /// QMC5883L CONTROL1 (0x09): OSR[7:6] RNG[5:4] ODR[3:2] MODE[1:0] (QMC-L 9.2, control register 1).
     /// `None` if the range is not available on the L.
     pub const fn control1_l(&self) -> Option<u8> {
         let rng = match self.range {
@@ -284,7 +285,7 @@ impl Config {
     }
 
     /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) [7:6], OSR1 [5:4], ODR [3:2],
-    /// MODE [1:0] with 0b11 = continuous, 0b00 = suspend (QMC-P 8.2).
+    /// MODE [1:0] with 0b11 = continuous, 0b00 = suspend (QMC-P register map).
     pub const fn control1_p(&self) -> u8 {
         let mode = match self.mode {
             Mode::Standby => 0,
@@ -352,7 +353,7 @@ pub fn decode_xyz(b: [u8; 6]) -> [i16; 3] {
     ]
 }
 
-/// QMC5883L temperature sensitivity, LSB/°C (QMC-L 9.2.1: "100 LSB/°C"; offset uncalibrated).
+/// QMC5883L temperature sensitivity, LSB/°C (QMC-L 9.2, temperature output registers: 100 LSB/°C; offset uncalibrated).
 pub const TEMP_LSB_PER_C: f32 = 100.0;
 
 /// Raw counts to microtesla: raw / (LSB/G) × 100 µT/G.
