@@ -406,46 +406,21 @@ fn deviation_of_phase(
 ) -> Result<Vec<Row>, AllanError> {
     let np = x.len() as u64;
     let ms = taus.ms(largest_m(stat, np))?;
+    // The sums are independent per m and dominate the cost: spread them over the cores.
+    let sums = par_map(&ms, |&m| stat_sum(x, m as usize, stat));
     let mut rows = Vec::with_capacity(ms.len());
     let mut last_alpha = 0;
-    for m in ms {
-        let mu = m as usize;
-        let mf = m as f64;
-        let (sum, n, denom) = match stat {
-            Stat::Adev => {
-                let (s, n) = diff_sum(x, mu, 2, mu);
-                (s, n, 2.0 * mf * mf)
-            }
-            Stat::Oadev => {
-                let (s, n) = diff_sum(x, mu, 2, 1);
-                (s, n, 2.0 * mf * mf)
-            }
-            Stat::Hdev => {
-                let (s, n) = diff_sum(x, mu, 3, mu);
-                (s, n, 6.0 * mf * mf)
-            }
-            Stat::Ohdev => {
-                let (s, n) = diff_sum(x, mu, 3, 1);
-                (s, n, 6.0 * mf * mf)
-            }
-            Stat::Mdev | Stat::Tdev => {
-                let (s, n) = mod_sum(x, mu);
-                (s, n, 2.0 * mf.powi(4))
-            }
-            Stat::Totdev => {
-                let (s, n) = tot_sum(x, mu);
-                (s, n, 2.0 * mf * mf)
-            }
-        };
+    for (m, (sum, n, denom)) in ms.into_iter().zip(sums) {
         if n < 2 {
             continue;
         }
+        let mf = m as f64;
         let mut dev = (sum / (denom * n as f64)).sqrt();
         let tau = mf * tau0;
         if stat == Stat::Tdev {
             dev *= tau / 3f64.sqrt();
         }
-        let alpha = identify(x, mu, stat).unwrap_or(last_alpha);
+        let alpha = identify(x, m as usize, stat).unwrap_or(last_alpha);
         last_alpha = alpha;
         let edf = edf_for(stat, alpha, mf, np as f64);
         let (lo, hi) = bounds(dev, edf);
@@ -464,6 +439,55 @@ fn deviation_of_phase(
     Ok(rows)
 }
 
+/// (sum of squared differences, number of terms, normaliser) of `stat` at `m`:
+/// the variance is `sum / (normaliser · n)`.
+fn stat_sum(x: &[f64], m: usize, stat: Stat) -> (f64, u64, f64) {
+    let mf = m as f64;
+    let ((s, n), denom) = match stat {
+        Stat::Adev => (diff_sum(x, m, 2, m), 2.0 * mf * mf),
+        Stat::Oadev => (diff_sum(x, m, 2, 1), 2.0 * mf * mf),
+        Stat::Hdev => (diff_sum(x, m, 3, m), 6.0 * mf * mf),
+        Stat::Ohdev => (diff_sum(x, m, 3, 1), 6.0 * mf * mf),
+        Stat::Mdev | Stat::Tdev => (mod_sum(x, m), 2.0 * mf.powi(4)),
+        Stat::Totdev => (tot_sum(x, m), 2.0 * mf * mf),
+    };
+    (s, n, denom)
+}
+
+/// `f` over `items` on all available cores (scoped threads, round-robin so that the costly
+/// small-m and cheap large-m items mix), results in input order.
+fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(items.len().max(1));
+    if threads <= 1 {
+        return items.iter().map(&f).collect();
+    }
+    let f = &f;
+    let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                s.spawn(move || {
+                    items
+                        .iter()
+                        .enumerate()
+                        .skip(t)
+                        .step_by(threads)
+                        .map(|(i, it)| (i, f(it)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().expect("worker panicked"))
+            .collect()
+    });
+    let mut out: Vec<(usize, R)> = parts.drain(..).flatten().collect();
+    out.sort_by_key(|(i, _)| *i);
+    out.into_iter().map(|(_, r)| r).collect()
+}
+
 fn bounds(dev: f64, edf: f64) -> (f64, f64) {
     if edf.is_finite() && edf > 0.0 {
         ci::chi2_bounds(dev, edf, ci::ONE_SIGMA)
@@ -479,14 +503,12 @@ fn bounds(dev: f64, edf: f64) -> (f64, f64) {
 fn identify(x: &[f64], m: usize, stat: Stat) -> Option<i32> {
     let d = stat.difference_order();
     let alpha = noise_id::acf_alpha(x, m, d).or_else(|| {
-        let (sa, na) = diff_sum(x, m, 2, 1);
-        if na == 0 || sa <= 0.0 {
-            return None;
-        }
-        let avar = sa / (2.0 * (m as f64).powi(2) * na as f64);
-        let (sm, nm) = mod_sum(x, m);
-        let rn = (nm > 0).then(|| sm / (2.0 * (m as f64).powi(4) * nm as f64) / avar);
-        noise_id::b1_alpha(x, m, rn)
+        noise_id::b1_alpha(x, m, || {
+            let (sa, na) = diff_sum(x, m, 2, 1);
+            let (sm, nm) = mod_sum(x, m);
+            (na > 0 && nm > 0 && sa > 0.0)
+                .then(|| (sm / (m as f64).powi(2) / nm as f64) / (sa / na as f64))
+        })
     });
     alpha.map(|a| a.clamp(2 - 2 * d as i32, 2))
 }

@@ -102,9 +102,10 @@ fn rn_theory(m: f64, alpha: i32) -> f64 {
 pub const B1_MIN_AVERAGES: usize = 10;
 
 /// B1 / R(n) identification for short series, given the phase `x` (Barnes' B1: the standard
-/// variance of the `m` averages over their non-overlapping Allan variance); `rn` is the measured MVAR/AVAR at `m`.
+/// variance of the `m` averages over their non-overlapping Allan variance); `rn` computes the
+/// measured MVAR/AVAR at `m`, needed only to split white from flicker PM.
 /// `None` with fewer than [`B1_MIN_AVERAGES`] averages.
-pub fn b1_alpha(x: &[f64], m: usize, rn: Option<f64>) -> Option<i32> {
+pub fn b1_alpha(x: &[f64], m: usize, rn: impl FnOnce() -> Option<f64>) -> Option<i32> {
     let x = block_means(x, m);
     if x.len() < B1_MIN_AVERAGES {
         return None;
@@ -128,7 +129,7 @@ pub fn b1_alpha(x: &[f64], m: usize, rn: Option<f64>) -> Option<i32> {
         }
     }
     Some(match mu {
-        -2 => match rn {
+        -2 => match rn() {
             Some(r) if m > 1 => {
                 let bound = (rn_theory(m as f64, 2) * rn_theory(m as f64, 1)).sqrt();
                 if r < bound {
