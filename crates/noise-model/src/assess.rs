@@ -15,7 +15,7 @@
 //! Both rates were chosen so that control data (exactly the fitted model) are passed; the control
 //! tests in `tests/` check this over many seeds and parameter sets.
 use crate::fit::Fit;
-use crate::special::{chi2_sf, normal_quantile};
+use crate::special::{chi2_cdf, chi2_sf, normal_quantile};
 
 /// Global false-alarm probability of the χ² test.
 pub const P_GLOBAL: f64 = 1e-3;
@@ -38,6 +38,8 @@ pub struct TauRange {
     pub sign: i32,
     /// Largest |r| in the range.
     pub worst: f64,
+    /// Largest |z| in the range.
+    pub worst_z: f64,
 }
 
 /// The assessment of a fit.
@@ -47,10 +49,14 @@ pub struct Assessment {
     pub residuals: Vec<f64>,
     /// Runs of points with |r| > 1 (outside the 68.3 % interval), in τ order.
     pub outside: Vec<TauRange>,
-    /// Runs that contain a significant point (|r| > `threshold`), which make the verdict fail.
+    /// Runs that contain a significant point (|z| > `threshold`), which make the verdict fail.
     pub failing: Vec<TauRange>,
-    /// The per-point significance threshold on |r|.
+    /// Exact z-scores, one per point (see module docs).
+    pub z: Vec<f64>,
+    /// The per-point significance threshold on |z|.
     pub threshold: f64,
+    /// Σz² and its degrees of freedom n − p.
+    pub sum_z2: f64,
     /// p-value of the global χ² test (after the correlation inflation).
     pub p_value: f64,
     /// RMS of ln(σ̂/σ_model) — the "log-residual" of the step report.
@@ -71,6 +77,21 @@ pub fn residual(dev: f64, lo: f64, hi: f64, model_dev: f64) -> f64 {
     }
 }
 
+/// Exact z-score of a measured deviation with `edf` degrees of freedom against a model deviation.
+pub fn z_score(dev: f64, edf: f64, model_dev: f64) -> f64 {
+    if !(model_dev > 0.0) {
+        return f64::INFINITY;
+    }
+    let x = edf * (dev / model_dev).powi(2);
+    let c = chi2_cdf(x, edf);
+    let z = if c <= 0.5 {
+        normal_quantile(c)
+    } else {
+        -normal_quantile(chi2_sf(x, edf))
+    };
+    z.clamp(-38.0, 38.0)
+}
+
 /// Assess a fit.
 pub fn assess(fit: &Fit) -> Assessment {
     let n = fit.points.len();
@@ -80,6 +101,12 @@ pub fn assess(fit: &Fit) -> Assessment {
         .zip(&fit.model_avar)
         .map(|(p, &m)| residual(p.dev, p.lo, p.hi, m.max(0.0).sqrt()))
         .collect();
+    let z: Vec<f64> = fit
+        .points
+        .iter()
+        .zip(&fit.model_avar)
+        .map(|(p, &m)| z_score(p.dev, p.edf, m.max(0.0).sqrt()))
+        .collect();
     let threshold = normal_quantile(1.0 - P_LOCAL / (2.0 * n as f64));
     let mut outside: Vec<TauRange> = Vec::new();
     let mut j = 0;
@@ -87,9 +114,10 @@ pub fn assess(fit: &Fit) -> Assessment {
         if residuals[j].abs() > 1.0 {
             let sign = if residuals[j] > 0.0 { 1 } else { -1 };
             let first = j;
-            let mut worst: f64 = 0.0;
+            let (mut worst, mut worst_z): (f64, f64) = (0.0, 0.0);
             while j < n && residuals[j].abs() > 1.0 && (residuals[j] > 0.0) == (sign > 0) {
                 worst = worst.max(residuals[j].abs());
+                worst_z = worst_z.max(z[j].abs());
                 j += 1;
             }
             outside.push(TauRange {
@@ -99,6 +127,7 @@ pub fn assess(fit: &Fit) -> Assessment {
                 last: j - 1,
                 sign,
                 worst,
+                worst_z,
             });
         } else {
             j += 1;
@@ -107,9 +136,10 @@ pub fn assess(fit: &Fit) -> Assessment {
     let failing: Vec<TauRange> = outside
         .iter()
         .copied()
-        .filter(|r| r.worst > threshold)
+        .filter(|r| r.worst_z > threshold)
         .collect();
-    let p_value = chi2_sf(fit.chi2 / CORRELATION_INFLATION, fit.dof as f64);
+    let sum_z2: f64 = z.iter().map(|v| v * v).sum();
+    let p_value = chi2_sf(sum_z2 / CORRELATION_INFLATION, fit.dof as f64);
     let rms_log_residual = (fit
         .points
         .iter()
@@ -123,7 +153,9 @@ pub fn assess(fit: &Fit) -> Assessment {
         residuals,
         outside,
         failing,
+        z,
         threshold,
+        sum_z2,
         p_value,
         rms_log_residual,
         adequate,

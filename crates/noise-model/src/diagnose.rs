@@ -11,7 +11,7 @@
 use crate::assess::{assess, Assessment, TauRange, CORRELATION_INFLATION};
 use crate::effect::{Effect, ALL_EFFECTS};
 use crate::fit::{fit, Fit, FitOptions};
-use crate::psd::Line;
+use crate::psd::{default_segment, find_line, line_near, welch, Line, LineTest};
 use crate::special::chi2_sf;
 
 /// Significance level for naming a candidate.
@@ -28,6 +28,9 @@ pub struct Candidate {
     /// p-value of the nested test (small = the candidate explains real structure).
     pub p_value: f64,
     pub significant: bool,
+    /// For a sinusoid with the raw data available: the whole-record test for a line near the
+    /// fitted frequency. A sinusoid without a line is not named.
+    pub line_test: Option<LineTest>,
 }
 
 /// The diagnosis of a fit.
@@ -44,6 +47,8 @@ pub struct Diagnosis {
     pub evidence: Vec<String>,
     /// All candidates tried, best first.
     pub candidates: Vec<Candidate>,
+    /// The strongest significant line of the Welch PSD, when the raw data were given.
+    pub line: Option<Line>,
 }
 
 /// Least-squares slope of ln σ against ln τ over points `first..=last` (widened to ≥ 2 points).
@@ -155,6 +160,13 @@ fn effect_evidence(c: &Candidate, line: Option<&Line>) -> Vec<String> {
                         format!(": {}", nulls.join(", "))
                     }
                 ));
+                if let Some(lt) = c.line_test {
+                    ev.push(format!(
+                        "the periodogram of the whole record has its strongest bin near f at \
+                         {:.4} Hz, {:.1}× the local background (p = {:.1e} over {} bins searched)",
+                        lt.freq_hz, lt.ratio, lt.p_value, lt.bins
+                    ));
+                }
                 match line {
                     Some(l) => {
                         let agree = (l.freq_hz - f).abs() <= 0.05 * f.max(l.freq_hz);
@@ -195,9 +207,15 @@ fn effect_evidence(c: &Candidate, line: Option<&Line>) -> Vec<String> {
     ev
 }
 
-/// Diagnose a fit. `line` is the strongest PSD line of the raw data, when available; its frequency
-/// is also offered to the sinusoid candidate's search.
-pub fn diagnose(base: &Fit, base_a: &Assessment, line: Option<&Line>) -> Diagnosis {
+/// Diagnose a fit. `data` is the raw rate record and its rate [Hz], when available: its Welch PSD
+/// line (if any) seeds the sinusoid search and is reported, and a sinusoid candidate is checked for
+/// a line in the whole-record periodogram.
+pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) -> Diagnosis {
+    let line: Option<Line> = data.and_then(|(y, fs)| {
+        let p = welch(y, fs, default_segment(y.len()))?;
+        find_line(&p)
+    });
+    let line = line.as_ref();
     let union = |rs: &[TauRange]| {
         if rs.is_empty() {
             None
@@ -223,11 +241,12 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, line: Option<&Line>) -> Diagnos
             ),
             evidence: residual_evidence(base, base_a),
             candidates: Vec::new(),
+            line: line.copied(),
         };
     }
     let opts = FitOptions {
         freq_hint: line.map(|l| l.freq_hz),
-        tau_c_hint: None,
+        ..FitOptions::default()
     };
     let have = base.effects();
     let mut candidates: Vec<Candidate> = ALL_EFFECTS
@@ -243,12 +262,18 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, line: Option<&Line>) -> Diagnos
             let s = (f.chi2_dof()).max(CORRELATION_INFLATION);
             let p = chi2_sf(delta.max(0.0) / s, k as f64);
             let detected = f.term(e).is_some_and(|t| t.detected);
+            let line_test = match (e, data, f.term(e).and_then(|t| t.theta)) {
+                (Effect::Sinusoid, Some((y, fs)), Some(freq)) => line_near(y, fs, freq, 0.15),
+                _ => None,
+            };
+            let line_ok = line_test.is_none_or(|lt| lt.p_value < P_CANDIDATE);
             Some(Candidate {
                 effect: e,
                 delta_chi2: delta,
                 extra_params: k,
                 p_value: p,
-                significant: p < P_CANDIDATE && detected,
+                significant: p < P_CANDIDATE && detected && line_ok,
+                line_test,
                 fit: f,
                 assessment: a,
             })
@@ -319,6 +344,7 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, line: Option<&Line>) -> Diagnos
         explanation,
         evidence,
         candidates,
+        line: line.copied(),
     }
 }
 

@@ -60,6 +60,9 @@ pub struct FitOptions {
     pub freq_hint: Option<f64>,
     /// A correlation time [s] to include in the Markov search.
     pub tau_c_hint: Option<f64>,
+    /// Fix the sinusoid frequency (value [Hz], 1σ [Hz]) instead of searching it, e.g. to the
+    /// periodogram peak, which resolves f far better than octave-spaced Allan points.
+    pub freq_fixed: Option<(f64, f64)>,
 }
 
 /// A fitted term.
@@ -334,12 +337,17 @@ impl Problem<'_> {
                 16.0,
                 opts.tau_c_hint,
             ),
-            Effect::Sinusoid => (
-                0.25 / tmax,
-                0.5 / self.tau0.max(tmin * 1e-3),
-                80.0,
-                opts.freq_hint,
-            ),
+            Effect::Sinusoid => {
+                if let Some((f, _)) = opts.freq_fixed {
+                    return vec![f];
+                }
+                (
+                    0.25 / tmax,
+                    0.5 / self.tau0.max(tmin * 1e-3),
+                    80.0,
+                    opts.freq_hint,
+                )
+            }
             _ => return vec![f64::NAN],
         };
         let hi = hi * 0.999;
@@ -373,6 +381,10 @@ impl Problem<'_> {
             }
         }
         let i = best.1;
+        if g.len() == 1 {
+            thetas[k] = g[0];
+            return best.0;
+        }
         let (mut a, mut b) = (
             g[i.saturating_sub(1)].ln(),
             g[(i + 1).min(g.len() - 1)].ln(),
@@ -452,7 +464,11 @@ pub fn fit(
         .iter()
         .map(|e| match e {
             Effect::Markov => opts.tau_c_hint.unwrap_or(1.0),
-            Effect::Sinusoid => opts.freq_hint.unwrap_or(0.1),
+            Effect::Sinusoid => opts
+                .freq_fixed
+                .map(|f| f.0)
+                .or(opts.freq_hint)
+                .unwrap_or(0.1),
             _ => f64::NAN,
         })
         .collect();
@@ -507,7 +523,8 @@ pub fn fit(
         col_ids.push(Col::Coef(k));
     }
     for &k in &nl {
-        if sol.coef[k] > 0.0 {
+        let fixed = effects[k] == Effect::Sinusoid && opts.freq_fixed.is_some();
+        if sol.coef[k] > 0.0 && !fixed {
             let h = 1e-4;
             let col = points
                 .iter()
@@ -579,6 +596,13 @@ pub fn fit(
             Col::Theta(k) => terms[k].theta_sigma = Some(var_of(a).sqrt()),
         }
     }
+    if let Some((_, fs)) = opts.freq_fixed {
+        for t in &mut terms {
+            if t.effect == Effect::Sinusoid && t.theta.is_some() {
+                t.theta_sigma = Some(fs);
+            }
+        }
+    }
     for t in &mut terms {
         t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
         if !t.detected {
@@ -593,4 +617,82 @@ pub fn fit(
         chi2: sol.chi2,
         dof,
     })
+}
+
+impl Point {
+    /// Convert deviation rows of the `allan` crate (OADEV is what the fit expects), in τ order.
+    ///
+    /// Rows whose EDF or bounds are not finite cannot be weighted and are left out (the second
+    /// value counts them). EDF guard: for the noises of an IMU rate channel (α ≤ 0 beyond the
+    /// first octaves) the EDF of the overlapping estimator falls as τ grows; a long-τ row with few
+    /// clusters whose noise type is mis-identified (e.g. as white PM) can get an EDF many times
+    /// too large, which would make the fit and the verdict trust it blindly. The EDF is therefore
+    /// capped at the running minimum of the shorter-τ rows, and the 68.3 % bounds recomputed from
+    /// the capped EDF (`allan::ci::chi2_bounds`). The third value counts the capped rows.
+    pub fn from_rows(rows: &[allan::Row]) -> (Vec<Point>, usize, usize) {
+        let mut skipped = 0;
+        let mut capped = 0;
+        let mut min_edf = f64::INFINITY;
+        let mut pts = Vec::new();
+        for r in rows {
+            let ok = r.tau > 0.0
+                && r.dev > 0.0
+                && r.dev.is_finite()
+                && r.edf.is_finite()
+                && r.edf > 0.0
+                && r.lo.is_finite()
+                && r.hi.is_finite();
+            if !ok {
+                skipped += 1;
+                continue;
+            }
+            let (edf, lo, hi) = if r.edf > min_edf {
+                capped += 1;
+                let (lo, hi) = allan::ci::chi2_bounds(r.dev, min_edf, allan::ci::ONE_SIGMA);
+                (min_edf, lo, hi)
+            } else {
+                (r.edf, r.lo, r.hi)
+            };
+            min_edf = min_edf.min(edf);
+            pts.push(Point {
+                tau: r.tau,
+                dev: r.dev,
+                edf,
+                lo,
+                hi,
+            });
+        }
+        (pts, skipped, capped)
+    }
+}
+/// Fit with the raw data at hand: as [`fit`], and when the model has a sinusoid whose frequency
+/// shows a line in the whole-record periodogram (p < 1e-3, [`crate::psd::line_near`] within
+/// ±15 %), refit with f fixed at the periodogram peak (1σ = half a periodogram bin, f_s/(2N)).
+pub fn fit_with_data(
+    points: &[Point],
+    tau0: f64,
+    effects: &[Effect],
+    data: Option<(&[f64], f64)>,
+) -> Result<Fit, FitError> {
+    let first = fit(points, tau0, effects, &FitOptions::default())?;
+    let (Some((y, fs)), Some(f)) = (data, first.term(Effect::Sinusoid).and_then(|t| t.theta))
+    else {
+        return Ok(first);
+    };
+    match crate::psd::line_near(y, fs, f, 0.15) {
+        Some(lt) if lt.p_value < 1e-3 => {
+            let half_bin = fs / (2.0 * y.len().next_power_of_two() as f64);
+            let opts = FitOptions {
+                freq_fixed: Some((lt.freq_hz, half_bin)),
+                ..FitOptions::default()
+            };
+            let second = fit(points, tau0, effects, &opts)?;
+            Ok(if second.chi2 <= first.chi2 * 1.5 + 10.0 {
+                second
+            } else {
+                first
+            })
+        }
+        _ => Ok(first),
+    }
 }

@@ -32,6 +32,6 @@ pub mod special;
 pub use assess::{assess, Assessment, TauRange};
 pub use diagnose::{diagnose, step, Candidate, Diagnosis, Step, StepSide};
 pub use effect::{Effect, UnitFamily, ALL_EFFECTS, DEFAULT_TERMS};
-pub use fit::{fit, Fit, FitError, FitOptions, ParamValue, Point, TermFit};
+pub use fit::{fit, fit_with_data, Fit, FitError, FitOptions, ParamValue, Point, TermFit};
 pub use practical::{recalibration, KalibrImu, Recalibration};
-pub use psd::{find_line, welch, Line, Psd};
+pub use psd::{find_line, line_near, welch, Line, LineTest, Psd};

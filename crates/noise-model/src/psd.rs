@@ -120,8 +120,9 @@ pub fn default_segment(n: usize) -> usize {
     s
 }
 
-/// The strongest significant line of the PSD, if any (bins below 4·df are skipped: the flicker
-/// and random-walk rise near DC is not a line).
+/// The strongest significant line of the PSD, if any. The background at each bin is a local power
+/// law fitted robustly to ±16 neighbours (the line's own ±2 bins excluded); bins below 6·df are
+/// not searched.
 pub fn find_line(psd: &Psd) -> Option<Line> {
     let p = &psd.density;
     let nb = p.len();
@@ -134,19 +135,39 @@ pub fn find_line(psd: &Psd) -> Option<Line> {
     let med_corr = (1.0 - 2.0 / (9.0 * nu)).powi(3);
     let threshold = chi2_quantile(1.0 - 1e-3 / nb as f64, nu) / nu;
     let mut best: Option<(usize, f64, f64)> = None;
-    for k in 4..nb - 1 {
+    let med = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    for k in 6..nb - 1 {
         let lo = k.saturating_sub(half).max(1);
         let hi = (k + half).min(nb - 1);
-        let mut nbh: Vec<f64> = (lo..=hi)
-            .filter(|&i| i + 2 < k || i > k + 2)
-            .map(|i| p[i])
-            .collect();
-        if nbh.len() < 8 {
+        let left: Vec<usize> = (lo..k.saturating_sub(2)).collect();
+        let right: Vec<usize> = (k + 3..=hi).collect();
+        if left.len() < 3 || right.len() < 3 || p[k] <= 0.0 {
             continue;
         }
-        nbh.sort_by(f64::total_cmp);
-        let bg = nbh[nbh.len() / 2] / med_corr;
-        if bg <= 0.0 {
+        // Local power-law background: slope of ln P on ln f from the medians of the two sides,
+        // then the median of the de-trended neighbours (robust against the line itself and
+        // against the steep flicker/random-walk rise near DC).
+        let lnf = |i: usize| (i as f64).ln();
+        let lnp = |i: usize| p[i].max(1e-300).ln();
+        let (pl, pr) = (
+            med(&mut left.iter().map(|&i| lnp(i)).collect()),
+            med(&mut right.iter().map(|&i| lnp(i)).collect()),
+        );
+        let (fl, fr) = (
+            med(&mut left.iter().map(|&i| lnf(i)).collect()),
+            med(&mut right.iter().map(|&i| lnf(i)).collect()),
+        );
+        let slope = if fr > fl { (pr - pl) / (fr - fl) } else { 0.0 };
+        let mut detr: Vec<f64> = left
+            .iter()
+            .chain(&right)
+            .map(|&i| lnp(i) - slope * (lnf(i) - lnf(k)))
+            .collect();
+        let bg = med(&mut detr).exp() / med_corr;
+        if !(bg > 0.0) {
             continue;
         }
         let r = p[k] / bg;
@@ -211,5 +232,103 @@ mod tests {
         let line = find_line(&psd).expect("line");
         assert!((line.freq_hz - 7.3).abs() < psd.df, "{line:?}");
         assert!((line.amplitude - 0.2).abs() < 0.05, "{line:?}");
+        let t = line_near(&y, 100.0, 7.0, 0.1).unwrap();
+        assert!(t.p_value < 1e-6 && (t.freq_hz - 7.3).abs() < 0.01, "{t:?}");
+        // no line near 20 Hz: the p-value is not small
+        let t = line_near(&y, 100.0, 20.0, 0.1).unwrap();
+        assert!(t.p_value > 1e-3, "{t:?}");
     }
+}
+
+/// The result of testing the whole record for a line near a given frequency.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LineTest {
+    /// Frequency of the strongest bin in the search window [Hz].
+    pub freq_hz: f64,
+    /// That bin over the local power-law background.
+    pub ratio: f64,
+    /// Probability of a ratio this large or larger from noise alone, Bonferroni-corrected over
+    /// the bins searched (single periodogram bins are χ²₂/2, i.e. exponential).
+    pub p_value: f64,
+    /// Bins searched.
+    pub bins: usize,
+}
+
+/// Test the whole record (Hann window, one periodogram, resolution f_s/N) for a line within
+/// `f·(1 ± rel)` (at least ±3 bins). The background is a power law fitted robustly (as in
+/// [`find_line`]) to 3–48 bins on each side of the window. This resolves far lower frequencies
+/// than the Welch average and is the spectral check on a sinusoid found in the Allan fit.
+pub fn line_near(y: &[f64], fs: f64, f: f64, rel: f64) -> Option<LineTest> {
+    let n = y.len();
+    if n < 64 || !(f > 0.0) || !(fs > 0.0) {
+        return None;
+    }
+    let len = n.next_power_of_two();
+    let mean = y.iter().sum::<f64>() / n as f64;
+    let mut re = vec![0.0; len];
+    let mut im = vec![0.0; len];
+    for (i, v) in y.iter().enumerate() {
+        let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / n as f64).cos();
+        re[i] = (v - mean) * w;
+    }
+    fft(&mut re, &mut im);
+    let df = fs / len as f64;
+    let p: Vec<f64> = (0..=len / 2)
+        .map(|k| re[k] * re[k] + im[k] * im[k])
+        .collect();
+    let kc = f / df;
+    let half = (kc * rel).max(3.0);
+    let lo = (kc - half).floor().max(1.0) as usize;
+    let hi = ((kc + half).ceil() as usize).min(p.len() - 1);
+    if lo >= hi {
+        return None;
+    }
+    let left: Vec<usize> = (lo.saturating_sub(48).max(1)..lo.saturating_sub(3)).collect();
+    let right: Vec<usize> = (hi + 3..=(hi + 48).min(p.len() - 1)).collect();
+    if left.len() + right.len() < 16 {
+        return None;
+    }
+    let med = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let lnf = |i: usize| (i as f64).ln();
+    let lnp = |i: usize| p[i].max(1e-300).ln();
+    let slope = if left.len() >= 3 && right.len() >= 3 {
+        let (pl, pr) = (
+            med(&mut left.iter().map(|&i| lnp(i)).collect()),
+            med(&mut right.iter().map(|&i| lnp(i)).collect()),
+        );
+        let (fl, fr) = (
+            med(&mut left.iter().map(|&i| lnf(i)).collect()),
+            med(&mut right.iter().map(|&i| lnf(i)).collect()),
+        );
+        (pr - pl) / (fr - fl)
+    } else {
+        0.0
+    };
+    let kref = kc.max(1.0).ln();
+    let mut detr: Vec<f64> = left
+        .iter()
+        .chain(&right)
+        .map(|&i| lnp(i) - slope * (lnf(i) - kref))
+        .collect();
+    // median of an exponential variable is ln 2 times its mean
+    let bg0 = med(&mut detr).exp() / std::f64::consts::LN_2;
+    let (mut best_k, mut best_r) = (lo, 0.0);
+    for (k, &pk) in p.iter().enumerate().take(hi + 1).skip(lo) {
+        let bg = bg0 * ((lnf(k) - kref) * slope).exp();
+        let r = pk / bg;
+        if r > best_r {
+            best_r = r;
+            best_k = k;
+        }
+    }
+    let bins = hi - lo + 1;
+    Some(LineTest {
+        freq_hz: best_k as f64 * df,
+        ratio: best_r,
+        p_value: (bins as f64 * (-best_r).exp()).min(1.0),
+        bins,
+    })
 }
