@@ -117,15 +117,20 @@ impl Mpu6050Model {
         self.regs[0x0D..0x11].copy_from_slice(&trim);
     }
 
+    /// Set the MPU-6500-family OTP self-test codes: SELF_TEST_X/Y/Z_GYRO (0x00..0x02) and
+    /// SELF_TEST_X/Y/Z_ACCEL (0x0D..0x0F).
+    pub fn set_otp_6500(&mut self, gyro: [u8; 3], accel: [u8; 3]) {
+        self.regs[0x00..0x03].copy_from_slice(&gyro);
+        self.regs[0x0D..0x10].copy_from_slice(&accel);
+    }
+
     fn power_on_defaults(&mut self) {
-        let trim = [
-            self.regs[0x0D],
-            self.regs[0x0E],
-            self.regs[0x0F],
-            self.regs[0x10],
-        ];
+        // Factory trim / OTP registers survive a reset.
+        let mut trim = [0u8; 0x11];
+        trim.copy_from_slice(&self.regs[..0x11]);
         self.regs = [0; 128];
-        self.regs[0x0D..0x11].copy_from_slice(&trim);
+        self.regs[..0x03].copy_from_slice(&trim[..0x03]);
+        self.regs[0x0D..0x11].copy_from_slice(&trim[0x0D..0x11]);
         self.regs[PWR_MGMT_1 as usize] = 0x40;
         self.fifo.clear();
         self.next_sample_ns = None;

@@ -443,12 +443,107 @@ fn fifo_count_masks_to_13_bits() {
 }
 
 #[test]
-fn self_test_refused_on_clones() {
-    let exp = [T::write_read(A, vec![0x75], vec![0x70])];
+fn self_test_refused_on_icm_parts() {
+    let exp = [T::write_read(A, vec![0x75], vec![0x98])];
     let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0Low);
-    assert_eq!(d.probe(), Ok(ChipId::Mpu6500));
+    assert_eq!(d.probe(), Ok(ChipId::Icm20689));
     assert_eq!(d.self_test(&mut NoopDelay), Err(Error::SelfTestUnsupported));
     d.release().done();
+}
+
+fn sample_bytes(accel: [i16; 3], gyro: [i16; 3]) -> Vec<u8> {
+    accel
+        .iter()
+        .chain([0i16].iter())
+        .chain(gyro.iter())
+        .flat_map(|v| v.to_be_bytes())
+        .collect()
+}
+
+#[test]
+fn self_test_sequence_mpu6050() {
+    // RM 4.1: GYRO_CONFIG = XG/YG/ZG_ST | FS_SEL 0 = 0xE0; ACCEL_CONFIG = XA/YA/ZA_ST | AFS_SEL 2
+    // (±8 g) = 0xF0; wait, average; self-test off (0x00, 0x10); wait, average; read the four
+    // SELF_TEST registers; restore the seed ranges (0x00, 0x08).
+    // Trim codes 1 everywhere: FT gyro = 3275 LSB (−3275 for Y), FT accel = 1392.64 LSB.
+    let on = sample_bytes([1393, 1393, 1393 + 4096], [3275, -3275, 3275]);
+    let off = sample_bytes([0, 0, 4096], [0, 0, 0]);
+    let mut exp = vec![
+        T::write_read(A, vec![0x75], vec![0x68]),
+        T::write(A, vec![0x1B, 0xE0]),
+        T::write(A, vec![0x1C, 0xF0]),
+    ];
+    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], on.clone())));
+    exp.push(T::write(A, vec![0x1B, 0x00]));
+    exp.push(T::write(A, vec![0x1C, 0x10]));
+    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], off.clone())));
+    exp.push(T::write_read(A, vec![0x0D], vec![0x01, 0x01, 0x01, 0x15]));
+    exp.push(T::write(A, vec![0x1B, 0x00]));
+    exp.push(T::write(A, vec![0x1C, 0x08]));
+    let mut delays = vec![D::delay_ms(250)];
+    delays.extend((0..16).map(|_| D::delay_ms(2)));
+    delays.push(D::delay_ms(250));
+    delays.extend((0..16).map(|_| D::delay_ms(2)));
+    let r = both(
+        &exp,
+        |d| {
+            d.probe().unwrap();
+            let mut delay = CheckedDelay::new(&delays);
+            let r = d.self_test(&mut delay).unwrap();
+            delay.done();
+            r
+        },
+        async |d| {
+            d.probe().await.unwrap();
+            let mut delay = CheckedDelay::new(&delays);
+            let r = d.self_test(&mut delay).await.unwrap();
+            delay.done();
+            r
+        },
+    );
+    // Gyro exactly at trim: 0 %. Accel 1393 vs 1392.64: +0.026 % (tolerance 0.001 points).
+    assert_eq!(r.gyro_change_pct, [0.0; 3]);
+    for c in r.accel_change_pct {
+        assert!((c - 0.0259).abs() < 1e-3, "{r:?}");
+    }
+    assert_eq!(r.gyro_limits_pct, [-14.0, 14.0]);
+    assert!(r.passed());
+}
+
+#[test]
+fn self_test_sequence_mpu6500() {
+    // AN-MPU-6500A-02: ±250 °/s (0xE0 with ST bits), ±2 g (0xE0 with ST bits); OTP codes from
+    // 0x00..0x02 (gyro) and 0x0D..0x0F (accel). Code 1: ST_OTP = 2620 LSB.
+    // Responses: gyro 1310 (ratio 0.5 → −50 %, on the limit), accel 3930 (ratio 1.5 → +50 %).
+    let on = sample_bytes([3930, 3930, 3930 + 16384], [1310, 2620, 2620]);
+    let off = sample_bytes([0, 0, 16384], [0, 0, 0]);
+    let mut exp = vec![
+        T::write_read(A, vec![0x75], vec![0x70]),
+        T::write(A, vec![0x1B, 0xE0]),
+        T::write(A, vec![0x1C, 0xE0]),
+    ];
+    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], on.clone())));
+    exp.push(T::write(A, vec![0x1B, 0x00]));
+    exp.push(T::write(A, vec![0x1C, 0x00]));
+    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], off.clone())));
+    exp.push(T::write_read(A, vec![0x00], vec![1, 1, 1]));
+    exp.push(T::write_read(A, vec![0x0D], vec![1, 1, 1]));
+    exp.push(T::write(A, vec![0x1B, 0x00]));
+    exp.push(T::write(A, vec![0x1C, 0x08]));
+    let r = both(
+        &exp,
+        |d| {
+            d.probe().unwrap();
+            d.self_test(&mut NoopDelay).unwrap()
+        },
+        async |d| {
+            d.probe().await.unwrap();
+            d.self_test(&mut NoopDelay).await.unwrap()
+        },
+    );
+    assert_eq!(r.gyro_change_pct, [-50.0, 0.0, 0.0]);
+    assert_eq!(r.accel_change_pct, [50.0, 50.0, 50.0]);
+    assert!(r.passed(), "limits are inclusive: {r:?}");
 }
 
 #[test]

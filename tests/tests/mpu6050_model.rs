@@ -300,3 +300,37 @@ fn wrong_chip_on_model() {
         Err(Error::Bus(SimError::Nack(NoAcknowledgeSource::Address)))
     ));
 }
+
+/// MPU-6500 on the model: OTP codes 1 → ST_OTP 2620 LSB (AN-MPU-6500A-02).
+fn otp_bus(gyro_factor: [f64; 3], accel_factor: [f64; 3]) -> SimBus {
+    let bus = bus_with(0x70);
+    bus.mpu(|m| {
+        m.motion = Box::new(|_| Motion::default());
+        m.set_otp_6500([1, 1, 1], [1, 1, 1]);
+        m.gyro_self_test_lsb = gyro_factor.map(|f| 2620.0 * f);
+        m.accel_self_test_lsb = accel_factor.map(|f| 2620.0 * f);
+    });
+    bus
+}
+
+#[test]
+fn self_test_mpu6500_family() {
+    let bus = otp_bus([1.2, 0.6, 1.0], [1.3, 0.7, 1.0]);
+    let mut d = init(&bus, &Config::default());
+    assert_eq!(d.chip(), Some(ChipId::Mpu6500));
+    let r = d.self_test(&mut bus.delay()).unwrap();
+    // Responses are whole LSB of 2620·factor, exact here; tolerance 0.01 points for f32.
+    let want_g = [20.0, -40.0, 0.0];
+    let want_a = [30.0, -30.0, 0.0];
+    for i in 0..3 {
+        assert!((r.gyro_change_pct[i] - want_g[i]).abs() < 0.01, "{r:?}");
+        assert!((r.accel_change_pct[i] - want_a[i]).abs() < 0.01, "{r:?}");
+    }
+    assert!(r.passed());
+    // A weak gyro (ratio 0.4) and a strong accelerometer (ratio 1.6) each fail.
+    for (g, a) in [([0.4, 1.0, 1.0], [1.0; 3]), ([1.0; 3], [1.0, 1.6, 1.0])] {
+        let bus = otp_bus(g, a);
+        let mut d = init(&bus, &Config::default());
+        assert!(!d.self_test(&mut bus.delay()).unwrap().passed());
+    }
+}

@@ -221,17 +221,21 @@ macro_rules! drivers {
                 Ok((a.map(|v| v as f32 / n), g.map(|v| v as f32 / n)))
             }
 
-            /// Factory self-test (RM 4.1, PS 6.1/6.2), genuine MPU-6050 only: outputs are
-            /// averaged with self-test on and off at ±250 °/s and ±8 g, the difference is
-            /// compared with the factory trim from SELF_TEST_X..A. The configured ranges are
-            /// restored afterwards. Takes about 0.6 s.
+            /// Factory self-test. MPU-6050 (RM 4.1, PS 6.1/6.2): outputs averaged with
+            /// self-test on and off at ±250 °/s and ±8 g, compared with the factory trim from
+            /// SELF_TEST_X..A. MPU-6500 family (AN-MPU-6500A-02): at ±250 °/s and ±2 g, compared
+            /// with the OTP codes in registers 0x00-0x02 and 0x0D-0x0F. The ICM parts return
+            /// [`m::Error::SelfTestUnsupported`]. The configured ranges are restored
+            /// afterwards; the FIFO then holds self-test frames (call `reset_fifo`). About 0.6 s.
             pub $($async)? fn self_test<D: $Delay>(&mut self, delay: &mut D) -> Result<SelfTestReport, MpuError<I2C>> {
                 let chip = self.chip.ok_or(m::Error::NotConfigured)?;
-                if chip.family() != Family::Mpu6050 {
-                    return Err(m::Error::SelfTestUnsupported);
-                }
+                let a_range = match chip.family() {
+                    Family::Mpu6050 => m::AccelRange::G8,
+                    Family::Mpu6500 => m::AccelRange::G2,
+                    Family::Icm => return Err(m::Error::SelfTestUnsupported),
+                };
                 let g = m::GyroRange::Dps250.bits();
-                let a = m::AccelRange::G8.bits();
+                let a = a_range.bits();
                 self.write_reg(mr::GYRO_CONFIG, g | mb::SELF_TEST_XYZ) $(.$await)? ?;
                 self.write_reg(mr::ACCEL_CONFIG, a | mb::SELF_TEST_XYZ) $(.$await)? ?;
                 delay.delay_ms(m::SELF_TEST_SETTLE_MS) $(.$await)?;
@@ -240,11 +244,20 @@ macro_rules! drivers {
                 self.write_reg(mr::ACCEL_CONFIG, a) $(.$await)? ?;
                 delay.delay_ms(m::SELF_TEST_SETTLE_MS) $(.$await)?;
                 let (off_a, off_g) = self.average(delay) $(.$await)? ?;
-                let mut trim = [0u8; 4];
-                self.read_regs(mr::SELF_TEST_X, &mut trim) $(.$await)? ?;
+                let report = if chip.family() == Family::Mpu6050 {
+                    let mut trim = [0u8; 4];
+                    self.read_regs(mr::SELF_TEST_X, &mut trim) $(.$await)? ?;
+                    m::self_test_report(on_a, on_g, off_a, off_g, trim)
+                } else {
+                    let mut gc = [0u8; 3];
+                    let mut ac = [0u8; 3];
+                    self.read_regs(mr::SELF_TEST_X_GYRO_6500, &mut gc) $(.$await)? ?;
+                    self.read_regs(mr::SELF_TEST_X_ACCEL_6500, &mut ac) $(.$await)? ?;
+                    m::self_test_report_6500(on_a, on_g, off_a, off_g, gc, ac)
+                };
                 self.write_reg(mr::GYRO_CONFIG, self.config.gyro_range.bits()) $(.$await)? ?;
                 self.write_reg(mr::ACCEL_CONFIG, self.config.accel_range.bits()) $(.$await)? ?;
-                Ok(m::self_test_report(on_a, on_g, off_a, off_g, trim))
+                Ok(report)
             }
         }
 

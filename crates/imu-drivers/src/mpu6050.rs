@@ -11,6 +11,10 @@
 pub mod reg {
     /// SELF_TEST_X..Z, SELF_TEST_A: factory trim codes (RM 4.1).
     pub const SELF_TEST_X: u8 = 0x0D;
+    /// MPU-6500 family: SELF_TEST_X/Y/Z_GYRO factory codes (RM-6500 registers 0-2).
+    pub const SELF_TEST_X_GYRO_6500: u8 = 0x00;
+    /// MPU-6500 family: SELF_TEST_X/Y/Z_ACCEL factory codes (RM-6500 registers 13-15).
+    pub const SELF_TEST_X_ACCEL_6500: u8 = 0x0D;
     /// Sample-rate divider (RM 4.2).
     pub const SMPLRT_DIV: u8 = 0x19;
     /// EXT_SYNC_SET and DLPF_CFG (RM 4.3).
@@ -632,8 +636,11 @@ impl IntStatus {
     }
 }
 
-/// Result of the self-test (RM 4.1, PS 6.1/6.2): change of the self-test response from the
-/// factory trim, in percent, per axis. Passes when every axis lies within ±14 %.
+/// Result of the self-test: change of the self-test response (output with self-test on minus
+/// output with it off) from the factory value, in percent, per axis, with the pass window of
+/// the chip family. MPU-6050 (RM 4.1, PS 6.1/6.2): within ±14 %. MPU-6500 family (InvenSense
+/// AN-MPU-6500A-02, "Accelerometer and Gyroscope Self-Test Implementation"): gyro ratio > 0.5
+/// (change > −50 %), accel ratio in 0.5..1.5 (change within ±50 %).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SelfTestReport {
@@ -641,18 +648,26 @@ pub struct SelfTestReport {
     pub gyro_change_pct: [f32; 3],
     /// Accelerometer X, Y, Z change from factory trim, %.
     pub accel_change_pct: [f32; 3],
+    /// Pass window of the gyro change, % (low, high).
+    pub gyro_limits_pct: [f32; 2],
+    /// Pass window of the accel change, % (low, high).
+    pub accel_limits_pct: [f32; 2],
 }
 
-/// Pass limit of the self-test change from factory trim, % (PS 6.1 and 6.2 tables).
+/// Pass limit of the MPU-6050 self-test change from factory trim, % (PS 6.1 and 6.2 tables).
 pub const SELF_TEST_LIMIT_PCT: f32 = 14.0;
 
 impl SelfTestReport {
-    /// `true` when all six axes are within ±[`SELF_TEST_LIMIT_PCT`] (NaN fails).
+    /// `true` when all six axes are inside their pass windows (NaN fails).
     pub fn passed(&self) -> bool {
+        let inside = |c: &f32, [lo, hi]: [f32; 2]| *c >= lo && *c <= hi;
         self.gyro_change_pct
             .iter()
-            .chain(self.accel_change_pct.iter())
-            .all(|c| c.abs() <= SELF_TEST_LIMIT_PCT)
+            .all(|c| inside(c, self.gyro_limits_pct))
+            && self
+                .accel_change_pct
+                .iter()
+                .all(|c| inside(c, self.accel_limits_pct))
     }
 }
 
@@ -718,6 +733,43 @@ pub fn self_test_report(
     SelfTestReport {
         gyro_change_pct: g,
         accel_change_pct: a,
+        gyro_limits_pct: [-SELF_TEST_LIMIT_PCT, SELF_TEST_LIMIT_PCT],
+        accel_limits_pct: [-SELF_TEST_LIMIT_PCT, SELF_TEST_LIMIT_PCT],
+    }
+}
+
+/// MPU-6500-family factory self-test value in LSB (AN-MPU-6500A-02; RM-6500 registers 0-2
+/// and 13-15): ST_OTP = (2620 / 2^FS)·1.01^(code−1) with FS = 0 (±250 °/s, ±2 g), 0 for code 0.
+pub fn otp_6500(code: u8) -> f32 {
+    if code == 0 {
+        return 0.0;
+    }
+    2620.0 * libm::powf(1.01, code as f32 - 1.0)
+}
+
+/// Build the MPU-6500-family report from the averaged outputs with self-test on and off
+/// (taken at ±250 °/s and ±2 g) and the SELF_TEST_X/Y/Z_GYRO (0x00-0x02) and
+/// SELF_TEST_X/Y/Z_ACCEL (0x0D-0x0F) codes. A code of 0 gives NaN (fails): the application
+/// note's absolute fallback limits for blank OTP are not applied.
+pub fn self_test_report_6500(
+    on_accel: [f32; 3],
+    on_gyro: [f32; 3],
+    off_accel: [f32; 3],
+    off_gyro: [f32; 3],
+    gyro_codes: [u8; 3],
+    accel_codes: [u8; 3],
+) -> SelfTestReport {
+    let mut g = [0.0; 3];
+    let mut a = [0.0; 3];
+    for i in 0..3 {
+        g[i] = change_from_trim_pct(on_gyro[i] - off_gyro[i], otp_6500(gyro_codes[i]));
+        a[i] = change_from_trim_pct(on_accel[i] - off_accel[i], otp_6500(accel_codes[i]));
+    }
+    SelfTestReport {
+        gyro_change_pct: g,
+        accel_change_pct: a,
+        gyro_limits_pct: [-50.0, f32::INFINITY],
+        accel_limits_pct: [-50.0, 50.0],
     }
 }
 
@@ -740,7 +792,7 @@ pub enum Error<E> {
     /// The operation needs something the configuration leaves off (e.g. `read_fifo` with
     /// the FIFO disabled) or the driver has not been initialised.
     NotConfigured,
-    /// The chip found has no MPU-6050 factory self-test (6500/ICM families use other registers).
+    /// The chip found has no self-test this driver knows (the ICM parts keep theirs elsewhere).
     SelfTestUnsupported,
 }
 
@@ -766,7 +818,7 @@ impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
             Error::SelfTestUnsupported => {
                 write!(
                     f,
-                    "MPU-6050: factory self-test only exists on a genuine MPU-6050"
+                    "MPU-6050: no known factory self-test for this chip (ICM parts)"
                 )
             }
         }
