@@ -281,11 +281,12 @@ pub fn edf_simple(alpha: i32, m: f64, n: f64) -> f64 {
     }
 }
 
-/// Regularised lower incomplete gamma function P(a, x) (series below a+1, Lentz's continued
-/// fraction above; Numerical Recipes §6.2).
-pub fn gamma_p(a: f64, x: f64) -> f64 {
+/// Regularised incomplete gamma functions `(P(a, x), Q(a, x) = 1 − P)`, each computed directly
+/// where it is small so both tails keep full relative accuracy (series below a+1, Lentz's
+/// continued fraction above; Numerical Recipes §6.2, A&S 6.5.29/6.5.31).
+pub fn gamma_pq(a: f64, x: f64) -> (f64, f64) {
     if x <= 0.0 {
-        return 0.0;
+        return (0.0, 1.0);
     }
     let ln_pre = a * libm::log(x) - x - libm::lgamma(a);
     if x < a + 1.0 {
@@ -299,7 +300,8 @@ pub fn gamma_p(a: f64, x: f64) -> f64 {
                 break;
             }
         }
-        sum * libm::exp(ln_pre)
+        let p = libm::fmin(sum * libm::exp(ln_pre), 1.0);
+        (p, 1.0 - p)
     } else {
         let tiny = 1e-300;
         let mut b = x + 1.0 - a;
@@ -324,18 +326,56 @@ pub fn gamma_p(a: f64, x: f64) -> f64 {
                 break;
             }
         }
-        1.0 - libm::exp(ln_pre) * h
+        let q = libm::fmin(libm::exp(ln_pre) * h, 1.0);
+        (1.0 - q, q)
     }
+}
+
+/// Regularised lower incomplete gamma function P(a, x).
+pub fn gamma_p(a: f64, x: f64) -> f64 {
+    gamma_pq(a, x).0
 }
 
 /// Chi-squared CDF with `nu` (possibly fractional) degrees of freedom.
 pub fn chi2_cdf(x: f64, nu: f64) -> f64 {
-    gamma_p(nu / 2.0, x / 2.0)
+    gamma_pq(nu / 2.0, x / 2.0).0
 }
 
-/// Inverse of the standard normal CDF (Acklam's rational approximation, |error| < 1.2e-9);
-/// only a starting point for [`chi2_ppf`].
-fn norm_ppf(p: f64) -> f64 {
+/// Chi-squared survival function P(X > x), accurate in the far upper tail.
+pub fn chi2_sf(x: f64, nu: f64) -> f64 {
+    gamma_pq(nu / 2.0, x / 2.0).1
+}
+
+/// Standard normal CDF, Φ(z) = ½[1 ± P(½, z²/2)].
+pub fn norm_cdf(z: f64) -> f64 {
+    let (p, q) = gamma_pq(0.5, 0.5 * z * z);
+    if z >= 0.0 {
+        0.5 + 0.5 * p
+    } else {
+        0.5 * q
+    }
+}
+
+/// Standard normal quantile Φ⁻¹(p): Acklam's rational approximation refined by one Halley step
+/// on [`norm_cdf`] (full double precision); ±∞ at p = 0, 1 and NaN outside [0, 1].
+pub fn norm_ppf(p: f64) -> f64 {
+    if p.is_nan() || !(0.0..=1.0).contains(&p) {
+        return f64::NAN;
+    }
+    if p == 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    if p == 1.0 {
+        return f64::INFINITY;
+    }
+    let x = norm_ppf_approx(p);
+    let e = norm_cdf(x) - p;
+    let u = e * libm::sqrt(2.0 * core::f64::consts::PI) * libm::exp(x * x / 2.0);
+    x - u / (1.0 + x * u / 2.0)
+}
+
+/// Acklam's rational approximation of the standard normal quantile (|error| < 1.2e-9).
+fn norm_ppf_approx(p: f64) -> f64 {
     const A: [f64; 6] = [
         -3.969683028665376e1,
         2.209460984245205e2,
@@ -387,7 +427,7 @@ pub fn chi2_ppf(p: f64, nu: f64) -> f64 {
     if !(p > 0.0 && p < 1.0 && nu > 0.0) {
         return f64::NAN;
     }
-    let z = norm_ppf(p);
+    let z = norm_ppf_approx(p);
     let h = 2.0 / (9.0 * nu);
     let mut x = nu * libm::pow(libm::fmax(1.0 - h + z * libm::sqrt(h), 0.01), 3.0);
     let (mut lo, mut hi) = (0.0, f64::INFINITY);
@@ -450,5 +490,17 @@ mod tests {
         assert!((chi2_ppf(0.05, 10.0) - 3.940_299).abs() < 1e-5);
         assert!((chi2_ppf(0.5, 1.0) - 0.454_936_4).abs() < 1e-6);
         assert!((chi2_ppf(0.99, 100.0) - 135.806_7).abs() < 1e-3);
+    }
+
+    #[test]
+    fn normal_and_tails() {
+        // A&S Table 26.1: Φ(1) = 0.841344746, Φ⁻¹(0.975) = 1.959963985.
+        assert!((norm_cdf(1.0) - 0.841_344_746_068_543).abs() < 1e-14);
+        assert!((norm_ppf(0.975) - 1.959_963_984_540_054).abs() < 1e-13);
+        assert!((norm_ppf(1e-10) + 6.361_340_902_404_056).abs() < 1e-9);
+        // Upper tail keeps relative accuracy where 1 − CDF would cancel: Q(χ²=200, ν=10).
+        let sf = chi2_sf(200.0, 10.0);
+        assert!(sf > 0.0 && sf < 1e-35, "{sf}");
+        assert!((chi2_sf(18.307_038, 10.0) - 0.05).abs() < 1e-7);
     }
 }
