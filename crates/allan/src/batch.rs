@@ -271,15 +271,27 @@ fn diff_sum(x: &[f64], m: usize, d: u32, stride: usize) -> (f64, u64) {
     (s, n)
 }
 
+const LANES: usize = 8;
+
 /// The fully overlapping sum over equal-length shifted slices, in eight independent lanes so
 /// the compiler can keep the loop in vector registers (the hot loop of every octave table).
 fn overlapping_sum(x: &[f64], m: usize, d: u32) -> f64 {
-    const LANES: usize = 8;
-    let n = x.len() - d as usize * m;
     let mut acc = [0.0f64; LANES];
+    let tail = accumulate(x, m, d, 0, x.len() - d as usize * m, &mut acc);
+    acc.iter().sum::<f64>() + tail
+}
+
+/// Add the squared d-th differences at lag m for start indices `i0..i1` into `acc`; returns
+/// the sum of the part that does not fill a whole lane group.
+fn accumulate(x: &[f64], m: usize, d: u32, i0: usize, i1: usize, acc: &mut [f64; LANES]) -> f64 {
+    let n = i1 - i0;
     let mut tail = 0.0;
     if d == 2 {
-        let (a, b, c) = (&x[..n], &x[m..m + n], &x[2 * m..2 * m + n]);
+        let (a, b, c) = (
+            &x[i0..i1],
+            &x[i0 + m..i0 + m + n],
+            &x[i0 + 2 * m..i0 + 2 * m + n],
+        );
         let mut ca = a.chunks_exact(LANES);
         let mut cb = b.chunks_exact(LANES);
         let mut cc = c.chunks_exact(LANES);
@@ -300,10 +312,10 @@ fn overlapping_sum(x: &[f64], m: usize, d: u32) -> f64 {
         }
     } else {
         let (a, b, c, e) = (
-            &x[..n],
-            &x[m..m + n],
-            &x[2 * m..2 * m + n],
-            &x[3 * m..3 * m + n],
+            &x[i0..i1],
+            &x[i0 + m..i0 + m + n],
+            &x[i0 + 2 * m..i0 + 2 * m + n],
+            &x[i0 + 3 * m..i0 + 3 * m + n],
         );
         let mut ca = a.chunks_exact(LANES);
         let mut cb = b.chunks_exact(LANES);
@@ -326,7 +338,38 @@ fn overlapping_sum(x: &[f64], m: usize, d: u32) -> f64 {
             tail += v * v;
         }
     }
-    acc.iter().sum::<f64>() + tail
+    tail
+}
+
+/// Start indices per block of the cache-blocked pass, and the largest lag span it takes:
+/// a block reads `BLOCK + d·m` phase values, ≤ 160 KiB, which stay in L2 while every small m
+/// is summed over them, so the phase streams from memory once for all the small levels.
+const BLOCK: usize = 4096;
+const BLOCKED_SPAN: usize = 16384;
+
+/// Fully overlapping sums for several small m in one cache-blocked pass over the phase.
+fn overlapping_sums_blocked(x: &[f64], ms: &[usize], d: u32) -> Vec<f64> {
+    let mut acc = vec![[0.0f64; LANES]; ms.len()];
+    let mut tails = vec![0.0f64; ms.len()];
+    let ends: Vec<usize> = ms
+        .iter()
+        .map(|&m| x.len().saturating_sub(d as usize * m))
+        .collect();
+    let last = ends.iter().copied().max().unwrap_or(0);
+    let mut i0 = 0;
+    while i0 < last {
+        for (k, &m) in ms.iter().enumerate() {
+            let i1 = (i0 + BLOCK).min(ends[k]);
+            if i1 > i0 {
+                tails[k] += accumulate(x, m, d, i0, i1, &mut acc[k]);
+            }
+        }
+        i0 += BLOCK;
+    }
+    acc.iter()
+        .zip(tails)
+        .map(|(a, t)| a.iter().sum::<f64>() + t)
+        .collect()
 }
 
 /// Modified Allan variance sum: Σ_j [Σ_{i=j}^{j+m−1} (x[i+2m] − 2x[i+m] + x[i])]² (SP 1065 eq. 14).
@@ -406,8 +449,43 @@ fn deviation_of_phase(
 ) -> Result<Vec<Row>, AllanError> {
     let np = x.len() as u64;
     let ms = taus.ms(largest_m(stat, np))?;
-    // The sums are independent per m and dominate the cost: spread them over the cores.
-    let sums = par_map(&ms, |&m| stat_sum(x, m as usize, stat));
+    // The sums dominate the cost. Small-lag overlapping sums share one cache-blocked pass;
+    // the rest are independent per m; the work items are spread over the cores.
+    let d = stat.difference_order();
+    let blocked: Vec<usize> = match stat {
+        Stat::Oadev | Stat::Ohdev => ms
+            .iter()
+            .map(|&m| m as usize)
+            .filter(|&m| d as usize * m <= BLOCKED_SPAN && x.len() > d as usize * m)
+            .collect(),
+        _ => Vec::new(),
+    };
+    let mut items: Vec<Option<u64>> = vec![None];
+    items.extend(
+        ms.iter()
+            .filter(|&&m| !blocked.contains(&(m as usize)))
+            .map(|&m| Some(m)),
+    );
+    let parts = par_map(&items, |item| match item {
+        None => overlapping_sums_blocked(x, &blocked, d),
+        Some(m) => vec![stat_sum(x, *m as usize, stat)],
+    });
+    let mut by_m = std::collections::HashMap::new();
+    for (item, part) in items.iter().zip(parts) {
+        match item {
+            None => by_m.extend(blocked.iter().map(|&m| m as u64).zip(part)),
+            Some(m) => {
+                by_m.insert(*m, part[0]);
+            }
+        }
+    }
+    let sums: Vec<(f64, u64, f64)> = ms
+        .iter()
+        .map(|&m| {
+            let (n, denom) = stat_norm(x.len(), m as usize, stat);
+            (by_m[&m], n, denom)
+        })
+        .collect();
     let mut rows = Vec::with_capacity(ms.len());
     let mut last_alpha = 0;
     for (m, (sum, n, denom)) in ms.into_iter().zip(sums) {
@@ -439,19 +517,45 @@ fn deviation_of_phase(
     Ok(rows)
 }
 
-/// (sum of squared differences, number of terms, normaliser) of `stat` at `m`:
-/// the variance is `sum / (normaliser · n)`.
-fn stat_sum(x: &[f64], m: usize, stat: Stat) -> (f64, u64, f64) {
+/// (number of terms, normaliser) of `stat` at `m` for `np` phase points, without touching the
+/// data: the variance is `sum / (normaliser · n)`.
+fn stat_norm(np: usize, m: usize, stat: Stat) -> (u64, f64) {
     let mf = m as f64;
-    let ((s, n), denom) = match stat {
-        Stat::Adev => (diff_sum(x, m, 2, m), 2.0 * mf * mf),
-        Stat::Oadev => (diff_sum(x, m, 2, 1), 2.0 * mf * mf),
-        Stat::Hdev => (diff_sum(x, m, 3, m), 6.0 * mf * mf),
-        Stat::Ohdev => (diff_sum(x, m, 3, 1), 6.0 * mf * mf),
-        Stat::Mdev | Stat::Tdev => (mod_sum(x, m), 2.0 * mf.powi(4)),
-        Stat::Totdev => (tot_sum(x, m), 2.0 * mf * mf),
+    let span = stat.difference_order() as usize * m;
+    let count = |stride: usize| {
+        if np > span {
+            ((np - span - 1) / stride + 1) as u64
+        } else {
+            0
+        }
     };
-    (s, n, denom)
+    match stat {
+        Stat::Adev => (count(m), 2.0 * mf * mf),
+        Stat::Oadev => (count(1), 2.0 * mf * mf),
+        Stat::Hdev => (count(m), 6.0 * mf * mf),
+        Stat::Ohdev => (count(1), 6.0 * mf * mf),
+        Stat::Mdev | Stat::Tdev => (
+            if np > 3 * m {
+                (np - 3 * m + 1) as u64
+            } else {
+                0
+            },
+            2.0 * mf.powi(4),
+        ),
+        Stat::Totdev => (np.saturating_sub(2) as u64, 2.0 * mf * mf),
+    }
+}
+
+/// The sum of squared differences of `stat` at `m` (see [`stat_norm`] for n and the normaliser).
+fn stat_sum(x: &[f64], m: usize, stat: Stat) -> f64 {
+    match stat {
+        Stat::Adev => diff_sum(x, m, 2, m).0,
+        Stat::Oadev => diff_sum(x, m, 2, 1).0,
+        Stat::Hdev => diff_sum(x, m, 3, m).0,
+        Stat::Ohdev => diff_sum(x, m, 3, 1).0,
+        Stat::Mdev | Stat::Tdev => mod_sum(x, m).0,
+        Stat::Totdev => tot_sum(x, m).0,
+    }
 }
 
 /// `f` over `items` on all available cores (scoped threads, round-robin so that the costly
@@ -632,4 +736,39 @@ pub fn stream_rows(levels: &[LevelSums], tau0: f64, scale: f64, hadamard: bool) 
         });
     }
     rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn term_counts_match_the_sums_and_blocking_matches_direct() {
+        let x: Vec<f64> = (0..2000)
+            .map(|i| ((i * 7919) % 1009) as f64 * 0.01 - (i as f64).sqrt())
+            .collect();
+        for np in [5usize, 17, 64, 999, 2000] {
+            let x = &x[..np];
+            for m in [1usize, 2, 3, 5, 16, 100, 333] {
+                let counted = [
+                    (Stat::Adev, diff_sum(x, m, 2, m).1),
+                    (Stat::Oadev, diff_sum(x, m, 2, 1).1),
+                    (Stat::Hdev, diff_sum(x, m, 3, m).1),
+                    (Stat::Ohdev, diff_sum(x, m, 3, 1).1),
+                    (Stat::Mdev, mod_sum(x, m).1),
+                ];
+                for (stat, n) in counted {
+                    assert_eq!(stat_norm(np, m, stat).0, n, "{} np={np} m={m}", stat.name());
+                }
+            }
+        }
+        let ms = [1usize, 2, 4, 8, 64, 512];
+        for d in [2, 3] {
+            let blocked = overlapping_sums_blocked(&x, &ms, d);
+            for (k, &m) in ms.iter().enumerate() {
+                let direct = diff_sum(&x, m, d, 1).0;
+                assert!((blocked[k] / direct - 1.0).abs() < 1e-12, "d={d} m={m}");
+            }
+        }
+    }
 }
