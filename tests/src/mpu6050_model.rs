@@ -89,13 +89,19 @@ const WHO_AM_I: u8 = 0x75;
 pub const RESET_NS: u64 = 100_000_000;
 
 impl Mpu6050Model {
-    /// A chip at `address` answering `who_am_i`, at rest, 1024-byte FIFO, asleep as after
+    /// A chip at `address` answering `who_am_i`, at rest, 1024-byte FIFO (512 for WHO_AM_I
+    /// 0x70..0x74), asleep as after
     /// power-up (PWR_MGMT_1 = 0x40, RM 4.28).
     pub fn new(address: u8, who_am_i: u8) -> Self {
         let mut m = Mpu6050Model {
             address,
             who_am_i,
-            fifo_capacity: 1024,
+            // RM 4.30: 1024 bytes; the MPU-6500 family has 512 (MPU-6500 product specification).
+            fifo_capacity: if (0x70..=0x74).contains(&who_am_i) {
+                512
+            } else {
+                1024
+            },
             motion: Box::new(|_| Motion::default()),
             gyro_self_test_lsb: [0.0; 3],
             accel_self_test_lsb: [0.0; 3],

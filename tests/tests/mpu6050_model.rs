@@ -334,3 +334,20 @@ fn self_test_mpu6500_family() {
         assert!(!d.self_test(&mut bus.delay()).unwrap().passed());
     }
 }
+
+#[test]
+fn mpu6500_overflows_at_512_bytes() {
+    // 42 frames (504 bytes) fit the MPU-6500's 512-byte FIFO; the 43rd overflows it.
+    let bus = bus_with(0x70);
+    let mut d = init(&bus, &Config::default());
+    bus.advance_us(42_000);
+    assert_eq!(d.fifo_count().unwrap(), 504);
+    let mut out = [RawSample::default(); 64];
+    assert_eq!(d.read_fifo(&mut out).unwrap(), 42);
+    bus.advance_us(43_000);
+    assert_eq!(d.read_fifo(&mut out), Err(Error::FifoOverflow));
+    d.reset_fifo().unwrap();
+    bus.advance_us(3_000);
+    assert_eq!(d.read_fifo(&mut out).unwrap(), 3);
+    assert_eq!(out[2].gyro[0], 42 + 43 + 2);
+}
