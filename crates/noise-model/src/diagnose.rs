@@ -234,7 +234,7 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) ->
             explanation: format!(
                 "The model describes the measurement: χ²/dof = {:.2} (p = {:.2} after the \
                  correlation allowance) and no τ where the model leaves the confidence interval \
-                 by more than {:.1} half-widths. No effect is missing.",
+                 significantly (all |z| ≤ {:.1}). No effect is missing.",
                 base.chi2_dof(),
                 base_a.p_value,
                 base_a.threshold

@@ -1,0 +1,348 @@
+//! Rendering of noise-model fits for people: parameter tables with canonical and conventional
+//! units (text and HTML), the step line, and the offline HTML report.
+use noise_model::{Assessment, Diagnosis, Fit, Step, UnitFamily};
+use std::fmt::Write;
+
+/// `x` with `sig` significant digits, fixed notation for 1e-3 ≤ |x| < 1e5, else scientific.
+pub fn sig(x: f64, sig: usize) -> String {
+    if !x.is_finite() {
+        return "—".into();
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let e = x.abs().log10().floor() as i32;
+    if (-3..5).contains(&e) {
+        let dec = (sig as i32 - 1 - e).max(0) as usize;
+        format!("{:.*}", dec, x)
+    } else {
+        format!("{:.*e}", sig.saturating_sub(1), x)
+    }
+}
+
+fn pm(v: f64, s: f64) -> String {
+    if s.is_finite() && s > 0.0 {
+        format!("{} ± {}", sig(v, 4), sig(s, 2))
+    } else {
+        sig(v, 4)
+    }
+}
+
+/// One row of the parameter table.
+pub struct ParamRow {
+    pub effect: String,
+    pub param: String,
+    pub canonical: String,
+    pub conventional: String,
+    pub status: String,
+}
+
+/// The parameter rows of a fit for a channel in `unit`.
+pub fn param_rows(fit: &Fit, unit: &str) -> Vec<ParamRow> {
+    let fam = UnitFamily::of(unit);
+    let mut out = Vec::new();
+    for t in &fit.terms {
+        let e = t.effect;
+        let disp = e.amp_display(fam);
+        let cu = e.amp_unit(unit);
+        let (canon, conv) = if t.detected {
+            (
+                format!("{} {cu}", pm(t.amplitude(), t.amplitude_sigma())),
+                disp.as_ref().map_or(String::new(), |d| {
+                    format!(
+                        "{} {}",
+                        pm(t.amplitude() * d.factor, t.amplitude_sigma() * d.factor),
+                        d.unit
+                    )
+                }),
+            )
+        } else {
+            let ub = t.upper_bound().unwrap_or(f64::NAN);
+            (
+                format!("< {} {cu}", sig(ub, 2)),
+                disp.as_ref().map_or(String::new(), |d| {
+                    format!("< {} {}", sig(ub * d.factor, 2), d.unit)
+                }),
+            )
+        };
+        out.push(ParamRow {
+            effect: e.name().into(),
+            param: e.amp_name().into(),
+            canonical: canon,
+            conventional: conv,
+            status: if t.detected {
+                "detected".into()
+            } else {
+                "not detected (2σ upper bound)".into()
+            },
+        });
+        if let (Some(name), Some(u)) = (e.nonlinear_name(), e.nonlinear_unit()) {
+            let (v, s) = (
+                t.theta.unwrap_or(f64::NAN),
+                t.theta_sigma.unwrap_or(f64::NAN),
+            );
+            let conv = match (e, t.theta) {
+                (noise_model::Effect::Markov, Some(tc)) if t.detected => {
+                    format!(
+                        "f_c = 1/(2π τ_c) = {} Hz",
+                        sig(1.0 / (2.0 * std::f64::consts::PI * tc), 3)
+                    )
+                }
+                (noise_model::Effect::Sinusoid, Some(f)) if t.detected => {
+                    format!("period {} s", sig(1.0 / f, 4))
+                }
+                _ => String::new(),
+            };
+            out.push(ParamRow {
+                effect: String::new(),
+                param: name.into(),
+                canonical: if t.detected {
+                    format!("{} {u}", pm(v, s))
+                } else {
+                    "—".into()
+                },
+                conventional: conv,
+                status: String::new(),
+            });
+        }
+    }
+    out
+}
+
+/// The rows as an aligned text table.
+pub fn text_table(rows: &[ParamRow]) -> String {
+    let head = [
+        "effect",
+        "param",
+        "value ± 1σ (canonical)",
+        "conventional",
+        "status",
+    ];
+    let cells: Vec<[&str; 5]> = rows
+        .iter()
+        .map(|r| {
+            [
+                r.effect.as_str(),
+                r.param.as_str(),
+                r.canonical.as_str(),
+                r.conventional.as_str(),
+                r.status.as_str(),
+            ]
+        })
+        .collect();
+    let mut w = head.map(|h| h.chars().count());
+    for c in &cells {
+        for i in 0..5 {
+            w[i] = w[i].max(c[i].chars().count());
+        }
+    }
+    let line = |c: [&str; 5]| {
+        let mut s = String::from("  ");
+        for i in 0..5 {
+            s += c[i];
+            s += &" ".repeat(w[i] - c[i].chars().count() + 2);
+        }
+        s.trim_end().to_string() + "\n"
+    };
+    let mut s = line(head);
+    s += &format!("  {}\n", "-".repeat(w.iter().sum::<usize>() + 8));
+    for c in cells {
+        s += &line(c);
+    }
+    s
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// The rows as an HTML table.
+pub fn html_table(rows: &[ParamRow]) -> String {
+    let mut s = String::from(
+        "<table><tr><th>effect</th><th>param</th><th>value ± 1σ (canonical)</th><th>conventional</th><th>status</th></tr>\n",
+    );
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(&r.effect),
+            esc(&r.param),
+            esc(&r.canonical),
+            esc(&r.conventional),
+            esc(&r.status)
+        );
+    }
+    s + "</table>\n"
+}
+
+/// A per-τ table: τ, measured σ, bounds, model, residual, z.
+pub fn tau_table(fit: &Fit, a: &Assessment, unit: &str) -> String {
+    let mut s = format!(
+        "  {:>10}  {:>11}  {:>11}  {:>11}  {:>11}  {:>7}  {:>6}\n",
+        "τ [s]",
+        format!("σ [{unit}]"),
+        "lo",
+        "hi",
+        "model",
+        "r",
+        "edf"
+    );
+    for (i, p) in fit.points.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "  {:>10}  {:>11.4e}  {:>11.4e}  {:>11.4e}  {:>11.4e}  {:>7.2}{} {:>6}",
+            sig(p.tau, 4),
+            p.dev,
+            p.lo,
+            p.hi,
+            fit.model_avar[i].max(0.0).sqrt(),
+            a.residuals[i],
+            if a.failing.iter().any(|r| i >= r.first && i <= r.last) {
+                "!"
+            } else if a.residuals[i].abs() > 1.0 {
+                "*"
+            } else {
+                " "
+            },
+            sig(p.edf, 3)
+        );
+    }
+    s
+}
+
+/// "χ²/dof a → b, RMS log-residual c → d, adequate no → yes".
+pub fn step_line(st: &Step) -> String {
+    let yn = |b: bool| if b { "yes" } else { "no" };
+    format!(
+        "+ {}: χ²/dof {} → {}, RMS log-residual {} → {}, adequate {} → {}",
+        st.added
+            .iter()
+            .map(|e| e.name())
+            .collect::<Vec<_>>()
+            .join(" + "),
+        sig(st.before.chi2_dof, 3),
+        sig(st.after.chi2_dof, 3),
+        sig(st.before.rms_log_residual, 3),
+        sig(st.after.rms_log_residual, 3),
+        yn(st.before.adequate),
+        yn(st.after.adequate)
+    )
+}
+
+/// The verdict sentence.
+pub fn verdict(fit: &Fit, a: &Assessment) -> String {
+    if a.adequate {
+        format!(
+            "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (all |z| ≤ {:.1}).",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2),
+            a.threshold
+        )
+    } else {
+        let ranges: Vec<String> = if a.failing.is_empty() {
+            vec!["(no single range: the misfit is spread over all τ)".into()]
+        } else {
+            a.failing
+                .iter()
+                .map(|r| {
+                    format!(
+                        "τ = {}–{} s (measured {} model, up to |z| = {:.1})",
+                        sig(r.lo, 3),
+                        sig(r.hi, 3),
+                        if r.sign > 0 { "above" } else { "below" },
+                        r.worst_z
+                    )
+                })
+                .collect()
+        };
+        format!(
+            "NOT ADEQUATE — χ²/dof = {}, global p = {}; failing: {}.",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2),
+            ranges.join("; ")
+        )
+    }
+}
+
+/// One section of the HTML report.
+pub struct Section {
+    pub title: String,
+    pub table: String,
+    pub verdict: String,
+    pub diagnosis: Option<Diagnosis>,
+    pub step: Option<String>,
+    /// The figure(s), side by side.
+    pub svg: String,
+}
+
+/// A self-contained HTML page (inline CSS and SVG, no external resources).
+pub fn html(
+    title: &str,
+    intro: &str,
+    sections: &[Section],
+    physics: &[(String, String)],
+) -> String {
+    let mut s = format!(
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{t}</title>
+<style>
+body {{ font-family: sans-serif; max-width: 1320px; margin: 2em auto; color: #222; line-height: 1.45; }}
+table {{ border-collapse: collapse; margin: 0.8em 0; }}
+td, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; font-size: 0.92em; }}
+th {{ background: #f0f0f0; }}
+section {{ border-top: 2px solid #888; margin-top: 2em; padding-top: 0.5em; }}
+.ok {{ color: #060; font-weight: bold; }} .bad {{ color: #a00; font-weight: bold; }}
+.fig {{ overflow-x: auto; }} code {{ background: #f4f4f4; padding: 1px 4px; }}
+</style></head><body>
+<h1>{t}</h1>
+<p>{intro}</p>
+"#,
+        t = esc(title),
+        intro = esc(intro)
+    );
+    for sec in sections {
+        let cls = if sec.verdict.starts_with("ADEQUATE") {
+            "ok"
+        } else {
+            "bad"
+        };
+        let _ = write!(
+            s,
+            "<section><h2>{}</h2>\n{}<p class=\"{cls}\">{}</p>\n",
+            esc(&sec.title),
+            sec.step.as_ref().map_or(String::new(), |st| format!(
+                "<p><b>Step:</b> {}</p>\n",
+                esc(st)
+            )),
+            esc(&sec.verdict)
+        );
+        s += &sec.table;
+        if let Some(d) = &sec.diagnosis {
+            let _ = write!(
+                s,
+                "<p><b>Diagnosis{}:</b> {}</p>\n",
+                d.missing
+                    .map_or(String::new(), |e| format!(" — missing effect: {e}")),
+                esc(&d.explanation)
+            );
+            if !d.evidence.is_empty() {
+                s += "<ul>\n";
+                for e in &d.evidence {
+                    let _ = writeln!(s, "<li>{}</li>", esc(e));
+                }
+                s += "</ul>\n";
+            }
+        }
+        let _ = write!(s, "<div class=\"fig\">{}</div></section>\n", sec.svg);
+    }
+    if !physics.is_empty() {
+        s += "<section><h2>The effects in these models</h2>\n";
+        for (name, text) in physics {
+            let _ = writeln!(s, "<p><b>{}</b> — {}</p>", esc(name), esc(text));
+        }
+        s += "</section>\n";
+    }
+    s + "</body></html>\n"
+}
