@@ -135,7 +135,7 @@ impl CalFile {
 
     /// Write as TOML.
     pub fn to_toml(&self) -> String {
-        let body = toml::to_string_pretty(self).unwrap_or_else(|e| format!("# error: {e}\n"));
+        let body = toml::to_string(self).unwrap_or_else(|e| format!("# error: {e}\n"));
         format!(
             "# pico-imu calibration file (units: m/s², deg/s, µT, °C; see docs/calibration.md)\n{body}"
         )

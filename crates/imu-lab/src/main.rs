@@ -16,12 +16,15 @@ struct Cli {
 enum Command {
     /// Allan-family deviation of one column, with 68.3 % confidence bounds.
     Adev(cmd::adev::Args),
+    /// Calibration lab: fit accel/gyro/mag error models, diagnose the missing effect.
+    Calibrate(cmd::calibrate::Args),
 }
 
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Adev(a) => cmd::adev::run(a),
+        Command::Calibrate(a) => cmd::calibrate::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,1 +1,2 @@
 pub mod adev;
+pub mod calibrate;
