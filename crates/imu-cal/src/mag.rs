@@ -7,7 +7,8 @@
 //! * **soft_iron_2d** (seed eqs. 4–5, exactly): for data rotated in a plane, the ellipse of the
 //!   in-plane components has semi-major axis r, semi-minor q and tilt θ; the correction rotates by
 //!   `R(θ) = [[cos θ, sin θ], [−sin θ, cos θ]]` (eq. 4) and scales the first axis by `σ = q/r`
-//!   (eq. 5): `S₂ = diag(σ, 1)·R(θ)`. Initial values from the algebraic conic fit
+//!   (eq. 5): `S₂ = diag(σ, 1)·R(θ)`; the matrix reported and applied is `R(θ)ᵀ·S₂`, which
+//!   rotates back so the axes (and headings) keep their meaning. Initial values from the algebraic conic fit
 //!   `a x² + b xy + c y² + d x + e y = 1`, refined with the rest by Levenberg–Marquardt.
 //! * **soft_iron**: a symmetric 3×3 `S` from an ellipsoid fit: the algebraic quadric least
 //!   squares `Ax² + By² + Cz² + 2Dxy + 2Exz + 2Fyz + 2Gx + 2Hy + 2Iz = 1` (the design matrix of
@@ -321,7 +322,17 @@ impl MagProblem {
         } else {
             levenberg_marquardt(DVector::from_vec(x0), res, 300)
         };
-        let (c, s, f) = unpack(&fit.x);
+        let (c, s_seed, f) = unpack(&fit.x);
+        // The seed stops after eq. 5: diag(σ,1)·R(θ) leaves the frame rotated by θ, which does not
+        // change |m| (nor the seed's Fig. 4 circle) but would turn every heading by θ. The matrix
+        // handed to the device rotates back: S = R(θ)ᵀ·diag(σ,1)·R(θ) (symmetric, axes kept).
+        let s = if has_2d {
+            let n = fit.x.len() - fit_f as usize;
+            let (sn, cs) = fit.x[n - 2].sin_cos();
+            Matrix2::new(cs, -sn, sn, cs) * s_seed
+        } else {
+            s_seed
+        };
         let mut h3 = [0.0; 3];
         h3[i] = c.x;
         h3[j] = c.y;

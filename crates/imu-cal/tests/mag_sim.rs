@@ -112,10 +112,11 @@ fn no_model_misses_hard_iron() {
 fn planar_data(seed: u64, theta_deg: f64, sigma: f64, h: Vector3<f64>) -> Vec<Vector3<f64>> {
     let mut rng = Rng::new(seed);
     let th = theta_deg.to_radians();
-    // Distortion D = R(θ)ᵀ·diag(1/σ, 1) (the inverse of the seed's correction diag(σ,1)·R(θ)).
+    // Symmetric soft-iron distortion D = R(θ)ᵀ·diag(1/σ, 1)·R(θ): the circle becomes an ellipse
+    // with major axis r = radius/σ at angle θ (what seed eqs. 4–5 undo).
     let (s, c) = th.sin_cos();
-    let rot_t = Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0);
-    let d = rot_t * Matrix3::from_diagonal(&Vector3::new(1.0 / sigma, 1.0, 1.0));
+    let rot = Matrix3::new(c, s, 0.0, -s, c, 0.0, 0.0, 0.0, 1.0);
+    let d = rot.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0 / sigma, 1.0, 1.0)) * rot;
     let (bh, bz) = (25.0, -15.0);
     (0..3000)
         .map(|k| {
@@ -157,6 +158,24 @@ fn planar_soft_iron_is_the_seeds_2d_effect() {
             "{e:?}"
         );
         let hi = r2.fitted.params.hard_iron.unwrap();
+        // The applied matrix undoes the distortion without turning the frame: S·D ≈ I
+        // (so headings are kept), to 5e-3 (σ is known to ≈ 1e-3).
+        let s = Matrix3::from_row_slice(&r2.fitted.params.soft_iron.unwrap().concat());
+        let th = 30f64.to_radians();
+        let rot = Matrix3::new(
+            th.cos(),
+            th.sin(),
+            0.0,
+            -th.sin(),
+            th.cos(),
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+        );
+        let d = rot.transpose() * Matrix3::from_diagonal(&Vector3::new(1.0 / 0.8, 1.0, 1.0)) * rot;
+        let e = (s * d - Matrix3::identity()).abs().max();
+        assert!(e < 5e-3, "seed {seed}: S·D − I max {e}");
         assert!(
             (hi[0] - h.x).abs() < 0.1 && (hi[1] - h.y).abs() < 0.1,
             "{hi:?}"
