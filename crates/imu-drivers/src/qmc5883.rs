@@ -22,7 +22,7 @@ pub mod reg_l {
     pub const STATUS: u8 = 0x06;
     /// Temperature LSB (0x08 MSB), 100 LSB/°C, offset not calibrated.
     pub const TEMP_LSB: u8 = 0x07;
-    /// Control 1: OSR[7:6] RNG[5:4] ODR[3:2] MODE[1:0].
+    /// Control 1: `OSR[7:6]` `RNG[5:4]` `ODR[3:2]` `MODE[1:0]`.
     pub const CONTROL1: u8 = 0x09;
     /// Control 2: SOFT_RST (bit 7), ROL_PNT (bit 6), INT_ENB (bit 0).
     pub const CONTROL2: u8 = 0x0A;
@@ -44,9 +44,9 @@ pub mod reg_p {
     pub const DATA_X_LSB: u8 = 0x01;
     /// Status: DRDY (bit 0), OVFL (bit 1).
     pub const STATUS: u8 = 0x09;
-    /// Control 1: OSR2[7:6] (down-sampling) OSR1[5:4] ODR[3:2] MODE[1:0].
+    /// Control 1: `OSR2[7:6]` (down-sampling) `OSR1[5:4]` `ODR[3:2]` `MODE[1:0]`.
     pub const CONTROL1: u8 = 0x0A;
-    /// Control 2: SOFT_RST (bit 7), SELF_TEST (bit 6), RNG[3:2], SET_RESET mode[1:0].
+    /// Control 2: SOFT_RST (bit 7), SELF_TEST (bit 6), `RNG[3:2]`, SET_RESET `mode[1:0]`.
     pub const CONTROL2: u8 = 0x0B;
     /// Axis sign definition register; the datasheet's set-up example writes 0x06.
     pub const AXIS_SIGN: u8 = 0x29;
@@ -80,7 +80,7 @@ pub mod bits {
 /// and QMC-P gives no figure, so the same is used).
 pub const SOFT_RESET_DELAY_MS: u32 = 1;
 
-/// Which magnetometer answered (see [`crate::blocking::detect_magnetometer`]).
+/// Which magnetometer answered (see [`crate::blocking::Qmc5883::detect`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Chip {
@@ -260,7 +260,7 @@ impl Default for Config {
 }
 
 impl Config {
-    /// QMC5883L CONTROL1 (0x09): OSR[7:6] RNG[5:4] ODR[3:2] MODE[1:0] (QMC-L 9.2, control register 1).
+    /// QMC5883L CONTROL1 (0x09): `OSR[7:6]` `RNG[5:4]` `ODR[3:2]` `MODE[1:0]` (QMC-L 9.2, control register 1).
     /// `None` if the range is not available on the L.
     pub const fn control1_l(&self) -> Option<u8> {
         let rng = match self.range {
@@ -284,8 +284,8 @@ impl Config {
         }
     }
 
-    /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) [7:6], OSR1 [5:4], ODR [3:2],
-    /// MODE [1:0] with 0b11 = continuous, 0b00 = suspend (QMC-P register map).
+    /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) `[7:6]`, OSR1 `[5:4]`, ODR `[3:2]`,
+    /// MODE `[1:0]` with 0b11 = continuous, 0b00 = suspend (QMC-P register map).
     pub const fn control1_p(&self) -> u8 {
         let mode = match self.mode {
             Mode::Standby => 0,
@@ -294,8 +294,8 @@ impl Config {
         ((self.osr as u8) << 4) | ((self.odr as u8) << 2) | mode
     }
 
-    /// QMC5883P CONTROL2 (0x0B): RNG [3:2] (0 = ±30 G, 1 = ±12 G, 2 = ±8 G, 3 = ±2 G),
-    /// SET/RESET mode [1:0] = 0 (set and reset on).
+    /// QMC5883P CONTROL2 (0x0B): RNG `[3:2]` (0 = ±30 G, 1 = ±12 G, 2 = ±8 G, 3 = ±2 G),
+    /// SET/RESET mode `[1:0]` = 0 (set and reset on).
     pub const fn control2_p(&self) -> u8 {
         let rng = match self.range {
             Range::G30 => 0,
