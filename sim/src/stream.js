@@ -5,6 +5,12 @@
 import { readFileSync } from 'node:fs';
 
 export const COLUMNS = ['t', 'ax', 'ay', 'az', 'gx', 'gy', 'gz', 'mx', 'my', 'mz', 'temp'];
+/**
+ * Values of columns a stream file leaves out (e.g. `imu-lab simulate --columns gx,gy,gz`):
+ * the board lying still and level — gravity on +z (9.80665 m/s²), no rotation, a mid-latitude
+ * geomagnetic field of 20/−5/40 µT — at 25 °C.
+ */
+export const DEFAULTS = { ax: 0, ay: 0, az: 9.80665, gx: 0, gy: 0, gz: 0, mx: 20, my: -5, mz: 40, temp: 25 };
 
 export class StreamError extends Error {}
 
@@ -58,8 +64,9 @@ export function parseStreamCsv(text, origin = 'stream') {
     const fields = line.split(',').map((f) => f.trim());
     if (!header) {
       header = fields.map((f) => f.replace(/\s*\[.*\]$/, '').replace(/_.*$/, '').toLowerCase());
-      for (const c of COLUMNS) {
-        if (!header.includes(c)) throw new StreamError(`${origin}:${lineNo}: header lacks column '${c}' (has: ${fields.join(', ')})`);
+      if (!header.includes('t')) throw new StreamError(`${origin}:${lineNo}: header lacks the time column 't' (has: ${fields.join(', ')})`);
+      if (!COLUMNS.some((c) => c !== 't' && header.includes(c))) {
+        throw new StreamError(`${origin}:${lineNo}: header has no data column of the contract (${COLUMNS.slice(1).join(' ')}); has: ${fields.join(', ')}`);
       }
       continue;
     }
@@ -80,7 +87,7 @@ export function parseStreamCsv(text, origin = 'stream') {
   if (data.length < 2) throw new StreamError(`${origin}: needs at least 2 rows, has ${data.length}`);
   const n = data.length;
   const cols = {};
-  for (const c of COLUMNS) cols[c] = Float64Array.from(data, (r) => r[c]);
+  for (const c of COLUMNS) cols[c] = header.includes(c) ? Float64Array.from(data, (r) => r[c]) : new Float64Array(n).fill(DEFAULTS[c]);
   const dt = (cols.t[n - 1] - cols.t[0]) / (n - 1);
   if (!(dt > 0)) throw new StreamError(`${origin}: time column does not increase (t[0]=${cols.t[0]} s, t[end]=${cols.t[n - 1]} s)`);
   for (let i = 1; i < n; i++) {

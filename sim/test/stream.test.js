@@ -12,7 +12,8 @@ test('CSV round trip keeps values to 9 significant digits', () => {
 });
 
 test('bad CSV: missing column, non-number, uneven time each name the problem', () => {
-  assert.throws(() => parseStreamCsv('t,ax\n0,1\n'), /lacks column 'ay'/);
+  assert.throws(() => parseStreamCsv('x,ax\n0,1\n0.1,1\n'), /lacks the time column 't'/);
+  assert.throws(() => parseStreamCsv('t,foo\n0,1\n0.1,1\n'), /no data column of the contract/);
   const h = 't,ax,ay,az,gx,gy,gz,mx,my,mz,temp\n';
   assert.throws(() => parseStreamCsv(h + '0,1,1,1,1,1,1,1,1,1,1\n0.001,x,1,1,1,1,1,1,1,1,1\n', 'f.csv'), /f\.csv:3: column 'ax' is not a finite number/);
   assert.throws(() => parseStreamCsv(h + '0,1,1,1,1,1,1,1,1,1,1\n0.001,1,1,1,1,1,1,1,1,1,1\n0.003,1,1,1,1,1,1,1,1,1,1\n'), StreamError);
@@ -36,4 +37,12 @@ test('fault specs and durations parse; bad ones are rejected with the expected f
   assert.equal(parseFault('overflow@30s').duration, 120e6);
   assert.throws(() => parseFault('nack@5s'), /which sensor/);
   assert.throws(() => parseFault('melt@5s'), /expected e\.g\./);
+});
+
+test('columns a file leaves out take the level-and-still defaults', () => {
+  const s = parseStreamCsv('t,gx\n0,1.5\n0.001,2.5\n');
+  assert.equal(s.cols.gx[1], 2.5);
+  assert.equal(s.cols.az[0], 9.80665);
+  assert.equal(s.cols.temp[1], 25);
+  assert.ok(Math.abs(s.rate - 1000) < 1e-6);
 });

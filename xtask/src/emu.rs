@@ -568,54 +568,74 @@ fn check_calibrated(
     (matched, total)
 }
 
-/// `cargo xtask demo [--port PORT] [--seconds S]`: the README's main job.
+/// `imu-lab` from this workspace (release build), run in the workspace root.
+fn imu_lab() -> Command {
+    let mut c = cargo();
+    c.args([
+        "run",
+        "--quiet",
+        "--release",
+        "--target",
+        "host-tuple",
+        "-p",
+        "imu-lab",
+        "--",
+    ]);
+    c
+}
+
+/// `cargo xtask demo [--port PORT] [--seconds S]`: the README's main job. Without `--port`:
+/// build the firmware, simulate an IMU whose gyro has a hidden effect (a 2 Hz vibration, outside
+/// the five-term model) with `imu-lab simulate`, run the firmware on the emulated board fed by
+/// it, and go through the flow below over the emulated USB port. With `--port /dev/ttyACM0`, the
+/// same flow on a real Pico running the firmware.
+///
+/// Flow: `imu-lab device status`; `imu-lab record` S seconds; `imu-lab device tables --fit` (the
+/// device's own Allan tables and the five-term fit); `imu-lab fit` on the recording, whose
+/// diagnosis names the missing effect; `imu-lab fit --add <it> --report` shows the error
+/// falling and writes the HTML report.
 pub fn demo(args: &[String]) -> Result<()> {
     let out = out_dir("demo")?;
-    let seconds = arg_value(args, "--seconds").unwrap_or_else(|| "120".into());
-    let imu_lab = |a: &[&str]| -> Result<()> {
-        let mut c = cargo();
-        c.args([
-            "run",
-            "--quiet",
-            "--release",
-            "--target",
-            "host-tuple",
-            "-p",
-            "imu-lab",
-            "--",
-        ])
-        .args(a);
-        run(&mut c)
-    };
+    let seconds: f64 = arg_value(args, "--seconds")
+        .map(|s| s.parse())
+        .transpose()
+        .context("--seconds")?
+        .unwrap_or(60.0);
     if let Some(port) = arg_value(args, "--port") {
-        eprintln!("xtask: demo on the real device at {port} (flash it first: cargo run --release)");
-        return demo_flow(&imu_lab, &port, &out);
+        eprintln!("xtask: demo on the device at {port} (flash it first: cargo run --release)");
+        return demo_flow(&port, seconds, &out);
     }
     let elf = build_firmware()?;
-    let sim_dir = ensure_sim()?;
+    ensure_sim()?;
     let stream = out.join("stream.csv");
-    let secs: f64 = seconds.parse().context("--seconds")?;
-    // The IMU with a hidden effect: a 2 Hz vibration on gx, outside the five-term model.
-    run(Command::new("node")
-        .arg(sim_dir.join("src/cli.js"))
+    let samples = ((seconds + 30.0) * 1000.0) as u64;
+    run(imu_lab()
         .args([
-            "gen-stream",
+            "simulate",
+            "--rate",
+            "1000",
+            "--samples",
+            &samples.to_string(),
             "--seed",
             "11",
-            "--sine",
-            "0.05,2",
-            "--seconds",
         ])
-        .arg(format!("{}", secs + 10.0))
+        .args([
+            "--columns",
+            "gx,gy,gz",
+            "--white",
+            "0.01",
+            "--rrw",
+            "0.002",
+            "--sinusoid",
+            "0.05,2",
+        ])
         .arg("--out")
         .arg(&stream))?;
     let sim = Sim::start(
         &elf,
         &[
-            "--warmup".into(),
-            format!("{secs}s"),
             "--seconds".into(),
-            format!("{}", secs + 3600.0),
+            format!("{}", seconds + 3600.0),
             "--stream".into(),
             stream.display().to_string(),
             "--log".into(),
@@ -625,18 +645,76 @@ pub fn demo(args: &[String]) -> Result<()> {
         &out.join("port"),
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
-    let r = demo_flow(&imu_lab, &port, &out);
+    let r = demo_flow(&port, seconds, &out);
     sim.kill();
     r
 }
 
-fn demo_flow(imu_lab: &dyn Fn(&[&str]) -> Result<()>, port: &str, out: &Path) -> Result<()> {
+fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {
+    let recording = out.join("recording.csv");
     let report = out.join("report.html");
-    let report_s = report.display().to_string();
-    imu_lab(&["device", "status", "--port", port])?;
-    imu_lab(&[
-        "device", "tables", "--port", port, "--fit", "--report", &report_s,
-    ])?;
-    eprintln!("xtask: demo report written to {report_s}");
+    run(imu_lab().args(["device", "--port", port, "status"]))?;
+    run(imu_lab()
+        .args([
+            "record",
+            "--port",
+            port,
+            "--seconds",
+            &seconds.to_string(),
+            "--out",
+        ])
+        .arg(&recording))?;
+    run(imu_lab()
+        .args([
+            "device",
+            "--port",
+            port,
+            "tables",
+            "--fit",
+            "--channel",
+            "gx",
+            "--json",
+        ])
+        .arg(out.join("tables.json")))?;
+    // The five-term fit of the recording, as JSON: its diagnosis names the missing effect.
+    let shown = format!(
+        "{:?}",
+        imu_lab()
+            .args(["fit"])
+            .arg(&recording)
+            .args(["--column", "gx", "--json"])
+    );
+    let fit = imu_lab()
+        .args(["fit"])
+        .arg(&recording)
+        .args(["--column", "gx", "--json"])
+        .current_dir(root())
+        .output()
+        .with_context(|| format!("running {shown}"))?;
+    if !fit.status.success() {
+        bail!("{shown} failed: {}", String::from_utf8_lossy(&fit.stderr));
+    }
+    let json: serde_json::Value = serde_json::from_slice(&fit.stdout)
+        .with_context(|| format!("parsing the JSON of {shown}"))?;
+    let missing = json
+        .pointer("/diagnosis/missing")
+        .and_then(|v| v.as_str())
+        .map(str::to_string);
+    let mut c = imu_lab();
+    c.args(["fit"])
+        .arg(&recording)
+        .args(["--column", "gx", "--report"])
+        .arg(&report);
+    match &missing {
+        Some(effect) => {
+            eprintln!("xtask: the five-term model fails; the diagnosis names the missing effect: {effect}");
+            c.args(["--add", effect]);
+        }
+        None => eprintln!(
+            "xtask: the diagnosis found no missing effect (the five-term model is adequate)"
+        ),
+    }
+    run(&mut c)?;
+    eprintln!("xtask: demo report written to {}", report.display());
     Ok(())
 }
