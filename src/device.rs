@@ -44,8 +44,13 @@ pub enum SensorMsg {
     },
     /// The FIFO overflowed and was reset; about `lost` samples are gone.
     ImuOverflow { t_us: u64, lost: u32 },
-    /// One magnetometer reading.
-    Mag { t_us: u64, xyz: [i16; 3] },
+    /// One magnetometer reading; `skipped`: the sensor overwrote at least one unread sample
+    /// before this one (QMC5883L DOR), a gap in the 200 Hz series.
+    Mag {
+        t_us: u64,
+        xyz: [i16; 3],
+        skipped: bool,
+    },
     /// A failed transfer, a loss, a recovery or a return.
     Fault(Fault),
     /// Sampling resumed after a pause (flash write): a gap in every channel.
@@ -229,7 +234,14 @@ impl Device {
                     sink,
                 );
             }
-            SensorMsg::Mag { t_us, xyz } => self.mag_sample(*xyz, *t_us, sink),
+            SensorMsg::Mag { t_us, xyz, skipped } => {
+                if *skipped {
+                    for c in MAG_CHANNELS {
+                        self.engines[c].gap();
+                    }
+                }
+                self.mag_sample(*xyz, *t_us, sink)
+            }
             SensorMsg::Fault(f) => {
                 self.counters.i2c_errors = self.counters.i2c_errors.saturating_add(f.i2c_errors);
                 self.counters.bus_recoveries =
@@ -408,17 +420,22 @@ impl Device {
     }
 
     /// Send the next table of the round if the queue has room for a table frame; returns the
-    /// channel sent. Tables wait for room rather than being dropped.
-    pub fn tables_step(&mut self, sink: &mut impl FrameSink) -> Option<Channel> {
+    /// table sent (for the defmt log). Tables wait for room rather than being dropped. One
+    /// table costs ≈ 8 ms of M0+ time (soft-float), so the caller sends one per wake-up and the
+    /// sensor queues absorb the delay.
+    pub fn tables_step(&mut self, sink: &mut impl FrameSink) -> Option<AllanTable> {
         let c = self.table_next?;
         if sink.room() < TABLE_FRAME_ROOM {
             return None;
         }
-        let ch = Channel::ALL[c];
-        let t = self.table(ch);
-        self.send(&DeviceMsg::Table(t), sink);
+        let t = self.table(Channel::ALL[c]);
+        let msg = DeviceMsg::Table(t);
+        self.send(&msg, sink);
         self.table_next = if c + 1 < CHANNELS { Some(c + 1) } else { None };
-        Some(ch)
+        match msg {
+            DeviceMsg::Table(t) => Some(t),
+            _ => None,
+        }
     }
 
     /// The Allan table of one channel: the engine's exact sums plus the deviation and its
@@ -431,9 +448,8 @@ impl Device {
             _ => (IMU_PERIOD_US as u32, self.scales.of(ch)),
         };
         let mut levels = Vec::new();
-        let all: Vec<LevelSums, { imu_proto::MAX_LEVELS }> = e.levels().collect();
-        for (k, l) in all.iter().enumerate().filter(|(_, l)| l.n2 > 0) {
-            let _ = levels.push(level_row(l, tau0_us, scale, alpha_at(&all, k)));
+        for l in e.levels().filter(|l| l.n2 > 0) {
+            let _ = levels.push(level_row(&l, tau0_us, scale));
         }
         AllanTable {
             channel: ch,
@@ -563,20 +579,31 @@ fn cal_fault(e: BlobError) -> CalFault {
     }
 }
 
-/// One table row from the engine's sums (off the hot path: f64 on the M0+ is soft-float).
-/// `alpha` is the noise exponent used for the EDF (Greenhall & Riley 2003).
-pub fn level_row(l: &LevelSums, tau0_us: u32, scale: f32, alpha: i32) -> AllanLevel {
-    use allan::ci;
+/// One table row from the engine's sums (off the hot path; f64 is soft-float on the M0+, so
+/// the bounds use closed forms only):
+/// * EDF: the white-FM formula of NIST SP 1065 Table 5 for overlapping ADEV
+///   (`allan::ci::edf_simple(0, m, N)`, N the phase points of the level). White FM (angle/
+///   velocity random walk) is the noise that dominates an IMU's short τ; the device does not
+///   identify the noise type, because the slope of a DLPF-shaped curve misleads the simple
+///   identification and Greenhall's general algorithm costs ~0.4 s of M0+ time per table;
+/// * χ² quantiles: Wilson & Hilferty (1931), χ²_p(ν) ≈ ν·(1 − 2/(9ν) + z_p·√(2/(9ν)))³ with
+///   z = ∓1 for the 68.3 % interval (the quantiles of the normal at 15.87 % and 84.13 %);
+/// * bounds: `σ·√(ν/χ²)` (SP 1065 eq. 45).
+///
+/// The host recomputes exact Greenhall EDFs and χ² quantiles from the same integer sums when
+/// it needs them (`imu-lab device tables`).
+pub fn level_row(l: &LevelSums, tau0_us: u32, scale: f32) -> AllanLevel {
     let dev = l.oadev(f64::from(scale)).unwrap_or(0.0);
-    let s_factor = f64::from(l.m) / f64::from(l.stride.max(1));
-    let edf = ci::edf_greenhall(
-        alpha,
-        f64::from(l.m),
-        l.phase_points(),
-        ci::Variance::Unmodified { d: 2, s_factor },
-    )
-    .unwrap_or(l.n2 as f64);
-    let (lo, hi) = ci::chi2_bounds(dev, edf, ci::ONE_SIGMA);
+    let edf = allan::ci::edf_simple(0, f64::from(l.m), l.phase_points());
+    let edf = if edf.is_finite() && edf > 0.0 {
+        edf
+    } else {
+        1.0
+    };
+    let (lo, hi) = (
+        dev * libm::sqrt(edf / chi2_wh(edf, 1.0)),
+        dev * libm::sqrt(edf / chi2_wh(edf, -1.0)),
+    );
     AllanLevel {
         m: l.m,
         stride: l.stride,
@@ -586,21 +613,16 @@ pub fn level_row(l: &LevelSums, tau0_us: u32, scale: f32, alpha: i32) -> AllanLe
         sum3: l.sum3,
         tau_s: (f64::from(l.m) * f64::from(tau0_us) * 1e-6) as f32,
         dev: dev as f32,
+        edf: edf as f32,
         lo: lo as f32,
         hi: hi as f32,
     }
 }
 
-/// Noise exponent at level `k` from the slope of the Allan variance to the neighbouring level
-/// (`allan::ci::alpha_from_slope`); 0 (white FM) when there is no neighbour yet.
-fn alpha_at(levels: &[LevelSums], k: usize) -> i32 {
-    let var = |l: &LevelSums| l.oadev(1.0).map(|d| d * d).unwrap_or(0.0);
-    let (a, b) = if k + 1 < levels.len() && levels[k + 1].n2 > 0 {
-        (k, k + 1)
-    } else if k > 0 {
-        (k - 1, k)
-    } else {
-        return 0;
-    };
-    allan::ci::alpha_from_slope(var(&levels[a]), var(&levels[b]), 2.0, 2)
+/// Wilson–Hilferty approximation of the χ² quantile with `nu` degrees of freedom at the normal
+/// quantile `z` (clamped positive for very small ν, where the cube would go negative).
+pub fn chi2_wh(nu: f64, z: f64) -> f64 {
+    let k = 2.0 / (9.0 * nu);
+    let c = 1.0 - k + z * libm::sqrt(k);
+    (nu * c * c * c).max(1e-9 * nu)
 }

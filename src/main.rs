@@ -36,7 +36,7 @@ use embassy_usb::UsbDevice;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::{self as mpu, Address, FifoFrame, RawSample};
 use imu_drivers::qmc5883 as qmc;
-use imu_proto::{Channel as Ch, DecodeError, FrameReader, HostFrame, Scales, Sensor, Vec};
+use imu_proto::{DecodeError, FrameReader, HostFrame, Scales, Sensor, Vec};
 use pico_imu::device::{Device, Fault, SensorMsg, IMU_PERIOD_US, MAG_PERIOD_US};
 use pico_imu::health::Health;
 use pico_imu::outbox::FrameSink;
@@ -80,9 +80,15 @@ impl FrameSink for PipeSink<'_> {
     fn room(&self) -> usize {
         self.0.free_capacity()
     }
-    fn put(&mut self, frame: &[u8]) {
-        // `room()` was checked by the caller and only this task writes, so it fits whole.
-        let _ = self.0.try_write(frame);
+    fn put(&mut self, mut frame: &[u8]) {
+        // `room()` was checked by the caller and only this task writes, so it fits whole; a
+        // ring buffer takes it in at most two contiguous pieces.
+        while !frame.is_empty() {
+            match self.0.try_write(frame) {
+                Ok(n) => frame = &frame[n..],
+                Err(_) => break, // unreachable given room(); never spin
+            }
+        }
     }
 }
 
@@ -159,7 +165,7 @@ async fn main(spawner: Spawner) {
 }
 
 /// Contract-unit scales of the configured ranges (the corrected counts keep the nominal LSB,
-/// see `imu_cal::device`): ±2 g, ±250 deg/s, ±2 G.
+/// see `imu_cal::device`): ±4 g, ±250 deg/s, ±2 G.
 fn scales() -> Scales {
     let cfg = imu_config();
     let s = cfg.scale(mpu::ChipId::Mpu6050);
@@ -177,11 +183,12 @@ fn scales() -> Scales {
     }
 }
 
-/// MPU-6050: 1 kHz (DLPF 184 Hz, SMPLRT_DIV 0), ±2 g, ±250 deg/s, FIFO with temperature.
+/// MPU-6050: 1 kHz (DLPF 184 Hz, SMPLRT_DIV 0), ±4 g, ±250 deg/s (the seed's ranges, which the
+/// calibration file assumes), FIFO with temperature.
 fn imu_config() -> mpu::Config {
     mpu::Config {
         gyro_range: mpu::GyroRange::Dps250,
-        accel_range: mpu::AccelRange::G2,
+        accel_range: mpu::AccelRange::G4,
         dlpf: mpu::Dlpf::Hz184,
         sample_rate_divider: 0,
         fifo: Some(FifoFrame::AccelTempGyro),
@@ -449,7 +456,17 @@ async fn mag_task(
             }
             continue;
         }
-        match mag.read().await {
+        // DRDY may trail the tick by a little (the sensor's clock is its own): poll again after
+        // 0.5 ms rather than a whole period, so no sample is overwritten unread.
+        let mut r = mag.read().await;
+        for _ in 0..4 {
+            if !matches!(r, Err(qmc::Error::NotReady)) {
+                break;
+            }
+            Timer::after_micros(500).await;
+            r = mag.read().await;
+        }
+        match r {
             Ok(s) => {
                 if let Some(e) = health.ok(t) {
                     out.send(SensorMsg::Fault(Fault {
@@ -465,11 +482,10 @@ async fn mag_task(
                 out.send(SensorMsg::Mag {
                     t_us: now_us(),
                     xyz: s.xyz,
+                    skipped: s.skipped,
                 })
                 .await;
             }
-            // DRDY not yet set: the 200 Hz tick and the sensor's own clock drift apart; the
-            // next tick reads it.
             Err(qmc::Error::NotReady) => {}
             Err(e) => {
                 let event = health.error(t);
@@ -545,34 +561,29 @@ async fn process_task(
                 {
                     last_tables = now;
                     device.start_tables();
-                    log_tables(device);
                 }
             }
         }
-        // Tables go out one channel at a time, as the USB pipe drains.
-        while device.tables_pending() {
-            if device.tables_step(&mut sink).is_none() {
-                break;
-            }
+        // Tables go out one channel per wake-up, as the USB pipe drains.
+        if let Some(t) = device.tables_step(&mut sink) {
+            log_table(&t);
         }
     }
 }
 
 /// The Allan tables over defmt, so a probe user sees them without the host tool.
-fn log_tables(device: &Device) {
-    for ch in Ch::ALL {
-        let t = device.table(ch);
-        for l in &t.levels {
-            info!(
-                "adev {} tau={}s dev={} [{}, {}] {} n={}",
-                ch.name(),
-                l.tau_s,
-                l.dev,
-                l.lo,
-                l.hi,
-                ch.unit(),
-                l.n2
-            );
-        }
+fn log_table(t: &imu_proto::AllanTable) {
+    let ch = t.channel;
+    for l in &t.levels {
+        info!(
+            "adev {} tau={}s dev={} [{}, {}] {} n={}",
+            ch.name(),
+            l.tau_s,
+            l.dev,
+            l.lo,
+            l.hi,
+            ch.unit(),
+            l.n2
+        );
     }
 }

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 mod cmd;
 mod input;
+mod link;
 
 #[derive(Parser)]
 #[command(name = "imu-lab", version, about = "Characterise and calibrate low-cost IMUs")]
@@ -16,6 +17,10 @@ struct Cli {
 enum Command {
     /// Allan-family deviation of one column, with 68.3 % confidence bounds.
     Adev(cmd::adev::Args),
+    /// Record samples from the device (or the emulator) into a CSV in the contract.
+    Record(cmd::record::Args),
+    /// Talk to the device: status, Allan tables, calibration, streaming mode.
+    Device(cmd::device::Args),
     /// Calibration lab: fit accel/gyro/mag error models, diagnose the missing effect.
     Calibrate(cmd::calibrate::Args),
 }
@@ -24,6 +29,8 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Adev(a) => cmd::adev::run(a),
+        Command::Record(a) => cmd::record::run(a),
+        Command::Device(a) => cmd::device::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
     };
     if let Err(e) = result {

@@ -178,6 +178,8 @@ pub struct AllanLevel {
     pub tau_s: f32,
     /// Overlapping Allan deviation in the channel's contract unit.
     pub dev: f32,
+    /// Equivalent degrees of freedom behind the bounds (Greenhall & Riley 2003).
+    pub edf: f32,
     /// 68.3 % lower and upper bounds of `dev`, same unit.
     pub lo: f32,
     pub hi: f32,

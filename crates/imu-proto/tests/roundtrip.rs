@@ -59,6 +59,7 @@ fn table() -> AllanTable {
                 sum3: u128::MAX - u128::from(k),
                 tau_s: 0.001 * (1u64 << k) as f32,
                 dev: 0.01 / (k as f32 + 1.0),
+                edf: 1234.5,
                 lo: 0.009,
                 hi: 0.011,
             })

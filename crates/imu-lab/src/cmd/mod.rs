@@ -1,2 +1,4 @@
 pub mod adev;
 pub mod calibrate;
+pub mod device;
+pub mod record;

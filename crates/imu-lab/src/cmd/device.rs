@@ -1,0 +1,491 @@
+//! `imu-lab device …`: talk to the firmware (a Pico over USB CDC, or the emulator over TCP).
+//!
+//! * `status` — identity and counters;
+//! * `tables [--fit] [--json F]` — the device's streaming Allan tables, each row checked against
+//!   its own integer sums; `--fit` runs the noise-model lab on each channel;
+//! * `calibrate --upload cal.toml|cal.bin` / `--download [--out cal.bin]` — the calibration in
+//!   flash (`imu_cal::file` TOML → fixed-point blob);
+//! * `reset-allan`, `mode off|calibrated|raw`.
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use imu_proto::{
+    AllanLevel, AllanTable, CalStatus, Channel, DeviceMsg, Reply, Request, Status, StreamMode,
+};
+
+use crate::link::{Link, PortArgs};
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    #[command(flatten)]
+    pub port: PortArgs,
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum Cmd {
+    /// Identity, sample counters, faults, CPU load and temperature.
+    Status,
+    /// The device's Allan tables (overlapping ADEV on octave τ, 68.3 % bounds).
+    Tables(TablesArgs),
+    /// Upload or download the calibration stored in flash.
+    Calibrate(CalArgs),
+    /// Forget the Allan state on the device.
+    ResetAllan,
+    /// Choose what the device streams: off, calibrated or raw samples.
+    Mode {
+        #[arg(value_parser = ["off", "calibrated", "raw"])]
+        mode: String,
+    },
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TablesArgs {
+    /// Fit the noise model (noise-model crate, default five terms) to each channel's table.
+    #[arg(long)]
+    pub fit: bool,
+    /// Only these channels (ax … mz, temp; comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub channel: Vec<String>,
+    /// Also write the tables (with the integer sums) as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Seconds to wait for all ten tables.
+    #[arg(long, default_value_t = 30.0)]
+    pub timeout: f64,
+}
+
+#[derive(clap::Args, Debug)]
+#[group(required = true, multiple = false)]
+pub struct CalArgs {
+    /// Calibration to store: a TOML calibration file (imu_cal::file) or a `.bin` blob.
+    #[arg(long)]
+    pub upload: Option<PathBuf>,
+    /// Read the calibration in use and print it (`--out` saves the blob).
+    #[arg(long)]
+    pub download: bool,
+    /// With --download: write the blob here (re-uploadable with --upload FILE.bin).
+    #[arg(long, requires = "download")]
+    pub out: Option<PathBuf>,
+    /// With --upload: apply without writing flash.
+    #[arg(long)]
+    pub no_persist: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let mut link = Link::open(&a.port.port)?;
+    match a.cmd {
+        Cmd::Status => status(&mut link),
+        Cmd::Tables(t) => tables(&mut link, &t),
+        Cmd::Calibrate(c) => calibrate(&mut link, &c),
+        Cmd::ResetAllan => {
+            link.request_ok(Request::ResetAllan)?;
+            println!("Allan state reset");
+            Ok(())
+        }
+        Cmd::Mode { mode } => {
+            let m = match mode.as_str() {
+                "off" => StreamMode::Off,
+                "raw" => StreamMode::Raw,
+                _ => StreamMode::Calibrated,
+            };
+            link.request_ok(Request::SetMode(m))?;
+            println!("streaming mode: {mode}");
+            Ok(())
+        }
+    }
+}
+
+fn status(link: &mut Link) -> Result<()> {
+    if let Reply::Identity(id) = link.request(Request::Identify)? {
+        println!(
+            "device: {} on {}, protocol {}, IMU {} Hz, magnetometer {} Hz, Allan engine P = {}, {} octave levels",
+            id.firmware, id.board, id.protocol, id.imu_rate_hz, id.mag_rate_hz, id.allan_overlap, id.allan_levels
+        );
+    }
+    match link.request(Request::GetStatus)? {
+        Reply::Status(s) => {
+            print!("{}", format_status(&s));
+            Ok(())
+        }
+        other => bail!("unexpected reply to GetStatus: {other:?}"),
+    }
+}
+
+/// Human-readable status, every number with its unit.
+pub fn format_status(s: &Status) -> String {
+    let temp = if s.temp_milli_c == i32::MIN {
+        "n/a (no IMU sample yet)".to_string()
+    } else {
+        format!("{:.2} °C", f64::from(s.temp_milli_c) / 1000.0)
+    };
+    format!(
+        "uptime:            {:.3} s\n\
+         IMU:               {:?}, {} samples taken, {} dropped, {} FIFO overflows\n\
+         magnetometer:      {:?}, {} samples\n\
+         I2C:               {} errors, {} bus recoveries\n\
+         host frames:       {} rejected; device frames not sent: {}\n\
+         CPU load:          {:.1} %\n\
+         temperature:       {temp}\n\
+         calibration:       {}\n\
+         streaming:         {:?}\n",
+        s.uptime_us as f64 * 1e-6,
+        s.imu,
+        s.samples_taken,
+        s.samples_dropped,
+        s.fifo_overflows,
+        s.mag,
+        s.mag_samples,
+        s.i2c_errors,
+        s.bus_recoveries,
+        s.frames_rejected,
+        s.frames_unsent,
+        f64::from(s.cpu_load_permille) / 10.0,
+        format_cal(&s.cal),
+        s.mode
+    )
+}
+
+fn format_cal(c: &CalStatus) -> String {
+    let src = match c.source {
+        imu_proto::CalSource::Identity => "identity (none stored)",
+        imu_proto::CalSource::Flash => "from flash",
+        imu_proto::CalSource::Host => "set by the host, not persisted",
+    };
+    match c.fault {
+        None => src.to_string(),
+        Some(f) => format!("{src}; stored record rejected: {f:?}"),
+    }
+}
+
+/// Collect one table per wanted channel after a `GetTables` request.
+pub fn fetch_tables(
+    link: &mut Link,
+    wanted: &[Channel],
+    timeout: Duration,
+) -> Result<BTreeMap<usize, AllanTable>> {
+    let mut got = BTreeMap::new();
+    let keep = |m: DeviceMsg, got: &mut BTreeMap<usize, AllanTable>| {
+        if let DeviceMsg::Table(t) = m {
+            got.insert(t.channel.index(), t);
+        }
+    };
+    match link.request_with(Request::GetTables, crate::link::REPLY_TIMEOUT, |m| {
+        keep(m, &mut got)
+    })? {
+        Reply::Ok => {}
+        other => bail!("unexpected reply to GetTables: {other:?}"),
+    }
+    let until = Instant::now() + timeout;
+    while wanted.iter().any(|c| !got.contains_key(&c.index())) {
+        let left = until.saturating_duration_since(Instant::now());
+        match link.recv(left)? {
+            Some(m) => keep(m, &mut got),
+            None => {
+                let missing: Vec<&str> = wanted
+                    .iter()
+                    .filter(|c| !got.contains_key(&c.index()))
+                    .map(|c| c.name())
+                    .collect();
+                bail!(
+                    "tables for {} did not arrive within {:.0} s",
+                    missing.join(", "),
+                    timeout.as_secs_f64()
+                );
+            }
+        }
+    }
+    got.retain(|k, _| wanted.iter().any(|c| c.index() == *k));
+    Ok(got)
+}
+
+/// Relative disagreement between a row's deviation and the one its sums give
+/// (σ² = Σ D2² / (2 n m²), seed eq. 7 with eq. 9), times the scale. The device sends f32, so
+/// agreement is expected to f32 precision (~1e-7 relative).
+pub fn sums_check(l: &AllanLevel, scale: f32) -> f64 {
+    let sums = allan::stream::LevelSums {
+        m: l.m,
+        stride: l.stride,
+        n2: l.n2,
+        sum2: l.sum2,
+        n3: l.n3,
+        sum3: l.sum3,
+    };
+    let dev = sums.oadev(f64::from(scale)).unwrap_or(0.0);
+    if dev == 0.0 {
+        return if l.dev == 0.0 { 0.0 } else { f64::INFINITY };
+    }
+    (f64::from(l.dev) - dev).abs() / dev
+}
+
+fn parse_channels(names: &[String]) -> Result<Vec<Channel>> {
+    if names.is_empty() {
+        return Ok(Channel::ALL.to_vec());
+    }
+    names
+        .iter()
+        .map(|n| {
+            Channel::ALL
+                .into_iter()
+                .find(|c| c.name() == n.trim())
+                .with_context(|| format!("unknown channel `{n}` (ax ay az gx gy gz mx my mz temp)"))
+        })
+        .collect()
+}
+
+fn tables(link: &mut Link, a: &TablesArgs) -> Result<()> {
+    let wanted = parse_channels(&a.channel)?;
+    if !(a.timeout > 0.0 && a.timeout.is_finite()) {
+        bail!("--timeout must be positive seconds");
+    }
+    let got = fetch_tables(link, &wanted, Duration::from_secs_f64(a.timeout))?;
+    let mut worst = 0.0f64;
+    for t in got.values() {
+        let unit = t.channel.unit();
+        println!(
+            "\n{} [{unit}]: τ0 = {} µs, {} samples, {} gaps",
+            t.channel.name(),
+            t.tau0_us,
+            t.pushed,
+            t.gaps
+        );
+        println!(
+            "{:>12} {:>9} {:>10} {:>14} {:>14} {:>14} {:>9}",
+            "τ [s]", "m", "n", "ADEV", "lo (68.3 %)", "hi", "EDF"
+        );
+        for l in &t.levels {
+            worst = worst.max(sums_check(l, t.scale));
+            println!(
+                "{:>12.4e} {:>9} {:>10} {:>14.6e} {:>14.6e} {:>14.6e} {:>9.1}",
+                l.tau_s, l.m, l.n2, l.dev, l.lo, l.hi, l.edf
+            );
+        }
+        if a.fit {
+            fit_table(t);
+        }
+    }
+    println!("\nrows checked against their integer sums: worst relative difference {worst:.1e} (f32 rounding ≈ 6e-8)");
+    if worst > 1e-5 {
+        bail!("a table row disagrees with its own sums by {worst:.1e} (relative): corrupt table");
+    }
+    if let Some(p) = &a.json {
+        let v: Vec<&AllanTable> = got.values().collect();
+        std::fs::write(p, serde_json::to_string_pretty(&v)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+        println!("tables written to {}", p.display());
+    }
+    Ok(())
+}
+
+/// The noise-model fit of one device table (default five terms).
+fn fit_table(t: &AllanTable) {
+    let pts: Vec<noise_model::Point> = t
+        .levels
+        .iter()
+        .filter(|l| l.dev > 0.0 && l.lo > 0.0 && l.hi > l.lo && l.edf > 0.0)
+        .map(|l| noise_model::Point {
+            tau: f64::from(l.tau_s),
+            dev: f64::from(l.dev),
+            edf: f64::from(l.edf),
+            lo: f64::from(l.lo),
+            hi: f64::from(l.hi),
+        })
+        .collect();
+    let tau0 = f64::from(t.tau0_us) * 1e-6;
+    match noise_model::fit(
+        &pts,
+        tau0,
+        &noise_model::DEFAULT_TERMS,
+        &noise_model::FitOptions::default(),
+    ) {
+        Ok(f) => {
+            let a = noise_model::assess(&f);
+            println!(
+                "  fit ({} points): χ²/dof = {:.2}, {}",
+                pts.len(),
+                f.chi2_dof(),
+                if a.adequate {
+                    "adequate"
+                } else {
+                    "NOT adequate"
+                }
+            );
+            for term in &f.terms {
+                let amp = term.amplitude();
+                match term.upper_bound() {
+                    None => println!(
+                        "    {:<14} {:.4e} ± {:.1e} ({} in canonical units of {})",
+                        term.effect.name(),
+                        amp,
+                        term.amplitude_sigma(),
+                        term.effect.amp_name(),
+                        t.channel.unit()
+                    ),
+                    Some(ub) => {
+                        println!("    {:<14} not detected (< {:.2e})", term.effect.name(), ub)
+                    }
+                }
+            }
+            for r in &a.failing {
+                println!(
+                    "    misfit for τ {:.3e}…{:.3e} s: a missing effect (try `imu-lab fit`)",
+                    r.lo, r.hi
+                );
+            }
+        }
+        Err(e) => println!("  fit: {e}"),
+    }
+}
+
+fn calibrate(link: &mut Link, a: &CalArgs) -> Result<()> {
+    if let Some(path) = &a.upload {
+        let blob = if path.extension().is_some_and(|e| e == "bin") {
+            let b = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+            imu_cal::device::decode_blob(&b).map_err(|e| {
+                anyhow::anyhow!("{}: not a valid calibration blob: {e}", path.display())
+            })?;
+            b
+        } else {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let file = imu_cal::file::CalFile::from_toml(&text)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            let cal = file.to_device().map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: cannot be represented on the device: {e}",
+                    path.display()
+                )
+            })?;
+            let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+            imu_cal::device::encode_blob(&cal, &mut buf)
+                .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?
+                .to_vec()
+        };
+        let blob = imu_proto::Vec::from_slice(&blob).map_err(|_| {
+            anyhow::anyhow!(
+                "calibration blob of {} B exceeds {} B",
+                blob.len(),
+                imu_proto::MAX_CAL_BLOB
+            )
+        })?;
+        let persist = !a.no_persist;
+        // A flash write pauses sampling and can take a few hundred ms (sector erase).
+        match link.request_with(
+            Request::SetCalibration { blob, persist },
+            Duration::from_secs(10),
+            |_| {},
+        )? {
+            Reply::Ok => println!(
+                "calibration from {} {} (the Allan state was reset: new corrections, new data)",
+                path.display(),
+                if persist {
+                    "applied and written to flash"
+                } else {
+                    "applied (not persisted)"
+                }
+            ),
+            Reply::Error(e) => bail!("the device refused the calibration: {e:?}"),
+            other => bail!("unexpected reply: {other:?}"),
+        }
+        return Ok(());
+    }
+    match link.request(Request::GetCalibration)? {
+        Reply::Calibration { blob, status } => {
+            println!("calibration in use: {}", format_cal(&status));
+            let cal = imu_cal::device::decode_blob(&blob)
+                .map_err(|e| anyhow::anyhow!("the device sent an invalid blob: {e}"))?;
+            print_cal(&cal);
+            if let Some(out) = &a.out {
+                std::fs::write(out, &blob).with_context(|| format!("writing {}", out.display()))?;
+                println!("blob ({} B) written to {}", blob.len(), out.display());
+            }
+            Ok(())
+        }
+        Reply::Error(e) => bail!("the device could not report its calibration: {e:?}"),
+        other => bail!("unexpected reply: {other:?}"),
+    }
+}
+
+/// The fixed-point corrections as numbers: out = M·raw − c (− κ·ΔT for the gyro), in nominal LSB.
+fn print_cal(cal: &imu_cal::device::Calibration) {
+    let show = |name: &str, a: &imu_cal::device::Affine| {
+        let m = a.matrix();
+        let c = a.folded_offset();
+        println!("{name}: out = M·raw − c  [nominal LSB]");
+        for i in 0..3 {
+            println!(
+                "    [{:>10.6} {:>10.6} {:>10.6}]   c = {:>10.3}",
+                m[i][0], m[i][1], m[i][2], c[i]
+            );
+        }
+    };
+    show("accel", cal.accel());
+    show("gyro", cal.gyro().affine());
+    let k = cal.gyro().kappa();
+    println!(
+        "    temperature term κ = [{:.6}, {:.6}, {:.6}] LSB per temperature LSB, T_ref = {} LSB",
+        k[0],
+        k[1],
+        k[2],
+        cal.gyro().t_ref()
+    );
+    show("mag", cal.mag());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_sums_check_recomputes_the_deviation_and_catches_a_wrong_row() {
+        // m = 4, 100 differences, Σ D2² = 2·100·16·25 → σ = 5 LSB; scale 0.01 → 0.05.
+        let mut l = AllanLevel {
+            m: 4,
+            stride: 1,
+            n2: 100,
+            sum2: 2 * 100 * 16 * 25,
+            n3: 0,
+            sum3: 0,
+            tau_s: 0.004,
+            dev: 0.05,
+            edf: 80.0,
+            lo: 0.045,
+            hi: 0.056,
+        };
+        assert!(sums_check(&l, 0.01) < 1e-7);
+        l.sum2 += 1000; // a corrupted sum: σ changes by ~0.1 %
+        assert!(sums_check(&l, 0.01) > 1e-4);
+    }
+
+    #[test]
+    fn status_prints_units_and_the_missing_temperature() {
+        let s = Status {
+            uptime_us: 2_500_000,
+            samples_taken: 10,
+            samples_dropped: 0,
+            mag_samples: 2,
+            fifo_overflows: 0,
+            i2c_errors: 1,
+            bus_recoveries: 0,
+            frames_rejected: 0,
+            frames_unsent: 0,
+            cpu_load_permille: 37,
+            temp_milli_c: i32::MIN,
+            imu: imu_proto::SensorState::Ok,
+            mag: imu_proto::SensorState::Missing,
+            cal: CalStatus {
+                source: imu_proto::CalSource::Identity,
+                fault: Some(imu_proto::CalFault::Corrupt),
+            },
+            mode: StreamMode::Off,
+        };
+        let t = format_status(&s);
+        assert!(t.contains("2.500 s"), "{t}");
+        assert!(t.contains("3.7 %"), "{t}");
+        assert!(t.contains("n/a"), "{t}");
+        assert!(t.contains("stored record rejected: Corrupt"), "{t}");
+    }
+}
