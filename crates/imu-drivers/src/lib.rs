@@ -12,29 +12,58 @@
 //! sequence is written once; all register values come from the pure register layer.
 //!
 //! # MPU-6050
-//! ```ignore
-//! use imu_drivers::{asynch::Mpu6050, mpu6050::{Address, Config}};
-//! let mut imu = Mpu6050::new(i2c, Address::Ad0Low);
-//! let chip = imu.init(&mut delay, &Config::default()).await?;  // seed: ±250 °/s, ±4 g, 5 Hz DLPF, 1 kHz, FIFO accel+gyro
-//! let one = imu.read_all().await?;                              // 14-byte burst, RawSample { accel, temp, gyro }
-//! let mut frames = [RawSample::default(); 32];
-//! match imu.read_fifo(&mut frames).await {                      // whole frames only
-//!     Ok(n) => { let si = imu.scale().convert(&frames[0]); /* m/s², °/s, °C */ }
-//!     Err(mpu6050::Error::FifoOverflow) => imu.reset_fifo().await?,
-//!     Err(e) => return Err(e),
+//! ```
+//! use embedded_hal_async::{delay::DelayNs, i2c::I2c};
+//! use imu_drivers::asynch::Mpu6050;
+//! use imu_drivers::mpu6050::{self, Address, Config, RawSample};
+//!
+//! async fn stream<I: I2c, D: DelayNs>(i2c: I, mut delay: D) -> Result<(), mpu6050::Error<I::Error>> {
+//!     let mut imu = Mpu6050::new(i2c, Address::Ad0Low);
+//!     // Seed: ±250 °/s, ±4 g, 5 Hz DLPF, 1 kHz, FIFO accel + gyro.
+//!     let _chip = imu.init(&mut delay, &Config::default()).await?;
+//!     let one: RawSample = imu.read_all().await?; // one 14-byte burst
+//!     let mut frames = [RawSample::default(); 32];
+//!     loop {
+//!         match imu.read_fifo(&mut frames).await {
+//!             // whole frames only; SI units via the scale of the applied configuration
+//!             Ok(n) => {
+//!                 for f in &frames[..n] {
+//!                     let _si = imu.scale().convert(f); // m/s², °/s, °C
+//!                 }
+//!             }
+//!             Err(mpu6050::Error::FifoOverflow) => imu.reset_fifo().await?,
+//!             Err(e) => return Err(e),
+//!         }
+//!         delay.delay_ms(10).await;
+//!         # let _ = one; break Ok(());
+//!     }
 //! }
 //! ```
 //! Other methods: `probe`, `who_am_i`, `int_status`, `read_if_ready` (NotReady when
 //! DATA_RDY is clear), `fifo_count`, `self_test(&mut delay)`, `chip`, `config`, `release`.
+//! The blocking flavour, `imu_drivers::blocking::Mpu6050`, has the same methods without `.await`.
 //!
 //! # QMC5883L / QMC5883P
-//! ```ignore
-//! use imu_drivers::{asynch::Qmc5883, qmc5883::{Chip, Config, Variant}};
-//! let variant = match Qmc5883::detect(&mut i2c).await { Chip::Qmc5883P => Variant::P, _ => Variant::L };
-//! let mut mag = Qmc5883::new_variant(i2c, variant);            // or Qmc5883::new(i2c) for the L
-//! mag.init(&mut delay, &Config::default()).await?;              // seed: ±2 G, 200 Hz, OSR 512, continuous
-//! let s = mag.read().await?;   // MagSample { xyz, temp, overflow, skipped }; Error::NotReady if DRDY clear
-//! let ut = mag.microtesla(&s);
+//! ```
+//! use embedded_hal::{delay::DelayNs, i2c::I2c};
+//! use imu_drivers::blocking::Qmc5883;
+//! use imu_drivers::qmc5883::{self, Chip, Config, Variant};
+//!
+//! fn field<I: I2c, D: DelayNs>(mut i2c: I, mut delay: D) -> Result<[f32; 3], qmc5883::Error<I::Error>> {
+//!     let variant = match Qmc5883::detect(&mut i2c) {
+//!         Chip::Qmc5883P => Variant::P,
+//!         _ => Variant::L,
+//!     };
+//!     let mut mag = Qmc5883::new_variant(i2c, variant); // or Qmc5883::new(i2c) for the L
+//!     mag.init(&mut delay, &Config::default())?; // seed: ±2 G, 200 Hz, OSR 512, continuous
+//!     loop {
+//!         match mag.read() {
+//!             Ok(s) => return Ok(mag.microtesla(&s)), // s: MagSample { xyz, temp, overflow, skipped }
+//!             Err(qmc5883::Error::NotReady) => delay.delay_ms(1),
+//!             Err(e) => return Err(e),
+//!         }
+//!     }
+//! }
 //! ```
 //!
 //! No method panics on any byte returned by the bus; unknown identities give
