@@ -48,7 +48,8 @@ pub mod reg_p {
     pub const CONTROL1: u8 = 0x0A;
     /// Control 2: SOFT_RST (bit 7), SELF_TEST (bit 6), `RNG[3:2]`, SET_RESET `mode[1:0]`.
     pub const CONTROL2: u8 = 0x0B;
-    /// Axis sign definition register; the datasheet's set-up example writes 0x06.
+    /// Axis sign definition register; the datasheet's continuous-mode example (QMC-P 7.2)
+    /// writes 0x06.
     pub const AXIS_SIGN: u8 = 0x29;
     /// Value the datasheet example writes to [`AXIS_SIGN`].
     pub const AXIS_SIGN_VALUE: u8 = 0x06;
