@@ -2,6 +2,9 @@
 //! left to the SVG viewer). One figure = the Allan panel (measured σ with its 68.3 % bars, the
 //! total model, each term dashed) above a residual panel (r per τ, the ±1 band, the τ ranges
 //! outside the interval shaded, failing ones in red).
+// SVG/HTML fragments are raw multi-line strings that end in a newline.
+#![allow(clippy::write_with_newline)]
+
 use noise_model::{Assessment, Effect, Fit};
 use std::fmt::Write;
 

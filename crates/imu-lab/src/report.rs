@@ -1,5 +1,8 @@
 //! Rendering of noise-model fits for people: parameter tables with canonical and conventional
 //! units (text and HTML), the step line, and the offline HTML report.
+// SVG/HTML fragments are raw multi-line strings that end in a newline.
+#![allow(clippy::write_with_newline)]
+
 use noise_model::{Assessment, Diagnosis, Fit, Step, UnitFamily};
 use std::fmt::Write;
 

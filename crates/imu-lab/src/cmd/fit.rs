@@ -218,12 +218,12 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     let rec = input::load(&args.input, &[&args.column])?;
-    let unit = input::unit_of(&args.input, &args.column)?;
     let shown = args.input.file.display().to_string();
-    let y = &rec
+    let series = rec
         .column(&args.column)
-        .ok_or_else(|| anyhow!("{shown}: column {:?} missing", args.column))?
-        .values;
+        .ok_or_else(|| anyhow!("{shown}: column {:?} missing", args.column))?;
+    let unit = series.unit.clone();
+    let y = &series.values;
     let tau0 = 1.0 / rec.rate_hz;
     let rows = deviation(y, tau0, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{shown}: column {:?}", args.column))?;
