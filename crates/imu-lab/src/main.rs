@@ -4,6 +4,8 @@ use clap::{Parser, Subcommand};
 
 mod cmd;
 mod input;
+mod plot;
+mod report;
 mod link;
 
 #[derive(Parser)]
@@ -23,6 +25,12 @@ enum Command {
     Device(cmd::device::Args),
     /// Calibration lab: fit accel/gyro/mag error models, diagnose the missing effect.
     Calibrate(cmd::calibrate::Args),
+    /// Noise-model lab: fit Allan terms with uncertainties, judge the model, name the missing effect.
+    Fit(cmd::fit::Args),
+    /// Simulate IMU rate data with any mix of noise effects, as CSV in the contract.
+    Simulate(cmd::simulate::Args),
+    /// Export noise parameters for other tools (Kalibr imu.yaml).
+    Export(cmd::export::Args),
 }
 
 fn main() {
@@ -31,6 +39,9 @@ fn main() {
         Command::Adev(a) => cmd::adev::run(a),
         Command::Record(a) => cmd::record::run(a),
         Command::Device(a) => cmd::device::run(a),
+        Command::Fit(a) => cmd::fit::run(a),
+        Command::Simulate(a) => cmd::simulate::run(a),
+        Command::Export(a) => cmd::export::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
     };
     if let Err(e) = result {

@@ -2,3 +2,6 @@ pub mod adev;
 pub mod calibrate;
 pub mod device;
 pub mod record;
+pub mod export;
+pub mod fit;
+pub mod simulate;
