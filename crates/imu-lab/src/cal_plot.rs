@@ -151,8 +151,8 @@ fn panel(s: &mut String, p: &Panel, ox: f64, oy: f64) {
     );
     // Ticks and grid.
     let sx = nice_step(x1 - x0);
-    let mut t = (x0 / sx).ceil() * sx;
-    while t <= x1 {
+    // Ticks at integer multiples of the step (no accumulated rounding, no "-0.0").
+    for t in ((x0 / sx).ceil() as i64..=(x1 / sx).floor() as i64).map(|k| k as f64 * sx + 0.0) {
         let x = px(t);
         let _ = write!(
             s,
@@ -162,11 +162,9 @@ fn panel(s: &mut String, p: &Panel, ox: f64, oy: f64) {
             oy + MT + ph + 14.0,
             fmt_tick(t, sx)
         );
-        t += sx;
     }
     let sy = nice_step(y1 - y0);
-    let mut t = (y0 / sy).ceil() * sy;
-    while t <= y1 {
+    for t in ((y0 / sy).ceil() as i64..=(y1 / sy).floor() as i64).map(|k| k as f64 * sy + 0.0) {
         let y = py(t);
         let _ = write!(
             s,
@@ -177,7 +175,6 @@ fn panel(s: &mut String, p: &Panel, ox: f64, oy: f64) {
             y + 4.0,
             fmt_tick(t, sy)
         );
-        t += sy;
     }
     let _ = write!(
         s,

@@ -488,6 +488,15 @@ fn circle(r: f64) -> Vec<(f64, f64)> {
 
 const AX: [&str; 3] = ["X", "Y", "Z"];
 
+/// Without a step, "after" is the same model as "before": keep one copy of each residual set.
+fn residual_series(r: &Report, before: Series, after: Series) -> Vec<Series> {
+    if r.step.is_some() {
+        vec![before, after]
+    } else {
+        vec![before]
+    }
+}
+
 fn plot(data: &Data, r: &Report) -> String {
     let (after, after_name) = after_params(r);
     let before_name = r
@@ -506,13 +515,24 @@ fn plot(data: &Data, r: &Report) -> String {
         Data::Mag(m) => {
             let corr: Vec<Vector3<f64>> =
                 m.m.iter().map(|v| MagProblem::correct(after, *v)).collect();
+            let before_corr: Vec<Vector3<f64>> =
+                m.m.iter()
+                    .map(|v| MagProblem::correct(&r.fitted.params, *v))
+                    .collect();
             let f = after.field.unwrap_or(1.0);
+            let fb = r.fitted.params.field.unwrap_or(1.0);
+            // Planar data are fitted (and so drawn) in their plane; 3-D data in XY and YZ.
+            let pairs: Vec<(usize, usize)> = match m.plane {
+                Some([i, j]) => vec![(i, j)],
+                None => vec![(0, 1), (1, 2)],
+            };
             let mut panels = Vec::new();
-            for (i, j) in [(0, 1), (1, 2)] {
+            for &(i, j) in &pairs {
+                let (ni, nj) = (AX[i].to_lowercase(), AX[j].to_lowercase());
                 panels.push(Panel {
                     title: format!("{}{} before (raw) with the fitted ellipse", AX[i], AX[j]),
-                    xlabel: format!("m{} (µT)", AX[i].to_lowercase()),
-                    ylabel: format!("m{} (µT)", AX[j].to_lowercase()),
+                    xlabel: format!("m{ni} (µT)"),
+                    ylabel: format!("m{nj} (µT)"),
                     series: vec![
                         Series {
                             label: "measured".into(),
@@ -531,8 +551,8 @@ fn plot(data: &Data, r: &Report) -> String {
                 });
                 panels.push(Panel {
                     title: format!("{}{} after ({after_name})", AX[i], AX[j]),
-                    xlabel: format!("m{} (µT)", AX[i].to_lowercase()),
-                    ylabel: format!("m{} (µT)", AX[j].to_lowercase()),
+                    xlabel: format!("m{ni} (µT)"),
+                    ylabel: format!("m{nj} (µT)"),
                     series: vec![
                         Series {
                             label: "corrected".into(),
@@ -550,39 +570,51 @@ fn plot(data: &Data, r: &Report) -> String {
                     equal: true,
                 });
             }
-            // Residuals against orientation (azimuth and elevation of the corrected field).
-            let before_corr: Vec<Vector3<f64>> =
-                m.m.iter()
-                    .map(|v| MagProblem::correct(&r.fitted.params, *v))
-                    .collect();
-            let fb = r.fitted.params.field.unwrap_or(1.0);
-            let az = |v: &Vector3<f64>| v.y.atan2(v.x).to_degrees();
-            let el = |v: &Vector3<f64>| (v.z / v.norm()).asin().to_degrees();
-            for (name, ang) in [
-                ("azimuth", &az as &dyn Fn(&Vector3<f64>) -> f64),
-                ("elevation", &el),
-            ] {
+            // Residuals on the lab's basis (in-plane magnitude for planar data) against the
+            // orientation of the corrected field.
+            type Ang<'a> = (&'static str, Box<dyn Fn(&Vector3<f64>) -> f64 + 'a>);
+            let (mag, angles): (Box<dyn Fn(&Vector3<f64>) -> f64>, Vec<Ang>) = match m.plane {
+                Some([i, j]) => (
+                    Box::new(move |v: &Vector3<f64>| (v[i] * v[i] + v[j] * v[j]).sqrt()),
+                    vec![(
+                        "in-plane angle",
+                        Box::new(move |v: &Vector3<f64>| v[j].atan2(v[i]).to_degrees()),
+                    )],
+                ),
+                None => (
+                    Box::new(|v: &Vector3<f64>| v.norm()),
+                    vec![
+                        (
+                            "azimuth",
+                            Box::new(|v: &Vector3<f64>| v.y.atan2(v.x).to_degrees()),
+                        ),
+                        (
+                            "elevation",
+                            Box::new(|v: &Vector3<f64>| (v.z / v.norm()).asin().to_degrees()),
+                        ),
+                    ],
+                ),
+            };
+            for (name, ang) in &angles {
                 panels.push(Panel {
                     title: format!("residual |m| − F against {name}"),
                     xlabel: format!("{name} of the corrected field (deg)"),
                     ylabel: "|m| − F (µT)".into(),
-                    series: vec![
+                    series: residual_series(
+                        r,
                         Series {
                             label: before_name.clone(),
                             color: "#ff7f0e",
-                            points: before_corr
-                                .iter()
-                                .map(|v| (ang(v), v.norm() - fb))
-                                .collect(),
+                            points: before_corr.iter().map(|v| (ang(v), mag(v) - fb)).collect(),
                             line: false,
                         },
                         Series {
                             label: after_name.clone(),
                             color: "#2ca02c",
-                            points: corr.iter().map(|v| (ang(v), v.norm() - f)).collect(),
+                            points: corr.iter().map(|v| (ang(v), mag(v) - f)).collect(),
                             line: false,
                         },
-                    ],
+                    ),
                     equal: false,
                 });
             }
@@ -638,7 +670,8 @@ fn plot(data: &Data, r: &Report) -> String {
                     title: format!("pose residual |a| − g against {name}"),
                     xlabel: format!("{name} of gravity in the sensor frame (deg)"),
                     ylabel: "|a| − g (m/s²)".into(),
-                    series: vec![
+                    series: residual_series(
+                        r,
                         Series {
                             label: before_name.clone(),
                             color: "#ff7f0e",
@@ -657,7 +690,7 @@ fn plot(data: &Data, r: &Report) -> String {
                                 .collect(),
                             line: false,
                         },
-                    ],
+                    ),
                     equal: false,
                 });
             }
@@ -687,7 +720,8 @@ fn plot(data: &Data, r: &Report) -> String {
                     title: format!("g{} residual against temperature", AX[j].to_lowercase()),
                     xlabel: xl.into(),
                     ylabel: "block-mean residual (deg/s)".into(),
-                    series: vec![
+                    series: residual_series(
+                        r,
                         Series {
                             label: before_name.clone(),
                             color: "#ff7f0e",
@@ -700,7 +734,7 @@ fn plot(data: &Data, r: &Report) -> String {
                             points: resid(after, j),
                             line: false,
                         },
-                    ],
+                    ),
                     equal: false,
                 })
                 .collect();
