@@ -321,6 +321,41 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) ->
             )
         }
         None => {
+            for c in &candidates {
+                if let (Some(lt), Some(f)) =
+                    (c.line_test, c.fit.term(c.effect).and_then(|t| t.theta))
+                {
+                    if c.p_value < P_CANDIDATE && lt.p_value >= P_CANDIDATE {
+                        evidence.push(format!(
+                            "a sinusoid at {:.4} Hz would lower χ² by {:.1} (p = {:.1e}), but the \
+                             periodogram of the record shows no line near it (best bin {:.1}× \
+                             background, p = {:.2}), so it is not named",
+                            f, c.delta_chi2, c.p_value, lt.ratio, lt.p_value
+                        ));
+                    }
+                }
+            }
+            // Residual signs alternating between neighbouring octaves at short τ: no stationary
+            // noise does that; repeated or irregularly timed samples do.
+            let r = &base_a.residuals;
+            let mut run = 1usize;
+            let mut best_run = 1usize;
+            for j in 1..r.len().min(8) {
+                if r[j] * r[j - 1] < 0.0 && r[j].abs() > 1.0 && r[j - 1].abs() > 1.0 {
+                    run += 1;
+                    best_run = best_run.max(run);
+                } else {
+                    run = 1;
+                }
+            }
+            if best_run >= 3 {
+                evidence.push(format!(
+                    "at short τ the residual alternates in sign from one octave to the next over {} \
+                     points: a zig-zag that no stationary noise produces, typical of repeated or \
+                     irregularly timed samples (buffered host reads, a sample-rate mismatch)",
+                    best_run
+                ));
+            }
             let best_try = candidates
                 .first()
                 .map(|c| format!("{} (p = {:.1e})", c.effect, c.p_value))
