@@ -572,8 +572,9 @@ fn plot(data: &Data, r: &Report) -> String {
             }
             // Residuals on the lab's basis (in-plane magnitude for planar data) against the
             // orientation of the corrected field.
-            type Ang<'a> = (&'static str, Box<dyn Fn(&Vector3<f64>) -> f64 + 'a>);
-            let (mag, angles): (Box<dyn Fn(&Vector3<f64>) -> f64>, Vec<Ang>) = match m.plane {
+            type VecFn<'a> = Box<dyn Fn(&Vector3<f64>) -> f64 + 'a>;
+            type Ang<'a> = (&'static str, VecFn<'a>);
+            let (mag, angles): (VecFn, Vec<Ang>) = match m.plane {
                 Some([i, j]) => (
                     Box::new(move |v: &Vector3<f64>| (v[i] * v[i] + v[j] * v[j]).sqrt()),
                     vec![(
