@@ -629,7 +629,7 @@ pub fn demo(args: &[String]) -> Result<()> {
             "--sinusoid",
             "0.05,2",
         ])
-        .arg("--out")
+        .arg("--output")
         .arg(&stream))?;
     let sim = Sim::start(
         &elf,
