@@ -7,12 +7,17 @@ use embassy_rp::i2c::{self, AbortReason, I2c};
 use embassy_rp::peripherals::{I2C0, PIN_4, PIN_5};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::mutex::Mutex;
+use embassy_time::{with_timeout, Duration};
 use embedded_hal_async::i2c::{ErrorType, I2c as AsyncI2c, Operation};
 
 use crate::Irqs;
 
 /// Half an SCL period of the recovery clock, µs (≈ 100 kHz, slow enough for any slave).
 const RECOVERY_HALF_PERIOD_US: u32 = 5;
+/// Longest a transaction may take before it is abandoned: the longest one (a FIFO chunk of
+/// 32 × 14 bytes) needs ≈ 11 ms at 400 kHz. A slave holding SDA low can otherwise stall a
+/// transfer for ever; after a timeout the controller is re-created before the next use.
+const TRANSACTION_TIMEOUT_MS: u64 = 25;
 
 pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 
@@ -20,6 +25,8 @@ pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 pub struct Bus {
     i2c: Option<I2c<'static, I2C0, i2c::Async>>,
     config: i2c::Config,
+    /// A transaction was abandoned mid-way: the controller's state is unknown.
+    wedged: bool,
 }
 
 impl Bus {
@@ -27,7 +34,19 @@ impl Bus {
         Self {
             i2c: Some(i2c),
             config,
+            wedged: false,
         }
+    }
+
+    /// Re-create the controller (after an abandoned transaction, or after a recovery).
+    fn reset_controller(&mut self) {
+        self.i2c = None;
+        // SAFETY: the only owner of these peripherals was the I2c just dropped (or the GPIO
+        // drivers of a recovery, dropped too); the bus mutex, held by our caller, keeps every
+        // other user out until the new controller is stored.
+        let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
+        self.i2c = Some(I2c::new_async(p, scl, sda, Irqs, self.config));
+        self.wedged = false;
     }
 
     /// Clock a stuck slave free and re-create the controller; returns the recoveries done (1).
@@ -55,9 +74,7 @@ impl Bus {
             Err(_) => defmt::warn!("i2c: bus recovery pin error"),
         }
         drop((scl, sda));
-        // SAFETY: as above; the pins were released by dropping the GPIO drivers.
-        let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
-        self.i2c = Some(I2c::new_async(p, scl, sda, Irqs, self.config));
+        self.reset_controller();
         1
     }
 }
@@ -84,9 +101,19 @@ impl AsyncI2c for BusDevice {
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
         let mut bus = self.bus.lock().await;
-        match bus.i2c.as_mut() {
-            Some(i2c) => i2c.transaction(address, operations).await,
-            None => Err(i2c::Error::Abort(AbortReason::Other(0))),
+        if bus.wedged || bus.i2c.is_none() {
+            bus.reset_controller();
+        }
+        let Some(i2c) = bus.i2c.as_mut() else {
+            return Err(i2c::Error::Abort(AbortReason::Other(0)));
+        };
+        let t = Duration::from_millis(TRANSACTION_TIMEOUT_MS);
+        match with_timeout(t, i2c.transaction(address, operations)).await {
+            Ok(r) => r,
+            Err(_) => {
+                bus.wedged = true;
+                Err(i2c::Error::Abort(AbortReason::Other(u32::MAX)))
+            }
         }
     }
 }

@@ -4,10 +4,13 @@
 //!
 //! * [`outbox`]: frames queued whole or dropped and counted, never blocking the sampler;
 //! * [`health`]: the sensor fault state machine (lost, retry with bus recovery, back);
-//! * [`device`]: per-sample pipeline (corrections → Allan → batch) and host request handling.
+//! * [`device`]: per-sample pipeline (corrections → Allan → batch) and host request handling;
+//! * [`sensors`]: the sensor tasks' tick (init, FIFO drain, overflow, loss and retry);
+//! * [`stage`]: cycle markers for the emulator's budget.
 #![no_std]
 
 pub mod device;
 pub mod health;
 pub mod outbox;
+pub mod sensors;
 pub mod stage;

@@ -34,13 +34,11 @@ use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::UsbDevice;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
-use imu_drivers::mpu6050::{self as mpu, Address, FifoFrame, RawSample};
-use imu_drivers::qmc5883 as qmc;
-use imu_proto::{DecodeError, FrameReader, HostFrame, Scales, Sensor, Vec};
-use pico_imu::device::{Device, Fault, SensorMsg, IMU_PERIOD_US, MAG_PERIOD_US};
-use pico_imu::health::Health;
+use imu_drivers::mpu6050::Address;
+use imu_proto::{DecodeError, FrameReader, HostFrame};
+use pico_imu::device::{Device, SensorMsg, MAG_PERIOD_US};
 use pico_imu::outbox::FrameSink;
-use pico_imu::stage::{self, Stage};
+use pico_imu::sensors::{self, ImuService, MagService};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -144,7 +142,7 @@ async fn main(spawner: Spawner) {
     // --- calibration from flash -------------------------------------------------------------
     let mut store = storage::Store::new(p.FLASH);
     let device = DEVICE.init(Device::new(
-        scales(),
+        sensors::scales(),
         concat!("pico-imu ", env!("CARGO_PKG_VERSION")),
     ));
     let mut blob = [0u8; imu_proto::MAX_CAL_BLOB];
@@ -162,41 +160,6 @@ async fn main(spawner: Spawner) {
     spawner.spawn(mag_task(bus, sensors, run).expect("spawn mag_task"));
     spawner
         .spawn(process_task(device, store, sensors, host, out, run).expect("spawn process_task"));
-}
-
-/// Contract-unit scales of the configured ranges (the corrected counts keep the nominal LSB,
-/// see `imu_cal::device`): ±4 g, ±250 deg/s, ±2 G.
-fn scales() -> Scales {
-    let cfg = imu_config();
-    let s = cfg.scale(mpu::ChipId::Mpu6050);
-    Scales {
-        accel: mpu::STANDARD_GRAVITY / s.accel_lsb_per_g,
-        gyro: 1.0 / s.gyro_lsb_per_dps,
-        // LSB/G → µT per LSB (1 G = 100 µT).
-        mag: 100.0
-            / qmc::Config::default()
-                .range
-                .lsb_per_gauss(qmc::Variant::L)
-                .unwrap_or(12000.0),
-        temp: 1.0 / s.temperature.lsb_per_c,
-        temp_offset: s.temperature.offset_c,
-    }
-}
-
-/// MPU-6050: 1 kHz (DLPF 184 Hz, SMPLRT_DIV 0), ±4 g, ±250 deg/s (the seed's ranges, which the
-/// calibration file assumes), FIFO with temperature.
-fn imu_config() -> mpu::Config {
-    mpu::Config {
-        gyro_range: mpu::GyroRange::Dps250,
-        accel_range: mpu::AccelRange::G4,
-        dlpf: mpu::Dlpf::Hz184,
-        sample_rate_divider: 0,
-        fifo: Some(FifoFrame::AccelTempGyro),
-        interrupt: mpu::InterruptConfig {
-            data_ready: false,
-            ..Default::default()
-        },
-    }
 }
 
 #[embassy_executor::task]
@@ -262,8 +225,8 @@ async fn wait_running(
     true
 }
 
-/// MPU-6050: FIFO bursts every 10 ms. A failed transfer is counted; a lost sensor is retried
-/// with bus recovery and re-initialised, and reports how long it was down.
+/// MPU-6050: FIFO bursts every 10 ms (`pico_imu::sensors::ImuService`); a lost sensor is
+/// retried with bus recovery and re-initialised.
 #[embassy_executor::task]
 async fn imu_task(
     bus: &'static SharedBus,
@@ -272,131 +235,40 @@ async fn imu_task(
 ) -> ! {
     let mut run = run.receiver().expect("watch receiver for imu_task");
     let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
-    let cfg = imu_config();
-    let mut health = Health::new(Sensor::Imu);
-    let mut ready = false;
-    let mut last_read_us = now_us();
-    let mut frames = [RawSample::default(); 32];
+    let mut svc = ImuService::new();
     let mut ticker = Ticker::every(Duration::from_millis(IMU_BURST_MS));
+    let mut msgs = sensors::Out::new();
+    let mut was = svc.state();
     loop {
         ticker.next().await;
-        if wait_running(&mut run).await && ready {
-            // The FIFO kept filling during the pause: drop it and mark the gap.
-            let _ = imu.reset_fifo().await;
-            last_read_us = now_us();
-            out.send(SensorMsg::Resumed { t_us: last_read_us }).await;
-            continue;
+        if wait_running(&mut run).await {
+            svc.resume(&mut imu, now_us(), &mut msgs).await;
+        } else {
+            let recoveries = if svc.wants_recovery(now_us()) {
+                bus.lock().await.recover()
+            } else {
+                0
+            };
+            svc.tick(
+                &mut imu,
+                &mut embassy_time::Delay,
+                &now_us,
+                recoveries,
+                &mut msgs,
+            )
+            .await;
         }
-        let t = now_us();
-        if !ready {
-            if health.state() == imu_proto::SensorState::Missing && !health.retry_due(t) {
-                continue;
-            }
-            let mut recoveries = 0;
-            if health.state() == imu_proto::SensorState::Missing {
-                recoveries = bus.lock().await.recover();
-            }
-            match imu.init(&mut embassy_time::Delay, &cfg).await {
-                Ok(chip) => {
-                    let t = now_us();
-                    info!("imu: {} ready", chip);
-                    let event = health.ok(t);
-                    let lost = match event {
-                        Some(imu_proto::Event::SensorBack { down_us, .. }) => {
-                            (down_us / IMU_PERIOD_US) as u32
-                        }
-                        _ => 0,
-                    };
-                    ready = true;
-                    last_read_us = t;
-                    out.send(SensorMsg::Fault(Fault {
-                        sensor: Sensor::Imu,
-                        i2c_errors: 0,
-                        recoveries,
-                        state: health.state(),
-                        event,
-                        lost,
-                    }))
-                    .await;
-                }
-                Err(e) => {
-                    let event = health.error(now_us());
-                    if event.is_some() {
-                        warn!("imu: not answering ({})", defmt::Debug2Format(&e));
-                    }
-                    out.send(SensorMsg::Fault(Fault {
-                        sensor: Sensor::Imu,
-                        i2c_errors: 1,
-                        recoveries,
-                        state: health.state(),
-                        event,
-                        lost: 0,
-                    }))
-                    .await;
-                }
-            }
-            continue;
+        if svc.state() != was {
+            info!("imu: {} -> {}", was, svc.state());
+            was = svc.state();
         }
-        // Drain the FIFO: up to 32 frames a read, repeated while it returns full buffers.
-        loop {
-            stage::enter(Stage::I2c);
-            let r = imu.read_fifo(&mut frames).await;
-            stage::leave();
-            let t = now_us();
-            match r {
-                Ok(0) => break,
-                Ok(n) => {
-                    if let Some(e) = health.ok(t) {
-                        out.send(SensorMsg::Fault(Fault {
-                            sensor: Sensor::Imu,
-                            i2c_errors: 0,
-                            recoveries: 0,
-                            state: health.state(),
-                            event: Some(e),
-                            lost: 0,
-                        }))
-                        .await;
-                    }
-                    last_read_us = t;
-                    let samples = Vec::from_slice(&frames[..n]).unwrap_or_default();
-                    out.send(SensorMsg::Imu { t_us: t, samples }).await;
-                    if n < frames.len() {
-                        break;
-                    }
-                }
-                Err(mpu::Error::FifoOverflow) => {
-                    // 1024 bytes held 73 frames; the rest of the time since the last read is lost.
-                    let elapsed = (t.saturating_sub(last_read_us) / IMU_PERIOD_US) as u32;
-                    let lost = elapsed.saturating_sub(73).max(1);
-                    warn!("imu: FIFO overflow, ~{} samples lost", lost);
-                    let _ = imu.reset_fifo().await;
-                    last_read_us = now_us();
-                    out.send(SensorMsg::ImuOverflow { t_us: t, lost }).await;
-                    break;
-                }
-                Err(e) => {
-                    let event = health.error(t);
-                    if event.is_some() {
-                        warn!("imu: lost ({})", defmt::Debug2Format(&e));
-                        ready = false;
-                    }
-                    out.send(SensorMsg::Fault(Fault {
-                        sensor: Sensor::Imu,
-                        i2c_errors: 1,
-                        recoveries: 0,
-                        state: health.state(),
-                        event,
-                        lost: 0,
-                    }))
-                    .await;
-                    break;
-                }
-            }
+        for m in msgs.drain(..) {
+            out.send(m).await;
         }
     }
 }
 
-/// QMC5883L at 200 Hz: one DRDY-checked read per 5 ms tick.
+/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`).
 #[embassy_executor::task]
 async fn mag_task(
     bus: &'static SharedBus,
@@ -405,104 +277,35 @@ async fn mag_task(
 ) -> ! {
     let mut run = run.receiver().expect("watch receiver for mag_task");
     let mut mag = Qmc5883::new(BusDevice::new(bus));
-    let cfg = qmc::Config::default();
-    let mut health = Health::new(Sensor::Mag);
-    let mut ready = false;
+    let mut svc = MagService::new();
     let mut ticker = Ticker::every(Duration::from_micros(MAG_PERIOD_US));
+    let mut msgs = sensors::Out::new();
+    let mut was = svc.state();
     loop {
         ticker.next().await;
-        if wait_running(&mut run).await && ready {
-            out.send(SensorMsg::Resumed { t_us: now_us() }).await;
+        if wait_running(&mut run).await {
+            let _ = msgs.push(SensorMsg::Resumed { t_us: now_us() });
+        } else {
+            let recoveries = if svc.wants_recovery(now_us()) {
+                bus.lock().await.recover()
+            } else {
+                0
+            };
+            svc.tick(
+                &mut mag,
+                &mut embassy_time::Delay,
+                &now_us,
+                recoveries,
+                &mut msgs,
+            )
+            .await;
         }
-        let t = now_us();
-        if !ready {
-            if health.state() == imu_proto::SensorState::Missing && !health.retry_due(t) {
-                continue;
-            }
-            let mut recoveries = 0;
-            if health.state() == imu_proto::SensorState::Missing {
-                recoveries = bus.lock().await.recover();
-            }
-            match mag.init(&mut embassy_time::Delay, &cfg).await {
-                Ok(()) => {
-                    info!("mag: ready");
-                    let event = health.ok(now_us());
-                    ready = true;
-                    out.send(SensorMsg::Fault(Fault {
-                        sensor: Sensor::Mag,
-                        i2c_errors: 0,
-                        recoveries,
-                        state: health.state(),
-                        event,
-                        lost: 0,
-                    }))
-                    .await;
-                }
-                Err(e) => {
-                    let event = health.error(now_us());
-                    if event.is_some() {
-                        warn!("mag: not answering ({})", defmt::Debug2Format(&e));
-                    }
-                    out.send(SensorMsg::Fault(Fault {
-                        sensor: Sensor::Mag,
-                        i2c_errors: 1,
-                        recoveries,
-                        state: health.state(),
-                        event,
-                        lost: 0,
-                    }))
-                    .await;
-                }
-            }
-            continue;
+        if svc.state() != was {
+            info!("mag: {} -> {}", was, svc.state());
+            was = svc.state();
         }
-        // DRDY may trail the tick by a little (the sensor's clock is its own): poll again after
-        // 0.5 ms rather than a whole period, so no sample is overwritten unread.
-        let mut r = mag.read().await;
-        for _ in 0..4 {
-            if !matches!(r, Err(qmc::Error::NotReady)) {
-                break;
-            }
-            Timer::after_micros(500).await;
-            r = mag.read().await;
-        }
-        match r {
-            Ok(s) => {
-                if let Some(e) = health.ok(t) {
-                    out.send(SensorMsg::Fault(Fault {
-                        sensor: Sensor::Mag,
-                        i2c_errors: 0,
-                        recoveries: 0,
-                        state: health.state(),
-                        event: Some(e),
-                        lost: 0,
-                    }))
-                    .await;
-                }
-                out.send(SensorMsg::Mag {
-                    t_us: now_us(),
-                    xyz: s.xyz,
-                    skipped: s.skipped,
-                })
-                .await;
-            }
-            Err(qmc::Error::NotReady) => {}
-            Err(e) => {
-                let event = health.error(t);
-                if event.is_some() {
-                    warn!("mag: lost ({})", defmt::Debug2Format(&e));
-                    ready = false;
-                }
-                out.send(SensorMsg::Fault(Fault {
-                    sensor: Sensor::Mag,
-                    i2c_errors: 1,
-                    recoveries: 0,
-                    state: health.state(),
-                    event,
-                    lost: 0,
-                }))
-                .await;
-            }
+        for m in msgs.drain(..) {
+            out.send(m).await;
         }
     }
 }

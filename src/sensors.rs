@@ -1,0 +1,294 @@
+//! What the sensor tasks do on each tick, generic over the I2C bus and the delay so the same
+//! code runs on the device (embassy-rp async I2C) and in the host tests (the register-level
+//! chip models on a simulated bus). The tasks in `main.rs` only wait for the tick, run bus
+//! recovery when [`ImuService::wants_recovery`] says so, and forward the messages.
+use embedded_hal_async::delay::DelayNs;
+use embedded_hal_async::i2c::I2c;
+use imu_drivers::asynch::{Mpu6050, Qmc5883};
+use imu_drivers::mpu6050::{self as mpu, FifoFrame, RawSample};
+use imu_drivers::qmc5883 as qmc;
+use imu_proto::{Event, Scales, Sensor, SensorState, Vec};
+
+use crate::device::{Fault, SensorMsg, IMU_PERIOD_US};
+use crate::health::Health;
+use crate::stage::{self, Stage};
+
+/// FIFO frames read per I2C burst (and per [`SensorMsg::Imu`]).
+pub const BURST_FRAMES: usize = 32;
+/// Frames the 1024-byte FIFO holds with accel + temp + gyro (14 bytes each).
+pub const FIFO_FRAMES: u64 = 1024 / 14;
+
+/// MPU-6050: 1 kHz (DLPF 184 Hz, SMPLRT_DIV 0), ±4 g, ±250 deg/s (the seed's ranges, which the
+/// calibration file assumes), FIFO with temperature, no interrupt pin (timer-driven).
+pub fn imu_config() -> mpu::Config {
+    mpu::Config {
+        gyro_range: mpu::GyroRange::Dps250,
+        accel_range: mpu::AccelRange::G4,
+        dlpf: mpu::Dlpf::Hz184,
+        sample_rate_divider: 0,
+        fifo: Some(FifoFrame::AccelTempGyro),
+        interrupt: mpu::InterruptConfig {
+            data_ready: false,
+            ..Default::default()
+        },
+    }
+}
+
+/// QMC5883L: continuous, 200 Hz, ±2 G, OSR 512 (the driver's default).
+pub fn mag_config() -> qmc::Config {
+    qmc::Config::default()
+}
+
+/// Contract-unit scales of the configured ranges (corrected counts keep the nominal LSB, see
+/// `imu_cal::device`): m/s² = LSB·g₀/(LSB/g), deg/s = LSB/(LSB/(deg/s)), µT = LSB·100/(LSB/G).
+pub fn scales() -> Scales {
+    let s = imu_config().scale(mpu::ChipId::Mpu6050);
+    Scales {
+        accel: mpu::STANDARD_GRAVITY / s.accel_lsb_per_g,
+        gyro: 1.0 / s.gyro_lsb_per_dps,
+        mag: 100.0
+            / mag_config()
+                .range
+                .lsb_per_gauss(qmc::Variant::L)
+                .unwrap_or(12000.0),
+        temp: 1.0 / s.temperature.lsb_per_c,
+        temp_offset: s.temperature.offset_c,
+    }
+}
+
+/// Messages produced by one tick (at most one burst and one fault report, or a few bursts).
+pub type Out = Vec<SensorMsg, 4>;
+
+fn fault(
+    sensor: Sensor,
+    h: &Health,
+    i2c_errors: u32,
+    recoveries: u32,
+    event: Option<Event>,
+    lost: u32,
+) -> SensorMsg {
+    SensorMsg::Fault(Fault {
+        sensor,
+        i2c_errors,
+        recoveries,
+        state: h.state(),
+        event,
+        lost,
+    })
+}
+
+/// The IMU side: initialisation, FIFO draining, overflow and loss handling.
+pub struct ImuService {
+    health: Health,
+    ready: bool,
+    last_read_us: u64,
+    frames: [RawSample; BURST_FRAMES],
+}
+
+impl Default for ImuService {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ImuService {
+    pub const fn new() -> Self {
+        Self {
+            health: Health::new(Sensor::Imu),
+            ready: false,
+            last_read_us: 0,
+            frames: [RawSample {
+                accel: [0; 3],
+                temp: None,
+                gyro: [0; 3],
+            }; BURST_FRAMES],
+        }
+    }
+
+    pub fn state(&self) -> SensorState {
+        self.health.state()
+    }
+
+    /// Missing and a retry is due: the caller recovers the bus before the next [`Self::tick`].
+    pub fn wants_recovery(&self, t_us: u64) -> bool {
+        !self.ready && self.health.retry_due(t_us)
+    }
+
+    /// After a pause (flash write): empty the FIFO and report the gap.
+    pub async fn resume<I: I2c>(&mut self, imu: &mut Mpu6050<I>, now_us: u64, out: &mut Out) {
+        if self.ready {
+            if imu.reset_fifo().await.is_err() {
+                self.ready = false;
+            }
+            self.last_read_us = now_us;
+            let _ = out.push(SensorMsg::Resumed { t_us: now_us });
+        }
+    }
+
+    /// One service tick at `now()` µs. `recoveries` is the number of bus recoveries the caller
+    /// ran just before (reported with the next fault message).
+    pub async fn tick<I: I2c, D: DelayNs>(
+        &mut self,
+        imu: &mut Mpu6050<I>,
+        delay: &mut D,
+        now: &impl Fn() -> u64,
+        recoveries: u32,
+        out: &mut Out,
+    ) {
+        let t = now();
+        if !self.ready {
+            if self.health.state() == SensorState::Missing && !self.health.retry_due(t) {
+                return;
+            }
+            match imu.init(delay, &imu_config()).await {
+                Ok(_) => {
+                    let t = now();
+                    let event = self.health.ok(t);
+                    let lost = match event {
+                        Some(Event::SensorBack { down_us, .. }) => (down_us / IMU_PERIOD_US) as u32,
+                        _ => 0,
+                    };
+                    self.ready = true;
+                    self.last_read_us = t;
+                    let _ = out.push(fault(Sensor::Imu, &self.health, 0, recoveries, event, lost));
+                }
+                Err(_) => {
+                    let event = self.health.error(now());
+                    let _ = out.push(fault(Sensor::Imu, &self.health, 1, recoveries, event, 0));
+                }
+            }
+            return;
+        }
+        // Drain the FIFO: BURST_FRAMES a read, again while reads come back full.
+        while !out.is_full() {
+            stage::enter(Stage::I2c);
+            let r = imu.read_fifo(&mut self.frames).await;
+            stage::leave();
+            let t = now();
+            match r {
+                Ok(0) => break,
+                Ok(n) => {
+                    if let Some(e) = self.health.ok(t) {
+                        let _ = out.push(fault(Sensor::Imu, &self.health, 0, 0, Some(e), 0));
+                    }
+                    self.last_read_us = t;
+                    let samples = Vec::from_slice(&self.frames[..n]).unwrap_or_default();
+                    let _ = out.push(SensorMsg::Imu { t_us: t, samples });
+                    if n < BURST_FRAMES {
+                        break;
+                    }
+                }
+                Err(mpu::Error::FifoOverflow) => {
+                    // The FIFO held FIFO_FRAMES frames; the rest of the time since the last
+                    // read is lost (at least one frame, or the chip would not have overflowed).
+                    let elapsed = t.saturating_sub(self.last_read_us) / IMU_PERIOD_US;
+                    let lost = elapsed.saturating_sub(FIFO_FRAMES).max(1) as u32;
+                    if imu.reset_fifo().await.is_err() {
+                        self.ready = false;
+                    }
+                    self.last_read_us = now();
+                    let _ = out.push(SensorMsg::ImuOverflow { t_us: t, lost });
+                    break;
+                }
+                Err(_) => {
+                    let event = self.health.error(t);
+                    if event.is_some() {
+                        self.ready = false;
+                    }
+                    let _ = out.push(fault(Sensor::Imu, &self.health, 1, 0, event, 0));
+                    break;
+                }
+            }
+        }
+    }
+}
+
+/// The magnetometer side.
+pub struct MagService {
+    health: Health,
+    ready: bool,
+}
+
+impl Default for MagService {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Re-polls of DRDY within one tick, 0.5 ms apart.
+pub const MAG_DRDY_POLLS: u32 = 4;
+
+impl MagService {
+    pub const fn new() -> Self {
+        Self {
+            health: Health::new(Sensor::Mag),
+            ready: false,
+        }
+    }
+
+    pub fn state(&self) -> SensorState {
+        self.health.state()
+    }
+
+    pub fn wants_recovery(&self, t_us: u64) -> bool {
+        !self.ready && self.health.retry_due(t_us)
+    }
+
+    /// One 200 Hz tick. DRDY may trail the tick a little (the sensor runs on its own clock):
+    /// it is polled again after 0.5 ms rather than a whole period, so no sample is overwritten.
+    pub async fn tick<I: I2c, D: DelayNs>(
+        &mut self,
+        mag: &mut Qmc5883<I>,
+        delay: &mut D,
+        now: &impl Fn() -> u64,
+        recoveries: u32,
+        out: &mut Out,
+    ) {
+        let t = now();
+        if !self.ready {
+            if self.health.state() == SensorState::Missing && !self.health.retry_due(t) {
+                return;
+            }
+            match mag.init(delay, &mag_config()).await {
+                Ok(()) => {
+                    let event = self.health.ok(now());
+                    self.ready = true;
+                    let _ = out.push(fault(Sensor::Mag, &self.health, 0, recoveries, event, 0));
+                }
+                Err(_) => {
+                    let event = self.health.error(now());
+                    let _ = out.push(fault(Sensor::Mag, &self.health, 1, recoveries, event, 0));
+                }
+            }
+            return;
+        }
+        let mut r = mag.read().await;
+        for _ in 0..MAG_DRDY_POLLS {
+            if !matches!(r, Err(qmc::Error::NotReady)) {
+                break;
+            }
+            delay.delay_us(500).await;
+            r = mag.read().await;
+        }
+        match r {
+            Ok(s) => {
+                if let Some(e) = self.health.ok(t) {
+                    let _ = out.push(fault(Sensor::Mag, &self.health, 0, 0, Some(e), 0));
+                }
+                let _ = out.push(SensorMsg::Mag {
+                    t_us: now(),
+                    xyz: s.xyz,
+                    skipped: s.skipped,
+                });
+            }
+            Err(qmc::Error::NotReady) => {}
+            Err(_) => {
+                let event = self.health.error(t);
+                if event.is_some() {
+                    self.ready = false;
+                }
+                let _ = out.push(fault(Sensor::Mag, &self.health, 1, 0, event, 0));
+            }
+        }
+    }
+}
