@@ -51,7 +51,8 @@
 //! (`__aeabi_lmul`, a library call on the M0+), [`mul_q24`] splits the coefficient into its high
 //! part `m >> 12` (Q12) and its low 12 bits `m & 0xfff` and forms two 32-bit products whose sums
 //! provably fit in i32 under the ranges above: `|raw·(m>>12)| ≤ 2¹⁵·2¹⁴`, `|raw·(m&0xfff)| < 2²⁷`.
-//! Per axis: 6 `muls`, shifts and adds; per 3-axis sample: 18 multiplies (21 for the gyro).
+//! Per axis: 6 `muls`, shifts and adds; per 3-axis sample: 18 multiplies (24 for the gyro,
+//! whose temperature term adds 2 per axis).
 //!
 //! # Error bound (tested exhaustively in `tests/fixed_point.rs`)
 //!

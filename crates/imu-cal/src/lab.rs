@@ -373,7 +373,7 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
 
     let verdict = format!(
         "residual RMS {rms:.4} {unit} vs noise floor {:.4} {unit} expected for a complete model \
-         ({} {} residuals, {} parameters; noise from {}); P(F ≥ {ratio:.2}) = {p_adequate:.3}",
+         ({} {} residuals, {} fitted parameters; noise from {}); P(F ≥ {ratio:.2}) = {p_adequate:.3}",
         expected_rms,
         fitted.residuals.len(),
         basis(p.sensor()),

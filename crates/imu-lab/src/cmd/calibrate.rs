@@ -365,11 +365,12 @@ fn text_report(data: &Data, r: &Report) -> String {
             )
         }
     }
-    s += &format!(
-        "model: {}\nparams:\n{}",
-        names(&r.fitted.model),
-        params_text(&r.fitted.params)
-    );
+    let model = if r.fitted.model.is_empty() {
+        "(none)".to_string()
+    } else {
+        names(&r.fitted.model)
+    };
+    s += &format!("model: {model}\nparams:\n{}", params_text(&r.fitted.params));
     s += &format!(
         "residual RMS {:.5} {unit} over {} residuals; noise floor {:.5} {unit} (σ {:.5} {unit} from {})\n",
         r.fitted.rms(),
