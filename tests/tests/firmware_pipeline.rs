@@ -143,7 +143,7 @@ impl Rig {
             self.t_ms += 1;
             let bus = self.bus.clone();
             let now = move || bus.now_ns() / 1000;
-            if self.t_ms % 5 == 0 {
+            if self.t_ms.is_multiple_of(5) {
                 let mut out = sensors::Out::new();
                 block_on(self.mag_svc.tick(
                     &mut self.mag,
@@ -154,7 +154,7 @@ impl Rig {
                 ));
                 self.feed(out);
             }
-            if self.t_ms % 10 == 0 {
+            if self.t_ms.is_multiple_of(10) {
                 let mut out = sensors::Out::new();
                 block_on(self.imu_svc.tick(
                     &mut self.imu,
