@@ -18,6 +18,7 @@ use imu_proto::{
 };
 
 use crate::outbox::{FrameSink, Outbox, Sent};
+use crate::stage::{self, Stage};
 
 /// IMU output data rate, Hz (MPU-6050: 1 kHz gyro rate with the DLPF on, SMPLRT_DIV = 0).
 pub const IMU_RATE_HZ: u32 = 1000;
@@ -32,6 +33,9 @@ pub const CHANNELS: usize = 10;
 /// Allan engine overlap factor and levels (must match `allan::stream::DeviceEngine`).
 pub const ALLAN_OVERLAP: u8 = 8;
 pub const ALLAN_LEVELS: u8 = 24;
+
+/// Largest burst [`SensorMsg::Imu`] carries.
+pub const BURST_MAX: usize = 32;
 
 /// What the sensor tasks tell the processing task.
 #[derive(Debug, Clone)]
@@ -283,31 +287,48 @@ impl Device {
     /// `t_read − (n−1−i)·1 ms`: the FIFO is paced by the sensor's own clock, so the
     /// timestamps are reconstructed from the read time (docs/firmware.md).
     fn imu_burst(&mut self, samples: &[RawSample], t_read_us: u64, sink: &mut impl FrameSink) {
-        let n = samples.len() as u64;
-        for (i, s) in samples.iter().enumerate() {
+        // Three passes over the burst, one per budget stage (docs/emulator.md, cycle markers):
+        // corrections, Allan update, framing. Each sample still goes through all three in order.
+        let mut fixed = [([0i32; 3], [0i32; 3], 0i32); BURST_MAX];
+        let samples = &samples[..samples.len().min(BURST_MAX)];
+        stage::enter(Stage::Corrections);
+        for (s, f) in samples.iter().zip(fixed.iter_mut()) {
             let temp = s.temp.or(self.last_temp).unwrap_or(0);
             self.last_temp = Some(temp);
-            let accel = self.cal.apply_accel(s.accel);
-            let gyro = self.cal.apply_gyro(s.gyro, temp);
-            for k in 0..3 {
-                self.engines[k].push(accel[k]);
-                self.engines[3 + k].push(gyro[k]);
+            *f = (
+                self.cal.apply_accel(s.accel),
+                self.cal.apply_gyro(s.gyro, temp),
+                i32::from(temp),
+            );
+        }
+        stage::enter(Stage::Allan);
+        let fixed = &fixed[..samples.len()];
+        for (accel, gyro, temp) in fixed {
+            let (a, rest) = self.engines.split_at_mut(3);
+            for (e, &v) in a.iter_mut().zip(accel) {
+                e.push(v);
             }
-            self.engines[9].push(i32::from(temp));
+            for (e, &v) in rest[..3].iter_mut().zip(gyro) {
+                e.push(v);
+            }
+            self.engines[9].push(*temp);
+        }
+        stage::enter(Stage::Usb);
+        let n = samples.len() as u64;
+        let raw = self.mode == StreamMode::Raw;
+        for (i, (s, (accel, gyro, temp))) in samples.iter().zip(fixed).enumerate() {
             let seq = self.imu_seq;
             self.imu_seq = self.imu_seq.wrapping_add(1);
             self.counters.samples_taken += 1;
             if self.mode == StreamMode::Off {
                 continue;
             }
-            let raw = self.mode == StreamMode::Raw;
-            let t_us = t_read_us.saturating_sub((n - 1 - i as u64) * IMU_PERIOD_US);
             let out = ImuSample {
                 seq,
-                t_us,
-                accel: if raw { s.accel.map(i32::from) } else { accel },
-                gyro: if raw { s.gyro.map(i32::from) } else { gyro },
-                temp: i32::from(temp),
+                t_us: t_read_us.saturating_sub((n - 1 - i as u64) * IMU_PERIOD_US),
+                accel: if raw { s.accel.map(i32::from) } else { *accel },
+                gyro: if raw { s.gyro.map(i32::from) } else { *gyro },
+                temp: *temp,
             };
             if self.batch.imu.push(out).is_err() {
                 self.flush(sink);
@@ -318,35 +339,39 @@ impl Device {
                 self.flush(sink);
             }
         }
+        stage::leave();
     }
 
     fn mag_sample(&mut self, xyz: [i16; 3], t_us: u64, sink: &mut impl FrameSink) {
+        stage::enter(Stage::Corrections);
         let mag = self.cal.apply_mag(xyz);
+        stage::enter(Stage::Allan);
         for (e, &v) in self.engines[6..9].iter_mut().zip(&mag) {
             e.push(v);
         }
+        stage::enter(Stage::Usb);
         let seq = self.mag_seq;
         self.mag_seq = self.mag_seq.wrapping_add(1);
         self.counters.mag_samples += 1;
-        if self.mode == StreamMode::Off {
-            return;
+        if self.mode != StreamMode::Off {
+            let out = MagSample {
+                seq,
+                t_us,
+                mag: if self.mode == StreamMode::Raw {
+                    xyz.map(i32::from)
+                } else {
+                    mag
+                },
+            };
+            if self.batch.mag.push(out).is_err() {
+                self.flush(sink);
+                let _ = self.batch.mag.push(out);
+            }
+            if self.batch.mag.is_full() {
+                self.flush(sink);
+            }
         }
-        let out = MagSample {
-            seq,
-            t_us,
-            mag: if self.mode == StreamMode::Raw {
-                xyz.map(i32::from)
-            } else {
-                mag
-            },
-        };
-        if self.batch.mag.push(out).is_err() {
-            self.flush(sink);
-            let _ = self.batch.mag.push(out);
-        }
-        if self.batch.mag.is_full() {
-            self.flush(sink);
-        }
+        stage::leave();
     }
 
     /// Send the batch assembled so far (if any).
