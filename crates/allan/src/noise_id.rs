@@ -14,7 +14,9 @@
 /// `(x[(i+1)m] − x[im])/m`, O(N/m) work (the incomplete tail is dropped).
 fn block_means(x: &[f64], m: usize) -> Vec<f64> {
     let count = x.len().saturating_sub(1) / m;
-    (0..count).map(|i| (x[(i + 1) * m] - x[i * m]) / m as f64).collect()
+    (0..count)
+        .map(|i| (x[(i + 1) * m] - x[i * m]) / m as f64)
+        .collect()
 }
 
 fn detrend_linear(x: &mut [f64]) {
