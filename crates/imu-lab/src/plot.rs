@@ -173,9 +173,18 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
     );
     legend.insert(0, ("model (total)".into(), "black".into(), false));
     // measurement with CI bars
-    for (p, r) in pts.iter().zip(&a.residuals) {
+    let status = |i: usize| -> &'static str {
+        if a.failing.iter().any(|f| i >= f.first && i <= f.last) {
+            "#c00"
+        } else if a.residuals[i].abs() > 1.0 {
+            "#e08000"
+        } else {
+            "#333"
+        }
+    };
+    for (i, p) in pts.iter().enumerate() {
         let (x, y, ylo, yhi) = (px(p.tau), py(p.dev), py(p.lo.max(1e-300)), py(p.hi));
-        let col = if r.abs() > 1.0 { "#c00" } else { "#333" };
+        let col = status(i);
         let _ = write!(
             s,
             r#"<line x1="{x:.1}" y1="{yhi:.1}" x2="{x:.1}" y2="{:.1}" stroke="{col}" stroke-width="1.2"/><line x1="{:.1}" y1="{yhi:.1}" x2="{:.1}" y2="{yhi:.1}" stroke="{col}"/><line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{col}"/><circle cx="{x:.1}" cy="{y:.1}" r="3.2" fill="{col}"/>
@@ -268,7 +277,7 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
 <line x1="{ML}" y1="{:.1}" x2="{}" y2="{:.1}" stroke="#666"/>
 <text x="{}" y="{:.1}" text-anchor="end">+{rmax}</text><text x="{}" y="{:.1}" text-anchor="end">0</text><text x="{}" y="{:.1}" text-anchor="end">−{rmax}</text>
 <text x="18" y="{}" text-anchor="middle" transform="rotate(-90 18 {})">r [CI half-widths]</text>
-<text x="{}" y="{}" text-anchor="middle">τ [s] — shaded: model outside the 68.3 % interval (red: significant)</text>
+<text x="{}" y="{}" text-anchor="middle">τ [s] — orange: model outside the 68.3 % interval; red: significant misfit</text>
 "##,
         ry(1.0),
         ry(-1.0) - ry(1.0),
@@ -286,9 +295,9 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
         ML + pw / 2.0,
         y0 + BOT_H + 30.0,
     );
-    for (p, r) in pts.iter().zip(&a.residuals) {
+    for (i, (p, r)) in pts.iter().zip(&a.residuals).enumerate() {
         let x = px(p.tau);
-        let col = if r.abs() > 1.0 { "#c00" } else { "#333" };
+        let col = status(i);
         let _ = write!(
             s,
             r#"<line x1="{x:.1}" y1="{:.1}" x2="{x:.1}" y2="{:.1}" stroke="{col}" stroke-width="2"/><circle cx="{x:.1}" cy="{:.1}" r="3" fill="{col}"/>

@@ -104,8 +104,13 @@ pub fn residual_evidence(fit: &Fit, a: &Assessment) -> Vec<String> {
             let sm = loglog_slope(&taus, &devs, r.first, r.last);
             let sx = loglog_slope(&taus, &mdev, r.first, r.last);
             format!(
-                "τ = {} – {}: measured σ {} the model by up to {:.1} CI half-widths; \
+                "{}τ = {} – {}: measured σ {} the model by up to {:.1} CI half-widths; \
                  log-log slope measured {} vs model {}",
+                if a.failing.is_empty() {
+                    "not significant: "
+                } else {
+                    ""
+                },
                 fmt_s(r.lo),
                 fmt_s(r.hi),
                 if r.sign > 0 { "above" } else { "below" },

@@ -140,6 +140,16 @@ impl Effect {
 
     /// Canonical unit of the amplitude parameter for a channel in unit `u` (τ in seconds).
     pub fn amp_unit(self, u: &str) -> String {
+        // u·s and u/s simplified for the usual channel units (deg/s·s = deg, m/s²/s = m/s³)
+        match (self, u) {
+            (Effect::Quantization, "deg/s") => return "deg".into(),
+            (Effect::Quantization, "rad/s") => return "rad".into(),
+            (Effect::Quantization, "m/s²" | "m/s^2") => return "m/s".into(),
+            (Effect::RateRamp, "deg/s") => return "deg/s²".into(),
+            (Effect::RateRamp, "rad/s") => return "rad/s²".into(),
+            (Effect::RateRamp, "m/s²" | "m/s^2") => return "m/s³".into(),
+            _ => {}
+        }
         match self {
             Effect::Quantization => format!("{u}·s"),
             Effect::White => format!("{u}·√s"),
