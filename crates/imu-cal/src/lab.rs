@@ -317,7 +317,11 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
     let ratio = s2 / (floor.sigma * floor.sigma);
     let p_adequate = f_sf(ratio, dof, floor.dof);
     let rms = fitted.rms();
-    let adequate = p_adequate >= ALPHA_ADEQUATE || rms <= PRACTICAL_MARGIN * expected_rms;
+    // (A noiseless recording, e.g. constant counts, has a zero floor: then only a residual at
+    // rounding level is adequate.)
+    let adequate = p_adequate >= ALPHA_ADEQUATE
+        || rms <= PRACTICAL_MARGIN * expected_rms
+        || (floor.sigma == 0.0 && rms < 1e-9);
     let unit = p.unit();
 
     let mut candidates = Vec::new();

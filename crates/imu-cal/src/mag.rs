@@ -24,7 +24,7 @@
 //! field) and only `soft_iron_2d` is identifiable. In 3-D data `soft_iron_2d` is not the answer
 //! and `soft_iron` is used instead (issue 4 §2).
 use crate::lab::{CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d};
-use crate::solve::{levenberg_marquardt, mean, sigma_second_diff};
+use crate::solve::{levenberg_marquardt, lstsq, mean, sigma_second_diff};
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
 
 /// Ratio of principal standard deviations below which data counts as planar.
@@ -62,10 +62,7 @@ pub fn sphere_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, f64), CalError> {
     let n = m.len();
     let a = DMatrix::from_fn(n, 4, |i, j| if j < 3 { 2.0 * m[i][j] } else { 1.0 });
     let b = DVector::from_fn(n, |i, _| m[i].norm_squared());
-    let x = a
-        .svd(true, true)
-        .solve(&b, 1e-12)
-        .map_err(|e| CalError::Fit(format!("sphere fit: {e}")))?;
+    let x = lstsq(a, &b, "sphere fit")?;
     let c = Vector3::new(x[0], x[1], x[2]);
     let r2 = x[3] + c.norm_squared();
     if !(r2 > 0.0) {
@@ -86,10 +83,7 @@ pub fn ellipse_fit(p: &[Vector2<f64>]) -> Result<(Vector2<f64>, f64, f64, f64), 
         [x * x, x * y, y * y, x, y][j]
     });
     let b = DVector::from_element(n, 1.0);
-    let s = a
-        .svd(true, true)
-        .solve(&b, 1e-12)
-        .map_err(|e| CalError::Fit(format!("ellipse fit: {e}")))?;
+    let s = lstsq(a, &b, "ellipse fit")?;
     let qf = Matrix2::new(s[0], s[1] / 2.0, s[1] / 2.0, s[2]);
     let l = Vector2::new(s[3], s[4]);
     let x0 = -qf
@@ -141,10 +135,7 @@ pub fn ellipsoid_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, Matrix3<f64>),
             2.0 * z,
         ][j]
     });
-    let s = a
-        .svd(true, true)
-        .solve(&DVector::from_element(n, 1.0), 1e-12)
-        .map_err(|e| CalError::Fit(format!("ellipsoid fit: {e}")))?;
+    let s = lstsq(a, &DVector::from_element(n, 1.0), "ellipsoid fit")?;
     let qf = Matrix3::new(s[0], s[3], s[4], s[3], s[1], s[5], s[4], s[5], s[2]);
     let g = Vector3::new(s[6], s[7], s[8]);
     let c = -qf
@@ -209,6 +200,14 @@ impl MagProblem {
         let mut idx = [0usize, 1, 2];
         idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
         let sd = idx.map(|i| e.eigenvalues[i].max(0.0).sqrt());
+        let scale = m.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        if !(sd[1] > 1e-6 * scale.max(1e-30)) {
+            return Err(CalError::Input(format!(
+                "the magnetometer data span only {:.3e}/{:.3e}/{:.3e} (principal s.d.): turn the \
+                 sensor through a full rotation (planar) or many orientations (3-D)",
+                sd[0], sd[1], sd[2]
+            )));
+        }
         let plane = if sd[2] < PLANAR_RATIO * sd[0] {
             let normal = e.eigenvectors.column(idx[2]);
             let k = (0..3)
@@ -269,10 +268,7 @@ impl MagProblem {
             let n = p.len();
             let a = DMatrix::from_fn(n, 3, |k, l| if l < 2 { 2.0 * p[k][l] } else { 1.0 });
             let b = DVector::from_fn(n, |k, _| p[k].norm_squared());
-            let x = a
-                .svd(true, true)
-                .solve(&b, 1e-12)
-                .map_err(|e| CalError::Fit(format!("circle fit: {e}")))?;
+            let x = lstsq(a, &b, "circle fit")?;
             c0 = Vector2::new(x[0], x[1]);
             f0 = (x[2] + c0.norm_squared()).max(0.0).sqrt();
         }

@@ -1,5 +1,6 @@
 //! Numerical tools shared by the fits: Levenberg–Marquardt least squares, robust statistics and
 //! the F / χ² tail probabilities of the diagnosis.
+use crate::lab::CalError;
 use nalgebra::{DMatrix, DVector};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
@@ -94,6 +95,29 @@ where
         rss,
         iterations: it,
     }
+}
+
+/// Linear least squares `a·x ≈ b` by SVD, refusing non-finite input and rank-deficient
+/// systems (data that do not determine the fit) with an error naming `what`. The SVD runs
+/// with an iteration limit, so no input can make it spin.
+pub fn lstsq(a: DMatrix<f64>, b: &DVector<f64>, what: &str) -> Result<DVector<f64>, CalError> {
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        return Err(CalError::Fit(format!(
+            "{what}: the data contain non-finite values"
+        )));
+    }
+    let svd = nalgebra::SVD::try_new(a, true, true, f64::EPSILON, 1000)
+        .ok_or_else(|| CalError::Fit(format!("{what}: the SVD did not converge")))?;
+    let smax = svd.singular_values.max();
+    let smin = svd.singular_values.min();
+    if !(smax > 0.0) || smin < 1e-10 * smax {
+        return Err(CalError::Fit(format!(
+            "{what}: the data do not determine the fit (rank-deficient design: the sensor did \
+             not go through enough different orientations)"
+        )));
+    }
+    svd.solve(b, 0.0)
+        .map_err(|e| CalError::Fit(format!("{what}: {e}")))
 }
 
 /// Upper tail P(F > f) of the Fisher–Snedecor distribution with (d1, d2) degrees of freedom.

@@ -226,3 +226,23 @@ fn seed_hard_iron_worked_example() {
     }
     assert!((r.fitted.params.field.unwrap() - b0.norm()).abs() < 0.05);
 }
+
+/// Degenerate recordings (a sensor that never moved, or moved along a line) are refused with
+/// a message saying what to do, and every SVD is iteration-limited: nothing can hang.
+#[test]
+fn degenerate_data_is_refused() {
+    let still = vec![Vector3::new(1.0, 2.0, 3.0); 100];
+    let e = MagProblem::new(still, None).unwrap_err().to_string();
+    assert!(e.contains("turn the sensor"), "{e}");
+    let line: Vec<Vector3<f64>> = (0..100).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
+    assert!(MagProblem::new(line, None).is_err());
+    let nan = vec![Vector3::new(f64::NAN, 0.0, 0.0); 100];
+    assert!(MagProblem::new(nan, None)
+        .unwrap_err()
+        .to_string()
+        .contains("sample 0"));
+    // Rank-deficient least squares is an error, not a silent answer.
+    let a = nalgebra::DMatrix::from_element(10, 3, 1.0);
+    let b = nalgebra::DVector::from_element(10, 1.0);
+    assert!(imu_cal::solve::lstsq(a, &b, "test").is_err());
+}
