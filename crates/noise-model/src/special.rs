@@ -4,6 +4,10 @@
 //! Formulas: Lanczos approximation (g = 7, n = 9) for ln Γ; series and Legendre continued fraction
 //! for the incomplete gamma function (Abramowitz & Stegun 6.5.29 and 6.5.31); chi-squared
 //! P(χ² ≤ x | k) = P(k/2, x/2) (A&S 26.4.19); Φ(z) = P(½, z²/2) relation (A&S 26.2.30).
+//!
+//! `allan::ci` has `gamma_p`/`chi2_cdf`/`chi2_ppf` for its confidence bounds; this module returns
+//! both P and Q = 1 − P, each to full relative precision, because the verdict's z-scores and the
+//! diagnosis' p-values live in the far upper tail (Q = 1e-40 is not 1 − 1.0).
 
 const LANCZOS: [f64; 9] = [
     0.999_999_999_999_809_9,
