@@ -107,3 +107,42 @@ fn valid_crc_but_out_of_range_payload_is_rejected() {
         })
     );
 }
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn with_crc(mut b: Vec<u8>) -> Vec<u8> {
+        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+        /// Arbitrary bytes never panic the decoder.
+        #[test]
+        fn arbitrary_bytes_never_panic(b in proptest::collection::vec(any::<u8>(), 0..300)) {
+            let _ = decode_blob(&b);
+        }
+
+        /// A correct header and CRC around an arbitrary payload: the decoder either refuses it
+        /// or returns a calibration that passes validation and whose every apply path is safe
+        /// at the input extremes (no overflow panic in this debug build).
+        #[test]
+        fn arbitrary_payload_with_valid_crc(p in proptest::collection::vec(any::<u8>(), 0..220)) {
+            let mut b = b"PCAL".to_vec();
+            b.extend_from_slice(&BLOB_VERSION.to_le_bytes());
+            b.extend_from_slice(&(p.len() as u16).to_le_bytes());
+            b.extend_from_slice(&p);
+            if let Ok(cal) = decode_blob(&with_crc(b)) {
+                prop_assert!(cal.validate().is_ok());
+                for v in [i16::MIN, i16::MAX] {
+                    let _ = cal.apply_accel([v, -v.saturating_add(1), v]);
+                    let _ = cal.apply_gyro([v, v, v], v);
+                    let _ = cal.apply_mag([v, v, i16::MIN]);
+                }
+            }
+        }
+    }
+}

@@ -152,3 +152,45 @@ fn out_of_range_parameters_are_rejected() {
     assert!(Affine::from_float(Sensor::Accel, id, [f64::NAN, 0.0, 0.0]).is_err());
     assert!(GyroCorrection::from_float(id, [0.0; 3], [2.5, 0.0, 0.0], 0).is_err());
 }
+
+/// Coefficients at the edges of the accepted ranges (row gain 3.999, |c| just under 2¹⁶ LSB,
+/// |κ| just under 2) with every sign combination and the extreme inputs: no i32 overflow
+/// (this debug build would panic) and the same error bound.
+#[test]
+fn range_limits_do_not_overflow() {
+    let mut ran = 0;
+    for signs in 0..64u32 {
+        let sg = |k: u32| if signs >> k & 1 == 1 { -1.0 } else { 1.0 };
+        let g = 3.999 / 3.0;
+        let m = [
+            [sg(0) * g, sg(1) * g, sg(2) * g],
+            [sg(3) * g, -sg(4) * g, sg(5) * g],
+            [-sg(0) * g, sg(2) * g, -sg(5) * g],
+        ];
+        // o chosen so that c = M·o is close to ±65535 LSB on the first row.
+        let o = [sg(0) * 16383.0, sg(1) * 16383.0, sg(2) * 16383.0];
+        let k = [sg(3) * 0.499, sg(4) * 0.499, sg(5) * 0.499];
+        let Ok(gyr) = GyroCorrection::from_float(m, o, k, 0) else {
+            continue; // κ or c beyond the limit for this sign pattern: refused, fine.
+        };
+        let acc = Affine::from_float(Sensor::Accel, m, o).unwrap();
+        let cal = Calibration::new(acc, gyr, acc).unwrap();
+        let p = Params { m, o, k, t_ref: 0 };
+        ran += 1;
+        for a in [i16::MIN, -1, 0, i16::MAX] {
+            for b in [i16::MIN, i16::MAX] {
+                for t in [i16::MIN, 0, i16::MAX] {
+                    let raw = [a, b, if signs % 2 == 0 { a } else { b }];
+                    check(cal.apply_accel(raw), exact(&p, raw, 0.0), "limit accel");
+                    check(
+                        cal.apply_gyro(raw, t),
+                        exact(&p, raw, t as f64),
+                        "limit gyro",
+                    );
+                }
+            }
+        }
+    }
+    // c = 3.999·16383 < 2¹⁶ and |κ| ≤ 1.996 < 2 for every pattern: none may be refused.
+    assert_eq!(ran, 64);
+}
