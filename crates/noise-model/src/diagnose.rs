@@ -74,6 +74,15 @@ pub fn loglog_slope(taus: &[f64], devs: &[f64], first: usize, last: usize) -> Op
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
+/// A p-value for people: "p = 2.5e-41", or "p < 1e-300" when it underflows.
+fn fmt_p(p: f64) -> String {
+    if p > 0.0 {
+        format!("p = {p:.1e}")
+    } else {
+        "p < 1e-300".into()
+    }
+}
+
 fn fmt_s(t: f64) -> String {
     if t < 1.0 {
         format!("{:.3} s", t)
@@ -298,17 +307,17 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) ->
             evidence.extend(effect_evidence(c, line));
             let others: Vec<String> = candidates[1..]
                 .iter()
-                .map(|o| format!("{} (p = {:.1e})", o.effect, o.p_value))
+                .map(|o| format!("{} ({})", o.effect, fmt_p(o.p_value)))
                 .collect();
             format!(
                 "The model misses a {} effect. Adding it lowers χ² by {:.1} for {} extra \
-                 parameter{} (p = {:.1e}; other candidates: {}); with it χ²/dof goes {:.2} → {:.2} \
+                 parameter{} ({}; other candidates: {}); with it χ²/dof goes {:.2} → {:.2} \
                  and the fit is {}. Signature: {}. Physics: {}",
                 c.effect,
                 c.delta_chi2,
                 c.extra_params,
                 if c.extra_params == 1 { "" } else { "s" },
-                c.p_value,
+                fmt_p(c.p_value),
                 if others.is_empty() {
                     "none".to_string()
                 } else {
@@ -363,7 +372,7 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) ->
             }
             let best_try = candidates
                 .first()
-                .map(|c| format!("{} (p = {:.1e})", c.effect, c.p_value))
+                .map(|c| format!("{} ({})", c.effect, fmt_p(c.p_value)))
                 .unwrap_or_else(|| "none left to try".into());
             format!(
                 "The model does not describe the measurement (χ²/dof = {:.2}), and no effect of \
