@@ -349,3 +349,17 @@ section {{ border-top: 2px solid #888; margin-top: 2em; padding-top: 0.5em; }}
     }
     s + "</body></html>\n"
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn significant_digits() {
+        assert_eq!(sig(0.009344468, 4), "0.009344");
+        assert_eq!(sig(123.456, 4), "123.5");
+        assert_eq!(sig(4.5e-5, 2), "4.5e-5");
+        assert_eq!(sig(0.0, 3), "0");
+        assert_eq!(sig(f64::NAN, 3), "—");
+    }
+}
