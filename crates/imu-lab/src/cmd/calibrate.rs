@@ -192,6 +192,37 @@ fn load_data(a: &Args) -> Result<Data> {
     })
 }
 
+/// The one JSON object of `--json` (issue 4 §3 schema, plus `unit`, `n_residuals`, the
+/// candidates' evidence and the step).
+fn json_out(p: &dyn Problem, report: &Report) -> Result<String> {
+    let unit = p.unit();
+    let names = |m: &[Effect]| m.iter().map(|e| e.name()).collect::<Vec<_>>();
+    let out = JsonOut {
+        sensor: p.sensor(),
+        unit,
+        model: names(&report.fitted.model),
+        params: &report.fitted.params,
+        residual_rms: report.fitted.rms(),
+        noise_floor: report.expected_rms,
+        n_residuals: report.fitted.residuals.len(),
+        diagnosis: JsonDiagnosis {
+            adequate: report.diagnosis.adequate,
+            missing: report.diagnosis.missing.map(|e| e.name()),
+            explanation: &report.diagnosis.explanation,
+            p_value: report.diagnosis.p_value,
+            candidates: &report.diagnosis.candidates,
+        },
+        step: report.step.as_ref().map(|s| JsonStep {
+            added: s.added.name(),
+            model: names(&s.model),
+            residual_rms_before: s.residual_rms_before,
+            residual_rms_after: s.residual_rms_after,
+            params: &s.params,
+        }),
+    };
+    Ok(serde_json::to_string(&out)?)
+}
+
 /// Run `imu-lab calibrate`.
 pub fn run(a: Args) -> Result<()> {
     let model: Vec<Effect> = if a.model.is_empty() {
@@ -209,31 +240,7 @@ pub fn run(a: Args) -> Result<()> {
     let unit = p.unit();
 
     if a.json {
-        let names = |m: &[Effect]| m.iter().map(|e| e.name()).collect::<Vec<_>>();
-        let out = JsonOut {
-            sensor: p.sensor(),
-            unit,
-            model: names(&report.fitted.model),
-            params: &report.fitted.params,
-            residual_rms: report.fitted.rms(),
-            noise_floor: report.expected_rms,
-            n_residuals: report.fitted.residuals.len(),
-            diagnosis: JsonDiagnosis {
-                adequate: report.diagnosis.adequate,
-                missing: report.diagnosis.missing.map(|e| e.name()),
-                explanation: &report.diagnosis.explanation,
-                p_value: report.diagnosis.p_value,
-                candidates: &report.diagnosis.candidates,
-            },
-            step: report.step.as_ref().map(|s| JsonStep {
-                added: s.added.name(),
-                model: names(&s.model),
-                residual_rms_before: s.residual_rms_before,
-                residual_rms_after: s.residual_rms_after,
-                params: &s.params,
-            }),
-        };
-        println!("{}", serde_json::to_string(&out)?);
+        println!("{}", json_out(p, &report)?);
     } else {
         print!("{}", text_report(&data, &report));
     }
@@ -859,5 +866,58 @@ mod tests {
             run(args(csv.path(), SensorArg::Accel, &[])).unwrap_err()
         );
         assert!(e.contains("ax"), "{e}");
+    }
+}
+
+#[cfg(test)]
+mod json_tests {
+    use super::*;
+
+    #[test]
+    fn json_has_the_issue_schema_and_only_the_models_params() {
+        // A planar turn of a 25 µT horizontal field with hard iron only.
+        let m: Vec<Vector3<f64>> = (0..600)
+            .map(|k| {
+                let a = k as f64 * 0.02;
+                let e = 0.05 * ((k * 31 % 7) as f64 - 3.0);
+                Vector3::new(25.0 * a.cos() + 4.0 + e, 25.0 * a.sin() - 2.0 - e, -30.0)
+            })
+            .collect();
+        let p = MagProblem::new(m, None).unwrap();
+        let r = analyse(&p, &[Effect::HardIron]).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&json_out(&p, &r).unwrap()).unwrap();
+        let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
+        for k in [
+            "sensor",
+            "model",
+            "params",
+            "residual_rms",
+            "noise_floor",
+            "diagnosis",
+        ] {
+            assert!(keys.contains(&k), "missing {k} in {keys:?}");
+        }
+        assert_eq!(v["sensor"], "mag");
+        assert_eq!(v["model"], serde_json::json!(["hard_iron"]));
+        let params: Vec<&str> = v["params"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
+        assert_eq!(
+            params,
+            ["field", "hard_iron"],
+            "only the model's effects (+ F)"
+        );
+        let h = v["params"]["hard_iron"].as_array().unwrap();
+        assert!(
+            (h[0].as_f64().unwrap() - 4.0).abs() < 0.05
+                && (h[1].as_f64().unwrap() + 2.0).abs() < 0.05
+        );
+        let d = &v["diagnosis"];
+        assert!(d["adequate"].is_boolean() && d["explanation"].is_string());
+        assert!(d["missing"].is_null() || d["missing"].is_string());
+        assert!(v["residual_rms"].as_f64().unwrap() < 0.2);
     }
 }
