@@ -237,7 +237,6 @@ pub fn run(a: Args) -> Result<()> {
     let data = load_data(&a)?;
     let p = data.problem();
     let report = analyse(p, &model)?;
-    let unit = p.unit();
 
     if a.json {
         println!("{}", json_out(p, &report)?);
