@@ -14,6 +14,7 @@ use noise_model::{
 };
 
 struct Outcome {
+    y: Vec<f64>,
     base: Fit,
     base_a: Assessment,
     diag: Diagnosis,
@@ -57,6 +58,7 @@ fn analyse(cfg: &SimConfig) -> Outcome {
         );
     }
     Outcome {
+        y,
         base,
         base_a,
         diag,
@@ -119,8 +121,7 @@ fn hidden(c: &SimConfig, expect: Effect) -> Fit {
     // the user adds the term: refit from scratch (as `imu-lab fit --add`)
     let mut terms = DEFAULT_TERMS.to_vec();
     terms.push(expect);
-    let y = c.generate();
-    let after = fit_with_data(&o.base.points, c.tau0(), &terms, Some((&y, c.rate_hz))).unwrap();
+    let after = fit_with_data(&o.base.points, c.tau0(), &terms, Some((&o.y, c.rate_hz))).unwrap();
     let aa = assess(&after);
     assert!(
         aa.adequate,
