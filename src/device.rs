@@ -12,9 +12,9 @@ use allan::stream::{DeviceEngine, LevelSums};
 use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
-    AllanLevel, AllanTable, CalFault, CalSource, CalStatus, Channel, DeviceMsg, ErrorCode, Event,
-    HostFrame, Identity, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, SensorState,
-    Status, StreamMode, Vec, MAX_CAL_BLOB, PROTOCOL_VERSION,
+    AllanLevel, AllanTable, CalFault, CalSource, CalStatus, Channel, DeviceMsg, DeviceMsgRef,
+    ErrorCode, Event, HostFrame, Identity, ImuSample, MagSample, Reply, Request, SampleBatch,
+    Scales, SensorState, Status, StreamMode, Vec, MAX_CAL_BLOB, PROTOCOL_VERSION,
 };
 
 use crate::outbox::{FrameSink, Outbox, Sent};
@@ -431,7 +431,7 @@ impl Device {
         sink: &mut impl FrameSink,
     ) -> Sent {
         let st = self.status(uptime_us, cpu_load_permille);
-        self.send(&DeviceMsg::Status(st), sink)
+        self.outbox.send(&DeviceMsgRef::Status(&st), sink)
     }
 
     /// Start a round of table frames (one per channel, sent by [`Device::tables_step`]).
@@ -454,13 +454,9 @@ impl Device {
             return None;
         }
         let t = self.table(Channel::ALL[c]);
-        let msg = DeviceMsg::Table(t);
-        self.send(&msg, sink);
+        self.outbox.send(&DeviceMsgRef::Table(&t), sink);
         self.table_next = if c + 1 < CHANNELS { Some(c + 1) } else { None };
-        match msg {
-            DeviceMsg::Table(t) => Some(t),
-            _ => None,
-        }
+        Some(t)
     }
 
     /// The Allan table of one channel: the engine's exact sums plus the deviation and its

@@ -51,9 +51,12 @@ bind_interrupts!(struct Irqs {
 
 /// I2C0 clock: 400 kHz fast mode (both sensors support it).
 const I2C_HZ: u32 = 400_000;
-/// IMU FIFO service period: 10 ms ≈ 10 frames of 14 bytes, far below the 1024-byte FIFO (73
-/// frames = 73 ms of headroom).
-const IMU_BURST_MS: u64 = 10;
+/// IMU FIFO service period: 5 ms ≈ 5 frames of 14 bytes (≈ 2 ms of bus time at 400 kHz), far
+/// below the 1024-byte FIFO (73 frames = 73 ms of headroom).
+const IMU_BURST_MS: u64 = 5;
+/// The magnetometer is read half a period after each IMU burst starts, when the bus is free:
+/// a read held up behind a burst could otherwise land after the next sample and lose one.
+const MAG_SLOT_OFFSET_US: u64 = MAG_PERIOD_US / 2;
 /// Encoded device→host frames waiting for USB; a full pipe drops whole frames (counted).
 const OUT_PIPE: usize = 8192;
 /// Largest host frame accepted (a SetCalibration with a 256-byte blob is ~270 bytes).
@@ -214,6 +217,15 @@ fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
+/// The next instant after now that is `offset_us` past a multiple of `period_us` since boot:
+/// the sensor tasks run on fixed slots of one shared time base, so their bus use interleaves
+/// the same way every period (a late slot is skipped, not caught up).
+fn next_slot(period_us: u64, offset_us: u64) -> Instant {
+    let now = now_us();
+    let k = now.saturating_sub(offset_us) / period_us + 1;
+    Instant::from_micros(k * period_us + offset_us)
+}
+
 /// Waits while measurement is paused (flash write); returns whether it was paused.
 async fn wait_running(
     run: &mut embassy_sync::watch::Receiver<'static, NoopRawMutex, bool, 2>,
@@ -236,11 +248,11 @@ async fn imu_task(
     let mut run = run.receiver().expect("watch receiver for imu_task");
     let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
     let mut svc = ImuService::new();
-    let mut ticker = Ticker::every(Duration::from_millis(IMU_BURST_MS));
+    let period = IMU_BURST_MS * 1000;
     let mut msgs = sensors::Out::new();
     let mut was = svc.state();
     loop {
-        ticker.next().await;
+        Timer::at(next_slot(period, 0)).await;
         if wait_running(&mut run).await {
             svc.resume(&mut imu, now_us(), &mut msgs).await;
         } else {
@@ -278,11 +290,11 @@ async fn mag_task(
     let mut run = run.receiver().expect("watch receiver for mag_task");
     let mut mag = Qmc5883::new(BusDevice::new(bus));
     let mut svc = MagService::new();
-    let mut ticker = Ticker::every(Duration::from_micros(MAG_PERIOD_US));
+    let period = MAG_PERIOD_US;
     let mut msgs = sensors::Out::new();
     let mut was = svc.state();
     loop {
-        ticker.next().await;
+        Timer::at(next_slot(period, MAG_SLOT_OFFSET_US)).await;
         if wait_running(&mut run).await {
             let _ = msgs.push(SensorMsg::Resumed { t_us: now_us() });
         } else {

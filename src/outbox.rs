@@ -1,6 +1,7 @@
 //! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
 //! split and never waited for, so a host that stops reading cannot stall the sampling path.
-use imu_proto::{DeviceMsg, FrameEncoder, MAX_FRAME};
+use imu_proto::{FrameEncoder, MAX_FRAME};
+use serde::Serialize;
 
 /// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
 pub trait FrameSink {
@@ -44,8 +45,9 @@ impl Outbox {
         }
     }
 
-    /// Encode `msg` and queue it on `sink` if it fits whole.
-    pub fn send(&mut self, msg: &DeviceMsg, sink: &mut impl FrameSink) -> Sent {
+    /// Encode `msg` (a `DeviceMsg` or its borrowed view `DeviceMsgRef`) and queue it on
+    /// `sink` if it fits whole.
+    pub fn send<T: Serialize>(&mut self, msg: &T, sink: &mut impl FrameSink) -> Sent {
         let n = match self.enc.encode(msg, &mut self.buf) {
             Ok(n) => n,
             Err(_) => {

@@ -651,3 +651,19 @@ fn table_rows_carry_consistent_deviations_and_bounds() {
         "ADEV(τ0) = {d0} deg/s"
     );
 }
+
+#[test]
+fn after_a_magnetometer_loss_sampling_resumes_at_the_full_rate() {
+    let mut rig = Rig::new();
+    rig.run(1000);
+    rig.bus.mag(|q| q.present = false);
+    rig.run(30);
+    rig.bus.mag(|q| q.present = true);
+    rig.run(500);
+    let before = rig.dev.status(0, 0).mag_samples;
+    rig.run(1000);
+    let per_s = rig.dev.status(0, 0).mag_samples - before;
+    eprintln!("{per_s} magnetometer samples in the second after recovery");
+    // 200 Hz: 200 ± 1 (tick phase) samples in one second.
+    assert!((199..=201).contains(&per_s), "{per_s} samples/s after recovery");
+}
