@@ -487,7 +487,7 @@ fn deviation_of_phase(
         })
         .collect();
     let mut rows = Vec::with_capacity(ms.len());
-    let mut last_alpha = 0;
+    let mut ceiling = None;
     for (m, (sum, n, denom)) in ms.into_iter().zip(sums) {
         if n < 2 {
             continue;
@@ -498,8 +498,7 @@ fn deviation_of_phase(
         if stat == Stat::Tdev {
             dev *= tau / 3f64.sqrt();
         }
-        let alpha = identify(x, m as usize, stat).unwrap_or(last_alpha);
-        last_alpha = alpha;
+        let alpha = redder(identify(x, m as usize, stat), &mut ceiling);
         let edf = edf_for(stat, alpha, mf, np as f64);
         let (lo, hi) = bounds(dev, edf);
         rows.push(Row {
@@ -600,6 +599,25 @@ fn bounds(dev: f64, edf: f64) -> (f64, f64) {
     }
 }
 
+/// The noise exponent of a row, given the exponent identified at it (if any) and the one used
+/// at the previous, shorter τ (`ceiling`, updated).
+///
+/// In a sum of power-law noises the term that dominates the Allan variance at a longer τ is
+/// never bluer than the one dominating at a shorter τ, so α never increases with τ. Holding to
+/// that keeps a misidentification on a few noisy averages at long τ (B1 reading white PM on
+/// Markov or drift data, say) from inflating the EDF tenfold. With nothing identified the
+/// previous row's exponent is kept, or white FM (0) for the first row.
+fn redder(identified: Option<i32>, ceiling: &mut Option<i32>) -> i32 {
+    let alpha = match (identified, *ceiling) {
+        (Some(a), Some(c)) => a.min(c),
+        (Some(a), None) => a,
+        (None, Some(c)) => c,
+        (None, None) => 0,
+    };
+    *ceiling = Some(alpha);
+    alpha
+}
+
 /// Noise exponent at averaging factor m: lag-1 ACF with ≥ 30 averages, else B1 with R(n).
 ///
 /// `None` when too few averages remain for either method; the caller then keeps the exponent of
@@ -682,6 +700,7 @@ pub fn stride_sums(segments: &[&[i32]], p: usize, levels: usize) -> Vec<LevelSum
 /// `scale`, EDF by Greenhall with the estimator's stride factor S = m/stride, and the noise
 /// exponent read from the slope to the neighbouring level.
 pub fn stream_rows(levels: &[LevelSums], tau0: f64, scale: f64, hadamard: bool) -> Vec<Row> {
+    let mut ceiling = None;
     let d = if hadamard { 3 } else { 2 };
     let var = |l: &LevelSums| if hadamard { l.ohdev(1.0) } else { l.oadev(1.0) };
     let mut rows = Vec::new();
@@ -699,9 +718,10 @@ pub fn stream_rows(levels: &[LevelSums], tau0: f64, scale: f64, hadamard: bool) 
                     .and_then(|j| var(&levels[j]))
                     .map(|v| (v, dev))
             });
-        let alpha = neighbour
-            .map(|(a, b)| ci::alpha_from_slope(a * a, b * b, 2.0, d))
-            .unwrap_or(0);
+        let alpha = redder(
+            neighbour.map(|(a, b)| ci::alpha_from_slope(a * a, b * b, 2.0, d)),
+            &mut ceiling,
+        );
         let m = l.m as f64;
         let np = (n - 1) as f64 * l.stride as f64 + d as f64 * m + 1.0;
         let edf = ci::edf_greenhall(
@@ -769,6 +789,44 @@ mod tests {
                 let direct = diff_sum(&x, m, d, 1).0;
                 assert!((blocked[k] / direct - 1.0).abs() < 1e-12, "d={d} m={m}");
             }
+        }
+    }
+
+    #[test]
+    fn noise_exponent_goes_from_white_pm_to_random_walk_and_never_back() {
+        // Quantisation-like white PM (differenced white noise) dominates short τ, a rate random
+        // walk dominates long τ.
+        let mut s = 0x2545_f491u32;
+        let mut u = move || {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            s as f64 / 4_294_967_296.0 - 0.5
+        };
+        let (mut prev, mut walk) = (0.0, 0.0);
+        let y: Vec<f64> = (0..1 << 17)
+            .map(|_| {
+                let w = u();
+                walk += 0.002 * u();
+                let v = w - prev + walk;
+                prev = w;
+                v
+            })
+            .collect();
+        let rows = deviation(&y, 1.0, Stat::Oadev, &TauSet::Octave).unwrap();
+        assert_eq!(rows[0].alpha, 2, "white PM at m = 1");
+        assert!(
+            rows.last().unwrap().alpha <= -1,
+            "redder than white FM at the longest τ"
+        );
+        for w in rows.windows(2) {
+            assert!(
+                w[1].alpha <= w[0].alpha,
+                "alpha rose from {} to {} at m = {}",
+                w[0].alpha,
+                w[1].alpha,
+                w[1].m
+            );
         }
     }
 }
