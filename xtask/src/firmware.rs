@@ -10,7 +10,7 @@ use std::fs;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use object::{Object, ObjectSection};
+use object::{Object, ObjectSection, ObjectSymbol};
 
 use crate::{cargo, root, run};
 
@@ -139,10 +139,50 @@ pub fn size_report(elf: &[u8]) -> Result<SizeReport> {
         100.0 * flash as f64 / FLASH_FOR_CODE as f64,
         100.0 * ram as f64 / RAM_LINKED as f64
     )?;
+    // The largest statics in RAM (task futures, queues, the device state with its Allan engines).
+    let mut statics: Vec<(u64, String)> = file
+        .symbols()
+        .filter(|s| RAM.contains(&s.address()) && s.size() >= 1024)
+        .map(|s| (s.size(), demangle(s.name().unwrap_or("?"))))
+        .collect();
+    statics.sort_by(|a, b| b.cmp(a));
+    writeln!(text, "| largest statics in RAM | size [B] |\n|---|---:|")?;
+    for (size, name) in statics.iter().take(8) {
+        writeln!(text, "| `{name}` | {size} |")?;
+    }
+    writeln!(text)?;
     if flash > FLASH_FOR_CODE {
         bail!("the firmware ({flash} B) overlaps the calibration area (limit {FLASH_FOR_CODE} B)");
     }
     Ok(SizeReport { flash, ram, text })
+}
+
+/// Readable name of a legacy-mangled Rust symbol (`_ZN8pico_imu6DEVICE17h…E` →
+/// `pico_imu::DEVICE`): the length-prefixed path segments, without the trailing hash.
+fn demangle(sym: &str) -> String {
+    let Some(mut rest) = sym.strip_prefix("_ZN") else {
+        return sym.to_string();
+    };
+    let mut parts = Vec::new();
+    while let Some(d) = rest.find(|c: char| !c.is_ascii_digit()).filter(|&d| d > 0) {
+        let Ok(n) = rest[..d].parse::<usize>() else {
+            break;
+        };
+        let Some(seg) = rest.get(d..d + n) else { break };
+        parts.push(seg);
+        rest = &rest[d + n..];
+    }
+    if parts
+        .last()
+        .is_some_and(|p| p.len() == 17 && p.starts_with('h'))
+    {
+        parts.pop();
+    }
+    if parts.is_empty() {
+        sym.to_string()
+    } else {
+        parts.join("::").replace("$LT$", "<").replace("$GT$", ">")
+    }
 }
 
 /// The flash image of the ELF as UF2 blocks of 256 bytes, every 256-byte page the image
@@ -323,6 +363,15 @@ mod tests {
             [addr(0), addr(1), addr(2)],
             [0x1000_0000, 0x1000_0100, 0x1000_0400]
         );
+    }
+
+    #[test]
+    fn legacy_symbols_are_demangled() {
+        assert_eq!(
+            demangle("_ZN8pico_imu6DEVICE17hadb0efd42087a55dE"),
+            "pico_imu::DEVICE"
+        );
+        assert_eq!(demangle("_SEGGER_RTT"), "_SEGGER_RTT");
     }
 
     #[test]
