@@ -502,5 +502,8 @@ mod tests {
         let sf = chi2_sf(200.0, 10.0);
         assert!(sf > 0.0 && sf < 1e-35, "{sf}");
         assert!((chi2_sf(18.307_038, 10.0) - 0.05).abs() < 1e-7);
+        // χ²(2) survival is exp(−x/2) exactly; A&S 26.8: χ²(10) 99.9 % point 29.588.
+        assert!((chi2_sf(7.0, 2.0) - (-3.5f64).exp()).abs() < 1e-14);
+        assert!((chi2_ppf(0.999, 10.0) - 29.588_3).abs() < 1e-3);
     }
 }

@@ -48,7 +48,7 @@ fn main() {
         };
         let y = cfg.generate();
         let rows = deviation(&y, cfg.tau0(), Stat::Oadev, &TauSet::Octave).unwrap();
-        let (pts, skipped, _) = Point::from_rows(&rows);
+        let (pts, skipped) = Point::from_rows(&rows);
         let f = fit(&pts, cfg.tau0(), &DEFAULT_TERMS, &FitOptions::default()).unwrap();
         let a = assess(&f);
         let d = diagnose(&f, &a, Some((&y, 100.0)));

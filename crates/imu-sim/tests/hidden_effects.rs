@@ -24,7 +24,7 @@ struct Outcome {
 fn analyse(cfg: &SimConfig) -> Outcome {
     let y = cfg.generate();
     let rows = deviation(&y, cfg.tau0(), Stat::Oadev, &TauSet::Octave).expect("oadev");
-    let (pts, _, _) = Point::from_rows(&rows);
+    let (pts, _) = Point::from_rows(&rows);
     let base = fit(&pts, cfg.tau0(), &DEFAULT_TERMS, &FitOptions::default()).expect("fit");
     let base_a = assess(&base);
     let diag = diagnose(&base, &base_a, Some((&y, cfg.rate_hz)));

@@ -15,7 +15,7 @@
 //! Both rates were chosen so that control data (exactly the fitted model) are passed; the control
 //! tests in `tests/` check this over many seeds and parameter sets.
 use crate::fit::Fit;
-use crate::special::{chi2_cdf, chi2_sf, normal_quantile};
+use allan::ci::{chi2_cdf, chi2_sf, norm_ppf as normal_quantile};
 
 /// Global false-alarm probability of the χ² test.
 pub const P_GLOBAL: f64 = 1e-3;

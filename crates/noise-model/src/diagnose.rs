@@ -12,7 +12,7 @@ use crate::assess::{assess, Assessment, TauRange, CORRELATION_INFLATION};
 use crate::effect::{Effect, ALL_EFFECTS};
 use crate::fit::{fit, Fit, FitOptions};
 use crate::psd::{default_segment, find_line, line_near, welch, Line, LineTest};
-use crate::special::chi2_sf;
+use allan::ci::chi2_sf;
 
 /// Significance level for naming a candidate.
 pub const P_CANDIDATE: f64 = 1e-3;

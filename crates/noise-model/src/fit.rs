@@ -623,16 +623,11 @@ impl Point {
     /// Convert deviation rows of the `allan` crate (OADEV is what the fit expects), in τ order.
     ///
     /// Rows whose EDF or bounds are not finite cannot be weighted and are left out (the second
-    /// value counts them). EDF guard: for the noises of an IMU rate channel (α ≤ 0 beyond the
-    /// first octaves) the EDF of the overlapping estimator falls as τ grows; a long-τ row with few
-    /// clusters whose noise type is mis-identified (e.g. as white PM) can get an EDF many times
-    /// too large, which would make the fit and the verdict trust it blindly. The EDF is therefore
-    /// capped at the running minimum of the shorter-τ rows, and the 68.3 % bounds recomputed from
-    /// the capped EDF (`allan::ci::chi2_bounds`). The third value counts the capped rows.
-    pub fn from_rows(rows: &[allan::Row]) -> (Vec<Point>, usize, usize) {
+    /// value counts them). The EDFs are taken as the allan crate gives them: it already keeps
+    /// the noise exponent from rising with τ, which is what stops a long-τ row with few clusters
+    /// from being trusted blindly.
+    pub fn from_rows(rows: &[allan::Row]) -> (Vec<Point>, usize) {
         let mut skipped = 0;
-        let mut capped = 0;
-        let mut min_edf = f64::INFINITY;
         let mut pts = Vec::new();
         for r in rows {
             let ok = r.tau > 0.0
@@ -646,23 +641,15 @@ impl Point {
                 skipped += 1;
                 continue;
             }
-            let (edf, lo, hi) = if r.edf > min_edf {
-                capped += 1;
-                let (lo, hi) = allan::ci::chi2_bounds(r.dev, min_edf, allan::ci::ONE_SIGMA);
-                (min_edf, lo, hi)
-            } else {
-                (r.edf, r.lo, r.hi)
-            };
-            min_edf = min_edf.min(edf);
             pts.push(Point {
                 tau: r.tau,
                 dev: r.dev,
-                edf,
-                lo,
-                hi,
+                edf: r.edf,
+                lo: r.lo,
+                hi: r.hi,
             });
         }
-        (pts, skipped, capped)
+        (pts, skipped)
     }
 }
 /// Fit with the raw data at hand: as [`fit`], and when the model has a sinusoid whose frequency

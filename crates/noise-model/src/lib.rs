@@ -27,7 +27,6 @@ pub mod fit;
 pub mod nnls;
 pub mod practical;
 pub mod psd;
-pub mod special;
 
 pub use assess::{assess, Assessment, TauRange};
 pub use diagnose::{diagnose, step, Candidate, Diagnosis, Step, StepSide};

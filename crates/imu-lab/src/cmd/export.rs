@@ -68,7 +68,7 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
         .values;
     let rows = deviation(y, 1.0 / rec.rate_hz, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{}: column {column:?}", input.file.display()))?;
-    let (pts, _, _) = Point::from_rows(&rows);
+    let (pts, _) = Point::from_rows(&rows);
     let f: Fit = fit_with_data(
         &pts,
         1.0 / rec.rate_hz,

@@ -227,7 +227,7 @@ pub fn run(args: Args) -> Result<()> {
     let tau0 = 1.0 / rec.rate_hz;
     let rows = deviation(y, tau0, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{shown}: column {:?}", args.column))?;
-    let (points, skipped, capped) = Point::from_rows(&rows);
+    let (points, skipped) = Point::from_rows(&rows);
 
     let mut stages = vec![stage(&points, tau0, &base_terms, y, rec.rate_hz)?];
     let mut steps: Vec<Step> = Vec::new();
@@ -427,7 +427,7 @@ pub fn run(args: Args) -> Result<()> {
         duration(y.len() as f64 / rec.rate_hz)
     );
     println!(
-        "Overlapping Allan deviation at {} octave τ ({}–{} s), 68.3 % bounds from Greenhall's EDF{}{}.",
+        "Overlapping Allan deviation at {} octave τ ({}–{} s), 68.3 % bounds from Greenhall's EDF{}.",
         points.len(),
         report::sig(points.first().map_or(0.0, |p| p.tau), 3),
         report::sig(points.last().map_or(0.0, |p| p.tau), 4),
@@ -436,11 +436,6 @@ pub fn run(args: Args) -> Result<()> {
         } else {
             String::new()
         },
-        if capped > 0 {
-            format!("; EDF of {capped} long-τ row(s) capped at the shorter-τ value")
-        } else {
-            String::new()
-        }
     );
     for (i, st) in stages.iter().enumerate() {
         println!();
@@ -538,7 +533,7 @@ mod tests {
     fn real_static_recording_is_white_noise_dominated_and_adequate() {
         let (y, rate) = static_gz();
         let rows = deviation(&y, 1.0 / rate, Stat::Oadev, &TauSet::Octave).unwrap();
-        let (pts, _, _) = Point::from_rows(&rows);
+        let (pts, _) = Point::from_rows(&rows);
         let st = stage(&pts, 1.0 / rate, &DEFAULT_TERMS, &y, rate).unwrap();
         assert!(st.assessment.adequate, "{}", st.diagnosis.explanation);
         assert_eq!(st.diagnosis.missing, None);
