@@ -57,6 +57,12 @@ fn out_dir(name: &str) -> Result<PathBuf> {
     Ok(d)
 }
 
+/// Where our emulator child writes its TCP port: named after this process, so that a second
+/// run in the same tree (another `cargo xtask test`) can never hand us its port.
+fn port_file(out: &Path) -> PathBuf {
+    out.join(format!("port.{}", std::process::id()))
+}
+
 fn arg_value(args: &[String], name: &str) -> Option<String> {
     args.iter()
         .position(|a| a == name)
@@ -224,7 +230,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
         sim_args.push("--fault".into());
         sim_args.push((*spec).into());
     }
-    let sim = Sim::start(&elf, &sim_args, &out.join("port"))?;
+    let sim = Sim::start(&elf, &sim_args, &port_file(&out))?;
     let session = match e2e_session(sim.port, seconds) {
         Ok(s) => s,
         Err(e) => {
@@ -636,7 +642,7 @@ pub fn demo(args: &[String]) -> Result<()> {
             out.join("firmware.log").display().to_string(),
             "--quiet".into(),
         ],
-        &out.join("port"),
+        &port_file(&out),
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
     let r = demo_flow(&port, seconds, &out);
