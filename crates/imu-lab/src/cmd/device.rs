@@ -221,6 +221,53 @@ pub fn sums_check(l: &AllanLevel, scale: f32) -> f64 {
     (f64::from(l.dev) - dev).abs() / dev
 }
 
+/// Bounds recomputed on the host from a table's sums: noise exponent from the local slope of
+/// the Allan variance (`allan::ci::alpha_from_slope`), Greenhall's EDF for the level's estimator
+/// (stride `s`, `m/s` differences per cluster; Greenhall & Riley 2003) and exact χ² quantiles
+/// (NIST SP 1065 eq. 45). The device itself uses closed forms (white-FM EDF, Wilson–Hilferty).
+/// Returns `(edf, lo, hi)` per level, the device's values where Greenhall is undefined.
+pub fn host_bounds(t: &AllanTable) -> Vec<(f64, f64, f64)> {
+    use allan::ci;
+    let var = |l: &AllanLevel| f64::from(l.dev) * f64::from(l.dev);
+    let n = t.levels.len();
+    (0..n)
+        .map(|k| {
+            let l = &t.levels[k];
+            let (a, b) = if k + 1 < n {
+                (k, k + 1)
+            } else {
+                (k.saturating_sub(1), k)
+            };
+            let alpha = if a == b {
+                0
+            } else {
+                ci::alpha_from_slope(var(&t.levels[a]), var(&t.levels[b]), 2.0, 2)
+            };
+            let sums = allan::stream::LevelSums {
+                m: l.m,
+                stride: l.stride,
+                n2: l.n2,
+                sum2: l.sum2,
+                n3: l.n3,
+                sum3: l.sum3,
+            };
+            let s_factor = f64::from(l.m) / f64::from(l.stride.max(1));
+            match ci::edf_greenhall(
+                alpha,
+                f64::from(l.m),
+                sums.phase_points(),
+                ci::Variance::Unmodified { d: 2, s_factor },
+            ) {
+                Some(edf) if edf.is_finite() && edf > 0.0 => {
+                    let (lo, hi) = ci::chi2_bounds(f64::from(l.dev), edf, ci::ONE_SIGMA);
+                    (edf, lo, hi)
+                }
+                _ => (f64::from(l.edf), f64::from(l.lo), f64::from(l.hi)),
+            }
+        })
+        .collect()
+}
+
 fn parse_channels(names: &[String]) -> Result<Vec<Channel>> {
     if names.is_empty() {
         return Ok(Channel::ALL.to_vec());
@@ -256,18 +303,20 @@ fn tables(link: &mut Link, a: &TablesArgs) -> Result<()> {
             "{:>12} {:>9} {:>10} {:>14} {:>14} {:>14} {:>9}",
             "τ [s]", "m", "n", "ADEV", "lo (68.3 %)", "hi", "EDF"
         );
-        for l in &t.levels {
+        let bounds = host_bounds(t);
+        for (l, (edf, lo, hi)) in t.levels.iter().zip(&bounds) {
             worst = worst.max(sums_check(l, t.scale));
             println!(
                 "{:>12.4e} {:>9} {:>10} {:>14.6e} {:>14.6e} {:>14.6e} {:>9.1}",
-                l.tau_s, l.m, l.n2, l.dev, l.lo, l.hi, l.edf
+                l.tau_s, l.m, l.n2, l.dev, lo, hi, edf
             );
         }
         if a.fit {
-            fit_table(t);
+            fit_table(t, &bounds);
         }
     }
-    println!("\nrows checked against their integer sums: worst relative difference {worst:.1e} (f32 rounding ≈ 6e-8)");
+    println!("\nbounds: Greenhall EDF and exact χ² recomputed on the host from the sums");
+    println!("rows checked against their integer sums: worst relative difference {worst:.1e} (f32 rounding ≈ 6e-8)");
     if worst > 1e-5 {
         bail!("a table row disagrees with its own sums by {worst:.1e} (relative): corrupt table");
     }
@@ -280,18 +329,19 @@ fn tables(link: &mut Link, a: &TablesArgs) -> Result<()> {
     Ok(())
 }
 
-/// The noise-model fit of one device table (default five terms).
-fn fit_table(t: &AllanTable) {
+/// The noise-model fit of one device table (default five terms), with the host's bounds.
+fn fit_table(t: &AllanTable, bounds: &[(f64, f64, f64)]) {
     let pts: Vec<noise_model::Point> = t
         .levels
         .iter()
-        .filter(|l| l.dev > 0.0 && l.lo > 0.0 && l.hi > l.lo && l.edf > 0.0)
-        .map(|l| noise_model::Point {
+        .zip(bounds)
+        .filter(|(l, (edf, lo, hi))| l.dev > 0.0 && *lo > 0.0 && hi > lo && *edf > 0.0)
+        .map(|(l, &(edf, lo, hi))| noise_model::Point {
             tau: f64::from(l.tau_s),
             dev: f64::from(l.dev),
-            edf: f64::from(l.edf),
-            lo: f64::from(l.lo),
-            hi: f64::from(l.hi),
+            edf,
+            lo,
+            hi,
         })
         .collect();
     let tau0 = f64::from(t.tau0_us) * 1e-6;
@@ -458,6 +508,78 @@ mod tests {
         assert!(sums_check(&l, 0.01) < 1e-7);
         l.sum2 += 1000; // a corrupted sum: σ changes by ~0.1 %
         assert!(sums_check(&l, 0.01) > 1e-4);
+    }
+
+    #[test]
+    fn host_bounds_bracket_the_deviation_and_follow_greenhall() {
+        // A white-FM table (σ ∝ τ^−½, 60000 samples, strided above m = 8): the slope gives
+        // alpha = 0, so every EDF must equal allan::ci's Greenhall value for alpha 0 exactly,
+        // and the bounds must bracket the deviation.
+        let mut levels = imu_proto::Vec::new();
+        for k in 0..10u32 {
+            let m = 1u32 << k;
+            let stride = if m <= 8 { 1 } else { m / 8 };
+            let dev = 0.1 / f64::from(m).sqrt();
+            let n2 = (60_000 - 2 * u64::from(m)) / u64::from(stride);
+            let sum2 = (dev / 0.01).powi(2) * 2.0 * n2 as f64 * f64::from(m).powi(2);
+            levels
+                .push(AllanLevel {
+                    m,
+                    stride,
+                    n2,
+                    sum2: sum2 as u128,
+                    n3: 0,
+                    sum3: 0,
+                    tau_s: 0.001 * m as f32,
+                    dev: dev as f32,
+                    edf: 1.0,
+                    lo: 0.0,
+                    hi: 0.0,
+                })
+                .unwrap();
+        }
+        let t = AllanTable {
+            channel: Channel::Gz,
+            tau0_us: 1000,
+            scale: 0.01,
+            pushed: 60_000,
+            gaps: 0,
+            levels,
+        };
+        let b = host_bounds(&t);
+        for (l, (edf, lo, hi)) in t.levels.iter().zip(&b) {
+            assert!(
+                *lo < f64::from(l.dev) && f64::from(l.dev) < *hi,
+                "m = {}",
+                l.m
+            );
+            let sums = allan::stream::LevelSums {
+                m: l.m,
+                stride: l.stride,
+                n2: l.n2,
+                sum2: l.sum2,
+                n3: 0,
+                sum3: 0,
+            };
+            let want = allan::ci::edf_greenhall(
+                0,
+                f64::from(l.m),
+                sums.phase_points(),
+                allan::ci::Variance::Unmodified {
+                    d: 2,
+                    s_factor: f64::from(l.m) / f64::from(l.stride),
+                },
+            )
+            .unwrap();
+            assert!(
+                (edf - want).abs() <= 1e-9 * want,
+                "m = {}: {edf} vs {want}",
+                l.m
+            );
+        }
+        // More clusters, tighter bounds: the relative width grows with τ.
+        let w = |i: usize| (b[i].2 - b[i].1) / f64::from(t.levels[i].dev);
+        assert!(w(0) < w(5) && w(5) < w(9));
     }
 
     #[test]
