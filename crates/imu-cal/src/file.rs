@@ -14,13 +14,15 @@
 //! offset = [0.0, 0.0, 0.0] # m/s²
 //! scale = [1.0, 1.0, 1.0]
 //! misalignment_deg = [0.0, 0.0, 0.0]
-//! [gyro]                   # ω_cal = ω − bias − temp_coeff·(T − temp_ref)
+//! [gyro]                   # ω_cal = T_g·K_g·(ω − bias − temp_coeff·(T − temp_ref))
 //! lsb_per_unit = 131.0     # LSB per deg/s (±250 °/s)
 //! bias = [0.0, 0.0, 0.0]   # deg/s
 //! temp_coeff = [0.0, 0.0, 0.0]  # deg/s per °C
 //! temp_ref = 25.0          # °C
 //! temp_lsb_per_c = 340.0   # MPU-6050: T = raw/340 + 36.53 °C
 //! temp_offset_c = 36.53
+//! scale = [1.0, 1.0, 1.0]  # optional (gyro_rot)
+//! misalignment_deg = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # optional (gyro_rot)
 //! [mag]                    # m_cal = soft_iron·(m − hard_iron)
 //! lsb_per_unit = 120.0     # LSB per µT (QMC5883 ±2 G: 12000 LSB/G)
 //! hard_iron = [0.0, 0.0, 0.0]   # µT
@@ -64,6 +66,16 @@ pub struct GyroSection {
     pub temp_lsb_per_c: f64,
     /// Temperature at raw 0 (°C).
     pub temp_offset_c: f64,
+    /// Gyro scale factors (dimensionless; `gyro_rot`), 1 when absent.
+    #[serde(default = "unit_scale")]
+    pub scale: [f64; 3],
+    /// Gyro non-orthogonality γ₁…γ₆ (deg; `gyro_rot`), 0 when absent.
+    #[serde(default)]
+    pub misalignment_deg: [f64; 6],
+}
+
+fn unit_scale() -> [f64; 3] {
+    [1.0; 3]
 }
 
 /// Magnetometer section.
@@ -109,6 +121,8 @@ impl Default for CalFile {
                 temp_ref: 25.0,
                 temp_lsb_per_c: 340.0,
                 temp_offset_c: 36.53,
+                scale: [1.0; 3],
+                misalignment_deg: [0.0; 6],
             },
             mag: MagSection {
                 lsb_per_unit: 120.0,
@@ -143,6 +157,7 @@ impl CalFile {
 
     /// Put the fitted parameters of one sensor into the file (effects absent from the fit are
     /// reset to identity, so the file always describes exactly the last fitted model).
+    /// `"gyro"` sets bias and temperature; `"gyro-rot"` sets the gyro scale and misalignment.
     pub fn set(&mut self, sensor: &str, p: &Params) -> Result<(), CalError> {
         match sensor {
             "accel" => {
@@ -156,6 +171,10 @@ impl CalFile {
                 if let Some(t) = p.temp_ref {
                     self.gyro.temp_ref = t;
                 }
+            }
+            "gyro-rot" => {
+                self.gyro.scale = p.scale.unwrap_or([1.0; 3]);
+                self.gyro.misalignment_deg = p.gyro_misalignment_deg.unwrap_or([0.0; 6]);
             }
             "mag" => {
                 self.mag.hard_iron = p.hard_iron.unwrap_or([0.0; 3]);
@@ -184,7 +203,6 @@ impl CalFile {
         ];
         let accel = Affine::from_float(Sensor::Accel, am, a.offset.map(|o| o * a.lsb_per_unit))?;
         let g = &self.gyro;
-        let id = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let t_ref_raw = ((g.temp_ref - g.temp_offset_c) * g.temp_lsb_per_c).round();
         if !(t_ref_raw.abs() <= i16::MAX as f64) {
             return Err(BlobError::OutOfRange {
@@ -193,8 +211,9 @@ impl CalFile {
                 axis: 0,
             });
         }
+        let gm = crate::gyro_rot::correction_matrix(g.scale, g.misalignment_deg);
         let gyro = GyroCorrection::from_float(
-            id,
+            gm,
             g.bias.map(|b| b * g.lsb_per_unit),
             g.temp_coeff.map(|k| k * g.lsb_per_unit / g.temp_lsb_per_c),
             t_ref_raw as i16,

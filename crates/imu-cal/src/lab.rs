@@ -79,6 +79,16 @@ impl Effect {
             })
     }
 
+    /// The physical cause, for the diagnosis text (scale and misalignment read differently for
+    /// the gyro, whose reference is a rotation rather than |g|).
+    pub fn physics_for(self, sensor: &str) -> &'static str {
+        match (self, sensor) {
+            (Effect::Scale, "gyro") => "a gyro scale-factor error: each axis reports a rotation rate a few per cent off, so integrating it over a turn between two poses over- or under-rotates the gravity direction",
+            (Effect::Misalignment, "gyro") => "non-orthogonal gyro axes, tilted with respect to the accelerometer's: a rotation about one axis is partly seen by the others, so the integrated turn ends on the wrong axis",
+            _ => self.physics(),
+        }
+    }
+
     /// The physical cause, for the diagnosis text.
     pub fn physics(self) -> &'static str {
         match self {
@@ -135,6 +145,9 @@ pub struct Params {
     /// Reference temperature of `bias` (°C).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub temp_ref: Option<f64>,
+    /// Gyro non-orthogonality angles (deg) γ₁…γ₆, the off-diagonal of T_g (see `gyro_rot`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gyro_misalignment_deg: Option<[f64; 6]>,
     /// Magnetometer hard iron (µT; seed eq. 3).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hard_iron: Option<[f64; 3]>,
@@ -217,6 +230,14 @@ pub trait Problem {
     fn noise_floor(&self) -> NoiseFloor;
     /// Number of residuals.
     fn n(&self) -> usize;
+    /// What one residual is, for the report ("per-pose", "per-sample", …).
+    fn basis(&self) -> &'static str {
+        match self.sensor() {
+            "accel" => "per-pose",
+            "mag" => "per-sample",
+            _ => "per-block",
+        }
+    }
 }
 
 /// Evidence for one candidate effect.
@@ -380,7 +401,7 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
          ({} {} residuals, {} fitted parameters; noise from {}); P(F ≥ {ratio:.2}) = {p_adequate:.3}",
         expected_rms,
         fitted.residuals.len(),
-        basis(p.sensor()),
+        p.basis(),
         fitted.n_params,
         floor.method
     );
@@ -405,7 +426,7 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
             f1.rms(),
             c.extra_params,
             c.p_value.unwrap_or(f64::NAN),
-            e.physics()
+            e.physics_for(p.sensor())
         );
             let step = Step {
                 added: e,
@@ -450,12 +471,4 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
         },
         step,
     })
-}
-
-fn basis(sensor: &str) -> &'static str {
-    match sensor {
-        "accel" => "per-pose",
-        "mag" => "per-sample",
-        _ => "per-block",
-    }
 }

@@ -21,6 +21,8 @@ pub mod file;
 #[cfg(feature = "std")]
 pub mod gyro;
 #[cfg(feature = "std")]
+pub mod gyro_rot;
+#[cfg(feature = "std")]
 pub mod lab;
 #[cfg(feature = "std")]
 pub mod mag;

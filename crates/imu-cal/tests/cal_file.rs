@@ -118,3 +118,40 @@ fn malformed_files_are_rejected_with_the_place() {
     f.mag.soft_iron[0][0] = 9.0; // outside the device's fixed-point range
     assert!(f.to_device().is_err());
 }
+
+#[test]
+fn gyro_scale_and_misalignment_reach_the_device() {
+    let mut f = fitted_file();
+    f.set(
+        "gyro-rot",
+        &Params {
+            scale: Some([1.03, 0.97, 1.01]),
+            gyro_misalignment_deg: Some([0.5, -0.3, 0.2, 0.8, -0.6, 0.1]),
+            ..Params::default()
+        },
+    )
+    .unwrap();
+    // The TOML keeps them, and a file without them (older) still parses with identity.
+    let text = f.to_toml();
+    assert_eq!(CalFile::from_toml(&text).unwrap(), f);
+    let cal = f.to_device().unwrap();
+    let g = &f.gyro;
+    let m = imu_cal::gyro_rot::correction_matrix(g.scale, g.misalignment_deg);
+    let t_raw = ((g.temp_ref - g.temp_offset_c) * g.temp_lsb_per_c).round() as i16;
+    let t_used = t_raw as f64 / g.temp_lsb_per_c + g.temp_offset_c;
+    for raw in [[1000i16, -2000, 3000], [-32768, 32767, 0]] {
+        let out = cal.apply_gyro(raw, t_raw);
+        for i in 0..3 {
+            let mut e = 0.0;
+            for j in 0..3 {
+                let o = (g.bias[j] + g.temp_coeff[j] * (t_used - g.temp_ref)) * g.lsb_per_unit;
+                e += m[i][j] * (raw[j] as f64 - o);
+            }
+            assert!(
+                (out[i] as f64 - e).abs() <= 1.0,
+                "axis {i}: {} vs {e}",
+                out[i]
+            );
+        }
+    }
+}

@@ -166,3 +166,45 @@ fn tilt_sphere_soft_iron() {
         assert!((r - t).abs() < 2.0, "radii {radii:?}");
     }
 }
+
+/// Gyro on the same multi-pose run. Bias at rest (seed eq. 2) against upstream's bias
+/// (−427.46, 147.95, −80.72 LSB, same sign convention as the raw counts): within 8 LSB
+/// (0.06 deg/s; measured ≤ 4.7 LSB). Scale/misalignment from the rotations: 3 of the 9 moves
+/// saturate the ±250 °/s gyro and are skipped; on the other 6 the integrated turns miss the
+/// gravity direction by ≈ 6.6° RMS and neither scale nor misalignment explains it
+/// (not significant) — the moves are too fast for 100 Hz sampling. The lab must say so rather
+/// than report a scale: upstream's scale (1.031, 0.998, 1.005) is not reproducible from these
+/// moves by our method, and we assert that the verdict is "not adequate, nothing missing".
+#[test]
+fn multipose_gyro_bias_and_rotations() {
+    let (_, c) = read_csv("mpu6050-static/multipose_calibration.csv", 4);
+    let k = G_STANDARD / LSB_PER_G;
+    let a: Vec<Vec<f64>> = (0..3)
+        .map(|j| c[j].iter().map(|v| v * k).collect())
+        .collect();
+    let g: Vec<Vec<f64>> = (3..6)
+        .map(|j| c[j].iter().map(|v| v / 131.0).collect())
+        .collect();
+    let poses = detect_static([&a[0], &a[1], &a[2]], 100.0, StaticDetect::default()).unwrap();
+    let p = imu_cal::gyro_rot::GyroRotProblem::new(
+        [&a[0], &a[1], &a[2]],
+        [&g[0], &g[1], &g[2]],
+        100.0,
+        &poses,
+        Some(32767.0 / 131.0 - 0.01),
+    )
+    .unwrap();
+    assert_eq!((p.moves.len(), p.skipped_saturated), (6, 3));
+    for (j, up) in [-427.46, 147.95, -80.72].iter().enumerate() {
+        let ours = p.bias[j] * 131.0;
+        assert!(
+            (ours - up).abs() < 8.0,
+            "axis {j}: bias {ours} LSB vs upstream {up}"
+        );
+    }
+    let r = analyse(&p, &[]).unwrap();
+    eprintln!("{}", r.diagnosis.explanation);
+    assert!(!r.diagnosis.adequate);
+    assert_eq!(r.diagnosis.missing, None);
+    assert!(r.fitted.rms() > 3.0, "rms {}", r.fitted.rms());
+}

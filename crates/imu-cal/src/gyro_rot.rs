@@ -1,0 +1,299 @@
+//! Gyroscope scale and misalignment from rotations between static poses (the issue's stretch
+//! goal), after Tedaldi et al. 2014 §IV-C: the accelerometer gives the direction of gravity in
+//! each static pose; integrating the corrected gyro over the move from pose k to pose k + 1
+//! must carry the first direction onto the second.
+//!
+//! ```text
+//! ω_cal = T_g · K_g · (ω − b),  K_g = diag(s),  T_g = [[1, γ₁, γ₂], [γ₃, 1, γ₄], [γ₅, γ₆, 1]]
+//! R_k = Π exp([ω_cal dt]×)   (body k → body k+1, Rodrigues per sample)
+//! residual_k = the two components of R_kᵀ·u_k orthogonal to u_{k+1}   (deg)
+//! ```
+//!
+//! b is the mean gyro rate over the middle half of every static pose (seed eq. 2), removed first. Six
+//! misalignment angles, not three: the gyro triad is referred to the accelerometer frame, which
+//! fixes all three of its axes (Tedaldi eq. 10). Rotations *about* gravity are invisible to this
+//! residual, so the poses must differ in tilt. Moves where a raw rate reaches `saturation` are
+//! skipped (the integral would be wrong).
+//!
+//! Noise floor per residual component: σ² = σ_u,k² + σ_u,k+1² + σ_ω²·dt²·n_k, from the half-pose
+//! differences of the gravity direction and the per-sample white noise of the gyro at rest.
+// Sample-index loops over three parallel axis slices read closer to the equations.
+#![allow(clippy::needless_range_loop)]
+
+use crate::accel::Pose;
+use crate::lab::{CalError, Effect, Fitted, NoiseFloor, Params, Problem};
+use crate::solve::{levenberg_marquardt, mean};
+use nalgebra::{DVector, Matrix3, Rotation3, Vector3};
+
+const EFFECTS: [Effect; 2] = [Effect::Scale, Effect::Misalignment];
+
+/// `T_g·K_g` as rows, from scale factors and the six angles in degrees (module docs).
+pub fn correction_matrix(scale: [f64; 3], mis_deg: [f64; 6]) -> [[f64; 3]; 3] {
+    let g = mis_deg.map(f64::to_radians);
+    let s = scale;
+    [
+        [s[0], g[0] * s[1], g[1] * s[2]],
+        [g[2] * s[0], s[1], g[3] * s[2]],
+        [g[4] * s[0], g[5] * s[1], s[2]],
+    ]
+}
+
+/// One move between two static poses.
+#[derive(Debug, Clone)]
+pub struct Move {
+    /// Gravity direction at the end of the first pose (unit, accelerometer frame).
+    pub u0: Vector3<f64>,
+    /// Gravity direction in the second pose.
+    pub u1: Vector3<f64>,
+    /// Bias-free gyro rates during the move (deg/s).
+    pub omega: Vec<Vector3<f64>>,
+    /// Variance of one residual component (rad²).
+    pub var: f64,
+}
+
+/// The rotation problem.
+#[derive(Debug, Clone)]
+pub struct GyroRotProblem {
+    /// Moves used.
+    pub moves: Vec<Move>,
+    /// Moves skipped because the gyro saturated.
+    pub skipped_saturated: usize,
+    /// Gyro bias removed (deg/s).
+    pub bias: [f64; 3],
+    /// Sample interval (s).
+    pub dt: f64,
+}
+
+impl GyroRotProblem {
+    /// Build from calibrated accelerometer samples (any unit), gyro rates (deg/s), the static
+    /// poses found on the accelerometer, and the saturation level of the raw gyro (deg/s).
+    pub fn new(
+        acc: [&[f64]; 3],
+        gyro: [&[f64]; 3],
+        rate_hz: f64,
+        poses: &[Pose],
+        saturation: Option<f64>,
+    ) -> Result<Self, CalError> {
+        let n = acc[0].len();
+        if acc.iter().chain(gyro.iter()).any(|c| c.len() != n) {
+            return Err(CalError::Input(
+                "accelerometer and gyro columns differ in length".into(),
+            ));
+        }
+        if poses.len() < 2 {
+            return Err(CalError::Input(format!(
+                "{} static poses: the rotation fit needs at least two",
+                poses.len()
+            )));
+        }
+        let dt = 1.0 / rate_hz;
+        // Averages use the middle half of each pose: the edges of an accelerometer-detected pose
+        // can hold the slow start of a turn (gravity barely moves, the gyro already does). The
+        // integration spans the trimmed edges too, so no rotation is lost.
+        let core = |p: &Pose| {
+            let q = (p.end - p.start) / 4;
+            Pose {
+                start: p.start + q,
+                end: p.end - q,
+                ..*p
+            }
+        };
+        let poses: Vec<Pose> = poses.iter().map(core).collect();
+        // Bias: mean over every static sample; white noise: pooled per-pose variance.
+        let (mut sum, mut cnt) = (Vector3::zeros(), 0usize);
+        for p in &poses {
+            for i in p.start..p.end {
+                sum += Vector3::new(gyro[0][i], gyro[1][i], gyro[2][i]);
+                cnt += 1;
+            }
+        }
+        let b = sum / cnt as f64;
+        let mut ss = 0.0;
+        for p in &poses {
+            let m = Vector3::new(
+                mean(&gyro[0][p.start..p.end]),
+                mean(&gyro[1][p.start..p.end]),
+                mean(&gyro[2][p.start..p.end]),
+            );
+            for i in p.start..p.end {
+                ss += (Vector3::new(gyro[0][i], gyro[1][i], gyro[2][i]) - m).norm_squared();
+            }
+        }
+        let var_w = (ss / (3 * cnt) as f64).to_radians().to_radians(); // (rad/s)² per sample
+        let dir = |p: &Pose| -> (Vector3<f64>, f64) {
+            let mid = p.start + (p.end - p.start) / 2;
+            let m = |lo: usize, hi: usize| {
+                Vector3::new(
+                    mean(&acc[0][lo..hi]),
+                    mean(&acc[1][lo..hi]),
+                    mean(&acc[2][lo..hi]),
+                )
+            };
+            let u = m(p.start, p.end).normalize();
+            let d = m(p.start, mid).normalize() - m(mid, p.end).normalize();
+            // |d|² has 2 components of variance 4·var(u) each (d is ⟂ u to first order).
+            (u, d.norm_squared() / 8.0)
+        };
+        let mut moves = Vec::new();
+        let mut skipped = 0;
+        for w in poses.windows(2) {
+            let (a, c) = (&w[0], &w[1]);
+            let raw = a.end..c.start;
+            if let Some(sat) = saturation {
+                if raw.clone().any(|i| (0..3).any(|k| gyro[k][i].abs() >= sat)) {
+                    skipped += 1;
+                    continue;
+                }
+            }
+            let (u0, v0) = dir(a);
+            let (u1, v1) = dir(c);
+            let omega: Vec<Vector3<f64>> = raw
+                .clone()
+                .map(|i| Vector3::new(gyro[0][i], gyro[1][i], gyro[2][i]) - b)
+                .collect();
+            let var = v0 + v1 + var_w * dt * dt * omega.len() as f64;
+            moves.push(Move { u0, u1, omega, var });
+        }
+        Ok(GyroRotProblem {
+            moves,
+            skipped_saturated: skipped,
+            bias: [b.x, b.y, b.z],
+            dt,
+        })
+    }
+
+    /// `T_g·K_g` for a parameter vector laid out [s?, γ?].
+    fn matrix(model: &[Effect], x: &DVector<f64>) -> (Matrix3<f64>, [f64; 3], [f64; 6]) {
+        let mut k = 0;
+        let s = if model.contains(&Effect::Scale) {
+            k = 3;
+            [x[0], x[1], x[2]]
+        } else {
+            [1.0; 3]
+        };
+        let g = if model.contains(&Effect::Misalignment) {
+            [x[k], x[k + 1], x[k + 2], x[k + 3], x[k + 4], x[k + 5]]
+        } else {
+            [0.0; 6]
+        };
+        let t = Matrix3::new(1.0, g[0], g[1], g[2], 1.0, g[3], g[4], g[5], 1.0);
+        (t * Matrix3::from_diagonal(&Vector3::from(s)), s, g)
+    }
+
+    /// The two residual components of one move (rad) under the correction `m`.
+    fn residual(&self, mv: &Move, m: &Matrix3<f64>) -> [f64; 2] {
+        let mut r = Rotation3::identity();
+        for w in &mv.omega {
+            let v = m * w.map(f64::to_radians) * self.dt;
+            r *= Rotation3::new(v);
+        }
+        let p = r.inverse() * mv.u0;
+        // Orthonormal basis ⟂ u1.
+        let a = if mv.u1.x.abs() < 0.9 {
+            Vector3::x()
+        } else {
+            Vector3::y()
+        };
+        let e1 = mv.u1.cross(&a).normalize();
+        let e2 = mv.u1.cross(&e1);
+        [e1.dot(&p), e2.dot(&p)]
+    }
+}
+
+impl Problem for GyroRotProblem {
+    fn sensor(&self) -> &'static str {
+        "gyro"
+    }
+    fn unit(&self) -> &'static str {
+        "deg"
+    }
+    fn effects(&self) -> &'static [Effect] {
+        &EFFECTS
+    }
+    fn n(&self) -> usize {
+        2 * self.moves.len()
+    }
+    fn basis(&self) -> &'static str {
+        "per-move"
+    }
+    fn identifiable(&self, model: &[Effect], e: Effect) -> Result<(), String> {
+        let p = 3 * model.len() + if e == Effect::Misalignment { 6 } else { 3 };
+        if self.n() <= p {
+            return Err(format!(
+                "{} usable moves give {} residuals, not enough for {p} parameters",
+                self.moves.len(),
+                self.n()
+            ));
+        }
+        Ok(())
+    }
+
+    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+        let p = 3 * model.contains(&Effect::Scale) as usize
+            + 6 * model.contains(&Effect::Misalignment) as usize;
+        if self.n() <= p {
+            return Err(CalError::Fit(format!(
+                "{} usable moves ({} skipped as saturated) give {} residuals, not enough for {p} \
+                 parameters",
+                self.moves.len(),
+                self.skipped_saturated,
+                self.n()
+            )));
+        }
+        let mut x0 = Vec::new();
+        if model.contains(&Effect::Scale) {
+            x0.extend_from_slice(&[1.0; 3]);
+        }
+        if model.contains(&Effect::Misalignment) {
+            x0.extend_from_slice(&[0.0; 6]);
+        }
+        // Unweighted: each move's variance is estimated from only ≈ 4 degrees of freedom, and
+        // weighting by a noisy inverse variance would inflate the residual (E[1/χ²₄·4] = 2); the
+        // floor is the mean variance, on the same unweighted basis.
+        let res = |x: &DVector<f64>| {
+            let (m, _, _) = Self::matrix(model, x);
+            DVector::from_iterator(
+                self.n(),
+                self.moves
+                    .iter()
+                    .flat_map(|mv| self.residual(mv, &m).map(f64::to_degrees)),
+            )
+        };
+        let fit = if x0.is_empty() {
+            let r = res(&DVector::zeros(0));
+            crate::solve::LmFit {
+                rss: r.norm_squared(),
+                x: DVector::zeros(0),
+                r,
+                iterations: 0,
+            }
+        } else {
+            levenberg_marquardt(DVector::from_vec(x0), res, 200)
+        };
+        let (_, s, g) = Self::matrix(model, &fit.x);
+        let params = Params {
+            bias: Some(self.bias),
+            scale: model.contains(&Effect::Scale).then_some(s),
+            gyro_misalignment_deg: model
+                .contains(&Effect::Misalignment)
+                .then_some(g.map(|v| v.to_degrees())),
+            ..Params::default()
+        };
+        Ok(Fitted {
+            model: model.to_vec(),
+            params,
+            residuals: fit.r.iter().copied().collect(),
+            n_params: p,
+        })
+    }
+
+    fn noise_floor(&self) -> NoiseFloor {
+        let v = self.moves.iter().map(|m| m.var).sum::<f64>() / self.moves.len().max(1) as f64;
+        NoiseFloor {
+            sigma: v.sqrt().to_degrees(),
+            // The per-pose direction variances are each a 2-d.o.f. estimate.
+            dof: (4 * self.moves.len()).max(1) as f64,
+            method: "half-pose gravity-direction differences + gyro white noise at rest",
+        }
+    }
+}
