@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use imu_cal::accel::{detect_static, AccelProblem, StaticDetect, G_STANDARD};
 use imu_cal::file::CalFile;
 use imu_cal::gyro::GyroProblem;
+use imu_cal::gyro_rot::GyroRotProblem;
 use imu_cal::lab::{analyse, Effect, Params, Problem, Report};
 use imu_cal::mag::MagProblem;
 use nalgebra::{Matrix3, Vector3};
@@ -56,6 +57,10 @@ pub struct Args {
     /// Shortest static pose kept (s).
     #[arg(long, default_value_t = 1.5)]
     pub min_static: f64,
+    /// Gyro saturation (deg/s, after --scale): moves reaching it are skipped by the gyro
+    /// scale/misalignment fit (e.g. 250 for ±250 °/s).
+    #[arg(long)]
+    pub saturation: Option<f64>,
     /// Number of blocks the gyro recording is cut into.
     #[arg(long, default_value_t = 50)]
     pub blocks: usize,
@@ -112,6 +117,7 @@ struct JsonOut<'a> {
 enum Data {
     Accel(AccelProblem),
     Gyro(GyroProblem),
+    GyroRot(GyroRotProblem),
     Mag(MagProblem),
 }
 
@@ -120,6 +126,7 @@ impl Data {
         match self {
             Data::Accel(p) => p,
             Data::Gyro(p) => p,
+            Data::GyroRot(p) => p,
             Data::Mag(p) => p,
         }
     }
@@ -158,8 +165,28 @@ fn temperature(in_: &InputArgs) -> Result<Option<Vec<f64>>> {
     }
 }
 
-fn load_data(a: &Args) -> Result<Data> {
+fn load_data(a: &Args, model: &[Effect]) -> Result<Data> {
+    let rotation = model.contains(&Effect::Scale) || model.contains(&Effect::Misalignment);
     Ok(match a.sensor {
+        SensorArg::Gyro if rotation => {
+            // Gyro scale/misalignment: rotations between static poses, gravity as reference.
+            // Only the direction of the accelerometer is used, so one --scale for both is fine.
+            let (rec, c) = columns(&a.input, ["ax", "ay", "az"])?;
+            let (_, w) = columns(&a.input, ["gx", "gy", "gz"])?;
+            let cfg = StaticDetect {
+                window_s: a.window,
+                k: a.threshold_k,
+                min_static_s: a.min_static,
+            };
+            let poses = detect_static([&c[0], &c[1], &c[2]], rec.rate_hz, cfg)?;
+            Data::GyroRot(GyroRotProblem::new(
+                [&c[0], &c[1], &c[2]],
+                [&w[0], &w[1], &w[2]],
+                rec.rate_hz,
+                &poses,
+                a.saturation,
+            )?)
+        }
         SensorArg::Accel => {
             let (rec, c) = columns(&a.input, ["ax", "ay", "az"])?;
             let cfg = StaticDetect {
@@ -234,7 +261,17 @@ pub fn run(a: Args) -> Result<()> {
             .map(|s| Effect::parse(s))
             .collect::<Result<_, _>>()?
     };
-    let data = load_data(&a)?;
+    let data = load_data(&a, &model)?;
+    let mut model = model;
+    if let Data::GyroRot(_) = data {
+        // The rotation fit always removes the bias at rest first; temperature is a block fit.
+        if model.contains(&Effect::Temperature) {
+            bail!(
+                "fit temperature with --model bias,temperature and scale/misalignment separately"
+            );
+        }
+        model.retain(|e| *e != Effect::Bias);
+    }
     let p = data.problem();
     let report = analyse(p, &model)?;
 
@@ -264,7 +301,11 @@ pub fn run(a: Args) -> Result<()> {
         } else {
             CalFile::default()
         };
-        file.set(p.sensor(), &report.fitted.params)?;
+        let section = match data {
+            Data::GyroRot(_) => "gyro-rot",
+            _ => p.sensor(),
+        };
+        file.set(section, &report.fitted.params)?;
         // The device must be able to hold it.
         file.to_device()
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -292,6 +333,12 @@ pub fn params_text(p: &Params) -> String {
     }
     if let Some(v) = &p.misalignment_deg {
         s += &format!("  misalignment     = {} deg\n", v3(v, 4));
+    }
+    if let Some(v) = &p.gyro_misalignment_deg {
+        s += &format!(
+            "  misalignment     = [{:.4}, {:.4}, {:.4}, {:.4}, {:.4}, {:.4}] deg (γ₁…γ₆)\n",
+            v[0], v[1], v[2], v[3], v[4], v[5]
+        );
     }
     if let Some(g) = p.g {
         s += &format!("  g                = {g} m/s² (given)\n");
@@ -351,6 +398,15 @@ fn text_report(data: &Data, r: &Report) -> String {
                 } else {
                     ", no temperature column"
                 }
+            )
+        }
+        Data::GyroRot(g) => {
+            s += &format!(
+                "calibrate gyro (scale/misalignment from rotations): {} moves between static \
+                 poses, {} skipped as saturated; bias removed {} deg/s\n",
+                g.moves.len(),
+                g.skipped_saturated,
+                v3(&g.bias, 5)
             )
         }
         Data::Mag(m) => {
@@ -704,6 +760,48 @@ fn plot(data: &Data, r: &Report) -> String {
             }
             figure("imu-lab calibrate accel", &panels, 2)
         }
+        Data::GyroRot(gp) => {
+            // Residual per move (two components, deg) against the turn angle of the move.
+            let angle = |mv: &imu_cal::gyro_rot::Move| mv.u0.angle(&mv.u1).to_degrees();
+            let pts = |res: &[f64]| -> Vec<(f64, f64)> {
+                gp.moves
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(k, mv)| [(angle(mv), res[2 * k]), (angle(mv), res[2 * k + 1])])
+                    .collect()
+            };
+            let after_res = match &r.step {
+                Some(_) => analyse(
+                    gp,
+                    &r.step.as_ref().map(|s| s.model.clone()).unwrap_or_default(),
+                )
+                .map(|x| x.fitted.residuals)
+                .unwrap_or_default(),
+                None => vec![],
+            };
+            let mut series = vec![Series {
+                label: before_name.clone(),
+                color: "#ff7f0e",
+                points: pts(&r.fitted.residuals),
+                line: false,
+            }];
+            if after_res.len() == r.fitted.residuals.len() {
+                series.push(Series {
+                    label: after_name.clone(),
+                    color: "#2ca02c",
+                    points: pts(&after_res),
+                    line: false,
+                });
+            }
+            let panels = vec![Panel {
+                title: "gravity-direction residual per move".into(),
+                xlabel: "tilt change of the move (deg)".into(),
+                ylabel: "residual component (deg)".into(),
+                series,
+                equal: false,
+            }];
+            figure("imu-lab calibrate gyro (rotations)", &panels, 1)
+        }
         Data::Gyro(gp) => {
             let nb = gp.blocks[0].len();
             let t: Vec<f64> = gp
@@ -774,6 +872,7 @@ mod tests {
             threshold_k: 6.0,
             min_static: 1.5,
             blocks: 50,
+            saturation: None,
             json: true,
             plot: None,
             report: None,
