@@ -56,7 +56,11 @@ const I2C_HZ: u32 = 400_000;
 const IMU_BURST_MS: u64 = 5;
 /// The magnetometer is read half a period after each IMU burst starts, when the bus is free:
 /// a read held up behind a burst could otherwise land after the next sample and lose one.
-const MAG_SLOT_OFFSET_US: u64 = MAG_PERIOD_US / 2;
+const MAG_SLOT_OFFSET_US: u64 = IMU_SLOT_OFFSET_US + MAG_PERIOD_US / 2;
+/// The slots sit 250 µs off whole milliseconds. On silicon this changes nothing; in rp2040js
+/// 1.4.1 an alarm that falls on the very instant the harness starts a CPU stall (its faults are
+/// scheduled on whole seconds) was lost and the firmware slept for ever (docs/firmware.md).
+const IMU_SLOT_OFFSET_US: u64 = 250;
 /// Encoded device→host frames waiting for USB; a full pipe drops whole frames (counted).
 const OUT_PIPE: usize = 8192;
 /// Largest host frame accepted (a SetCalibration with a 256-byte blob is ~270 bytes).
@@ -252,7 +256,7 @@ async fn imu_task(
     let mut msgs = sensors::Out::new();
     let mut was = svc.state();
     loop {
-        Timer::at(next_slot(period, 0)).await;
+        Timer::at(next_slot(period, IMU_SLOT_OFFSET_US)).await;
         if wait_running(&mut run).await {
             svc.resume(&mut imu, now_us(), &mut msgs).await;
         } else {
