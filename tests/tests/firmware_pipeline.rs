@@ -665,5 +665,8 @@ fn after_a_magnetometer_loss_sampling_resumes_at_the_full_rate() {
     let per_s = rig.dev.status(0, 0).mag_samples - before;
     eprintln!("{per_s} magnetometer samples in the second after recovery");
     // 200 Hz: 200 ± 1 (tick phase) samples in one second.
-    assert!((199..=201).contains(&per_s), "{per_s} samples/s after recovery");
+    assert!(
+        (199..=201).contains(&per_s),
+        "{per_s} samples/s after recovery"
+    );
 }
