@@ -52,8 +52,6 @@ pub struct Series {
 pub struct Recording {
     /// Sample rate in Hz.
     pub rate_hz: f64,
-    /// The `t` column in s, when present.
-    pub t: Option<Vec<f64>>,
     /// The requested columns, in the order asked.
     pub columns: Vec<Series>,
 }
@@ -143,6 +141,11 @@ impl Rows {
 
 /// Open the recording and find the columns `wanted` (contract names, after renaming).
 pub fn open(args: &InputArgs, wanted: &[&str]) -> Result<Rows> {
+    open_with(args, wanted, &[])
+}
+
+/// As [`open`], also reading the columns of `optional` that the file has.
+pub fn open_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result<Rows> {
     let path = &args.file;
     let shown = path.display().to_string();
     let file = File::open(path).with_context(|| format!("cannot open {shown}"))?;
@@ -188,7 +191,12 @@ pub fn open(args: &InputArgs, wanted: &[&str]) -> Result<Rows> {
         })
         .collect();
     let mut names: Vec<String> = wanted.iter().map(|w| w.to_string()).collect();
-    let has_t = headers.iter().any(|h| h == "t") && !wanted.contains(&"t");
+    for o in optional {
+        if headers.iter().any(|h| h == o) && !names.iter().any(|n| n == o) {
+            names.push(o.to_string());
+        }
+    }
+    let has_t = headers.iter().any(|h| h == "t") && !names.iter().any(|n| n == "t");
     if has_t {
         names.push("t".into());
     }
@@ -215,9 +223,16 @@ pub fn open(args: &InputArgs, wanted: &[&str]) -> Result<Rows> {
     })
 }
 
+/// Whether `--scale` and `--unit` apply to a column: every selected column but the time `t` (s)
+/// and the temperature `temp` (°C), which are always in the contract's units.
+pub fn is_scaled(name: &str) -> bool {
+    name != "t" && name != "temp"
+}
+
 /// The unit of a selected column after the reading flags.
 pub fn unit_of(args: &InputArgs, name: &str) -> Result<String> {
-    match (&args.unit, contract_unit(name)) {
+    let flag = if is_scaled(name) { &args.unit } else { &None };
+    match (flag, contract_unit(name)) {
         (Some(u), _) => Ok(u.clone()),
         (None, Some(u)) => Ok(u.to_string()),
         (None, None) => bail!("column {name:?} is not in the contract: give its unit with --unit"),
@@ -253,39 +268,44 @@ pub fn rate_of(
 
 /// Read the columns `wanted` (contract names, after renaming) from the recording.
 pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
-    let mut rows = open(args, wanted)?;
+    load_with(args, wanted, &[])
+}
+
+/// As [`load`], also reading the columns of `optional` that the file has (e.g. `temp`); they
+/// follow the wanted ones in `columns`.
+pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result<Recording> {
+    let mut rows = open_with(args, wanted, optional)?;
     let shown = rows.shown.clone();
     let mut data: Vec<Vec<f64>> = vec![Vec::new(); rows.names.len()];
     let mut buf = vec![0.0; rows.names.len()];
+    let mut n = 0usize;
     while rows.next_into(&mut buf)? {
         for (col, v) in data.iter_mut().zip(&buf) {
             col.push(*v);
         }
+        n += 1;
     }
-    let n = data.first().map(Vec::len).unwrap_or(0);
     if n == 0 {
         bail!(
             "{shown}: no data rows after the header (line {})",
             args.skip_lines + 1
         );
     }
+    let names: Vec<String> = rows.names.clone();
     let t = if rows.has_t {
         data.pop()
     } else {
-        wanted
-            .iter()
-            .position(|w| *w == "t")
-            .map(|i| data[i].clone())
+        names.iter().position(|w| w == "t").map(|i| data[i].clone())
     };
     if let Some(t) = &t {
         check_time(t).with_context(|| format!("{shown}: column \"t\""))?;
     }
     let rate_hz = rate_of(args, &shown, t.as_ref().map(|t| (t[0], t[t.len() - 1])), n)?;
     let scale = scale_of(args)?;
-    let mut columns = Vec::with_capacity(wanted.len());
-    for (w, values) in wanted.iter().zip(data) {
+    let mut columns = Vec::with_capacity(names.len());
+    for (w, values) in names.iter().zip(data) {
         let unit = unit_of(args, w)?;
-        let values = if scale == 1.0 || *w == "t" {
+        let values = if scale == 1.0 || !is_scaled(w) {
             values
         } else {
             values.iter().map(|v| v * scale).collect()
@@ -296,11 +316,7 @@ pub fn load(args: &InputArgs, wanted: &[&str]) -> Result<Recording> {
             values,
         });
     }
-    Ok(Recording {
-        rate_hz,
-        t,
-        columns,
-    })
+    Ok(Recording { rate_hz, columns })
 }
 
 /// Refuse a time column that goes backwards.
@@ -401,7 +417,20 @@ mod tests {
         let gz = r.column("gz").unwrap();
         assert_eq!(gz.unit, "deg/s");
         assert!((gz.values[1] - 2.0).abs() < 1e-12);
-        assert!(r.t.is_none());
+    }
+
+    #[test]
+    fn temperature_is_optional_and_never_scaled() {
+        let f = csv("gx,temp\n131,25.5\n262,25.6\n");
+        let mut a = args(&f);
+        a.rate = Some(10.0);
+        a.scale = Some(1.0 / 131.0);
+        a.unit = Some("deg/s".into());
+        let r = load_with(&a, &["gx"], &["temp", "mx"]).unwrap();
+        assert_eq!(r.columns.len(), 2, "mx is absent and optional");
+        let temp = r.column("temp").unwrap();
+        assert_eq!((temp.unit.as_str(), temp.values[1]), ("°C", 25.6));
+        assert!((r.column("gx").unwrap().values[1] - 2.0).abs() < 1e-12);
     }
 
     #[test]

@@ -153,16 +153,10 @@ fn columns(in_: &InputArgs, names: [&str; 3]) -> Result<(input::Recording, [Vec<
     Ok((rec, cols))
 }
 
-/// The temperature column, if the file has one (read without --scale/--unit: it stays °C).
+/// The temperature column in °C, if the file has one (--scale and --unit never apply to it).
 fn temperature(in_: &InputArgs) -> Result<Option<Vec<f64>>> {
-    let mut a = in_.clone();
-    a.scale = None;
-    a.unit = None;
-    match input::load(&a, &["temp"]) {
-        Ok(r) => Ok(r.column("temp").map(|c| c.values.clone())),
-        Err(e) if format!("{e:#}").contains("no column named \"temp\"") => Ok(None),
-        Err(e) => Err(e),
-    }
+    let rec = input::load_with(in_, &[], &["temp"])?;
+    Ok(rec.column("temp").map(|c| c.values.clone()))
 }
 
 fn load_data(a: &Args, model: &[Effect]) -> Result<Data> {
