@@ -202,7 +202,8 @@ pub fn e2e(args: &[String]) -> Result<()> {
     let wall = Instant::now();
     let elf = build_firmware()?;
     let sim_dir = ensure_sim()?;
-    let out = out_dir("e2e")?;
+    // `--out DIR` (under out/): keeps concurrent runs in one tree apart.
+    let out = out_dir(&arg_value(args, "--out").unwrap_or_else(|| "e2e".into()))?;
     // The stream: 1 kHz rows in the CSV contract, from the seeded generator.
     let stream = out.join("stream.csv");
     run(Command::new("node")
