@@ -341,6 +341,7 @@ async fn process_task(
     let mut last_status = Instant::now();
     let mut last_tables = Instant::now();
     let mut cpu = cpu::Meter::new();
+    let mut log: Option<(imu_proto::AllanTable, usize)> = None;
     loop {
         match select3(sensors.receive(), host.receive(), tick.next()).await {
             Either3::First(msg) => device.on_sensor(&msg, &mut sink),
@@ -385,15 +386,23 @@ async fn process_task(
         }
         // Tables go out one channel per wake-up, as the USB pipe drains.
         if let Some(t) = device.tables_step(&mut sink) {
-            log_table(&t);
+            log = Some((t, 0));
+        }
+        // The defmt log of a table (≈ 70 µs a row) also goes a few rows per wake-up.
+        if let Some((t, next)) = log.as_mut() {
+            *next = log_rows(t, *next, 4);
+            if *next >= t.levels.len() {
+                log = None;
+            }
         }
     }
 }
 
-/// The Allan tables over defmt, so a probe user sees them without the host tool.
-fn log_table(t: &imu_proto::AllanTable) {
+/// The Allan tables over defmt, so a probe user sees them without the host tool: rows
+/// `from .. from + n` of `t`; returns the next row to log.
+fn log_rows(t: &imu_proto::AllanTable, from: usize, n: usize) -> usize {
     let ch = t.channel;
-    for l in &t.levels {
+    for l in t.levels.iter().skip(from).take(n) {
         info!(
             "adev {} tau={}s dev={} [{}, {}] {} n={}",
             ch.name(),
@@ -405,4 +414,5 @@ fn log_table(t: &imu_proto::AllanTable) {
             l.n2
         );
     }
+    from + n
 }

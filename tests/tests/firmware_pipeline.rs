@@ -602,16 +602,46 @@ fn a_full_queue_drops_and_counts_frames_and_tables_wait_for_room() {
     assert!(st.frames_unsent > 20, "unsent {}", st.frames_unsent);
     assert!(rig.sink.bytes.is_empty());
     rig.dev.start_tables();
-    assert!(rig.dev.tables_step(&mut rig.sink).is_none());
+    for _ in 0..50 {
+        assert!(
+            rig.dev.tables_step(&mut rig.sink).is_none(),
+            "no table without room"
+        );
+    }
     assert!(rig.dev.tables_pending());
     rig.sink.room = TABLE_FRAME_ROOM;
     let mut sent = Vec::new();
-    while let Some(t) = rig.dev.tables_step(&mut rig.sink) {
-        sent.push(t.channel);
-        rig.sink.room = TABLE_FRAME_ROOM;
+    let mut steps = 0;
+    while rig.dev.tables_pending() && steps < 1000 {
+        steps += 1;
+        if let Some(t) = rig.dev.tables_step(&mut rig.sink) {
+            // Built a few rows per step, the table equals the one computed at once.
+            assert_eq!(t, rig.dev.table(t.channel));
+            sent.push(t.channel);
+        }
     }
     assert_eq!(sent, Channel::ALL.to_vec());
-    assert!(!rig.dev.tables_pending());
+    // 500 ms of data: 9 levels (IMU) or 6 (magnetometer) at ROWS_PER_STEP = 2 a step, plus the
+    // 50 rows done while waiting for room; never a whole table in one step.
+    assert!(steps >= 10, "{steps} steps");
+}
+
+#[test]
+fn a_table_is_a_snapshot_even_when_samples_arrive_while_it_is_built() {
+    let mut rig = Rig::new();
+    rig.run(2000);
+    rig.dev.start_tables();
+    let want = rig.dev.table(Channel::Ax);
+    assert!(rig.dev.tables_step(&mut rig.sink).is_none()); // the first rows only
+    rig.run(20); // more samples arrive
+    let mut got = None;
+    for _ in 0..20 {
+        if let Some(t) = rig.dev.tables_step(&mut rig.sink) {
+            got = Some(t);
+            break;
+        }
+    }
+    assert_eq!(got.expect("the ax table"), want);
 }
 
 #[test]
