@@ -5,42 +5,37 @@
 //! FIFO refills, USB endpoint events), so this slightly under-reads; the emulator benchmark
 //! counts every executed cycle and is the reference figure (docs/firmware.md).
 //!
-//! This accumulator is the firmware's only static beyond embassy's own: the hooks are free
+//! These two words are the firmware's only statics beyond embassy's own: the hooks are free
 //! functions called by the executor, so the state cannot be passed to them.
-use core::cell::Cell;
+use core::sync::atomic::{AtomicU32, Ordering};
 
-use critical_section::Mutex;
 use embassy_time::Instant;
 
-struct Busy {
-    since: Cell<u64>,
-    total: Cell<u64>,
+/// When the executor last started polling, µs (low 32 bits; differences wrap correctly for
+/// intervals under 71 minutes).
+static SINCE: AtomicU32 = AtomicU32::new(0);
+/// Busy µs, wrapping.
+static BUSY: AtomicU32 = AtomicU32::new(0);
+
+fn now() -> u32 {
+    Instant::now().as_ticks() as u32
 }
 
-static BUSY: Mutex<Busy> = Mutex::new(Busy {
-    since: Cell::new(0),
-    total: Cell::new(0),
-});
-
-fn now() -> u64 {
-    Instant::now().as_ticks()
-}
-
+// The hooks run only in thread mode, on the one executor, so each word has a single writer:
+// plain atomic loads and stores suffice (the M0+ has no atomic read-modify-write, and a
+// critical section per poll cost more than the measurement is worth).
 #[unsafe(no_mangle)]
 fn _embassy_trace_poll_start(_executor_id: u32) {
-    critical_section::with(|cs| BUSY.borrow(cs).since.set(now()));
+    SINCE.store(now(), Ordering::Relaxed);
 }
 
 #[unsafe(no_mangle)]
 fn _embassy_trace_executor_idle(_executor_id: u32) {
-    critical_section::with(|cs| {
-        let b = BUSY.borrow(cs);
-        b.total.set(
-            b.total
-                .get()
-                .wrapping_add(now().wrapping_sub(b.since.get())),
-        );
-    });
+    let busy = now().wrapping_sub(SINCE.load(Ordering::Relaxed));
+    BUSY.store(
+        BUSY.load(Ordering::Relaxed).wrapping_add(busy),
+        Ordering::Relaxed,
+    );
 }
 
 #[unsafe(no_mangle)]
@@ -56,8 +51,8 @@ fn _embassy_trace_task_ready_begin(_executor_id: u32, _task_id: u32) {}
 
 /// Busy fraction between successive [`Meter::sample`] calls.
 pub struct Meter {
-    last_busy: u64,
-    last_at: u64,
+    last_busy: u32,
+    last_at: u32,
     last_permille: u16,
 }
 
@@ -75,9 +70,8 @@ impl Meter {
         let (busy, at) = (busy_ticks(), now());
         let dt = at.wrapping_sub(self.last_at);
         let db = busy.wrapping_sub(self.last_busy);
-        self.last_permille = db
-            .saturating_mul(1000)
-            .checked_div(dt)
+        self.last_permille = (u64::from(db) * 1000)
+            .checked_div(u64::from(dt))
             .unwrap_or(0)
             .min(1000) as u16;
         self.last_busy = busy;
@@ -91,6 +85,6 @@ impl Meter {
     }
 }
 
-fn busy_ticks() -> u64 {
-    critical_section::with(|cs| BUSY.borrow(cs).total.get())
+fn busy_ticks() -> u32 {
+    BUSY.load(Ordering::Relaxed)
 }
