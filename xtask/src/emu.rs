@@ -283,7 +283,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
                 |s| emu_check::imu_inputs(&identity, s)[pos].1,
             )
         };
-        checks.push(emu_check::compare(table, &host));
+        checks.push(emu_check::compare(table, &host.0, host.1));
     }
     // Drops: every jump of the served index must fall inside an injected fault's window.
     let mut report = String::new();
