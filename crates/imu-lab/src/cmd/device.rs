@@ -76,7 +76,7 @@ pub struct CalArgs {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let mut link = Link::open(&a.port.port)?;
+    let mut link = a.port.open()?;
     match a.cmd {
         Cmd::Status => status(&mut link),
         Cmd::Tables(t) => tables(&mut link, &t),

@@ -15,7 +15,7 @@ use anyhow::{bail, Context, Result};
 use imu_proto::{DeviceMsg, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, StreamMode};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::link::{Link, PortArgs};
+use crate::link::PortArgs;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -130,12 +130,7 @@ fn write_batch(b: &SampleBatch, rows: &mut Rows, w: &mut impl Write) -> std::io:
     let mut res = Ok(());
     rows.batch(b, |r| {
         if res.is_ok() {
-            let line = r
-                .iter()
-                .map(|v| v.to_string())
-                .collect::<Vec<_>>()
-                .join(",");
-            res = writeln!(w, "{line}");
+            res = writeln!(w, "{}", csv_line(r));
         }
     });
     res
@@ -148,7 +143,7 @@ pub fn run(a: Args) -> Result<()> {
             a.seconds
         );
     }
-    let mut link = Link::open(&a.port.port)?;
+    let mut link = a.port.open()?;
     if let Reply::Identity(id) = link.request(Request::Identify)? {
         eprintln!(
             "device: {} on {} (IMU {} Hz, magnetometer {} Hz)",
