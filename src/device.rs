@@ -34,14 +34,15 @@ pub const CHANNELS: usize = 10;
 pub const ALLAN_OVERLAP: u8 = 8;
 pub const ALLAN_LEVELS: u8 = 24;
 
-/// Largest burst [`SensorMsg::Imu`] carries.
-pub const BURST_MAX: usize = 32;
+/// Largest burst one [`SensorMsg::Imu`] carries: a 5 ms slot holds 5 frames, so 8 covers it
+/// with slack and keeps the message (copied into and out of the channel) small.
+pub const BURST_MAX: usize = 8;
 
 /// What the sensor tasks tell the processing task.
 #[derive(Debug, Clone)]
 #[allow(clippy::large_enum_variant)] // no heap: the burst travels inline through the channel
 pub enum SensorMsg {
-    /// FIFO frames in arrival order; the last one was read at `t_us`.
+    /// FIFO frames in arrival order; `t_us` is the time of the last one (µs since boot).
     Imu {
         t_us: u64,
         samples: Vec<RawSample, 32>,

@@ -13,8 +13,9 @@ use crate::device::{Fault, SensorMsg, IMU_PERIOD_US};
 use crate::health::Health;
 use crate::stage::{self, Stage};
 
-/// FIFO frames read per I2C burst (and per [`SensorMsg::Imu`]).
-pub const BURST_FRAMES: usize = 32;
+/// FIFO frames read per I2C burst (and per [`SensorMsg::Imu`]); a tick drains up to four
+/// bursts, more than the FIFO gathers in a 5 ms slot.
+pub const BURST_FRAMES: usize = crate::device::BURST_MAX;
 /// Frames the 1024-byte FIFO holds with accel + temp + gyro (14 bytes each).
 pub const FIFO_FRAMES: u64 = 1024 / 14;
 
@@ -160,6 +161,8 @@ impl ImuService {
             return;
         }
         // Drain the FIFO: BURST_FRAMES a read, again while reads come back full.
+        let first = out.len();
+        let mut t_last = None;
         while !out.is_full() {
             stage::enter(Stage::I2c);
             let r = imu.read_fifo(&mut self.frames).await;
@@ -172,6 +175,7 @@ impl ImuService {
                         let _ = out.push(fault(Sensor::Imu, &self.health, 0, 0, Some(e), 0));
                     }
                     self.last_read_us = t;
+                    t_last = Some(t);
                     let samples = Vec::from_slice(&self.frames[..n]).unwrap_or_default();
                     let _ = out.push(SensorMsg::Imu { t_us: t, samples });
                     if n < BURST_FRAMES {
@@ -197,6 +201,18 @@ impl ImuService {
                     }
                     let _ = out.push(fault(Sensor::Imu, &self.health, 1, 0, event, 0));
                     break;
+                }
+            }
+        }
+        // Only the last read of the tick emptied the FIFO, so only its newest frame is "now":
+        // stamp every burst of the tick backwards from it, 1 ms a frame (a burst's `t_us` is the
+        // time of its last frame).
+        if let Some(t_last) = t_last {
+            let mut later = 0u64;
+            for m in out[first..].iter_mut().rev() {
+                if let SensorMsg::Imu { t_us, samples } = m {
+                    *t_us = t_last.saturating_sub(later * IMU_PERIOD_US);
+                    later += samples.len() as u64;
                 }
             }
         }
