@@ -45,7 +45,7 @@ pub enum SensorMsg {
     /// FIFO frames in arrival order; `t_us` is the time of the last one (µs since boot).
     Imu {
         t_us: u64,
-        samples: Vec<RawSample, 32>,
+        samples: Vec<RawSample, BURST_MAX>,
     },
     /// The FIFO overflowed and was reset; about `lost` samples are gone.
     ImuOverflow { t_us: u64, lost: u32 },

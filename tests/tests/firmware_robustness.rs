@@ -40,12 +40,16 @@ fn raw() -> impl Strategy<Value = RawSample> {
 
 fn sensor_msg() -> impl Strategy<Value = SensorMsg> {
     prop_oneof![
-        (any::<u64>(), proptest::collection::vec(raw(), 0..=32)).prop_map(|(t_us, v)| {
-            SensorMsg::Imu {
-                t_us,
-                samples: imu_proto::Vec::from_slice(&v).unwrap(),
-            }
-        }),
+        (
+            any::<u64>(),
+            proptest::collection::vec(raw(), 0..=pico_imu::device::BURST_MAX)
+        )
+            .prop_map(|(t_us, v)| {
+                SensorMsg::Imu {
+                    t_us,
+                    samples: imu_proto::Vec::from_slice(&v).unwrap(),
+                }
+            }),
         (any::<u64>(), any::<u32>()).prop_map(|(t_us, lost)| SensorMsg::ImuOverflow { t_us, lost }),
         (any::<u64>(), any::<[i16; 3]>(), any::<bool>())
             .prop_map(|(t_us, xyz, skipped)| SensorMsg::Mag { t_us, xyz, skipped }),
