@@ -15,7 +15,10 @@ const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let (cmd, rest) = args.split_first().map(|(c, r)| (c.as_str(), r)).unwrap_or(("help", &[]));
+    let (cmd, rest) = args
+        .split_first()
+        .map(|(c, r)| (c.as_str(), r))
+        .unwrap_or(("help", &[]));
     match cmd {
         "test" => test(rest),
         "e2e" => emu::e2e(rest),
@@ -32,14 +35,20 @@ fn main() -> Result<()> {
 
 /// The workspace root (the parent of this crate's directory).
 pub fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask lives in the workspace").to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("xtask lives in the workspace")
+        .to_path_buf()
 }
 
 /// Run a command in the workspace root, failing with its description if it fails.
 pub fn run(cmd: &mut Command) -> Result<()> {
     let shown = format!("{cmd:?}");
     eprintln!("xtask: {shown}");
-    let status = cmd.current_dir(root()).status().with_context(|| format!("starting {shown}"))?;
+    let status = cmd
+        .current_dir(root())
+        .status()
+        .with_context(|| format!("starting {shown}"))?;
     if !status.success() {
         bail!("{shown} failed with {status}");
     }
@@ -58,5 +67,10 @@ fn test(extra: &[String]) -> Result<()> {
     }
     c.args(extra);
     run(&mut c)?;
-    if emu::node_available() { emu::e2e(&[]) } else { eprintln!("xtask: node >= 20 not found: emulator end-to-end test skipped"); Ok(()) }
+    if emu::node_available() {
+        emu::e2e(&[])
+    } else {
+        eprintln!("xtask: node >= 20 not found: emulator end-to-end test skipped");
+        Ok(())
+    }
 }

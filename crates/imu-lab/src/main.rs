@@ -4,12 +4,16 @@ use clap::{Parser, Subcommand};
 
 mod cmd;
 mod input;
+mod link;
 mod plot;
 mod report;
-mod link;
 
 #[derive(Parser)]
-#[command(name = "imu-lab", version, about = "Characterise and calibrate low-cost IMUs")]
+#[command(
+    name = "imu-lab",
+    version,
+    about = "Characterise and calibrate low-cost IMUs"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -1,7 +1,7 @@
 pub mod adev;
 pub mod calibrate;
 pub mod device;
-pub mod record;
 pub mod export;
 pub mod fit;
+pub mod record;
 pub mod simulate;
