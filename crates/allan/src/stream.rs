@@ -80,14 +80,65 @@ impl LevelSums {
     }
 }
 
+/// An exact 128-bit sum kept as two u64 words, so that adding a 64-bit square costs one 64-bit
+/// add and a rarely taken carry (a `u128 +=` touches four words on the M0+).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Sum128 {
+    lo: u64,
+    hi: u64,
+}
+
+impl Sum128 {
+    const ZERO: Sum128 = Sum128 { lo: 0, hi: 0 };
+
+    #[inline(always)]
+    fn add64(&mut self, x: u64) {
+        let (lo, carry) = self.lo.overflowing_add(x);
+        self.lo = lo;
+        if carry {
+            self.hi += 1;
+        }
+    }
+
+    #[inline(always)]
+    fn add128(&mut self, x: u128) {
+        self.add64(x as u64);
+        self.hi += (x >> 64) as u64;
+    }
+
+    fn get(&self) -> u128 {
+        (self.hi as u128) << 64 | self.lo as u128
+    }
+}
+
 /// The exact accumulators of one level (what the engine stores; `m` and the stride are implied
-/// by the level's index).
+/// by the level's index). The counts of the current segment follow from its length, so only
+/// the counts of closed segments are stored and nothing is counted on the per-sample path.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Acc {
-    sum2: u128,
-    sum3: u128,
-    n2: u64,
-    n3: u64,
+    sum2: Sum128,
+    sum3: Sum128,
+    closed_n2: u64,
+    closed_n3: u64,
+}
+
+/// Multiples of `stride` (a power of two) in `[span, t]`: the differences a segment of `t`
+/// samples contributes when each needs `span` samples of history.
+fn terms(t: u64, span: u64, stride: u64) -> u64 {
+    if t < span {
+        0
+    } else {
+        t / stride - span.div_ceil(stride) + 1
+    }
+}
+
+/// Square of a difference known to fit in i32: three 16×16→32 multiplies.
+#[inline(always)]
+fn square32(d: i32) -> u64 {
+    let a = d.unsigned_abs();
+    let (h, l) = (a >> 16, a & 0xffff);
+    // (h·2^16 + l)² = h²·2^32 + 2hl·2^16 + l²
+    (((h * h) as u64) << 32 | (l * l) as u64) + (((h * l) as u64) << 17)
 }
 
 /// Square of an exact difference, cheap when it fits in 32 bits (the common case).
@@ -129,6 +180,16 @@ pub struct Engine<const P: usize, const L: usize, const R: usize> {
     base_head: u8,
     /// Own rings: slot of the newest entry.
     heads: [u8; L],
+    /// Levels with at least one second difference in this segment (t ≥ 2m) …
+    half: u8,
+    /// … and with third differences too (t ≥ 3m).
+    full: u8,
+    /// Levels whose differences provably fit in i32 given `amax` (computed in 32-bit words).
+    narrow: u8,
+    /// The t at which `half` or `full` next grows.
+    next_valid: u64,
+    /// Largest |y| of this segment.
+    amax: u32,
     sums: [Acc; L],
 }
 
@@ -173,11 +234,16 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
             rings: [[0; R]; L],
             base_head: 0,
             heads: [R as u8 - 1; L],
+            half: 0,
+            full: 0,
+            narrow: Self::narrow_levels(0),
+            next_valid: 2,
+            amax: 0,
             sums: [Acc {
-                sum2: 0,
-                sum3: 0,
-                n2: 0,
-                n3: 0,
+                sum2: Sum128::ZERO,
+                sum3: Sum128::ZERO,
+                closed_n2: 0,
+                closed_n3: 0,
             }; L],
         }
     }
@@ -193,10 +259,67 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         if self.t != 0 {
             self.gaps += 1;
         }
+        for k in 0..L {
+            let (n2, n3) = self.segment_terms(k);
+            self.sums[k].closed_n2 += n2;
+            self.sums[k].closed_n3 += n3;
+        }
         self.theta = 0;
         self.t = 0;
         self.base_head = 0;
         self.heads = [R as u8 - 1; L];
+        self.half = 0;
+        self.full = 0;
+        self.next_valid = 2;
+        self.amax = 0;
+        self.narrow = Self::narrow_levels(0);
+    }
+
+    /// (second, third) differences level `k` has taken in the current segment.
+    fn segment_terms(&self, k: usize) -> (u64, u64) {
+        let m = 1u64 << k;
+        let s = Self::stride(k) as u64;
+        (terms(self.t, 2 * m, s), terms(self.t, 3 * m, s))
+    }
+
+    fn stride(k: usize) -> u32 {
+        let m = 1u32 << k;
+        if m as usize <= P {
+            1
+        } else {
+            m / P as u32
+        }
+    }
+
+    /// Levels k whose D2 and D3 fit in i32 for inputs up to `amax`: |D3| ≤ 4·2^k·amax < 2^31
+    /// ⟺ amax < 2^(29−k). Off the hot path (the M0+ has no count-leading-zeros).
+    const fn narrow_levels(amax: u32) -> u8 {
+        let bits = 32 - amax.leading_zeros() as usize;
+        let n = if bits > 29 { 0 } else { 30 - bits };
+        (if n < L { n } else { L }) as u8
+    }
+
+    /// Recompute `half`, `full` and `next_valid` for the current t (rarely: ~2 log2 t times).
+    #[cold]
+    fn advance_valid(&mut self) {
+        let t = self.t;
+        while (self.half as usize) < L && t >= 2u64 << self.half {
+            self.half += 1;
+        }
+        while (self.full as usize) < L && t >= 3u64 << self.full {
+            self.full += 1;
+        }
+        let h = if (self.half as usize) < L {
+            2u64 << self.half
+        } else {
+            u64::MAX
+        };
+        let f = if (self.full as usize) < L {
+            3u64 << self.full
+        } else {
+            u64::MAX
+        };
+        self.next_valid = h.min(f);
     }
 
     /// Samples pushed since the last reset.
@@ -212,14 +335,14 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
     /// The sums of level `k` (m = 2^k), or `None` past the last level.
     pub fn level(&self, k: usize) -> Option<LevelSums> {
         let a = self.sums.get(k)?;
-        let m = 1u32 << k;
+        let (n2, n3) = self.segment_terms(k);
         Some(LevelSums {
-            m,
-            stride: if m as usize <= P { 1 } else { m / P as u32 },
-            n2: a.n2,
-            sum2: a.sum2,
-            n3: a.n3,
-            sum3: a.sum3,
+            m: 1u32 << k,
+            stride: Self::stride(k),
+            n2: a.closed_n2 + n2,
+            sum2: a.sum2.get(),
+            n3: a.closed_n3 + n3,
+            sum3: a.sum3.get(),
         })
     }
 
@@ -257,17 +380,44 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         self.rings[level][slot]
     }
 
+    /// Differences from i64 phase values (any level, any input).
     #[inline(always)]
-    fn accumulate(&mut self, k: usize, t0: i64, tm: i64, t2m: i64, t3m: Option<i64>) {
-        let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
+    fn accumulate_wide(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
+        let d2 = self
+            .theta
+            .wrapping_sub(tm.wrapping_mul(2))
+            .wrapping_add(t2m);
         let s = &mut self.sums[k];
-        s.sum2 += square(d2);
-        s.n2 += 1;
+        s.sum2.add128(square(d2));
         if let Some(t3m) = t3m {
             // D3(t) = D2(t) − D2(t − m)
             let d2_prev = tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m);
-            s.sum3 += square(d2.wrapping_sub(d2_prev));
-            s.n3 += 1;
+            s.sum3.add128(square(d2.wrapping_sub(d2_prev)));
+        }
+    }
+
+    /// The same in 32-bit words: exact because the differences are known to fit in i32, so
+    /// their value mod 2^32 (computed from the low words of θ) is the value itself.
+    #[inline(always)]
+    fn accumulate_narrow(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
+        let (t0, tm, t2m) = (self.theta as i32, tm as i32, t2m as i32);
+        let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
+        let s = &mut self.sums[k];
+        s.sum2.add64(square32(d2));
+        if let Some(t3m) = t3m {
+            let d2_prev = tm
+                .wrapping_sub(t2m.wrapping_mul(2))
+                .wrapping_add(t3m as i32);
+            s.sum3.add64(square32(d2.wrapping_sub(d2_prev)));
+        }
+    }
+
+    #[inline(always)]
+    fn accumulate(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
+        if k < self.narrow as usize {
+            self.accumulate_narrow(k, tm, t2m, t3m);
+        } else {
+            self.accumulate_wide(k, tm, t2m, t3m);
         }
     }
 
@@ -277,8 +427,7 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         // 1. θ[t] enters the base ring; θ[t − 3P] leaves it and trickles up the cascade.
         let slot = self.base_head as usize;
         let (row, col) = if slot < R { (0, slot) } else { (1, slot - R) };
-        let leaving = self.rings[row][col];
-        self.rings[row][col] = self.theta;
+        let leaving = core::mem::replace(&mut self.rings[row][col], self.theta);
         self.base_head = if slot + 1 == Self::BASE {
             0
         } else {
@@ -290,26 +439,32 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         self.theta = self.theta.wrapping_add(y as i64);
         self.t += 1;
         self.total += 1;
-        let t = self.t;
+        let a = y.unsigned_abs();
+        if a > self.amax {
+            self.amax = a;
+            self.narrow = Self::narrow_levels(a);
+        }
+        if self.t >= self.next_valid {
+            self.advance_valid();
+        }
+        let (half, full) = (self.half as usize, self.full as usize);
 
         // 2. Unit-stride levels (m ≤ P): every sample.
-        let mut k = 0;
-        while k < Self::K0 && k < L {
+        let unit = if half < Self::K0 { half } else { Self::K0 };
+        for k in 0..unit {
             let m = 1usize << k;
-            if t < 2 * m as u64 {
-                return;
-            }
             let tm = self.base_at_age(m);
             let t2m = self.base_at_age(2 * m);
-            let t3m = (t >= 3 * m as u64).then(|| self.base_at_age(3 * m));
-            self.accumulate(k, self.theta, tm, t2m, t3m);
-            k += 1;
+            let t3m = (k < full).then(|| self.base_at_age(3 * m));
+            self.accumulate(k, tm, t2m, t3m);
         }
-        // 3. Strided levels: level k works when t is a multiple of its stride 2^(k−K0+1).
-        while k < L {
-            let stride_mask = (1u64 << (k + 1 - Self::K0)) - 1;
-            let m = 1u64 << k;
-            if t & stride_mask != 0 || t < 2 * m {
+        // 3. Strided levels: level k works when t is a multiple of its stride 2^(k−K0+1)
+        //    (tested on the low word: strides are below 2^32).
+        let t32 = self.t as u32;
+        let mut k = Self::K0;
+        while k < half {
+            let stride_mask = (1u32 << (k + 1 - Self::K0)) - 1;
+            if t32 & stride_mask != 0 {
                 return;
             }
             let tm = if k == Self::K0 {
@@ -318,8 +473,8 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
                 self.ring_back(k - 1, Self::BACK)
             };
             let t2m = self.ring_back(k, Self::BACK);
-            let t3m = (t >= 3 * m).then(|| self.ring_back(k, R - 1));
-            self.accumulate(k, self.theta, tm, t2m, t3m);
+            let t3m = (k < full).then(|| self.ring_back(k, R - 1));
+            self.accumulate(k, tm, t2m, t3m);
             k += 1;
         }
     }
@@ -330,14 +485,14 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         let mut k = Self::K0;
         while k < L {
             let stride_shift = k + 1 - Self::K0;
-            if index & ((1u64 << stride_shift) - 1) != 0 {
+            if (index as u32) & ((1u32 << stride_shift) - 1) != 0 {
                 return;
             }
             let h = self.heads[k] as usize;
             let next = if h + 1 == R { 0 } else { h + 1 };
             self.heads[k] = next as u8;
             let leaving = core::mem::replace(&mut self.rings[k][next], value);
-            let span = (R as u64) << stride_shift;
+            let span = ((R as u32) << stride_shift) as u64;
             if index < span {
                 return;
             }
