@@ -117,6 +117,8 @@ pub struct Device {
     imu_state: SensorState,
     mag_state: SensorState,
     last_temp: Option<i16>,
+    /// Read time of the last magnetometer sample, µs.
+    last_mag_us: Option<u64>,
     /// Next channel of a table round in progress.
     table_next: Option<usize>,
     /// The table being computed: a snapshot of the engine's sums and the rows done so far.
@@ -152,6 +154,7 @@ impl Device {
             imu_state: SensorState::Unknown,
             mag_state: SensorState::Unknown,
             last_temp: None,
+            last_mag_us: None,
             table_next: None,
             building: None,
             outbox: Outbox::new(),
@@ -243,7 +246,15 @@ impl Device {
                 );
             }
             SensorMsg::Mag { t_us, xyz, skipped } => {
-                if *skipped {
+                // A gap when the chip says it overwrote a sample (DOR), or when more than 1.5
+                // periods passed since the last reading: reads land 0–2 ms after their slot
+                // (DRDY re-polls), so consecutive samples are 3–7 ms apart and a missed one
+                // makes it ≥ 8 ms, whatever the cause (a stall, a bus fault short of a loss).
+                let late = self
+                    .last_mag_us
+                    .is_some_and(|l| t_us.saturating_sub(l) > MAG_PERIOD_US * 3 / 2);
+                self.last_mag_us = Some(*t_us);
+                if *skipped || late {
                     for c in MAG_CHANNELS {
                         self.engines[c].gap();
                     }

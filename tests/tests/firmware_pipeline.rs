@@ -707,3 +707,23 @@ fn after_a_magnetometer_loss_sampling_resumes_at_the_full_rate() {
         "{per_s} samples/s after recovery"
     );
 }
+
+#[test]
+fn a_late_magnetometer_sample_is_a_gap_even_without_the_overwrite_flag() {
+    let mut dev = Device::new(sensors::scales(), "test");
+    let mut sink = Sink::roomy();
+    let mut t = 1_000;
+    for k in 0..20u64 {
+        // Regular reads 5 ms apart with 0–2 ms of jitter, then one 10 ms hole at k = 10.
+        t += if k == 10 { 10_000 } else { 5_000 };
+        let jitter = (k * 700) % 2000;
+        let msg = SensorMsg::Mag {
+            t_us: t + jitter,
+            xyz: [k as i16, 0, 0],
+            skipped: false,
+        };
+        dev.on_sensor(&msg, &mut sink);
+    }
+    assert_eq!(dev.table(Channel::Mx).gaps, 1);
+    assert_eq!(dev.table(Channel::Mx).pushed, 20);
+}
