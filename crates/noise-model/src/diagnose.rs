@@ -5,8 +5,8 @@
 //! likelihood-ratio statistic: with k extra parameters, Δχ²/s ~ χ²_k under "the candidate adds
 //! nothing", where s = max(1, χ²_new/dof_new) absorbs any remaining over-dispersion (an F-type
 //! test, Bevington & Robinson §11.4). Candidates are ranked by that p-value, so extra parameters are
-//! penalised through k; the best one is named only if p < [`P_CANDIDATE`] and its added term is
-//! itself detected (> 2σ). Otherwise the diagnosis says plainly what is wrong and that no effect of
+//! penalised through k; the best one is named only if p < [`P_CANDIDATE`] and its added amplitude
+//! is not pinned at zero (the likelihood ratio decides, not the term's own Wald test). Otherwise the diagnosis says plainly what is wrong and that no effect of
 //! the vocabulary explains it.
 use crate::assess::{assess, Assessment, TauRange, CORRELATION_INFLATION};
 use crate::effect::{Effect, ALL_EFFECTS};
@@ -275,7 +275,7 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) ->
             let delta = base.chi2 - f.chi2;
             let s = (f.chi2_dof()).max(CORRELATION_INFLATION);
             let p = chi2_sf(delta.max(0.0) / s, k as f64);
-            let detected = f.term(e).is_some_and(|t| t.detected);
+            let coef_positive = f.term(e).is_some_and(|t| t.coef > 0.0);
             let line_test = match (e, data, f.term(e).and_then(|t| t.theta)) {
                 (Effect::Sinusoid, Some((y, fs)), Some(freq)) => line_near(y, fs, freq, 0.15),
                 _ => None,
@@ -286,7 +286,13 @@ pub fn diagnose(base: &Fit, base_a: &Assessment, data: Option<(&[f64], f64)>) ->
                 delta_chi2: delta,
                 extra_params: k,
                 p_value: p,
-                significant: p < P_CANDIDATE && detected && line_ok,
+                // The likelihood-ratio test (Δχ² for k extra parameters) decides; the term's own
+                // Wald test (c > 2σ_c) is not required, because a term whose parameters trade off
+                // against another (a Markov τ_c near τ0 against white noise) can be poorly
+                // constrained on its own while the data need it overwhelmingly (a one-pole DLPF
+                // on the emulated MPU-6050: χ²/dof 212 → 2.8, p ≈ 1e-148). An amplitude pinned
+                // at zero is still refused.
+                significant: p < P_CANDIDATE && coef_positive && line_ok,
                 line_test,
                 fit: f,
                 assessment: a,
