@@ -75,12 +75,38 @@ pub fn elf_path() -> PathBuf {
 
 /// Release build of the firmware; returns the ELF path.
 pub fn build() -> Result<PathBuf> {
+    ensure_target();
     run(cargo().args(["build", "--release", "-p", "pico-imu"]))?;
     let elf = elf_path();
     if !elf.is_file() {
         bail!("the firmware build did not produce {}", elf.display());
     }
     Ok(elf)
+}
+
+/// Install the device target when rustup is there and lacks it (a no-op when it is installed;
+/// rust-toolchain.toml alone does not install targets everywhere).
+fn ensure_target() {
+    let listed = std::process::Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .current_dir(root())
+        .output();
+    match listed {
+        Ok(out)
+            if String::from_utf8_lossy(&out.stdout)
+                .lines()
+                .any(|l| l.trim() == "thumbv6m-none-eabi") => {}
+        Ok(_) => {
+            let _ = run(std::process::Command::new("rustup").args([
+                "target",
+                "add",
+                "thumbv6m-none-eabi",
+            ]));
+        }
+        Err(_) => eprintln!(
+            "xtask: rustup not found; the thumbv6m-none-eabi target must be installed by hand"
+        ),
+    }
 }
 
 /// Flash and RAM use.
