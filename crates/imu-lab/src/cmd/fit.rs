@@ -35,8 +35,8 @@ pub struct Args {
     /// Print one JSON object on stdout instead of the report.
     #[arg(long)]
     pub json: bool,
-    /// Write the Allan plot (with the residual panel) as SVG; before and after side by side
-    /// when --add is given.
+    /// Write the Allan plot (with the residual panel) as SVG or PNG (by the name's extension);
+    /// before and after side by side when --add is given.
     #[arg(long)]
     pub plot: Option<PathBuf>,
     /// Write a self-contained HTML report (one section per step).
@@ -262,12 +262,12 @@ pub fn run(args: Args) -> Result<()> {
         .map_or(shown.clone(), |n| n.to_string_lossy().into_owned());
     let title = format!("{} [{unit}] — {}", args.column, base_name);
     if let Some(path) = &args.plot {
-        if path.extension().and_then(|e| e.to_str()) != Some("svg") {
-            bail!(
-                "--plot {}: only SVG output is supported (use a .svg name; browsers and \
-                 Inkscape convert it to PNG)",
-                path.display()
-            );
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        if !matches!(ext.as_deref(), Some("svg") | Some("png")) {
+            bail!("--plot {}: give a .svg or .png name", path.display());
         }
         let figs: Vec<String> = if stages.len() == 1 {
             vec![plot::figure(
@@ -296,8 +296,13 @@ pub fn run(args: Args) -> Result<()> {
                 ),
             ]
         };
-        std::fs::write(path, plot::document(&figs))
-            .with_context(|| format!("writing {}", path.display()))?;
+        let svg = plot::document(&figs);
+        let bytes = if ext.as_deref() == Some("png") {
+            plot::svg_to_png(&svg).with_context(|| format!("rendering {}", path.display()))?
+        } else {
+            svg.into_bytes()
+        };
+        std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &args.report {
         let mut sections = Vec::new();
