@@ -246,15 +246,15 @@ impl Device {
                 );
             }
             SensorMsg::Mag { t_us, xyz, skipped } => {
-                // A gap when the chip says it overwrote a sample (DOR), or when more than two
-                // periods passed since the last reading (a loss the chip cannot flag, e.g. after
-                // it was power-cycled). Reads land 0–2 ms after their slot, so consecutive ones
-                // are 3–7 ms apart; a read delayed by a retry but under 10 ms still finds the next
-                // sample in sequence (one new sample, no DOR), which is no gap: marking it one
-                // would split the series where no data was lost (seen in the emulator e2e test).
+                // A gap when the chip says it overwrote a sample (DOR), or when more than 1.5
+                // periods passed since the last reading: reads land 0–2 ms after their slot
+                // (DRDY re-polls), so consecutive samples are 3–7 ms apart and a missed one makes
+                // it ≥ 8 ms, whatever the cause — including a failed read that cleared DOR before
+                // the firmware saw it. A delayed read that lost nothing is split too: a needless
+                // gap costs a few terms, a missed one would bias the tables silently.
                 let late = self
                     .last_mag_us
-                    .is_some_and(|l| t_us.saturating_sub(l) > MAG_PERIOD_US * 2);
+                    .is_some_and(|l| t_us.saturating_sub(l) > MAG_PERIOD_US * 3 / 2);
                 self.last_mag_us = Some(*t_us);
                 if *skipped || late {
                     for c in MAG_CHANNELS {

@@ -94,7 +94,9 @@ pub fn imu_inputs(cal: &Calibration, s: &ImuRaw) -> [(Channel, i32); 7] {
 }
 
 /// Replays the first `pushed` served samples of one channel through a fresh engine, marking a
-/// gap wherever the model's sample index jumps (a sample was produced but never served).
+/// gap wherever the model's sample index jumps (a sample was produced but never served), or
+/// wherever `late(previous, this)` says the device's own gap rule fires (the magnetometer's:
+/// reads more than 1.5 periods apart).
 /// Returns the engine and whether the index also jumps right after the last replayed sample: the
 /// device may already know of that loss (a lost sensor) or not yet (a sample overwritten after
 /// the table was taken); a trailing gap changes no sum, only the gap count.
@@ -103,14 +105,15 @@ pub fn replay<T>(
     pushed: u64,
     k_of: impl Fn(&T) -> u64,
     value: impl Fn(&T) -> i32,
+    late: impl Fn(&T, &T) -> bool,
 ) -> (Box<DeviceEngine>, bool) {
     let mut e = Box::new(DeviceEngine::new());
     let mut last: Option<u64> = None;
     let n = (pushed as usize).min(samples.len());
-    for s in &samples[..n] {
+    for (i, s) in samples[..n].iter().enumerate() {
         let k = k_of(s);
         if let Some(l) = last {
-            if k != l + 1 {
+            if k != l + 1 || late(&samples[i - 1], s) {
                 e.gap();
             }
         }
