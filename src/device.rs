@@ -13,8 +13,9 @@ use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
     AllanLevel, AllanTable, CalFault, CalSource, CalStatus, Channel, DeviceMsg, DeviceMsgRef,
-    ErrorCode, Event, HostFrame, Identity, ImuSample, MagSample, Reply, Request, SampleBatch,
-    Scales, SensorState, Status, StreamMode, Vec, MAX_CAL_BLOB, PROTOCOL_VERSION,
+    ErrorCode, Event, GapCause, HostFrame, Identity, ImuSample, MagSample, Reply, Request,
+    SampleBatch, Scales, Sensor, SensorState, Status, StreamMode, Vec, MAX_CAL_BLOB,
+    PROTOCOL_VERSION,
 };
 
 use crate::outbox::{FrameSink, Outbox, Sent};
@@ -234,9 +235,7 @@ impl Device {
                     .counters
                     .samples_dropped
                     .saturating_add(u64::from(*lost));
-                for c in IMU_CHANNELS {
-                    self.engines[c].gap();
-                }
+                self.split(Sensor::Imu, GapCause::FifoOverflow, sink);
                 self.send(
                     &DeviceMsg::Event(Event::FifoOverflow {
                         t_us: *t_us,
@@ -256,10 +255,10 @@ impl Device {
                     .last_mag_us
                     .is_some_and(|l| t_us.saturating_sub(l) > MAG_PERIOD_US * 3 / 2);
                 self.last_mag_us = Some(*t_us);
-                if *skipped || late {
-                    for c in MAG_CHANNELS {
-                        self.engines[c].gap();
-                    }
+                if *skipped {
+                    self.split(Sensor::Mag, GapCause::Overwritten, sink);
+                } else if late {
+                    self.split(Sensor::Mag, GapCause::Late, sink);
                 }
                 self.mag_sample(*xyz, *t_us, sink)
             }
@@ -267,20 +266,12 @@ impl Device {
                 self.counters.i2c_errors = self.counters.i2c_errors.saturating_add(f.i2c_errors);
                 self.counters.bus_recoveries =
                     self.counters.bus_recoveries.saturating_add(f.recoveries);
-                let chans: &[usize] = match f.sensor {
-                    imu_proto::Sensor::Imu => {
-                        self.imu_state = f.state;
-                        &IMU_CHANNELS
-                    }
-                    imu_proto::Sensor::Mag => {
-                        self.mag_state = f.state;
-                        &MAG_CHANNELS
-                    }
-                };
+                match f.sensor {
+                    Sensor::Imu => self.imu_state = f.state,
+                    Sensor::Mag => self.mag_state = f.state,
+                }
                 if f.state != SensorState::Ok {
-                    for &c in chans {
-                        self.engines[c].gap();
-                    }
+                    self.split(f.sensor, GapCause::SensorFault, sink);
                 }
                 if f.sensor == imu_proto::Sensor::Imu {
                     self.counters.samples_dropped = self
@@ -293,10 +284,29 @@ impl Device {
                 }
             }
             SensorMsg::Resumed { .. } => {
-                for e in &mut self.engines {
-                    e.gap();
-                }
+                self.split(Sensor::Imu, GapCause::Paused, sink);
+                self.split(Sensor::Mag, GapCause::Paused, sink);
             }
+        }
+    }
+
+    /// Split one sensor's series in its Allan engines, and tell the host where (in samples
+    /// pushed), so a replay of the same samples can split at the same place. A split of an empty
+    /// segment changes nothing and is not reported.
+    fn split(&mut self, sensor: Sensor, cause: GapCause, sink: &mut impl FrameSink) {
+        let chans: &[usize] = match sensor {
+            Sensor::Imu => &IMU_CHANNELS,
+            Sensor::Mag => &MAG_CHANNELS,
+        };
+        let first = &self.engines[chans[0]];
+        let before = first.gaps();
+        for &c in chans {
+            self.engines[c].gap();
+        }
+        let first = &self.engines[chans[0]];
+        if first.gaps() != before {
+            let at = first.samples();
+            self.send(&DeviceMsg::Event(Event::Gap { sensor, at, cause }), sink);
         }
     }
 

@@ -11,8 +11,8 @@ use embassy_futures::block_on;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::{Address, RawSample};
 use imu_proto::{
-    CalFault, CalSource, Channel, DeviceMsg, Event, FrameReader, HostFrame, Reply, Request,
-    SampleBatch, Sensor, SensorState, StreamMode, MAX_FRAME,
+    CalFault, CalSource, Channel, DeviceMsg, Event, FrameReader, GapCause, HostFrame, Reply,
+    Request, SampleBatch, Sensor, SensorState, StreamMode, MAX_FRAME,
 };
 use pico_imu::device::{Device, SensorMsg, TABLE_FRAME_ROOM};
 use pico_imu::outbox::FrameSink;
@@ -423,6 +423,24 @@ fn a_fifo_overflow_is_counted_and_marked_as_a_gap() {
             .any(|e| matches!(e, Event::FifoOverflow { .. })),
         "{events:?}"
     );
+    // The split is reported where it was made, in samples pushed: a host replay needs nothing
+    // else to mirror it.
+    let imu_splits: Vec<(u64, GapCause)> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Gap {
+                sensor: Sensor::Imu,
+                at,
+                cause,
+            } => Some((*at, *cause)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        imu_splits,
+        vec![(before as u64, GapCause::FifoOverflow)],
+        "{events:?}"
+    );
 }
 
 #[test]
@@ -607,7 +625,12 @@ fn a_full_queue_drops_and_counts_frames_and_tables_wait_for_room() {
     rig.run(500);
     let st = rig.dev.status(0, 0);
     assert!(st.frames_unsent > 20, "unsent {}", st.frames_unsent);
-    assert!(rig.sink.bytes.is_empty());
+    // Small event frames fit; no sample batch does.
+    assert!(!rig
+        .sink
+        .messages()
+        .iter()
+        .any(|m| matches!(m, DeviceMsg::Samples(_))));
     rig.dev.start_tables();
     for _ in 0..50 {
         assert!(

@@ -1,6 +1,7 @@
 //! The emulator commands: `cargo xtask e2e` (end-to-end test on the emulated board),
 //! `cargo xtask bench-emu` (cycle budget report) and `cargo xtask demo` (the README's main job).
 //! The harness itself is `sim/` (Node 20, rp2040js); docs/emulator.md explains it.
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -251,28 +252,38 @@ pub fn e2e(args: &[String]) -> Result<()> {
         mut cal_report,
         cal,
         batches,
-        link,
+        mut link,
         measured_s,
         persisted,
     } = session;
+    let events = std::mem::take(&mut link.got.events);
     drop(link);
     sim.wait("the end-to-end run")?;
     // Host replay over the served samples.
     let imu = emu_check::read_imu(&out.join("mpu_served.csv"))?;
     let mag = emu_check::read_mag(&out.join("qmc_served.csv"))?;
     let identity = Calibration::identity();
+    // Where the device split each sensor's series (Event::Gap), in samples pushed.
+    let mut splits: [BTreeSet<u64>; 2] = Default::default();
+    let mut split_causes: BTreeMap<String, usize> = BTreeMap::new();
+    for e in &events {
+        if let imu_proto::Event::Gap { sensor, at, cause } = e {
+            splits[matches!(sensor, imu_proto::Sensor::Mag) as usize].insert(*at);
+            *split_causes
+                .entry(format!("{sensor:?}/{cause:?}"))
+                .or_default() += 1;
+        }
+    }
     let mut checks: Vec<ChannelCheck> = Vec::new();
     for (idx, table) in &tables {
         let ch = Channel::ALL[*idx];
-        let host = if (6..9).contains(idx) {
-            // The firmware also splits the series when two reads are more than 1.5 periods
-            // (7.5 ms) apart, a loss the chip's DOR flag cannot show after a failed read.
+        let replay = if (6..9).contains(idx) {
             emu_check::replay(
                 &mag,
                 table.pushed,
                 |s| s.k,
                 |s| identity.apply_mag(s.mag)[idx - 6],
-                |a, b| b.served_ns - a.served_ns > 7.5e6,
+                &splits[1],
             )
         } else {
             let pos = emu_check::imu_inputs(&identity, &imu[0])
@@ -284,10 +295,10 @@ pub fn e2e(args: &[String]) -> Result<()> {
                 table.pushed,
                 |s| s.k,
                 |s| emu_check::imu_inputs(&identity, s)[pos].1,
-                |_, _| false,
+                &splits[0],
             )
         };
-        checks.push(emu_check::compare(table, &host.0, host.1));
+        checks.push(emu_check::compare(table, &replay));
     }
     // Drops: every jump of the served index must fall inside an injected fault's window.
     let mut report = String::new();
@@ -312,22 +323,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
                 c.mismatches.join("; ")
             }
         ));
-        // Known limit (docs/emulator.md): the magnetometer's time-based gap rule reads the
-        // device's own timestamps, the replay the model's read times; a read near the 7.5 ms
-        // boundary can fall on either side, so the two may split the 200 Hz series once
-        // differently. That one case is reported, not failed; equal segmentation must be
-        // bit-exact, and the IMU and temperature channels must always be.
-        let mag = matches!(c.channel.name(), "mx" | "my" | "mz");
-        let split_once_differently =
-            mag && c.levels_compared > 0 && c.device_gaps.abs_diff(c.host_gaps) == 1;
-        if !ok && split_once_differently {
-            eprintln!(
-                "xtask: {}: device and replay split the series once differently ({} vs {} gaps); sums not compared bit for bit",
-                c.channel.name(),
-                c.device_gaps,
-                c.host_gaps
-            );
-        } else if !ok {
+        if !ok {
             failures.push(format!(
                 "{}: {}",
                 c.channel.name(),
@@ -335,6 +331,18 @@ pub fn e2e(args: &[String]) -> Result<()> {
             ));
         }
     }
+    report.push_str(&format!(
+        "\nSplits the device reported (Event::Gap, sensor/cause: count): {}\n",
+        if split_causes.is_empty() {
+            "none".to_string()
+        } else {
+            split_causes
+                .iter()
+                .map(|(k, v)| format!("{k}: {v}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    ));
     if checks.len() != Channel::ALL.len() {
         failures.push(format!(
             "only {} of {} channel tables received",

@@ -2,6 +2,7 @@
 //! (`sim --served DIR`), replayed through the same fixed-point corrections (`imu-cal`) and the
 //! same streaming engine (`allan::DeviceEngine`) as the firmware, compared with the device's
 //! Allan tables sum for sum.
+use std::collections::BTreeSet;
 use std::path::Path;
 
 use allan::DeviceEngine;
@@ -93,35 +94,52 @@ pub fn imu_inputs(cal: &Calibration, s: &ImuRaw) -> [(Channel, i32); 7] {
     ]
 }
 
-/// Replays the first `pushed` served samples of one channel through a fresh engine, marking a
-/// gap wherever the model's sample index jumps (a sample was produced but never served), or
-/// wherever `late(previous, this)` says the device's own gap rule fires (the magnetometer's:
-/// reads more than 1.5 periods apart).
-/// Returns the engine and whether the index also jumps right after the last replayed sample: the
-/// device may already know of that loss (a lost sensor) or not yet (a sample overwritten after
-/// the table was taken); a trailing gap changes no sum, only the gap count.
+/// The host replay of one channel.
+pub struct Replay {
+    pub engine: Box<DeviceEngine>,
+    /// The device also split the series right after the last replayed sample. It may have done
+    /// so before or after the table was taken; a trailing split changes no sum, only the count.
+    pub trailing_split: bool,
+    /// Losses the device did not split at: (samples pushed before the loss, k before, k after).
+    pub unsplit_losses: Vec<(u64, u64, u64)>,
+}
+
+/// Replays the first `pushed` served samples of one channel through a fresh engine, splitting
+/// the series exactly where the device said it did (`splits`: the `at` of its `Event::Gap`s for
+/// this sensor, in samples pushed). Every loss in the served sequence (the model's sample index
+/// jumps: a sample was produced but never served) must be one of those splits; one that is not is
+/// reported in [`Replay::unsplit_losses`], because the device's tables would then straddle
+/// missing data. Splits without a loss are allowed (the firmware splits a late read even when
+/// nothing was lost: a needless split costs a few terms, a missed one biases the tables).
 pub fn replay<T>(
     samples: &[T],
     pushed: u64,
     k_of: impl Fn(&T) -> u64,
     value: impl Fn(&T) -> i32,
-    late: impl Fn(&T, &T) -> bool,
-) -> (Box<DeviceEngine>, bool) {
-    let mut e = Box::new(DeviceEngine::new());
-    let mut last: Option<u64> = None;
+    splits: &BTreeSet<u64>,
+) -> Replay {
+    let mut engine = Box::new(DeviceEngine::new());
+    let mut unsplit_losses = Vec::new();
     let n = (pushed as usize).min(samples.len());
     for (i, s) in samples[..n].iter().enumerate() {
-        let k = k_of(s);
-        if let Some(l) = last {
-            if k != l + 1 || late(&samples[i - 1], s) {
-                e.gap();
+        let at = i as u64;
+        if i > 0 {
+            let (k0, k1) = (k_of(&samples[i - 1]), k_of(s));
+            let split = splits.contains(&at);
+            if k1 != k0 + 1 && !split {
+                unsplit_losses.push((at, k0, k1));
+            }
+            if split {
+                engine.gap();
             }
         }
-        last = Some(k);
-        e.push(value(s));
+        engine.push(value(s));
     }
-    let trailing = matches!((last, samples.get(n)), (Some(l), Some(next)) if k_of(next) != l + 1);
-    (e, trailing)
+    Replay {
+        engine,
+        trailing_split: n > 0 && splits.contains(&(n as u64)),
+        unsplit_losses,
+    }
 }
 
 /// Outcome of comparing one channel's device table with the host replay.
@@ -134,9 +152,9 @@ pub struct ChannelCheck {
     pub device_gaps: u32,
 }
 
-/// Compares one device table with the host replay; `trailing_gap` (from [`replay`]) allows the
-/// device to count one gap more than the replay.
-pub fn compare(table: &AllanTable, host: &DeviceEngine, trailing_gap: bool) -> ChannelCheck {
+/// Compares one device table with the host replay, sum for sum and count for count.
+pub fn compare(table: &AllanTable, replay: &Replay) -> ChannelCheck {
+    let host = &replay.engine;
     let mut mismatches = Vec::new();
     if host.samples() != table.pushed {
         mismatches.push(format!(
@@ -145,9 +163,25 @@ pub fn compare(table: &AllanTable, host: &DeviceEngine, trailing_gap: bool) -> C
             host.samples()
         ));
     }
-    let host_gaps = host.gaps() + u32::from(trailing_gap);
+    for (at, k0, k1) in &replay.unsplit_losses {
+        mismatches.push(format!(
+            "samples {}..{} were lost before pushed sample {at} and the device did not split there",
+            k0 + 1,
+            k1
+        ));
+    }
+    let host_gaps = host.gaps() + u32::from(replay.trailing_split);
     if table.gaps != host.gaps() && table.gaps != host_gaps {
-        mismatches.push(format!("gaps: device {} host {} (+1 if the device already counts the loss after its last sample)", table.gaps, host.gaps()));
+        mismatches.push(format!(
+            "gaps: device {} host {}{}",
+            table.gaps,
+            host.gaps(),
+            if replay.trailing_split {
+                " (+1 trailing split)"
+            } else {
+                ""
+            }
+        ));
     }
     let mut compared = 0;
     for dl in table.levels.iter() {
@@ -195,4 +229,62 @@ pub fn index_jumps<T>(
             )
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn engine_with(values: &[i32], gaps_before: &[usize]) -> DeviceEngine {
+        let mut e = DeviceEngine::new();
+        for (i, &v) in values.iter().enumerate() {
+            if gaps_before.contains(&i) {
+                e.gap();
+            }
+            e.push(v);
+        }
+        e
+    }
+
+    fn sums(e: &DeviceEngine) -> Vec<(u64, u128, u64, u128)> {
+        e.levels().map(|l| (l.n2, l.sum2, l.n3, l.sum3)).collect()
+    }
+
+    // (k, value): sample 40 and 41 were lost between pushed samples 39 and 40.
+    fn served() -> Vec<(u64, i32)> {
+        (0..100u64)
+            .filter(|k| !(40..42).contains(k))
+            .map(|k| (k, ((k * 7919) % 201) as i32 - 100))
+            .collect()
+    }
+
+    #[test]
+    fn the_replay_splits_where_the_device_said_and_nowhere_else() {
+        let s = served();
+        // The device split at the loss and once more (a late read) at pushed sample 70.
+        let splits: BTreeSet<u64> = [40, 70].into();
+        let r = replay(&s, 90, |x| x.0, |x| x.1, &splits);
+        assert!(r.unsplit_losses.is_empty());
+        assert!(!r.trailing_split);
+        let values: Vec<i32> = s[..90].iter().map(|x| x.1).collect();
+        assert_eq!(sums(&r.engine), sums(&engine_with(&values, &[40, 70])));
+        assert_eq!(r.engine.gaps(), 2);
+        // Splitting elsewhere gives other sums: the comparison can fail.
+        assert_ne!(sums(&r.engine), sums(&engine_with(&values, &[40, 71])));
+    }
+
+    #[test]
+    fn a_loss_the_device_did_not_split_at_is_reported() {
+        let s = served();
+        let r = replay(&s, 90, |x| x.0, |x| x.1, &BTreeSet::from([70]));
+        assert_eq!(r.unsplit_losses, vec![(40, 39, 42)]);
+    }
+
+    #[test]
+    fn a_split_after_the_last_replayed_sample_is_trailing() {
+        let s = served();
+        let r = replay(&s, 40, |x| x.0, |x| x.1, &BTreeSet::from([40]));
+        assert!(r.trailing_split && r.unsplit_losses.is_empty());
+        assert_eq!(r.engine.gaps(), 0);
+    }
 }

@@ -26,7 +26,7 @@ use serde::{de::DeserializeOwned, Deserialize, Serialize};
 pub use heapless::{String, Vec};
 
 /// Wire-format version carried in the first byte of every frame.
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Largest serialised message (version + postcard + CRC), bytes, before COBS.
 pub const MAX_PAYLOAD: usize = 3072;
 /// Largest encoded frame, bytes, including the trailing `0x00` delimiter.
@@ -324,6 +324,31 @@ pub enum Event {
         t_us: u64,
         lost: u32,
     },
+    /// The sensor's Allan engines were split: no difference straddles the position `at`, the
+    /// number of samples pushed into each of its engines (since boot or the last Allan reset)
+    /// before the split. A host that replays the same samples applies the same splits and gets
+    /// the same sums, bit for bit.
+    Gap {
+        sensor: Sensor,
+        at: u64,
+        cause: GapCause,
+    },
+}
+
+/// Why the device split a sensor's series (see [`Event::Gap`]).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum GapCause {
+    /// The MPU-6050 FIFO overflowed and was reset.
+    FifoOverflow,
+    /// The sensor stopped answering (or failed a transfer).
+    SensorFault,
+    /// The QMC5883L overwrote an unread sample (DOR).
+    Overwritten,
+    /// The magnetometer read came more than 1.5 periods after the previous one.
+    Late,
+    /// Sampling paused (a flash write).
+    Paused,
 }
 
 /// Host → device request.

@@ -117,6 +117,11 @@ fn all_device_msgs() -> std::vec::Vec<DeviceMsg> {
             down_us: 2_000_000
         }),
         DeviceMsg::Event(Event::FifoOverflow { t_us: 99, lost: 12 }),
+        DeviceMsg::Event(Event::Gap {
+            sensor: Sensor::Mag,
+            at: 123_456_789_012,
+            cause: GapCause::Late
+        }),
         DeviceMsg::Reply {
             id: 7,
             reply: Reply::Ok
@@ -259,9 +264,10 @@ fn a_flipped_bit_is_caught_by_the_crc() {
 
 #[test]
 fn another_version_is_rejected_not_guessed() {
-    // Hand-build a frame with version 2 and a valid CRC.
+    // Hand-build a frame with the next version and a valid CRC.
+    let other = PROTOCOL_VERSION + 1;
     let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
-    let mut payload = std::vec![2u8];
+    let mut payload = std::vec![other];
     payload.extend_from_slice(
         &postcard::to_allocvec(&HostFrame {
             id: 1,
@@ -274,7 +280,10 @@ fn another_version_is_rejected_not_guessed() {
     let mut f = std::vec![0u8; cobs::max_encoding_length(payload.len())];
     let n = cobs::encode(&payload, &mut f);
     f.truncate(n);
-    assert_eq!(decode::<HostFrame>(&mut f), Err(DecodeError::Version(2)));
+    assert_eq!(
+        decode::<HostFrame>(&mut f),
+        Err(DecodeError::Version(other))
+    );
 }
 
 #[test]
