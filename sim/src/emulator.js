@@ -14,6 +14,9 @@ const ROM_LIMIT = 0x4000;
 const SECTOR_ERASE_NS = 45e6;
 const PAGE_PROGRAM_NS = 0.4e6;
 
+/** Marker stage id under which interrupt handlers are counted. */
+export const IRQ_STAGE = 9;
+
 export class EmulatorStop extends Error {}
 
 export class Emulator {
@@ -97,12 +100,42 @@ export class Emulator {
     const core = this.core;
     this.marks = { address, stage: 0, since: 0, cycles: new Map(), entries: new Map(), log: null };
     const m = this.marks;
-    const enter = (v) => {
+    const charge = () => {
       const now = core.cycles;
       m.cycles.set(m.stage, (m.cycles.get(m.stage) ?? 0) + (now - m.since));
       m.since = now;
+    };
+    // Thread-mode stage to resume after the interrupt handlers (null: in thread mode).
+    let interrupted = null;
+    const enter = (v) => {
+      if (interrupted !== null) {
+        interrupted = v; // a marker store inside a handler names the stage to resume
+        return;
+      }
+      charge();
       m.stage = v;
       m.entries.set(v, (m.entries.get(v) ?? 0) + 1);
+    };
+    // Interrupt handlers are charged to their own stage, not to the stage they interrupted, so
+    // a stage's cycles are its own code (and whatever other tasks it awaits).
+    const exEntry = core.exceptionEntry.bind(core);
+    core.exceptionEntry = (n) => {
+      if (interrupted === null) {
+        charge();
+        interrupted = m.stage;
+        m.stage = IRQ_STAGE;
+        m.entries.set(IRQ_STAGE, (m.entries.get(IRQ_STAGE) ?? 0) + 1);
+      }
+      exEntry(n);
+    };
+    const exReturn = core.exceptionReturn.bind(core);
+    core.exceptionReturn = (r) => {
+      exReturn(r);
+      if (interrupted !== null && core.IPSR === 0) {
+        charge();
+        m.stage = interrupted;
+        interrupted = null;
+      }
     };
     const w32 = mcu.writeUint32.bind(mcu);
     mcu.writeUint32 = (a, v) => {

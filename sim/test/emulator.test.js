@@ -1,6 +1,6 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Emulator, EmulatorStop } from '../src/emulator.js';
+import { Emulator, EmulatorStop, IRQ_STAGE } from '../src/emulator.js';
 import { buildElf, flashImage } from './helpers.js';
 
 const elf = (code, symbols) => buildElf([flashImage(code)], symbols);
@@ -47,4 +47,32 @@ test('time advances by executed cycles at 125 MHz (8 ns per cycle)', () => {
   const emu = new Emulator({ elfBytes: markerLoop(200) });
   emu.runUntil(1e9);
   assert.equal(emu.clock.nanos, emu.core.cycles * 8);
+});
+
+/**
+ * Stage 1 pends PendSV (ICSR.PENDSVSET) and loops 20 turns; the PendSV handler loops `h` turns.
+ * ldr r0,=MARK; movs r1,#1; str r1,[r0]; ldr r3,=ICSR; ldr r4,=PENDSVSET; str r4,[r3];
+ * movs r2,#20; 1: subs r2,#1; bne 1b; movs r1,#0; str r1,[r0]; udf #0
+ * handler: movs r2,#h; 2: subs r2,#1; bne 2b; bx lr
+ */
+function interruptedLoop(h) {
+  const code = [0x4807, 0x2101, 0x6001, 0x4b07, 0x4c07, 0x601c, 0x2214, 0x3a01, 0xd1fd, 0x2100, 0x6001, 0xde00,
+    0x2200 | h, 0x3a01, 0xd1fd, 0x4770, 0x0100, 0x2000, 0xed04, 0xe000, 0x0000, 0x1000];
+  const img = flashImage(code);
+  new DataView(img.data.buffer).setUint32(0x100 + 14 * 4, 0x10000159, true); // PendSV vector
+  return buildElf([img], { PICO_IMU_STAGE: 0x20000100 });
+}
+
+test('stage markers: interrupt handlers are charged to their own stage, not to the one they interrupt', () => {
+  const run = (h) => {
+    const emu = new Emulator({ elfBytes: interruptedLoop(h) });
+    const stop = emu.runUntil(1e9);
+    assert.equal(stop?.kind, 'break');
+    return emu.markReport();
+  };
+  const a = run(10);
+  const b = run(100);
+  assert.equal(a.entries.get(IRQ_STAGE), 1);
+  assert.equal(b.cycles.get(1), a.cycles.get(1), 'stage 1 does not pay for the handler');
+  assert.equal(b.cycles.get(IRQ_STAGE) - a.cycles.get(IRQ_STAGE), 90 * 3);
 });

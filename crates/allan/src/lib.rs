@@ -24,7 +24,7 @@ pub mod batch;
 #[cfg(feature = "std")]
 pub mod noise_id;
 
-pub use stream::{DeviceEngine, Engine, LevelSums};
+pub use stream::{DeviceEngine, Engine, LevelSums, MagEngine};
 
 #[cfg(feature = "std")]
 pub use batch::{deviation, stride_sums, Estimator, Row, Stat, TauSet};

@@ -197,6 +197,10 @@ pub struct Engine<const P: usize, const L: usize, const R: usize> {
 /// 2.3 h at 1 kHz).
 pub type DeviceEngine = Engine<8, 24, 12>;
 
+/// The firmware's magnetometer configuration: the same overlap, 22 levels (τ up to 2^21 samples,
+/// 2.9 h at 200 Hz, the same reach in seconds as [`DeviceEngine`] at 1 kHz).
+pub type MagEngine = Engine<8, 22, 12>;
+
 impl<const P: usize, const L: usize, const R: usize> Default for Engine<P, L, R> {
     fn default() -> Self {
         Self::new()
