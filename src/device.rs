@@ -8,7 +8,7 @@
 //!
 //! Gaps (FIFO overflow, a lost sensor, a pause for a flash write) call `gap()` on the
 //! affected engines, so no Allan difference ever straddles missing data.
-use allan::stream::{DeviceEngine, LevelSums};
+use allan::stream::{DeviceEngine, LevelSums, MagEngine};
 use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
@@ -31,9 +31,12 @@ pub const MAG_RATE_HZ: u32 = 200;
 pub const MAG_PERIOD_US: u64 = 1_000_000 / MAG_RATE_HZ as u64;
 /// Channels with an Allan engine (ax ay az gx gy gz mx my mz temp).
 pub const CHANNELS: usize = 10;
-/// Allan engine overlap factor and levels (must match `allan::stream::DeviceEngine`).
+/// Allan engine overlap factor and levels (must match `allan::stream::DeviceEngine` for the
+/// 1 kHz channels and `allan::stream::MagEngine` for the 200 Hz magnetometer: both reach
+/// τ ≈ 2.3–2.9 h).
 pub const ALLAN_OVERLAP: u8 = 8;
 pub const ALLAN_LEVELS: u8 = 24;
+pub const ALLAN_LEVELS_MAG: u8 = 22;
 
 /// Largest burst one [`SensorMsg::Imu`] carries: a 5 ms slot holds 5 frames, so 8 covers it
 /// with slack and keeps the message (copied into and out of the channel) small.
@@ -99,14 +102,95 @@ pub struct Counters {
     pub frames_rejected: u32,
 }
 
-const IMU_CHANNELS: [usize; 7] = [0, 1, 2, 3, 4, 5, 9];
-const MAG_CHANNELS: [usize; 3] = [6, 7, 8];
+/// The Allan engines: the seven 1 kHz channels (ax ay az gx gy gz temp, in that order) and the
+/// three 200 Hz magnetometer channels, each sized for the same reach in seconds.
+struct Engines {
+    imu: [DeviceEngine; 7],
+    mag: [MagEngine; 3],
+}
+
+/// One channel's engine, whichever its configuration.
+#[derive(Clone, Copy)]
+enum EngineRef<'a> {
+    Imu(&'a DeviceEngine),
+    Mag(&'a MagEngine),
+}
+
+impl<'a> EngineRef<'a> {
+    fn samples(self) -> u64 {
+        match self {
+            EngineRef::Imu(e) => e.samples(),
+            EngineRef::Mag(e) => e.samples(),
+        }
+    }
+
+    fn gaps(self) -> u32 {
+        match self {
+            EngineRef::Imu(e) => e.gaps(),
+            EngineRef::Mag(e) => e.gaps(),
+        }
+    }
+
+    fn levels(self) -> impl Iterator<Item = LevelSums> + 'a {
+        (0..usize::from(ALLAN_LEVELS)).map_while(move |k| match self {
+            EngineRef::Imu(e) => e.level(k),
+            EngineRef::Mag(e) => e.level(k),
+        })
+    }
+}
+
+impl Engines {
+    fn new() -> Self {
+        Engines {
+            imu: core::array::from_fn(|_| DeviceEngine::new()),
+            mag: core::array::from_fn(|_| MagEngine::new()),
+        }
+    }
+
+    fn of(&self, ch: Channel) -> EngineRef<'_> {
+        match ch {
+            Channel::Mx => EngineRef::Mag(&self.mag[0]),
+            Channel::My => EngineRef::Mag(&self.mag[1]),
+            Channel::Mz => EngineRef::Mag(&self.mag[2]),
+            Channel::Ax => EngineRef::Imu(&self.imu[0]),
+            Channel::Ay => EngineRef::Imu(&self.imu[1]),
+            Channel::Az => EngineRef::Imu(&self.imu[2]),
+            Channel::Gx => EngineRef::Imu(&self.imu[3]),
+            Channel::Gy => EngineRef::Imu(&self.imu[4]),
+            Channel::Gz => EngineRef::Imu(&self.imu[5]),
+            Channel::Temp => EngineRef::Imu(&self.imu[6]),
+        }
+    }
+
+    /// Split a sensor's engines; returns the split position (samples pushed) when the split
+    /// counted, i.e. when the segment it closed was not empty.
+    fn split(&mut self, sensor: Sensor) -> Option<u64> {
+        let (before, after, at) = match sensor {
+            Sensor::Imu => {
+                let before = self.imu[0].gaps();
+                self.imu.iter_mut().for_each(DeviceEngine::gap);
+                (before, self.imu[0].gaps(), self.imu[0].samples())
+            }
+            Sensor::Mag => {
+                let before = self.mag[0].gaps();
+                self.mag.iter_mut().for_each(MagEngine::gap);
+                (before, self.mag[0].gaps(), self.mag[0].samples())
+            }
+        };
+        (after != before).then_some(at)
+    }
+
+    fn reset(&mut self) {
+        self.imu.iter_mut().for_each(DeviceEngine::reset);
+        self.mag.iter_mut().for_each(MagEngine::reset);
+    }
+}
 
 /// The device state machine.
 pub struct Device {
     cal: Calibration,
     cal_status: CalStatus,
-    engines: [DeviceEngine; CHANNELS],
+    engines: Engines,
     scales: Scales,
     mode: StreamMode,
     status_ms: u32,
@@ -138,7 +222,7 @@ impl Device {
                 source: CalSource::Identity,
                 fault: None,
             },
-            engines: core::array::from_fn(|_| DeviceEngine::new()),
+            engines: Engines::new(),
             scales,
             mode: StreamMode::Calibrated,
             status_ms: 1000,
@@ -215,11 +299,6 @@ impl Device {
         self.tables_ms
     }
 
-    /// The engine of one channel (for tests and the defmt log).
-    pub fn engine(&self, ch: Channel) -> &DeviceEngine {
-        &self.engines[ch.index()]
-    }
-
     /// Frames dropped because the host was not reading.
     pub fn frames_unsent(&self) -> u32 {
         self.outbox.unsent
@@ -294,18 +373,7 @@ impl Device {
     /// pushed), so a replay of the same samples can split at the same place. A split of an empty
     /// segment changes nothing and is not reported.
     fn split(&mut self, sensor: Sensor, cause: GapCause, sink: &mut impl FrameSink) {
-        let chans: &[usize] = match sensor {
-            Sensor::Imu => &IMU_CHANNELS,
-            Sensor::Mag => &MAG_CHANNELS,
-        };
-        let first = &self.engines[chans[0]];
-        let before = first.gaps();
-        for &c in chans {
-            self.engines[c].gap();
-        }
-        let first = &self.engines[chans[0]];
-        if first.gaps() != before {
-            let at = first.samples();
+        if let Some(at) = self.engines.split(sensor) {
             self.send(&DeviceMsg::Event(Event::Gap { sensor, at, cause }), sink);
         }
     }
@@ -331,14 +399,14 @@ impl Device {
         stage::enter(Stage::Allan);
         let fixed = &fixed[..samples.len()];
         for (accel, gyro, temp) in fixed {
-            let (a, rest) = self.engines.split_at_mut(3);
-            for (e, &v) in a.iter_mut().zip(accel) {
-                e.push(v);
-            }
-            for (e, &v) in rest[..3].iter_mut().zip(gyro) {
-                e.push(v);
-            }
-            self.engines[9].push(*temp);
+            let [ax, ay, az, gx, gy, gz, t] = &mut self.engines.imu;
+            ax.push(accel[0]);
+            ay.push(accel[1]);
+            az.push(accel[2]);
+            gx.push(gyro[0]);
+            gy.push(gyro[1]);
+            gz.push(gyro[2]);
+            t.push(*temp);
         }
         stage::enter(Stage::Usb);
         let n = samples.len() as u64;
@@ -373,7 +441,7 @@ impl Device {
         stage::enter(Stage::Corrections);
         let mag = self.cal.apply_mag(xyz);
         stage::enter(Stage::Allan);
-        for (e, &v) in self.engines[6..9].iter_mut().zip(&mag) {
+        for (e, &v) in self.engines.mag.iter_mut().zip(&mag) {
             e.push(v);
         }
         stage::enter(Stage::Usb);
@@ -484,7 +552,7 @@ impl Device {
         let c = self.table_next?;
         if self.building.is_none() {
             let ch = Channel::ALL[c];
-            let e = &self.engines[ch.index()];
+            let e = self.engines.of(ch);
             let (tau0_us, scale) = self.tau0_scale(ch);
             let snap = e.levels().filter(|l| l.n2 > 0).collect();
             let head = AllanTable {
@@ -521,7 +589,7 @@ impl Device {
     /// engine's exact sums plus the deviation and its 68.3 % bounds in contract units
     /// ([`level_row`]).
     pub fn table(&self, ch: Channel) -> AllanTable {
-        let e = &self.engines[ch.index()];
+        let e = self.engines.of(ch);
         let (tau0_us, scale) = self.tau0_scale(ch);
         let mut levels = Vec::new();
         for l in e.levels().filter(|l| l.n2 > 0) {
@@ -547,6 +615,7 @@ impl Device {
             mag_rate_hz: MAG_RATE_HZ as u16,
             allan_overlap: ALLAN_OVERLAP,
             allan_levels: ALLAN_LEVELS,
+            allan_levels_mag: ALLAN_LEVELS_MAG,
         }
     }
 
@@ -637,9 +706,7 @@ impl Device {
 
     /// Forget all Allan state and restart the sample numbering.
     pub fn reset_allan(&mut self) {
-        for e in &mut self.engines {
-            e.reset();
-        }
+        self.engines.reset();
         // A table being computed describes the old state: drop it (the round goes on).
         self.building = None;
         self.imu_seq = 0;

@@ -278,7 +278,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
     for (idx, table) in &tables {
         let ch = Channel::ALL[*idx];
         let replay = if (6..9).contains(idx) {
-            emu_check::replay(
+            emu_check::replay::<allan::MagEngine, _>(
                 &mag,
                 table.pushed,
                 |s| s.k,
@@ -290,7 +290,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
                 .iter()
                 .position(|(c, _)| *c == ch)
                 .context("channel")?;
-            emu_check::replay(
+            emu_check::replay::<allan::DeviceEngine, _>(
                 &imu,
                 table.pushed,
                 |s| s.k,

@@ -302,9 +302,11 @@ pub struct Identity {
     pub board: String<24>,
     pub imu_rate_hz: u16,
     pub mag_rate_hz: u16,
-    /// Overlap factor P and octave levels L of the streaming Allan engine.
+    /// Overlap factor P and octave levels L of the streaming Allan engines: `allan_levels` for
+    /// the 1 kHz channels, `allan_levels_mag` for the magnetometer.
     pub allan_overlap: u8,
     pub allan_levels: u8,
+    pub allan_levels_mag: u8,
 }
 
 /// An asynchronous event worth a line in the host's log.

@@ -154,6 +154,7 @@ fn all_device_msgs() -> std::vec::Vec<DeviceMsg> {
                 mag_rate_hz: 200,
                 allan_overlap: 8,
                 allan_levels: 24,
+                allan_levels_mag: 22,
             }),
         },
     ]

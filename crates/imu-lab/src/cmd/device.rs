@@ -102,8 +102,8 @@ pub fn run(a: Args) -> Result<()> {
 fn status(link: &mut Link) -> Result<()> {
     if let Reply::Identity(id) = link.request(Request::Identify)? {
         println!(
-            "device: {} on {}, protocol {}, IMU {} Hz, magnetometer {} Hz, Allan engine P = {}, {} octave levels",
-            id.firmware, id.board, id.protocol, id.imu_rate_hz, id.mag_rate_hz, id.allan_overlap, id.allan_levels
+            "device: {} on {}, protocol {}, IMU {} Hz, magnetometer {} Hz, Allan engines P = {}, {} octave levels ({} for the magnetometer)",
+            id.firmware, id.board, id.protocol, id.imu_rate_hz, id.mag_rate_hz, id.allan_overlap, id.allan_levels, id.allan_levels_mag
         );
     }
     match link.request(Request::GetStatus)? {
