@@ -9,6 +9,8 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
@@ -171,9 +173,17 @@ pub fn run(a: Args) -> Result<()> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} ms of device time  {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    // Ctrl-C ends the recording like the end of --seconds: the rows so far are flushed, streaming
+    // is switched off and the summary printed. (A second handler cannot be installed in one
+    // process; then Ctrl-C keeps its default meaning, and the BufWriter still flushes on exit.)
+    let stop = Arc::new(AtomicBool::new(false));
+    let stopped = stop.clone();
+    if let Err(e) = ctrlc::set_handler(move || stopped.store(true, Ordering::Relaxed)) {
+        pb.println(format!("Ctrl-C will not end the recording cleanly: {e}"));
+    }
     let mut events = Vec::new();
     let mut idle = 0;
-    while rows.span() < a.seconds {
+    while rows.span() < a.seconds && !stop.load(Ordering::Relaxed) {
         match link.recv(Duration::from_millis(500))? {
             Some(DeviceMsg::Samples(b)) => {
                 idle = 0;
@@ -203,6 +213,12 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     pb.finish_and_clear();
+    if stop.load(Ordering::Relaxed) {
+        eprintln!(
+            "stopped by Ctrl-C after {:.3} s of device time",
+            rows.span()
+        );
+    }
     w.flush()
         .with_context(|| format!("writing {}", a.out.display()))?;
     // Stop streaming; a failure here does not lose the recording.
