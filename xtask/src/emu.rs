@@ -252,11 +252,11 @@ pub fn e2e(args: &[String]) -> Result<()> {
         mut cal_report,
         cal,
         batches,
-        mut link,
+        link,
+        events,
         measured_s,
         persisted,
     } = session;
-    let events = std::mem::take(&mut link.got.events);
     drop(link);
     sim.wait("the end-to-end run")?;
     // Host replay over the served samples.
@@ -485,6 +485,9 @@ fn e2e_session(port: u16, seconds: f64) -> Result<SessionResult> {
         g.tables.len() == Channel::ALL.len()
     })?;
     let tables = std::mem::take(&mut link.got.tables);
+    // The split positions count samples since the last Allan reset; the calibration upload
+    // below resets the engines, so only the events up to the tables describe them.
+    let events = std::mem::take(&mut link.got.events);
     let status = link.request(Request::GetStatus, long)?;
     let mut cal_report = format!("device status after the run: {status:?}\n\n");
     // Calibration round trip: upload, read back, see it applied to the streamed samples.
@@ -556,6 +559,7 @@ fn e2e_session(port: u16, seconds: f64) -> Result<SessionResult> {
         cal,
         batches,
         link,
+        events,
         measured_s,
         persisted,
     })
@@ -563,6 +567,8 @@ fn e2e_session(port: u16, seconds: f64) -> Result<SessionResult> {
 
 struct SessionResult {
     tables: Tables,
+    /// Device events up to the tables (before the calibration upload reset the engines).
+    events: Vec<imu_proto::Event>,
     cal_report: String,
     cal: Calibration,
     batches: Vec<imu_proto::SampleBatch>,
