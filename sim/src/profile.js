@@ -42,6 +42,8 @@ export async function profile(v) {
     return `0x${pc.toString(16)}`;
   };
   const hist = new Map();
+  const callers = new Map();
+  const callersRe = v.callers ? new RegExp(v.callers) : null;
   const core = s.emu.core;
   let next = core.cycles;
   let samples = 0;
@@ -53,6 +55,12 @@ export async function profile(v) {
     if (core.cycles >= next && !core.waiting) {
       const f = find(core.PC >>> 0);
       hist.set(f, (hist.get(f) ?? 0) + 1);
+      // --callers RE: for samples in a function whose name matches RE (a leaf such as memcpy),
+      // also count the function holding the return address (LR).
+      if (callersRe && callersRe.test(f)) {
+        const c = `${demangle(f)} ← ${demangle(find((core.LR >>> 0) & ~1))}`;
+        callers.set(c, (callers.get(c) ?? 0) + 1);
+      }
       samples++;
       next = core.cycles + 97;
     }
@@ -61,4 +69,9 @@ export async function profile(v) {
   const rows = [...hist.entries()].sort((a, b) => b[1] - a[1]).slice(0, Number(v.top ?? 25));
   process.stdout.write(`# PC samples while executing: ${samples} over ${seconds} s emulated\n`);
   for (const [n, c] of rows) process.stdout.write(`${((100 * c) / samples).toFixed(1).padStart(5)} %  ${demangle(n)}\n`);
+  if (callersRe) {
+    process.stdout.write(`# callers (by LR) of functions matching /${v.callers}/\n`);
+    const cs = [...callers.entries()].sort((a, b) => b[1] - a[1]).slice(0, Number(v.top ?? 25));
+    for (const [n, c] of cs) process.stdout.write(`${((100 * c) / samples).toFixed(1).padStart(5)} %  ${n}\n`);
+  }
 }
