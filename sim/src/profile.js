@@ -45,6 +45,26 @@ export async function profile(v) {
   const callers = new Map();
   const callersRe = v.callers ? new RegExp(v.callers) : null;
   const core = s.emu.core;
+  // --copies: every call of the memcpy/memmove/memset entry points, by caller (LR) and bytes (r2).
+  const copies = new Map();
+  if (v.copies) {
+    const entries = new Map();
+    for (const [n, x] of s.emu.elf.symbols.entries()) {
+      if (/^__aeabi_mem(cpy|move|set|clr)[48]?$/.test(n)) entries.set(x.value & ~1, n);
+    }
+    const exec = core.executeInstruction.bind(core);
+    core.executeInstruction = () => {
+      const name = entries.get(core.PC >>> 0);
+      if (name) {
+        const key = `${name} ← ${demangle(find((core.LR >>> 0) & ~1))}`;
+        const c = copies.get(key) ?? { calls: 0, bytes: 0 };
+        c.calls++;
+        c.bytes += core.registers[name.includes('clr') ? 1 : 2] >>> 0;
+        copies.set(key, c);
+      }
+      return exec();
+    };
+  }
   let next = core.cycles;
   let samples = 0;
   const end = s.emu.clock.nanos + seconds * 1e9;
@@ -69,6 +89,11 @@ export async function profile(v) {
   const rows = [...hist.entries()].sort((a, b) => b[1] - a[1]).slice(0, Number(v.top ?? 25));
   process.stdout.write(`# PC samples while executing: ${samples} over ${seconds} s emulated\n`);
   for (const [n, c] of rows) process.stdout.write(`${((100 * c) / samples).toFixed(1).padStart(5)} %  ${demangle(n)}\n`);
+  if (v.copies) {
+    process.stdout.write(`# memory copies by caller over ${seconds} s: calls, bytes per ms\n`);
+    const cs = [...copies.entries()].sort((a, b) => b[1].bytes - a[1].bytes).slice(0, Number(v.top ?? 25));
+    for (const [n, c] of cs) process.stdout.write(`${String(c.calls).padStart(8)} calls ${(c.bytes / (seconds * 1000)).toFixed(0).padStart(7)} B/ms  ${n}\n`);
+  }
   if (callersRe) {
     process.stdout.write(`# callers (by LR) of functions matching /${v.callers}/\n`);
     const cs = [...callers.entries()].sort((a, b) => b[1] - a[1]).slice(0, Number(v.top ?? 25));
