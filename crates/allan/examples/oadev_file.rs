@@ -3,6 +3,26 @@
 //!
 //! `cargo run --release -p allan --features std --target host-tuple --example oadev_file -- FILE RATE_HZ`
 use allan::{deviation, Stat, TauSet};
+use std::io::Read;
+
+/// The samples of a raw little-endian f64 file, read in 1 MiB pieces straight into the
+/// sample vector (no second copy of the file in memory; a trailing partial sample is ignored).
+fn read_f64(path: &str) -> std::io::Result<Vec<f64>> {
+    let mut file = std::fs::File::open(path)?;
+    let mut y = Vec::with_capacity(file.metadata()?.len() as usize / 8);
+    let mut piece = Vec::with_capacity(1 << 20);
+    loop {
+        piece.clear();
+        if (&mut file).take(1 << 20).read_to_end(&mut piece)? == 0 {
+            return Ok(y);
+        }
+        y.extend(
+            piece
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().unwrap())),
+        );
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -11,15 +31,10 @@ fn main() {
         eprintln!("usage: oadev_file FILE RATE_HZ");
         std::process::exit(2);
     };
-    let bytes = std::fs::read(path).unwrap_or_else(|e| {
+    let y = read_f64(path).unwrap_or_else(|e| {
         eprintln!("{path}: {e}");
         std::process::exit(1);
     });
-    let y: Vec<f64> = bytes
-        .chunks_exact(8)
-        .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
-        .collect();
-    drop(bytes);
     let t = std::time::Instant::now();
     match deviation(&y, 1.0 / rate, Stat::Oadev, &TauSet::Octave) {
         Ok(rows) => {

@@ -219,6 +219,7 @@ pub struct Row {
 }
 
 /// Phase in "rate × samples" units with the mean rate removed and a leading 0.
+#[cfg(test)]
 fn phase_from_rate(y: &[f64]) -> Vec<f64> {
     let mean = y.iter().sum::<f64>() / y.len() as f64;
     let mut x = Vec::with_capacity(y.len() + 1);
@@ -229,6 +230,78 @@ fn phase_from_rate(y: &[f64]) -> Vec<f64> {
         x.push(acc);
     }
     x
+}
+
+/// Σ (v − shift) in eight independent lanes (vectorisable; the order differs from a
+/// sequential sum only in rounding).
+fn lane_sum(y: &[f64], shift: f64) -> f64 {
+    let mut acc = [0.0f64; LANES];
+    let mut c = y.chunks_exact(LANES);
+    for v in &mut c {
+        for l in 0..LANES {
+            acc[l] += v[l] - shift;
+        }
+    }
+    acc.iter().sum::<f64>() + c.remainder().iter().map(|v| v - shift).sum::<f64>()
+}
+
+/// The same phase as [`phase_from_rate`] (equal up to rounding), built on all cores: each
+/// core sums its share of the samples, then writes its share of the cumulative sum starting
+/// from the sum of the shares before it. The sums are taken about the first sample, so a
+/// large mean rate (gravity on an accelerometer) does not cost the shares' starting values
+/// their low bits. The zeroed buffer is fresh from the allocator, so its pages are first
+/// touched (and faulted in) by the cores that write them. Checks the input on the way: a
+/// non-finite sample makes the total non-finite, and only then is it looked for.
+fn phase_from_rate_checked(y: &[f64]) -> Result<Vec<f64>, AllanError> {
+    let threads = cores().min(y.len() / (1 << 16)).max(1);
+    let chunk = y.len().div_ceil(threads).max(1);
+    let shift = y.first().copied().unwrap_or(0.0);
+    let sums: Vec<f64> = if threads == 1 {
+        vec![lane_sum(y, shift)]
+    } else {
+        std::thread::scope(|s| {
+            let hs: Vec<_> = y
+                .chunks(chunk)
+                .map(|c| s.spawn(move || lane_sum(c, shift)))
+                .collect();
+            hs.into_iter()
+                .map(|h| h.join().expect("worker panicked"))
+                .collect()
+        })
+    };
+    let total: f64 = sums.iter().sum();
+    if !(total.is_finite() && shift.is_finite()) {
+        if let Some(index) = y.iter().position(|v| !v.is_finite()) {
+            return Err(AllanError::NotFinite { index });
+        }
+    }
+    if y.len() < 3 {
+        return Err(AllanError::TooShort {
+            samples: y.len(),
+            needed: 3,
+        });
+    }
+    let mean = shift + total / y.len() as f64;
+    let mut x = vec![0.0f64; y.len() + 1];
+    let fill = |out: &mut [f64], ys: &[f64], mut acc: f64| {
+        for (o, v) in out.iter_mut().zip(ys) {
+            acc += v - mean;
+            *o = acc;
+        }
+    };
+    if threads == 1 {
+        fill(&mut x[1..], y, 0.0);
+    } else {
+        std::thread::scope(|s| {
+            let mut start = 0.0;
+            for ((out, ys), sum) in x[1..].chunks_mut(chunk).zip(y.chunks(chunk)).zip(&sums) {
+                let acc = start;
+                s.spawn(move || fill(out, ys, acc));
+                start += sum - ys.len() as f64 * (mean - shift);
+            }
+        });
+    }
+    Ok(x)
 }
 
 fn check(y: &[f64], tau0: f64) -> Result<(), AllanError> {
@@ -283,7 +356,43 @@ fn overlapping_sum(x: &[f64], m: usize, d: u32) -> f64 {
 
 /// Add the squared d-th differences at lag m for start indices `i0..i1` into `acc`; returns
 /// the sum of the part that does not fill a whole lane group.
+///
+/// On x86-64 CPUs with AVX2 and FMA (checked at run time, cached by std) a copy compiled for
+/// them runs: four lanes a register and fused multiply-adds, which round once where the
+/// portable code rounds twice (a difference in the last bit of a term).
 fn accumulate(x: &[f64], m: usize, d: u32, i0: usize, i1: usize, acc: &mut [f64; LANES]) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has the features the copy was compiled for.
+        return unsafe { accumulate_avx2_fma(x, m, d, i0, i1, acc) };
+    }
+    accumulate_lanes::<false>(x, m, d, i0, i1, acc)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn accumulate_avx2_fma(
+    x: &[f64],
+    m: usize,
+    d: u32,
+    i0: usize,
+    i1: usize,
+    acc: &mut [f64; LANES],
+) -> f64 {
+    accumulate_lanes::<true>(x, m, d, i0, i1, acc)
+}
+
+/// The body of [`accumulate`]; `FMA` only where the target has fused multiply-add in hardware
+/// (elsewhere `mul_add` is a slow library call).
+#[inline(always)]
+fn accumulate_lanes<const FMA: bool>(
+    x: &[f64],
+    m: usize,
+    d: u32,
+    i0: usize,
+    i1: usize,
+    acc: &mut [f64; LANES],
+) -> f64 {
     let n = i1 - i0;
     let mut tail = 0.0;
     if d == 2 {
@@ -297,8 +406,13 @@ fn accumulate(x: &[f64], m: usize, d: u32, i0: usize, i1: usize, acc: &mut [f64;
         let mut cc = c.chunks_exact(LANES);
         for ((a, b), c) in (&mut ca).zip(&mut cb).zip(&mut cc) {
             for l in 0..LANES {
-                let v = c[l] - 2.0 * b[l] + a[l];
-                acc[l] += v * v;
+                if FMA {
+                    let v = (-2.0f64).mul_add(b[l], c[l]) + a[l];
+                    acc[l] = v.mul_add(v, acc[l]);
+                } else {
+                    let v = c[l] - 2.0 * b[l] + a[l];
+                    acc[l] += v * v;
+                }
             }
         }
         for ((a, b), c) in ca
@@ -323,8 +437,13 @@ fn accumulate(x: &[f64], m: usize, d: u32, i0: usize, i1: usize, acc: &mut [f64;
         let mut ce = e.chunks_exact(LANES);
         for (((a, b), c), e) in (&mut ca).zip(&mut cb).zip(&mut cc).zip(&mut ce) {
             for l in 0..LANES {
-                let v = e[l] - 3.0 * c[l] + 3.0 * b[l] - a[l];
-                acc[l] += v * v;
+                if FMA {
+                    let v = 3.0f64.mul_add(b[l] - c[l], e[l] - a[l]);
+                    acc[l] = v.mul_add(v, acc[l]);
+                } else {
+                    let v = e[l] - 3.0 * c[l] + 3.0 * b[l] - a[l];
+                    acc[l] += v * v;
+                }
             }
         }
         for (((a, b), c), e) in ca
@@ -341,34 +460,93 @@ fn accumulate(x: &[f64], m: usize, d: u32, i0: usize, i1: usize, acc: &mut [f64;
     tail
 }
 
-/// Start indices per block of the cache-blocked pass, and the largest lag span it takes:
-/// a block reads `BLOCK + d·m` phase values, ≤ 160 KiB, which stay in L2 while every small m
-/// is summed over them, so the phase streams from memory once for all the small levels.
-const BLOCK: usize = 4096;
-const BLOCKED_SPAN: usize = 16384;
+/// Start indices per block of the fused pass. A block reads `BLOCK` phase values at each
+/// shift k·m (k = 0 … d) and sums every m of the group over them; for octave m the shift 2m
+/// of one m is the shift m of the next (still in L1), so 22 octaves read 23 shifted blocks of
+/// 16 KiB, those up to a few MiB ahead already in L2 from earlier blocks, the farthest from
+/// L3. One pass serves every m instead of one pass per m.
+const BLOCK: usize = 2048;
+/// Most m summed in one fused pass (more shifted blocks would fall out of L2).
+const FUSED_MAX: usize = 32;
 
-/// Fully overlapping sums for several small m in one cache-blocked pass over the phase.
-fn overlapping_sums_blocked(x: &[f64], ms: &[usize], d: u32) -> Vec<f64> {
+/// Largest m whose noise-identification sums ride along the fused pass; beyond it the
+/// averages are few and far apart and a pass of their own costs little.
+const ACF_FUSED_MAX: usize = 256;
+
+/// Fully overlapping sums of squared d-th differences for every m in `ms` over the start
+/// indices `lo..hi` (each m clipped to its own last start), in one cache-blocked pass, and the
+/// noise-identification sums ([`noise_id::AvgSums`]) of the averages over the first `acf` of
+/// the `ms` that start in `lo..hi` (to the end of the record when `tail`).
+fn overlapping_partial(
+    x: &[f64],
+    ms: &[usize],
+    d: u32,
+    (lo, hi): (usize, usize),
+    acf: usize,
+    tail: bool,
+) -> (Vec<f64>, Vec<noise_id::AvgSums>) {
     let mut acc = vec![[0.0f64; LANES]; ms.len()];
     let mut tails = vec![0.0f64; ms.len()];
+    let mut avg = vec![noise_id::AvgSums::default(); acf];
     let ends: Vec<usize> = ms
         .iter()
-        .map(|&m| x.len().saturating_sub(d as usize * m))
+        .map(|&m| x.len().saturating_sub(d as usize * m).min(hi))
         .collect();
-    let last = ends.iter().copied().max().unwrap_or(0);
-    let mut i0 = 0;
-    while i0 < last {
+    let mut i0 = lo;
+    while i0 < hi {
+        let i1 = (i0 + BLOCK).min(hi);
         for (k, &m) in ms.iter().enumerate() {
-            let i1 = (i0 + BLOCK).min(ends[k]);
-            if i1 > i0 {
-                tails[k] += accumulate(x, m, d, i0, i1, &mut acc[k]);
+            let e = i1.min(ends[k]);
+            if e > i0 {
+                tails[k] += accumulate(x, m, d, i0, e, &mut acc[k]);
             }
         }
-        i0 += BLOCK;
+        for (a, &m) in avg.iter_mut().zip(ms) {
+            let j1 = if tail && i1 == hi {
+                usize::MAX
+            } else {
+                i1.div_ceil(m)
+            };
+            a.add(x, m, i0.div_ceil(m), j1);
+        }
+        i0 = i1;
     }
-    acc.iter()
+    let sums = acc
+        .iter()
         .zip(tails)
         .map(|(a, t)| a.iter().sum::<f64>() + t)
+        .collect();
+    (sums, avg)
+}
+
+/// Split the start indices of the fused pass over `ms` into `pieces` ranges of about equal
+/// work (m has `len − d·m` starts, so the ranges near the end serve fewer m).
+fn split_work(len: usize, ms: &[usize], d: u32, pieces: usize) -> Vec<(usize, usize)> {
+    let ends: Vec<usize> = ms
+        .iter()
+        .map(|&m| len.saturating_sub(d as usize * m))
+        .collect();
+    let last = ends.iter().copied().max().unwrap_or(0);
+    let work = |a: usize| ends.iter().map(|&e| e.min(a) as u128).sum::<u128>();
+    let total = work(last);
+    let mut cuts = vec![0usize];
+    for p in 1..pieces {
+        let target = total * p as u128 / pieces as u128;
+        let (mut lo, mut hi) = (*cuts.last().unwrap(), last);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            if work(mid) < target {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        cuts.push(lo);
+    }
+    cuts.push(last);
+    cuts.windows(2)
+        .filter(|w| w[1] > w[0])
+        .map(|w| (w[0], w[1]))
         .collect()
 }
 
@@ -424,8 +602,10 @@ fn largest_m(stat: Stat, np: u64) -> u64 {
 /// `taus`, each row with its EDF and 68.3 % bounds. Rows with fewer than 2 terms are dropped
 /// (as AllanTools does).
 pub fn deviation(y: &[f64], tau0: f64, stat: Stat, taus: &TauSet) -> Result<Vec<Row>, AllanError> {
-    check(y, tau0)?;
-    let x = phase_from_rate(y);
+    if !(tau0 > 0.0 && tau0.is_finite()) {
+        return Err(AllanError::BadTau0(tau0));
+    }
+    let x = phase_from_rate_checked(y)?;
     deviation_of_phase(&x, tau0, stat, taus)
 }
 
@@ -441,6 +621,39 @@ pub fn deviation_from_phase(
     deviation_of_phase(&xs, tau0, stat, taus)
 }
 
+/// A unit of work of [`deviation_of_phase`], in the order handed to the cores (costliest first).
+enum Job {
+    /// Fused overlapping sums (and identification sums) of group `group` over start indices
+    /// `range`; `tail` for the last range.
+    Fused {
+        group: usize,
+        range: (usize, usize),
+        tail: bool,
+    },
+    /// The sum of the statistic at row `row` on its own.
+    Single { row: usize },
+    /// Noise identification at row `row` on its own.
+    Identify { row: usize },
+}
+
+enum Done {
+    Fused(Vec<f64>, Vec<noise_id::AvgSums>),
+    Single(f64),
+    Identify(Ident),
+}
+
+/// What the per-τ noise identification found before the rows are put in order.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Ident {
+    /// An exponent (or nothing identifiable).
+    Alpha(Option<i32>),
+    /// B1 says phase modulation; white (2) or flicker (1) needs the measured R(n), which is
+    /// computed only if the exponent ceiling of the shorter τ leaves the choice open.
+    Pm,
+    /// The lag-1 ACF sums come from the fused pass.
+    Fused,
+}
+
 fn deviation_of_phase(
     x: &[f64],
     tau0: f64,
@@ -448,57 +661,125 @@ fn deviation_of_phase(
     taus: &TauSet,
 ) -> Result<Vec<Row>, AllanError> {
     let np = x.len() as u64;
-    let ms = taus.ms(largest_m(stat, np))?;
-    // The sums dominate the cost. Small-lag overlapping sums share one cache-blocked pass;
-    // the rest are independent per m; the work items are spread over the cores.
+    let ms: Vec<u64> = taus
+        .ms(largest_m(stat, np))?
+        .into_iter()
+        .filter(|&m| stat_norm(x.len(), m as usize, stat).0 >= 2)
+        .collect();
     let d = stat.difference_order();
-    let blocked: Vec<usize> = match stat {
-        Stat::Oadev | Stat::Ohdev => ms
-            .iter()
-            .map(|&m| m as usize)
-            .filter(|&m| d as usize * m <= BLOCKED_SPAN && x.len() > d as usize * m)
-            .collect(),
-        _ => Vec::new(),
+    // Overlapping sums: fused passes over groups of m, each split by start index over the
+    // cores, carrying the identification sums of the short τ; the other statistics one m at a
+    // time. Identification of the rest is O(N/m) per m.
+    let fused = matches!(stat, Stat::Oadev | Stat::Ohdev);
+    let groups: Vec<&[u64]> = if fused {
+        ms.chunks(FUSED_MAX).collect()
+    } else {
+        Vec::new()
     };
-    let mut items: Vec<Option<u64>> = vec![None];
-    items.extend(
-        ms.iter()
-            .filter(|&&m| !blocked.contains(&(m as usize)))
-            .map(|&m| Some(m)),
-    );
-    let parts = par_map(&items, |item| match item {
-        None => overlapping_sums_blocked(x, &blocked, d),
-        Some(m) => vec![stat_sum(x, *m as usize, stat)],
-    });
-    let mut by_m = std::collections::HashMap::new();
-    for (item, part) in items.iter().zip(parts) {
-        match item {
-            None => by_m.extend(blocked.iter().map(|&m| m as u64).zip(part)),
-            Some(m) => {
-                by_m.insert(*m, part[0]);
-            }
+    let group_ms: Vec<Vec<usize>> = groups
+        .iter()
+        .map(|g| g.iter().map(|&m| m as usize).collect())
+        .collect();
+    let acf_fused = |m: u64| {
+        m as usize <= ACF_FUSED_MAX
+            && noise_id::averages(x.len(), m as usize) >= noise_id::ACF_MIN_AVERAGES
+    };
+    // Fused identification sums are taken for a prefix of each group (ascending m).
+    let group_acf: Vec<usize> = groups
+        .iter()
+        .map(|g| g.iter().take_while(|&&m| acf_fused(m)).count())
+        .collect();
+    let mut jobs = Vec::new();
+    for (g, group) in group_ms.iter().enumerate() {
+        let ranges = split_work(x.len(), group, d, 2 * cores());
+        let last = ranges.len().saturating_sub(1);
+        for (k, &range) in ranges.iter().enumerate() {
+            let tail = k == last;
+            jobs.push(Job::Fused {
+                group: g,
+                range,
+                tail,
+            });
         }
     }
-    let sums: Vec<(f64, u64, f64)> = ms
-        .iter()
-        .map(|&m| {
-            let (n, denom) = stat_norm(x.len(), m as usize, stat);
-            (by_m[&m], n, denom)
-        })
-        .collect();
+    if !fused {
+        jobs.extend((0..ms.len()).map(|row| Job::Single { row }));
+    }
+    let mut idents = vec![Ident::Alpha(None); ms.len()];
+    for (g, &count) in group_acf.iter().enumerate() {
+        let first = g * FUSED_MAX;
+        idents[first..first + count].fill(Ident::Fused);
+    }
+    jobs.extend(
+        (0..ms.len())
+            .filter(|&row| idents[row] != Ident::Fused)
+            .map(|row| Job::Identify { row }),
+    );
+    let done = par_map(&jobs, |job| match *job {
+        Job::Fused { group, range, tail } => {
+            let (s, a) = overlapping_partial(x, &group_ms[group], d, range, group_acf[group], tail);
+            Done::Fused(s, a)
+        }
+        Job::Single { row } => Done::Single(stat_sum(x, ms[row] as usize, stat)),
+        Job::Identify { row } => Done::Identify(identify(x, ms[row] as usize, d)),
+    });
+    let mut sums = vec![0.0f64; ms.len()];
+    let mut avg = vec![noise_id::AvgSums::default(); ms.len()];
+    for (job, out) in jobs.iter().zip(done) {
+        match (job, out) {
+            (Job::Fused { group, .. }, Done::Fused(part, a)) => {
+                let first = group * FUSED_MAX;
+                for (k, v) in part.into_iter().enumerate() {
+                    sums[first + k] += v;
+                }
+                for (k, v) in a.iter().enumerate() {
+                    avg[first + k].merge(v);
+                }
+            }
+            (Job::Single { row }, Done::Single(v)) => sums[*row] = v,
+            (Job::Identify { row }, Done::Identify(id)) => idents[*row] = id,
+            _ => unreachable!("job and result kinds match"),
+        }
+    }
+    for (row, id) in idents.iter_mut().enumerate() {
+        if *id == Ident::Fused {
+            let m = ms[row] as usize;
+            *id = Ident::Alpha(noise_id::acf_alpha_from_sums(x, m, d, &avg[row]));
+        }
+    }
     let mut rows = Vec::with_capacity(ms.len());
     let mut ceiling = None;
-    for (m, (sum, n, denom)) in ms.into_iter().zip(sums) {
-        if n < 2 {
-            continue;
-        }
+    for (row, &m) in ms.iter().enumerate() {
+        let (n, denom) = stat_norm(x.len(), m as usize, stat);
+        let sum = sums[row];
         let mf = m as f64;
         let mut dev = (sum / (denom * n as f64)).sqrt();
         let tau = mf * tau0;
         if stat == Stat::Tdev {
             dev *= tau / 3f64.sqrt();
         }
-        let alpha = redder(identify(x, m as usize, stat), &mut ceiling);
+        let identified = match idents[row] {
+            Ident::Alpha(a) => a,
+            Ident::Fused => unreachable!("resolved above"),
+            // Either answer is capped by a ceiling of 1 or less: R(n) would change nothing.
+            Ident::Pm if m == 1 || ceiling.is_some_and(|c| c <= 1) => Some(2),
+            Ident::Pm => {
+                let m = m as usize;
+                let (sa, na) = if stat == Stat::Oadev {
+                    (sum, n)
+                } else {
+                    diff_sum(x, m, 2, 1)
+                };
+                let (sm, nm) = mod_sum(x, m);
+                let rn = (na > 0 && nm > 0 && sa > 0.0)
+                    .then(|| (sm / (m as f64).powi(2) / nm as f64) / (sa / na as f64));
+                Some(noise_id::pm_alpha(m, rn))
+            }
+        };
+        let alpha = redder(
+            identified.map(|a| a.clamp(2 - 2 * d as i32, 2)),
+            &mut ceiling,
+        );
         let edf = edf_for(stat, alpha, mf, np as f64);
         let (lo, hi) = bounds(dev, edf);
         rows.push(Row {
@@ -557,27 +838,30 @@ fn stat_sum(x: &[f64], m: usize, stat: Stat) -> f64 {
     }
 }
 
-/// `f` over `items` on all available cores (scoped threads, round-robin so that the costly
-/// small-m and cheap large-m items mix), results in input order.
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// `f` over `items` on all available cores (scoped threads, each taking the next untaken item,
+/// so with the costliest items first the cores finish together), results in input order.
 fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    let threads = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(items.len().max(1));
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let threads = cores().min(items.len().max(1));
     if threads <= 1 {
         return items.iter().map(&f).collect();
     }
-    let f = &f;
+    let (f, next) = (&f, &AtomicUsize::new(0));
     let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|s| {
         let handles: Vec<_> = (0..threads)
-            .map(|t| {
+            .map(|_| {
                 s.spawn(move || {
-                    items
-                        .iter()
-                        .enumerate()
-                        .skip(t)
-                        .step_by(threads)
-                        .map(|(i, it)| (i, f(it)))
-                        .collect::<Vec<_>>()
+                    let mut out = Vec::new();
+                    loop {
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        let Some(it) = items.get(i) else { break };
+                        out.push((i, f(it)));
+                    }
+                    out
                 })
             })
             .collect();
@@ -618,21 +902,20 @@ fn redder(identified: Option<i32>, ceiling: &mut Option<i32>) -> i32 {
     alpha
 }
 
-/// Noise exponent at averaging factor m: lag-1 ACF with ≥ 30 averages, else B1 with R(n).
+/// Noise exponent at averaging factor m: lag-1 ACF with ≥ 30 averages, else B1 (R(n) left to
+/// the caller, see [`Ident::Pm`]).
 ///
-/// `None` when too few averages remain for either method; the caller then keeps the exponent of
-/// the previous (shorter) τ, or white FM (0) if there is none.
-fn identify(x: &[f64], m: usize, stat: Stat) -> Option<i32> {
-    let d = stat.difference_order();
-    let alpha = noise_id::acf_alpha(x, m, d).or_else(|| {
-        noise_id::b1_alpha(x, m, || {
-            let (sa, na) = diff_sum(x, m, 2, 1);
-            let (sm, nm) = mod_sum(x, m);
-            (na > 0 && nm > 0 && sa > 0.0)
-                .then(|| (sm / (m as f64).powi(2) / nm as f64) / (sa / na as f64))
-        })
-    });
-    alpha.map(|a| a.clamp(2 - 2 * d as i32, 2))
+/// `Alpha(None)` when too few averages remain for either method; the caller then keeps the
+/// exponent of the previous (shorter) τ, or white FM (0) if there is none.
+fn identify(x: &[f64], m: usize, d: u32) -> Ident {
+    if let Some(a) = noise_id::acf_alpha_from_phase(x, m, d) {
+        return Ident::Alpha(Some(a));
+    }
+    match noise_id::b1_mu(x, m) {
+        None => Ident::Alpha(None),
+        Some(-2) => Ident::Pm,
+        Some(mu) => Ident::Alpha(Some(-mu - 1)),
+    }
 }
 
 fn edf_for(stat: Stat, alpha: i32, m: f64, np: f64) -> f64 {
@@ -763,7 +1046,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn term_counts_match_the_sums_and_blocking_matches_direct() {
+    fn term_counts_match_the_sums() {
         let x: Vec<f64> = (0..2000)
             .map(|i| ((i * 7919) % 1009) as f64 * 0.01 - (i as f64).sqrt())
             .collect();
@@ -782,14 +1065,159 @@ mod tests {
                 }
             }
         }
-        let ms = [1usize, 2, 4, 8, 64, 512];
-        for d in [2, 3] {
-            let blocked = overlapping_sums_blocked(&x, &ms, d);
-            for (k, &m) in ms.iter().enumerate() {
-                let direct = diff_sum(&x, m, d, 1).0;
-                assert!((blocked[k] / direct - 1.0).abs() < 1e-12, "d={d} m={m}");
+    }
+
+    fn rng(seed: u32) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            s as f64 / 4_294_967_296.0 - 0.5
+        }
+    }
+
+    /// Σ over i0..i1 of the squared d-th difference at lag m, term by term.
+    fn straightforward(x: &[f64], m: usize, d: u32, i0: usize, i1: usize) -> f64 {
+        (i0..i1)
+            .map(|i| {
+                let v = if d == 2 {
+                    x[i + 2 * m] - 2.0 * x[i + m] + x[i]
+                } else {
+                    x[i + 3 * m] - 3.0 * x[i + 2 * m] + 3.0 * x[i + m] - x[i]
+                };
+                v * v
+            })
+            .sum()
+    }
+
+    #[test]
+    fn difference_kernels_match_the_formula_on_random_data() {
+        let mut u = rng(0x1234_5678);
+        let mut acc = 0.0;
+        let x: Vec<f64> = (0..30_011)
+            .map(|_| {
+                acc += 9.81 + u();
+                acc
+            })
+            .collect();
+        for d in [2u32, 3] {
+            for (m, i0, i1) in [
+                (1usize, 0usize, 29_000usize),
+                (3, 5, 13),
+                (64, 101, 20_000),
+                (997, 7, 27_000),
+            ] {
+                let want = straightforward(&x, m, d, i0, i1);
+                let mut lanes = [0.0; LANES];
+                let tail = accumulate_lanes::<false>(&x, m, d, i0, i1, &mut lanes);
+                let portable = lanes.iter().sum::<f64>() + tail;
+                let mut lanes = [0.0; LANES];
+                let tail = accumulate(&x, m, d, i0, i1, &mut lanes);
+                let dispatched = lanes.iter().sum::<f64>() + tail;
+                for got in [portable, dispatched] {
+                    assert!(
+                        (got / want - 1.0).abs() < 1e-11,
+                        "d={d} m={m}: {got} vs {want}"
+                    );
+                }
             }
         }
+    }
+
+    #[test]
+    fn fused_pass_matches_direct_sums_however_split() {
+        let mut u = rng(0x0bad_cafe);
+        let mut acc = 0.0;
+        let x: Vec<f64> = (0..50_001)
+            .map(|i| {
+                acc += u() + if i % 7000 < 3500 { 0.1 } else { -0.1 };
+                acc
+            })
+            .collect();
+        for d in [2u32, 3] {
+            for ms in [
+                vec![
+                    1usize, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192,
+                ],
+                vec![1, 3, 10, 30, 100, 5000, 16_000],
+            ] {
+                let n_acf = ms
+                    .iter()
+                    .take_while(|&&m| noise_id::averages(x.len(), m) >= 30)
+                    .count();
+                for pieces in [1usize, 2, 5] {
+                    let ranges = split_work(x.len(), &ms, d, pieces);
+                    let mut sums = vec![0.0; ms.len()];
+                    let mut avg = vec![noise_id::AvgSums::default(); n_acf];
+                    for (k, &r) in ranges.iter().enumerate() {
+                        let (s, a) =
+                            overlapping_partial(&x, &ms, d, r, n_acf, k + 1 == ranges.len());
+                        sums.iter_mut().zip(s).for_each(|(t, v)| *t += v);
+                        avg.iter_mut().zip(&a).for_each(|(t, v)| t.merge(v));
+                    }
+                    for (k, &m) in ms.iter().enumerate() {
+                        let want = straightforward(&x, m, d, 0, x.len() - d as usize * m);
+                        assert!(
+                            (sums[k] / want - 1.0).abs() < 1e-11,
+                            "d={d} m={m} pieces={pieces}"
+                        );
+                        if k < n_acf {
+                            let mut whole = noise_id::AvgSums::default();
+                            whole.add(&x, m, 0, usize::MAX);
+                            let (a, b) = (avg[k], whole);
+                            for (p, q) in [
+                                (a.sb, b.sb),
+                                (a.stb, b.stb),
+                                (a.sbb, b.sbb),
+                                (a.sbb1, b.sbb1),
+                            ] {
+                                assert!(
+                                    (p - q).abs() <= 1e-9 * q.abs().max(1.0),
+                                    "m={m}: {p} vs {q}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_phase_matches_the_sequential_one_and_checks_the_input() {
+        let mut u = rng(0x5eed);
+        let y: Vec<f64> = (0..300_000).map(|_| 9.81 + u()).collect();
+        let (a, b) = (phase_from_rate(&y), phase_from_rate_checked(&y).unwrap());
+        assert_eq!(a.len(), b.len());
+        // Both round: a sequential sum of n samples near ȳ is itself uncertain by ~n·|ȳ|·ε.
+        // A different rounding of the mean is a linear phase (no difference sees it), so that
+        // is taken out before comparing.
+        let tol = 4.0 * y.len() as f64 * 9.81 * f64::EPSILON;
+        let n = y.len() as f64;
+        let drift = (a[y.len()] - b[y.len()]) / n;
+        for (k, (p, q)) in a.iter().zip(&b).enumerate() {
+            let e = p - q - drift * k as f64;
+            assert!(e.abs() < tol, "k = {k}: {p} vs {q}");
+        }
+        let mut bad = y.clone();
+        bad[200_000] = f64::NAN;
+        bad[250_000] = f64::INFINITY;
+        assert_eq!(
+            phase_from_rate_checked(&bad),
+            Err(AllanError::NotFinite { index: 200_000 })
+        );
+        assert_eq!(
+            phase_from_rate_checked(&[1.0, 2.0]),
+            Err(AllanError::TooShort {
+                samples: 2,
+                needed: 3
+            })
+        );
+        assert_eq!(
+            phase_from_rate_checked(&[1.0, f64::NAN]),
+            Err(AllanError::NotFinite { index: 1 })
+        );
     }
 
     #[test]
