@@ -86,9 +86,9 @@ pub fn averages(np: usize, m: usize) -> usize {
 /// `out[k] = (x[(j0+k+1)m] − x[(j0+k)m])/m`, the averages of the rate over `m` samples.
 fn fill_means(x: &[f64], m: usize, inv: f64, j0: usize, out: &mut [f64]) {
     if m == 1 {
-        let xs = &x[j0..=j0 + out.len()];
-        for (o, w) in out.iter_mut().zip(xs.windows(2)) {
-            *o = (w[1] - w[0]) * inv;
+        let (lo, hi) = (&x[j0..j0 + out.len()], &x[j0 + 1..=j0 + out.len()]);
+        for ((o, a), b) in out.iter_mut().zip(lo).zip(hi) {
+            *o = (b - a) * inv;
         }
     } else {
         let mut prev = x[j0 * m];
@@ -128,6 +128,81 @@ fn moments(v: &[f64], own: usize, pairs: usize) -> (f64, f64, f64) {
     }
     let sum = |a: [f64; 4]| (a[0] + a[1]) + (a[2] + a[3]);
     (sum(s), sum(q), sum(p))
+}
+
+/// `[Σ v, Σ v², Σ v_k·v_{k+1}, Σ t_k·v_k]` over `k < own` (the lag products over `k < pairs`)
+/// of `v_k = b_k − (a0 + s0·t_k)`, `t_k = t0 + k`: the [`AvgSums`] of one chunk of averages.
+fn chunk_sums(b: &[f64], own: usize, pairs: usize, t0: f64, a0: f64, s0: f64) -> [f64; 4] {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has the features the copy was compiled for.
+        return unsafe { chunk_sums_avx2_fma(b, own, pairs, t0, a0, s0) };
+    }
+    chunk_sums_portable(b, own, pairs, t0, a0, s0)
+}
+
+fn chunk_sums_portable(b: &[f64], own: usize, pairs: usize, t0: f64, a0: f64, s0: f64) -> [f64; 4] {
+    let mut out = [0.0f64; 4];
+    for k in 0..own {
+        let t = t0 + k as f64;
+        let v = b[k] - (a0 + s0 * t);
+        out[0] += v;
+        out[1] += v * v;
+        if k < pairs {
+            out[2] += v * (b[k + 1] - (a0 + s0 * (t + 1.0)));
+        }
+        out[3] += t * v;
+    }
+    out
+}
+
+/// [`chunk_sums`] in AVX2 registers with fused multiply-adds (intrinsics, so it vectorises at
+/// any optimisation level).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn chunk_sums_avx2_fma(b: &[f64], own: usize, pairs: usize, t0: f64, a0: f64, s0: f64) -> [f64; 4] {
+    use std::arch::x86_64::*;
+    assert!(pairs <= own && own <= b.len() && (pairs == 0 || pairs < b.len()));
+    // Vectors of four k, each needing b[k + 1]: whole groups below `pairs`.
+    let full = pairs / 4 * 4;
+    let p = b.as_ptr();
+    let mut out = [0.0f64; 4];
+    // SAFETY: loads read b[k .. k + 5] with k + 4 ≤ full ≤ pairs < b.len().
+    unsafe {
+        let zero = _mm256_setzero_pd();
+        let (mut s, mut q, mut pr, mut st) = (zero, zero, zero, zero);
+        let (va0, vs0) = (_mm256_set1_pd(a0), _mm256_set1_pd(s0));
+        let mut t = _mm256_add_pd(_mm256_set1_pd(t0), _mm256_setr_pd(0.0, 1.0, 2.0, 3.0));
+        let mut k = 0;
+        while k < full {
+            let line = _mm256_fmadd_pd(vs0, t, va0);
+            let v = _mm256_sub_pd(_mm256_loadu_pd(p.add(k)), line);
+            let next = _mm256_sub_pd(_mm256_loadu_pd(p.add(k + 1)), _mm256_add_pd(line, vs0));
+            s = _mm256_add_pd(s, v);
+            q = _mm256_fmadd_pd(v, v, q);
+            pr = _mm256_fmadd_pd(v, next, pr);
+            st = _mm256_fmadd_pd(t, v, st);
+            t = _mm256_add_pd(t, _mm256_set1_pd(4.0));
+            k += 4;
+        }
+        for (o, r) in out.iter_mut().zip([s, q, pr, st]) {
+            let mut lanes = [0.0f64; 4];
+            _mm256_storeu_pd(lanes.as_mut_ptr(), r);
+            *o = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+        }
+    }
+    let rest = chunk_sums_portable(
+        &b[full..],
+        own - full,
+        pairs - full,
+        t0 + full as f64,
+        a0,
+        s0,
+    );
+    for (o, r) in out.iter_mut().zip(rest) {
+        *o += r;
+    }
+    out
 }
 
 /// A rough line `(a0, s0)` through the `n` averages over `m` samples, `a0 + s0·(j − tm)`:
@@ -179,27 +254,11 @@ impl AvgSums {
             let len = (own + 1).min(n - j);
             let b = &mut b[..len];
             fill_means(x, m, inv, j, b);
-            let t0 = j as f64 - tm;
-            for (k, v) in b.iter_mut().enumerate() {
-                *v -= a0 + s0 * (t0 + k as f64);
-            }
-            let (sb, sbb, sbb1) = moments(b, own, own.min(len - 1));
+            let [sb, sbb, sbb1, stb] = chunk_sums(b, own, own.min(len - 1), j as f64 - tm, a0, s0);
             self.sb += sb;
             self.sbb += sbb;
             self.sbb1 += sbb1;
-            let mut st = [0.0f64; 4];
-            let mut t = t0;
-            let mut c = b[..own].chunks_exact(4);
-            for w in &mut c {
-                for l in 0..4 {
-                    st[l] += (t + l as f64) * w[l];
-                }
-                t += 4.0;
-            }
-            for (k, w) in c.remainder().iter().enumerate() {
-                st[0] += (t + k as f64) * w;
-            }
-            self.stb += (st[0] + st[1]) + (st[2] + st[3]);
+            self.stb += stb;
             j += own;
         }
     }
@@ -452,6 +511,40 @@ mod tests {
             z = z.windows(2).map(|w| w[1] - w[0]).collect();
         }
         r
+    }
+
+    #[test]
+    fn chunk_kernel_matches_the_formula_on_random_data() {
+        let mut u = rng(99);
+        let b: Vec<f64> = (0..300).map(|_| 5.0 + u()).collect();
+        for (own, pairs) in [(299usize, 299usize), (299, 298), (7, 7), (64, 63), (0, 0)] {
+            let (t0, a0, s0) = (-120.5, 5.01, 0.003);
+            let mut want = [0.0f64; 4];
+            for k in 0..own {
+                let t = t0 + k as f64;
+                let v = b[k] - (a0 + s0 * t);
+                want[0] += v;
+                want[1] += v * v;
+                want[3] += t * v;
+                if k < pairs {
+                    want[2] += v * (b[k + 1] - (a0 + s0 * (t + 1.0)));
+                }
+            }
+            for got in [
+                chunk_sums(&b, own, pairs, t0, a0, s0),
+                chunk_sums_portable(&b, own, pairs, t0, a0, s0),
+            ] {
+                for k in 0..4 {
+                    let scale = want[k].abs().max(1.0);
+                    assert!(
+                        (got[k] - want[k]).abs() < 1e-12 * scale * own.max(1) as f64,
+                        "own={own} sum {k}: {} vs {}",
+                        got[k],
+                        want[k]
+                    );
+                }
+            }
+        }
     }
 
     #[test]
