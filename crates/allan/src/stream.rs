@@ -80,46 +80,79 @@ impl LevelSums {
     }
 }
 
-/// An exact 128-bit sum kept as two u64 words, so that adding a 64-bit square costs one 64-bit
-/// add and a rarely taken carry (a `u128 +=` touches four words on the M0+).
+/// An exact 128-bit sum kept as four u32 words (least significant first). Adding a square
+/// below 2^32 — every |D| < 2^16, the common case — is one 32-bit add and a rarely taken carry;
+/// a 64-bit square is a 64-bit add and a rarely taken carry. The M0+ has no 64-bit registers, so
+/// a `u128 +=` would touch all four words every time.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Sum128 {
-    lo: u64,
-    hi: u64,
+    w: [u32; 4],
 }
 
 impl Sum128 {
-    const ZERO: Sum128 = Sum128 { lo: 0, hi: 0 };
+    const ZERO: Sum128 = Sum128 { w: [0; 4] };
+
+    /// Carry into word 1 and up.
+    #[inline(always)]
+    fn carry1(&mut self) {
+        let (w1, c) = self.w[1].overflowing_add(1);
+        self.w[1] = w1;
+        if c {
+            self.carry2(1);
+        }
+    }
+
+    /// Add `x` into words 2 and 3 (the upper half).
+    #[inline(always)]
+    fn carry2(&mut self, x: u64) {
+        let hi = ((self.w[3] as u64) << 32 | self.w[2] as u64).wrapping_add(x);
+        self.w[2] = hi as u32;
+        self.w[3] = (hi >> 32) as u32;
+    }
+
+    #[inline(always)]
+    fn add32(&mut self, x: u32) {
+        let (w0, c) = self.w[0].overflowing_add(x);
+        self.w[0] = w0;
+        if c {
+            self.carry1();
+        }
+    }
 
     #[inline(always)]
     fn add64(&mut self, x: u64) {
-        let (lo, carry) = self.lo.overflowing_add(x);
-        self.lo = lo;
-        if carry {
-            self.hi += 1;
+        let lo = (self.w[1] as u64) << 32 | self.w[0] as u64;
+        let (lo, c) = lo.overflowing_add(x);
+        self.w[0] = lo as u32;
+        self.w[1] = (lo >> 32) as u32;
+        if c {
+            self.carry2(1);
+        }
+    }
+
+    /// Add d², d known to fit in i32: one multiply when |d| < 2^16, else three 16×16 ones.
+    #[inline(always)]
+    fn add_square32(&mut self, d: i32) {
+        let a = d.unsigned_abs();
+        if a >> 16 == 0 {
+            self.add32(a * a);
+        } else {
+            self.add64(square32(a));
         }
     }
 
     #[inline(always)]
     fn add128(&mut self, x: u128) {
         self.add64(x as u64);
-        self.hi += (x >> 64) as u64;
+        self.carry2((x >> 64) as u64);
     }
 
     fn get(&self) -> u128 {
-        (self.hi as u128) << 64 | self.lo as u128
+        self.w
+            .iter()
+            .rev()
+            .fold(0u128, |acc, &w| acc << 32 | w as u128)
     }
-}
-
-/// The exact accumulators of one level (what the engine stores; `m` and the stride are implied
-/// by the level's index). The counts of the current segment follow from its length, so only
-/// the counts of closed segments are stored and nothing is counted on the per-sample path.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Acc {
-    sum2: Sum128,
-    sum3: Sum128,
-    closed_n2: u64,
-    closed_n3: u64,
 }
 
 /// Multiples of `stride` (a power of two) in `[span, t]`: the differences a segment of `t`
@@ -132,10 +165,9 @@ fn terms(t: u64, span: u64, stride: u64) -> u64 {
     }
 }
 
-/// Square of a difference known to fit in i32: three 16×16→32 multiplies.
+/// Square of |d| for a difference known to fit in i32: three 16×16→32 multiplies.
 #[inline(always)]
-fn square32(d: i32) -> u64 {
-    let a = d.unsigned_abs();
+fn square32(a: u32) -> u64 {
     let (h, l) = (a >> 16, a & 0xffff);
     // (h·2^16 + l)² = h²·2^32 + 2hl·2^16 + l²
     (((h * h) as u64) << 32 | (l * l) as u64) + (((h * l) as u64) << 17)
@@ -160,55 +192,81 @@ fn square(d: i64) -> u128 {
 ///
 /// * `P` — overlap factor: differences per cluster length at the high levels (power of two ≥ 2).
 /// * `L` — number of octave levels (`m = 1, 2, …, 2^(L−1)`).
-/// * `R` — own-ring length per level, must equal `3P/2` (a separate parameter only because
-///   stable Rust cannot size an array by `3 * P / 2`). Use [`DeviceEngine`] for the firmware's
-///   configuration.
+/// * `R` — own-ring length per strided level, must equal `3P/2`.
+/// * `S` — number of strided levels (`m > P`), must equal `L − log2(P) − 1`.
+///
+/// `R` and `S` are separate parameters only because stable Rust cannot size an array by
+/// `3 * P / 2` or `L − log2(P) − 1`; both are checked at compile time. Use [`DeviceEngine`] and
+/// [`MagEngine`] for the firmware's configurations.
+///
+/// The layout is `repr(C)` and ordered for the Cortex-M0+, whose loads and stores reach only
+/// 124 bytes past a base register: the sums come first (the unit-stride levels' are then
+/// addressed straight from `self`), then the base ring, the per-sample scalars, the own rings
+/// and the closed counts.
 #[derive(Clone, Debug)]
-pub struct Engine<const P: usize, const L: usize, const R: usize> {
+#[repr(C)]
+pub struct Engine<const P: usize, const L: usize, const R: usize, const S: usize> {
+    /// Σ D2² and Σ D3² of each level.
+    sums: [[Sum128; 2]; L],
+    /// The base ring: the last 3P phase values, in one of two forms.
+    ///
+    /// * Narrow (`narrow ≥ K0`, i.e. max |y| < 2^(30−K0)): low words only, mirrored —
+    ///   lo θ[t − a] (1 ≤ a ≤ 3P) in word (t − a) mod 3P and again 3P words later. Any 3P
+    ///   consecutive words starting at t mod 3P are then the last 3P values in order, so the
+    ///   unit-stride levels read them at constant offsets with no wrap. A full value is
+    ///   θ[t − a] = θ[t] − (lo θ[t] − lo θ[t − a]) as i32, exact because |θ[t] − θ[t − a]| ≤
+    ///   3P·max|y| < 2^31.
+    /// * Wide (larger inputs, until the next gap): θ[t − a] as an i64 in words
+    ///   2s, 2s + 1 (low first) of slot s = (t − a) mod 3P.
+    base: [[u32; R]; 4],
     /// θ[t], wrapping.
     theta: i64,
     /// Samples pushed since the start of the current segment (θ's index).
     t: u64,
-    /// Samples pushed since the last reset, across gaps.
-    total: u64,
-    /// Number of gaps marked since the last reset.
-    gaps: u32,
-    /// Rows 0 and 1 form the base ring (3P = 2R raw phase values); rows `K0..L` are the own
-    /// rings of the strided levels. Rows `2..K0` are unused (at most `log2 P − 1` rows).
-    rings: [[i64; R]; L],
+    /// `push` takes the steady-state path for `|y| < gate`: `amax + 1` once the base ring is
+    /// full (t ≥ 3P) and every unit-stride level is narrow, else 0 (never).
+    gate: u32,
+    /// Largest |y| of this segment.
+    amax: u32,
     /// Base ring: slot of the next write (= t mod 3P).
     base_head: u8,
-    /// Own rings: slot of the newest entry.
-    heads: [u8; L],
-    /// Levels with at least one second difference in this segment (t ≥ 2m) …
-    half: u8,
-    /// … and with third differences too (t ≥ 3m).
+    /// The first strided level without third differences yet in this segment (levels below it
+    /// have both; it is advanced when that level next works, so the hot path never checks t).
     full: u8,
     /// Levels whose differences provably fit in i32 given `amax` (computed in 32-bit words).
     narrow: u8,
-    /// The t at which `half` or `full` next grows.
-    next_valid: u64,
-    /// Largest |y| of this segment.
-    amax: u32,
-    sums: [Acc; L],
+    /// Own rings: slot of the newest entry.
+    heads: [u8; S],
+    /// Number of gaps marked since the last reset.
+    gaps: u32,
+    /// Samples of the closed segments since the last reset (`samples() = closed + t`).
+    closed: u64,
+    /// Own rings of the strided levels (row `k − K0` for level `k`).
+    rings: [[i64; R]; S],
+    /// Numbers of second and third differences of the closed segments of each level (the
+    /// current segment's follow from its length, so nothing is counted per sample).
+    counts: [[u64; 2]; L],
 }
 
 /// The firmware's configuration: overlap factor 8, 24 octave levels (τ up to 2^23 samples,
 /// 2.3 h at 1 kHz).
-pub type DeviceEngine = Engine<8, 24, 12>;
+pub type DeviceEngine = Engine<8, 24, 12, 20>;
 
 /// The firmware's magnetometer configuration: the same overlap, 22 levels (τ up to 2^21 samples,
 /// 2.9 h at 200 Hz, the same reach in seconds as [`DeviceEngine`] at 1 kHz).
-pub type MagEngine = Engine<8, 22, 12>;
+pub type MagEngine = Engine<8, 22, 12, 18>;
 
-impl<const P: usize, const L: usize, const R: usize> Default for Engine<P, L, R> {
+impl<const P: usize, const L: usize, const R: usize, const S: usize> Default
+    for Engine<P, L, R, S>
+{
     fn default() -> Self {
         Self::new()
     }
 }
 
-impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
-    /// log2(P) + 1: the first level with stride 2 (m = 2P).
+impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L, R, S> {
+    /// log2(P) + 1: the number of unit-stride levels, and the first level with stride 2
+    /// (m = 2P).
     const K0: usize = P.trailing_zeros() as usize + 1;
     const BASE: usize = 3 * P;
     /// Entries between the newest one of a ring and the value 2P strides older.
@@ -223,6 +281,7 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
             L >= Self::K0 && L <= 32,
             "L must cover the unit-stride levels and m < 2^32"
         );
+        assert!(S + Self::K0 == L, "S must equal L − log2(P) − 1");
         assert!(3 * P <= 255, "ring slots are u8");
     };
 
@@ -231,24 +290,20 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         #[allow(clippy::let_unit_value)]
         let _ = Self::VALID;
         Self {
+            sums: [[Sum128::ZERO; 2]; L],
+            base: [[0; R]; 4],
             theta: 0,
             t: 0,
-            total: 0,
-            gaps: 0,
-            rings: [[0; R]; L],
-            base_head: 0,
-            heads: [R as u8 - 1; L],
-            half: 0,
-            full: 0,
-            narrow: Self::narrow_levels(0),
-            next_valid: 2,
+            gate: 0,
             amax: 0,
-            sums: [Acc {
-                sum2: Sum128::ZERO,
-                sum3: Sum128::ZERO,
-                closed_n2: 0,
-                closed_n3: 0,
-            }; L],
+            base_head: 0,
+            full: Self::K0 as u8,
+            narrow: Self::narrow_levels(0),
+            heads: [R as u8 - 1; S],
+            gaps: 0,
+            closed: 0,
+            rings: [[0; R]; S],
+            counts: [[0; 2]; L],
         }
     }
 
@@ -265,18 +320,18 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         }
         for k in 0..L {
             let (n2, n3) = self.segment_terms(k);
-            self.sums[k].closed_n2 += n2;
-            self.sums[k].closed_n3 += n3;
+            self.counts[k][0] += n2;
+            self.counts[k][1] += n3;
         }
+        self.closed += self.t;
         self.theta = 0;
         self.t = 0;
-        self.base_head = 0;
-        self.heads = [R as u8 - 1; L];
-        self.half = 0;
-        self.full = 0;
-        self.next_valid = 2;
+        self.gate = 0;
         self.amax = 0;
+        self.base_head = 0;
+        self.full = Self::K0 as u8;
         self.narrow = Self::narrow_levels(0);
+        self.heads = [R as u8 - 1; S];
     }
 
     /// (second, third) differences level `k` has taken in the current segment.
@@ -303,32 +358,9 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         (if n < L { n } else { L }) as u8
     }
 
-    /// Recompute `half`, `full` and `next_valid` for the current t (rarely: ~2 log2 t times).
-    #[cold]
-    fn advance_valid(&mut self) {
-        let t = self.t;
-        while (self.half as usize) < L && t >= 2u64 << self.half {
-            self.half += 1;
-        }
-        while (self.full as usize) < L && t >= 3u64 << self.full {
-            self.full += 1;
-        }
-        let h = if (self.half as usize) < L {
-            2u64 << self.half
-        } else {
-            u64::MAX
-        };
-        let f = if (self.full as usize) < L {
-            3u64 << self.full
-        } else {
-            u64::MAX
-        };
-        self.next_valid = h.min(f);
-    }
-
     /// Samples pushed since the last reset.
     pub fn samples(&self) -> u64 {
-        self.total
+        self.closed + self.t
     }
 
     /// Gaps marked since the last reset.
@@ -338,15 +370,16 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
 
     /// The sums of level `k` (m = 2^k), or `None` past the last level.
     pub fn level(&self, k: usize) -> Option<LevelSums> {
-        let a = self.sums.get(k)?;
+        let [s2, s3] = self.sums.get(k)?;
+        let [c2, c3] = self.counts[k];
         let (n2, n3) = self.segment_terms(k);
         Some(LevelSums {
             m: 1u32 << k,
             stride: Self::stride(k),
-            n2: a.closed_n2 + n2,
-            sum2: a.sum2.get(),
-            n3: a.closed_n3 + n3,
-            sum3: a.sum3.get(),
+            n2: c2 + n2,
+            sum2: s2.get(),
+            n3: c3 + n3,
+            sum3: s3.get(),
         })
     }
 
@@ -355,83 +388,117 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
         (0..L).filter_map(|k| self.level(k))
     }
 
+    /// Whether the base ring holds mirrored low words (see [`Engine::base`]): exactly when
+    /// every unit-stride level is narrow, max |y| < 2^(30−K0).
+    #[inline(always)]
+    fn base_is_narrow(&self) -> bool {
+        self.narrow as usize >= Self::K0
+    }
+
+    /// θ[t] − (lo θ[t] − lo): the full value of a phase whose distance from θ[t] fits in i32.
+    #[inline(always)]
+    fn from_low(theta: i64, lo: u32) -> i64 {
+        theta.wrapping_sub((theta as u32).wrapping_sub(lo) as i32 as i64)
+    }
+
+    /// θ[t − age] from the base ring, 1 ≤ age ≤ 3P.
     #[inline(always)]
     fn base_at_age(&self, age: usize) -> i64 {
-        // θ[t − age] lives in slot (t − age) mod 3P; base_head = t mod 3P, 1 ≤ age ≤ 3P.
         let h = self.base_head as usize;
         let slot = if h >= age {
             h - age
         } else {
             h + Self::BASE - age
         };
-        Self::base_slot(&self.rings, slot)
-    }
-
-    /// The low 32 bits of θ[t − age] (all a narrow difference needs: one load, not two).
-    #[inline(always)]
-    fn base_low(&self, age: usize) -> i32 {
-        let h = self.base_head as usize;
-        let slot = if h >= age {
-            h - age
+        let words = self.base.as_flattened();
+        if self.base_is_narrow() {
+            Self::from_low(self.theta, words[slot])
         } else {
-            h + Self::BASE - age
-        };
-        Self::base_slot(&self.rings, slot) as i32
-    }
-
-    /// The base ring spans rows 0 and 1 (no division: the M0+ has no divide instruction).
-    #[inline(always)]
-    fn base_slot(rings: &[[i64; R]; L], slot: usize) -> i64 {
-        if slot < R {
-            rings[0][slot]
-        } else {
-            rings[1][slot - R]
+            (words[2 * slot + 1] as i64) << 32 | words[2 * slot] as i64
         }
     }
 
+    /// θ[t] enters the base ring; returns θ[t − 3P], which leaves it.
     #[inline(always)]
-    fn ring_back(&self, level: usize, back: usize) -> i64 {
-        let h = self.heads[level] as usize;
-        let slot = if h >= back { h - back } else { h + R - back };
-        self.rings[level][slot]
+    fn base_push(&mut self) -> i64 {
+        let h = (self.base_head as usize).min(Self::BASE - 1);
+        let theta = self.theta;
+        let narrow = self.base_is_narrow();
+        let words = self.base.as_flattened_mut();
+        let leaving = if narrow {
+            let lo = core::mem::replace(&mut words[h], theta as u32);
+            words[h + Self::BASE] = theta as u32;
+            Self::from_low(theta, lo)
+        } else {
+            let lo = core::mem::replace(&mut words[2 * h], theta as u32);
+            let hi = core::mem::replace(&mut words[2 * h + 1], (theta >> 32) as u32);
+            (hi as i64) << 32 | lo as i64
+        };
+        self.base_head = if h + 1 == Self::BASE { 0 } else { h as u8 + 1 };
+        leaving
     }
 
-    /// Differences from i64 phase values (any level, any input).
+    /// Rewrite the base ring from the narrow to the wide form (once per segment at most, when
+    /// max |y| first reaches 2^(30−K0)). Runs before θ[t] enters the ring, so every value held
+    /// is within (3P − 1)·(the old max |y|) < 2^31 of θ[t] and is recovered exactly.
+    #[cold]
+    #[inline(never)]
+    fn widen_base(&mut self) {
+        let theta = self.theta;
+        let words = self.base.as_flattened_mut();
+        for s in 0..Self::BASE {
+            // Slot s's low word is read from its mirror, 3P words on: the wide slots written so
+            // far cover words 0 … 2s − 1 < s + 3P.
+            let v = Self::from_low(theta, words[s + Self::BASE]);
+            words[2 * s] = v as u32;
+            words[2 * s + 1] = (v >> 32) as u32;
+        }
+    }
+
+    /// Entry `back` places older than the newest of strided level `k`'s own ring.
+    #[inline(always)]
+    fn ring_back(&self, k: usize, back: usize) -> i64 {
+        let j = k - Self::K0;
+        let h = self.heads[j] as usize;
+        let slot = if h >= back { h - back } else { h + R - back };
+        self.rings[j][slot]
+    }
+
+    /// Differences of level `k` from i64 phase values (any level, any input).
     #[inline(always)]
     fn accumulate_wide(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
         let d2 = self
             .theta
             .wrapping_sub(tm.wrapping_mul(2))
             .wrapping_add(t2m);
-        let s = &mut self.sums[k];
-        s.sum2.add128(square(d2));
+        let [s2, s3] = &mut self.sums[k];
+        s2.add128(square(d2));
         if let Some(t3m) = t3m {
             // D3(t) = D2(t) − D2(t − m)
             let d2_prev = tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m);
-            s.sum3.add128(square(d2.wrapping_sub(d2_prev)));
+            s3.add128(square(d2.wrapping_sub(d2_prev)));
         }
     }
 
     /// The same in 32-bit words: exact because the differences are known to fit in i32, so
     /// their value mod 2^32 (computed from the low words of θ) is the value itself.
     #[inline(always)]
-    fn accumulate_narrow(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
-        let (t0, tm, t2m) = (self.theta as i32, tm as i32, t2m as i32);
+    fn accumulate_narrow(sums: &mut [Sum128; 2], t0: u32, tm: u32, t2m: u32, t3m: Option<u32>) {
         let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
-        let s = &mut self.sums[k];
-        s.sum2.add64(square32(d2));
+        let [s2, s3] = sums;
+        s2.add_square32(d2 as i32);
         if let Some(t3m) = t3m {
-            let d2_prev = tm
-                .wrapping_sub(t2m.wrapping_mul(2))
-                .wrapping_add(t3m as i32);
-            s.sum3.add64(square32(d2.wrapping_sub(d2_prev)));
+            let d2_prev = tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m);
+            s3.add_square32(d2.wrapping_sub(d2_prev) as i32);
         }
     }
 
     #[inline(always)]
     fn accumulate(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
         if k < self.narrow as usize {
-            self.accumulate_narrow(k, tm, t2m, t3m);
+            let t0 = self.theta as u32;
+            let t3m = t3m.map(|v| v as u32);
+            Self::accumulate_narrow(&mut self.sums[k], t0, tm as u32, t2m as u32, t3m);
         } else {
             self.accumulate_wide(k, tm, t2m, t3m);
         }
@@ -440,61 +507,162 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
     /// Feed one rate sample (already corrected, fixed point).
     #[inline]
     pub fn push(&mut self, y: i32) {
-        // 1. θ[t] enters the base ring; θ[t − 3P] leaves it and trickles up the cascade.
-        let slot = self.base_head as usize;
-        let (row, col) = if slot < R { (0, slot) } else { (1, slot - R) };
-        let leaving = core::mem::replace(&mut self.rings[row][col], self.theta);
-        self.base_head = if slot + 1 == Self::BASE {
-            0
+        if y.unsigned_abs() < self.gate {
+            self.push_steady(y);
         } else {
-            slot as u8 + 1
-        };
+            self.push_general(y);
+        }
+    }
+
+    /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and
+    /// D3 and the cascade runs), every unit-stride level is narrow and |y| ≤ amax (nothing to
+    /// re-derive). No per-level validity checks, no 64-bit multiplies, no variable 64-bit shifts.
+    #[inline(always)]
+    fn push_steady(&mut self, y: i32) {
+        // 1. θ[t] enters the (narrow) base ring; θ[t − 3P] leaves it.
+        let t = self.t;
+        let theta = self.theta;
+        let h = (self.base_head as usize).min(Self::BASE - 1);
+        let words = self.base.as_flattened_mut();
+        let lo = core::mem::replace(&mut words[h], theta as u32);
+        words[h + Self::BASE] = theta as u32;
+        let h = if h + 1 == Self::BASE { 0 } else { h + 1 };
+        self.base_head = h as u8;
+        let theta = theta.wrapping_add(y as i64);
+        self.theta = theta;
+        self.t = t + 1;
+
+        // 2. Unit-stride levels (m ≤ P).
+        let t2p = self.unit_levels(h, theta as u32);
+
+        // 3. θ[t − 3P] trickles up the cascade (even t), or the strided levels work (odd t:
+        //    t + 1 is a multiple of their strides); 3P is even, so θ[t − 3P] enters level K0
+        //    exactly when t is even.
+        if t as u32 & 1 == 0 {
+            // θ[t − 3P] from θ[t + 1]: 3P + 1 samples apart, each below 2^(30−K0), so within
+            //    (3P + 1)·2^(30−K0) < 2^31.
+            self.cascade(t - Self::BASE as u64, Self::from_low(theta, lo));
+        } else {
+            self.strided(t + 1, t2p);
+        }
+    }
+
+    /// D2 and D3 of every unit-stride level, in 32-bit words, with no validity checks; unrolled
+    /// by hand (`opt-level = "s"` keeps the loop), so every read is at a constant offset.
+    /// `h` = t mod 3P. Returns lo θ[t − 2P].
+    #[inline(always)]
+    fn unit_levels(&mut self, h: usize, t0: u32) -> u32 {
+        // The last 3P low words of θ, oldest first: w[3P − a] = lo θ[t − a], 1 ≤ a ≤ 3P.
+        let w = &self.base.as_flattened()[h..h + Self::BASE];
+        let sums = &mut self.sums;
+        let tm = w[Self::BASE - 1];
+        let tm = Self::unit_level::<0>(sums, w, t0, tm);
+        let tm = Self::unit_level::<1>(sums, w, t0, tm);
+        let tm = Self::unit_level::<2>(sums, w, t0, tm);
+        let tm = Self::unit_level::<3>(sums, w, t0, tm);
+        let tm = Self::unit_level::<4>(sums, w, t0, tm);
+        let tm = Self::unit_level::<5>(sums, w, t0, tm);
+        Self::unit_level::<6>(sums, w, t0, tm)
+    }
+
+    /// Unit-stride level `K` (m = 2^K ≤ P; nothing for K ≥ K0) given lo θ[t] and lo θ[t − m];
+    /// returns lo θ[t − 2m], the next level's θ[t − m].
+    #[inline(always)]
+    fn unit_level<const K: usize>(sums: &mut [[Sum128; 2]; L], w: &[u32], t0: u32, tm: u32) -> u32 {
+        if K >= Self::K0 {
+            return tm;
+        }
+        let m = 1 << K;
+        let t2m = w[Self::BASE - 2 * m];
+        let t3m = w[Self::BASE - 3 * m];
+        Self::accumulate_narrow(&mut sums[K], t0, tm, t2m, Some(t3m));
+        t2m
+    }
+
+    /// Everything else: the start of a segment (t < 3P), a new largest |y|, or inputs so large
+    /// that the unit-stride levels need 64-bit differences.
+    #[inline(never)]
+    fn push_general(&mut self, y: i32) {
+        let a = y.unsigned_abs();
+        if a > self.amax {
+            let was_narrow = self.base_is_narrow();
+            self.amax = a;
+            self.narrow = Self::narrow_levels(a);
+            if was_narrow && !self.base_is_narrow() {
+                self.widen_base();
+            }
+        }
+        let leaving = self.base_push();
         if self.t >= Self::BASE as u64 {
             self.cascade(self.t - Self::BASE as u64, leaving);
         }
         self.theta = self.theta.wrapping_add(y as i64);
         self.t += 1;
-        self.total += 1;
-        let a = y.unsigned_abs();
-        if a > self.amax {
-            self.amax = a;
-            self.narrow = Self::narrow_levels(a);
-        }
-        if self.t >= self.next_valid {
-            self.advance_valid();
-        }
-        let (half, full) = (self.half as usize, self.full as usize);
-
-        // 2. Unit-stride levels (m ≤ P): every sample. The steady state (all of them valid, all
-        //    narrow) is a fixed-trip, 32-bit loop the compiler unrolls with constant ages.
-        let unit = if half < Self::K0 { half } else { Self::K0 };
-        if full >= Self::K0 && self.narrow as usize >= Self::K0 {
-            let t0 = self.theta as i32;
-            for k in 0..Self::K0 {
-                let m = 1usize << k;
-                let (tm, t2m, t3m) = (self.base_low(m), self.base_low(2 * m), self.base_low(3 * m));
-                let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
-                let d2_prev = tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m);
-                let s = &mut self.sums[k];
-                s.sum2.add64(square32(d2));
-                s.sum3.add64(square32(d2.wrapping_sub(d2_prev)));
+        let t = self.t;
+        for k in 0..Self::K0 {
+            let m = 1usize << k;
+            if t < 2 * m as u64 {
+                break;
             }
+            let tm = self.base_at_age(m);
+            let t2m = self.base_at_age(2 * m);
+            let t3m = (t >= 3 * m as u64).then(|| self.base_at_age(3 * m));
+            self.accumulate(k, tm, t2m, t3m);
+        }
+        self.strided_general(t, Self::K0);
+        self.gate = if t >= Self::BASE as u64 && self.base_is_narrow() {
+            self.amax + 1
         } else {
-            for k in 0..unit {
-                let m = 1usize << k;
-                let tm = self.base_at_age(m);
-                let t2m = self.base_at_age(2 * m);
-                let t3m = (k < full).then(|| self.base_at_age(3 * m));
-                self.accumulate(k, tm, t2m, t3m);
+            0
+        };
+    }
+
+    /// Strided levels at sample count `t` (t even), steady state: level `K0 + j` works when t is
+    /// a multiple of its stride 2^(j+1), i.e. for the levels below the lowest set bit of t
+    /// (tested on the low word: strides are below 2^32). `tm` = lo θ[t − 2P]. Levels that are
+    /// full and narrow chain like the unit-stride ones; the rest go to [`Self::strided_general`].
+    #[inline(never)]
+    fn strided(&mut self, t: u64, mut tm: u32) {
+        let t0 = self.theta as u32;
+        let fast = self.full.min(self.narrow) as usize;
+        let mut bits = t as u32;
+        let mut j = 0;
+        while j < S {
+            if bits & 1 != 0 {
+                return;
             }
+            bits >>= 1;
+            let k = Self::K0 + j;
+            if k >= fast {
+                self.strided_general(t, k);
+                return;
+            }
+            // θ[t − 2m] is BACK entries behind the newest of this level's ring, θ[t − 3m] is the
+            // oldest (the one after the newest).
+            let h = (self.heads[j] as usize).min(R - 1);
+            let back = if h >= Self::BACK {
+                h - Self::BACK
+            } else {
+                h + R - Self::BACK
+            };
+            let oldest = if h + 1 == R { 0 } else { h + 1 };
+            let ring = &self.rings[j];
+            let (t2m, t3m) = (ring[back] as u32, ring[oldest] as u32);
+            Self::accumulate_narrow(&mut self.sums[k], t0, tm, t2m, Some(t3m));
+            tm = t2m;
+            j += 1;
         }
-        // 3. Strided levels: level k works when t is a multiple of its stride 2^(k−K0+1)
-        //    (tested on the low word: strides are below 2^32).
-        let t32 = self.t as u32;
-        let mut k = Self::K0;
-        while k < half {
+    }
+
+    /// Strided levels from level `from` on at sample count `t`, any state (start of a segment,
+    /// wide levels).
+    #[cold]
+    #[inline(never)]
+    fn strided_general(&mut self, t: u64, from: usize) {
+        let mut k = from;
+        while k < L {
             let stride_mask = (1u32 << (k + 1 - Self::K0)) - 1;
-            if t32 & stride_mask != 0 {
+            if t as u32 & stride_mask != 0 {
                 return;
             }
             let tm = if k == Self::K0 {
@@ -503,32 +671,46 @@ impl<const P: usize, const L: usize, const R: usize> Engine<P, L, R> {
                 self.ring_back(k - 1, Self::BACK)
             };
             let t2m = self.ring_back(k, Self::BACK);
-            let t3m = (k < full).then(|| self.ring_back(k, R - 1));
-            self.accumulate(k, tm, t2m, t3m);
+            let t3m = self.ring_back(k, R - 1);
+            let m = 1u64 << k;
+            if t < 2 * m {
+                // No higher level has a difference yet either.
+                return;
+            }
+            let has3 = t >= 3 * m;
+            if has3 && k >= self.full as usize {
+                // The levels below worked at this t too and became full first.
+                self.full = (k + 1) as u8;
+            }
+            self.accumulate(k, tm, t2m, has3.then_some(t3m));
             k += 1;
         }
     }
 
-    /// Move θ[index] (which just left the level below) into the strided levels' rings.
-    #[inline]
+    /// Move θ[index] (which just left the base ring) into the strided levels' rings: it enters
+    /// level K0 if index is a multiple of 2, and the value it displaces moves on likewise.
+    #[inline(never)]
     fn cascade(&mut self, mut index: u64, mut value: i64) {
-        let mut k = Self::K0;
-        while k < L {
-            let stride_shift = k + 1 - Self::K0;
-            if (index as u32) & ((1u32 << stride_shift) - 1) != 0 {
+        let mut mask = 1u32;
+        let mut span = 2 * R as u64;
+        let mut j = 0;
+        while j < S {
+            if index as u32 & mask != 0 {
                 return;
             }
-            let h = self.heads[k] as usize;
+            let h = (self.heads[j] as usize).min(R - 1);
             let next = if h + 1 == R { 0 } else { h + 1 };
-            self.heads[k] = next as u8;
-            let leaving = core::mem::replace(&mut self.rings[k][next], value);
-            let span = ((R as u32) << stride_shift) as u64;
+            self.heads[j] = next as u8;
+            let leaving = core::mem::replace(&mut self.rings[j][next], value);
+            // Until this level's ring has filled, what leaves it is not a phase value.
             if index < span {
                 return;
             }
             index -= span;
             value = leaving;
-            k += 1;
+            mask = mask << 1 | 1;
+            span <<= 1;
+            j += 1;
         }
     }
 }
@@ -557,7 +739,7 @@ mod tests {
 
     #[test]
     fn constant_rate_gives_zero_sums_and_right_counts() {
-        let mut e = Engine::<4, 8, 6>::new();
+        let mut e = Engine::<4, 8, 6, 5>::new();
         for _ in 0..1000 {
             e.push(-12345);
         }

@@ -8,8 +8,10 @@ use allan::batch::{deviation, stride_sums, Stat, TauSet};
 use allan::{DeviceEngine, Engine, LevelSums};
 use proptest::prelude::*;
 
-fn run<const P: usize, const L: usize, const R: usize>(segments: &[Vec<i32>]) -> Engine<P, L, R> {
-    let mut e = Engine::<P, L, R>::new();
+fn run<const P: usize, const L: usize, const R: usize, const S: usize>(
+    segments: &[Vec<i32>],
+) -> Engine<P, L, R, S> {
+    let mut e = Engine::<P, L, R, S>::new();
     for (i, seg) in segments.iter().enumerate() {
         if i > 0 {
             e.gap();
@@ -42,12 +44,45 @@ proptest! {
 
     #[test]
     fn engine_equals_host_stride_estimator(segments in prop::collection::vec(prop::collection::vec(sample(), 0..3000), 1..4)) {
-        let e = run::<8, 12, 12>(&segments);
+        let e = run::<8, 12, 12, 8>(&segments);
         prop_assert_eq!(&e.levels().collect::<Vec<_>>()[..], &host::<8>(&segments, 12)[..]);
-        let e = run::<2, 10, 3>(&segments);
+        let e = run::<2, 10, 3, 8>(&segments);
         prop_assert_eq!(&e.levels().collect::<Vec<_>>()[..], &host::<2>(&segments, 10)[..]);
-        let e = run::<4, 11, 6>(&segments);
+        let e = run::<4, 11, 6, 8>(&segments);
         prop_assert_eq!(&e.levels().collect::<Vec<_>>()[..], &host::<4>(&segments, 11)[..]);
+    }
+
+    /// The engine's fast path keeps only the low words of the recent phase while every input
+    /// is below 2^(30 − log2(P) − 1), and rewrites them as full values when a larger input
+    /// first arrives: inputs right at that edge, and a large one arriving late (base ring full,
+    /// strided levels running), must not change a bit.
+    #[test]
+    fn inputs_at_the_narrow_edge_and_late_large_inputs(
+        prefix in prop::collection::vec(-3000i32..3000, 0..1500),
+        edge_signs in prop::collection::vec(any::<bool>(), 0..1500),
+        tail in prop::collection::vec(sample(), 0..600),
+    ) {
+        fn edge(limit: i32, signs: &[bool]) -> Vec<i32> {
+            signs.iter().map(|&s| if s { limit - 1 } else { 1 - limit }).collect()
+        }
+        // 2^(30 − K0): K0 = 4, 3, 2 for P = 8, 4, 2.
+        for (limit, p) in [(1i32 << 26, 8usize), (1 << 27, 4), (1 << 28, 2)] {
+            let mut y = prefix.clone();
+            y.extend(edge(limit, &edge_signs));
+            y.extend(&tail);
+            let segments = vec![y.clone(), y];
+            let got: Vec<LevelSums> = match p {
+                8 => run::<8, 12, 12, 8>(&segments).levels().collect(),
+                4 => run::<4, 11, 6, 8>(&segments).levels().collect(),
+                _ => run::<2, 10, 3, 8>(&segments).levels().collect(),
+            };
+            let want = match p {
+                8 => host::<8>(&segments, 12),
+                4 => host::<4>(&segments, 11),
+                _ => host::<2>(&segments, 10),
+            };
+            prop_assert_eq!(&got[..], &want[..], "P = {}", p);
+        }
     }
 
     #[test]
@@ -62,7 +97,7 @@ proptest! {
 
     #[test]
     fn unit_stride_levels_equal_exact_batch_oadev_and_ohdev(y in prop::collection::vec(-30000i32..30000, 64..2000)) {
-        let e = run::<8, 12, 12>(std::slice::from_ref(&y));
+        let e = run::<8, 12, 12, 8>(std::slice::from_ref(&y));
         let yf: Vec<f64> = y.iter().map(|&v| v as f64).collect();
         let ms: Vec<u64> = (0..4).map(|k| 1u64 << k).collect();
         let oadev = deviation(&yf, 1.0, Stat::Oadev, &TauSet::List(ms.clone())).unwrap();
@@ -96,7 +131,7 @@ fn long_stream_reaches_high_levels_and_matches() {
             (s >> 20) as i32 - 2048 + drift
         })
         .collect();
-    let e = run::<8, 24, 12>(std::slice::from_ref(&y));
+    let e = run::<8, 24, 12, 20>(std::slice::from_ref(&y));
     let h = host::<8>(&[y], 24);
     assert_eq!(&e.levels().collect::<Vec<_>>()[..], &h[..]);
     assert!(h[16].n2 > 0 && h[16].n3 > 0, "level m = 2^16 has terms");
@@ -144,7 +179,7 @@ fn no_accumulator_overflows_in_30_days_at_1khz_full_scale_16_bit() {
             }
         })
         .collect();
-    let e = run::<8, 12, 12>(&[y]);
+    let e = run::<8, 12, 12, 8>(&[y]);
     let l = e.level(6).unwrap();
     assert_eq!(l.m as usize, m);
     let per_term = (2 * m as u128 * 32767).pow(2);

@@ -89,7 +89,7 @@ pub fn bounded_table(input: &InputArgs, column: &str, stat: Stat) -> Result<(f64
     };
     let mut rows = input::open(input, &[column])?;
     let shown = input.file.display().to_string();
-    let mut engine = Box::new(allan::Engine::<8, 32, 12>::new());
+    let mut engine = Box::new(allan::Engine::<8, 32, 12, 28>::new());
     let mut buf = [0.0f64; 2];
     let (mut t_first, mut t_last) = (None, 0.0);
     while rows.next_into(&mut buf)? {
