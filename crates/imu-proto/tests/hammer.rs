@@ -158,3 +158,44 @@ proptest! {
         prop_assert_eq!(rd.stats().rejected() as usize, n_bad);
     }
 }
+
+/// Byte strings with long non-zero runs and zeros placed around the 254-byte block boundary.
+fn cobs_input() -> impl Strategy<Value = std::vec::Vec<u8>> {
+    prop_oneof![
+        proptest::collection::vec(any::<u8>(), 0..700),
+        proptest::collection::vec(1u8..=255, 250..260),
+        (0usize..600, 0usize..600).prop_map(|(n, z)| {
+            let mut v = std::vec![0x5Au8; n];
+            if z < n {
+                v[z] = 0;
+            }
+            v
+        }),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// The firmware's COBS encoder writes exactly what the `cobs` crate writes, and it decodes back.
+    #[test]
+    fn cobs_encode_matches_the_cobs_crate(src in cobs_input()) {
+        let mut ours = std::vec![0u8; cobs::max_encoding_length(src.len())];
+        let n = cobs_encode(&src, &mut ours).expect("room");
+        let mut theirs = std::vec![0u8; cobs::max_encoding_length(src.len())];
+        let m = cobs::try_encode(&src, &mut theirs).expect("room");
+        prop_assert_eq!(&ours[..n], &theirs[..m]);
+        let mut back = ours[..n].to_vec();
+        let k = cobs::decode_in_place(&mut back).expect("decodes");
+        prop_assert_eq!(&back[..k], &src[..]);
+    }
+}
+
+#[test]
+fn cobs_encode_refuses_a_short_buffer_instead_of_panicking() {
+    let src = [1u8; 300];
+    let mut dst = [0u8; 301];
+    assert_eq!(cobs_encode(&src, &mut dst), None);
+    let mut dst = [0u8; 302];
+    assert_eq!(cobs_encode(&src, &mut dst), Some(302));
+}

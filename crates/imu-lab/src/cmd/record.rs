@@ -195,7 +195,8 @@ pub fn run(a: Args) -> Result<()> {
                 pb.set_message(format!("{} rows, {} gaps", rows.rows, rows.gaps));
             }
             Some(DeviceMsg::Event(e)) => {
-                pb.println(format!("device event: {e:?}"));
+                // suspend + eprintln: shown even when the bar is hidden (stderr not a terminal).
+                pb.suspend(|| eprintln!("device event: {e:?}"));
                 events.push(e);
             }
             Some(_) => {}
