@@ -133,11 +133,11 @@ impl Sum128 {
     /// Add d², d known to fit in i32: one multiply when |d| < 2^16, else three 16×16 ones.
     #[inline(always)]
     fn add_square32(&mut self, d: i32) {
-        let a = d.unsigned_abs();
-        if a >> 16 == 0 {
-            self.add32(a * a);
+        // |d| < 2^16 ⟺ d + (2^16 − 1) ∈ [0, 2^17 − 2]: one add and one compare, no abs.
+        if (d as u32).wrapping_add(0xffff) < 0x1ffff {
+            self.add32((d as u32).wrapping_mul(d as u32));
         } else {
-            self.add64(square32(a));
+            self.add64(square32(d.unsigned_abs()));
         }
     }
 
@@ -541,9 +541,10 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         if t as u32 & 1 == 0 {
             // θ[t − 3P] from θ[t + 1]: 3P + 1 samples apart, each below 2^(30−K0), so within
             //    (3P + 1)·2^(30−K0) < 2^31.
-            self.cascade(t - Self::BASE as u64, Self::from_low(theta, lo));
+            let index = (t as u32).wrapping_sub(Self::BASE as u32);
+            self.cascade(index, Self::from_low(theta, lo));
         } else {
-            self.strided(t + 1, t2p);
+            self.strided(t2p);
         }
     }
 
@@ -593,9 +594,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             }
         }
         let leaving = self.base_push();
-        if self.t >= Self::BASE as u64 {
-            self.cascade(self.t - Self::BASE as u64, leaving);
-        }
+        self.cascade((self.t as u32).wrapping_sub(Self::BASE as u32), leaving);
         self.theta = self.theta.wrapping_add(y as i64);
         self.t += 1;
         let t = self.t;
@@ -617,12 +616,13 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         };
     }
 
-    /// Strided levels at sample count `t` (t even), steady state: level `K0 + j` works when t is
+    /// Strided levels at the current sample count t (even), steady state: level `K0 + j` works when t is
     /// a multiple of its stride 2^(j+1), i.e. for the levels below the lowest set bit of t
     /// (tested on the low word: strides are below 2^32). `tm` = lo θ[t − 2P]. Levels that are
     /// full and narrow chain like the unit-stride ones; the rest go to [`Self::strided_general`].
     #[inline(never)]
-    fn strided(&mut self, t: u64, mut tm: u32) {
+    fn strided(&mut self, mut tm: u32) {
+        let t = self.t;
         let t0 = self.theta as u32;
         let fast = self.full.min(self.narrow) as usize;
         let mut bits = t as u32;
@@ -688,26 +688,28 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     }
 
     /// Move θ[index] (which just left the base ring) into the strided levels' rings: it enters
-    /// level K0 if index is a multiple of 2, and the value it displaces moves on likewise.
+    /// level K0 if index is a multiple of 2, and the value it displaces, θ[index − 2R],
+    /// moves on to level K0 + 1 if that index is a multiple of 4, and so on. Only the low word
+    /// of the index is needed (the strides are below 2^32).
+    ///
+    /// The cascade also runs at the start of a segment, from t = 0 on (index negative): the
+    /// rings then hold values of an imagined history before the segment, in the positions the
+    /// real values will take. Differences are only ever formed from indices ≥ 0, so nothing
+    /// needs to know when a ring has filled.
     #[inline(never)]
-    fn cascade(&mut self, mut index: u64, mut value: i64) {
+    fn cascade(&mut self, mut index: u32, mut value: i64) {
         let mut mask = 1u32;
-        let mut span = 2 * R as u64;
+        let mut span = 2 * R as u32;
         let mut j = 0;
         while j < S {
-            if index as u32 & mask != 0 {
+            if index & mask != 0 {
                 return;
             }
             let h = (self.heads[j] as usize).min(R - 1);
             let next = if h + 1 == R { 0 } else { h + 1 };
             self.heads[j] = next as u8;
-            let leaving = core::mem::replace(&mut self.rings[j][next], value);
-            // Until this level's ring has filled, what leaves it is not a phase value.
-            if index < span {
-                return;
-            }
-            index -= span;
-            value = leaving;
+            value = core::mem::replace(&mut self.rings[j][next], value);
+            index = index.wrapping_sub(span);
             mask = mask << 1 | 1;
             span <<= 1;
             j += 1;
