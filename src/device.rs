@@ -109,6 +109,11 @@ struct Engines {
     mag: [MagEngine; 3],
 }
 
+/// Bytes of Allan state on the device: the ten engines (size_of on the target, checked against
+/// the 32 KiB budget at compile time).
+pub const ALLAN_STATE_BYTES: usize = core::mem::size_of::<Engines>();
+const _: () = assert!(ALLAN_STATE_BYTES <= 32 * 1024, "Allan state over 32 KiB");
+
 /// One channel's engine, whichever its configuration.
 #[derive(Clone, Copy)]
 enum EngineRef<'a> {

@@ -750,3 +750,17 @@ fn a_late_magnetometer_sample_is_a_gap_even_without_the_overwrite_flag() {
     assert_eq!(dev.table(Channel::Mx).gaps, 1);
     assert_eq!(dev.table(Channel::Mx).pushed, 20);
 }
+
+#[test]
+fn the_allan_state_fits_its_32_kib_budget() {
+    use allan::stream::MagEngine;
+    let bytes = pico_imu::device::ALLAN_STATE_BYTES;
+    let parts = 7 * core::mem::size_of::<DeviceEngine>() + 3 * core::mem::size_of::<MagEngine>();
+    println!(
+        "Allan state: {bytes} B (7 × {} B at 1 kHz + 3 × {} B for the magnetometer)",
+        core::mem::size_of::<DeviceEngine>(),
+        core::mem::size_of::<MagEngine>()
+    );
+    assert_eq!(bytes, parts);
+    assert!(bytes <= 32 * 1024, "{bytes} B");
+}
