@@ -27,9 +27,17 @@
 //! # Exactness
 //! `θ` is kept in wrapping `i64`: every difference above is exact as long as its true value fits
 //! in `i64` (it is below `4·m·max|y| ≤ 2^56` for `m ≤ 2^23` and any `i32` input), even after `θ`
-//! itself wraps. Squares are formed in `u64` with three 16×16 multiplies when `|D| < 2^32` (the
-//! Cortex-M0+ has only a 32×32→32 multiplier) and in `u128` otherwise, and summed in `u128`.
+//! itself wraps. While `4·m·max|y| < 2^31` a level's differences are computed from the low 32-bit
+//! words of `θ` (exact: they are known to fit in `i32`) and squared with one 32-bit multiply when
+//! `|D| < 2^16`, three 16×16 ones otherwise (the Cortex-M0+ has only a 32×32→32 multiplier);
+//! wider differences are squared in `u128`. Sums are exact `u128`s kept as four u32 words.
 //! docs/allan.md gives the overflow argument for 30 days at 1 kHz.
+//!
+//! # The hot path
+//! `push` takes a straight steady-state path (no per-level checks) once the base ring is full and
+//! the unit-stride levels are narrow, for every |y| not above the segment's largest so far; the
+//! rest goes through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
+//! choices and gives the measured cycles.
 
 /// Sums of one octave level: everything a deviation, its EDF and its bounds derive from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -255,6 +263,11 @@ pub type DeviceEngine = Engine<8, 24, 12, 20>;
 /// The firmware's magnetometer configuration: the same overlap, 22 levels (τ up to 2^21 samples,
 /// 2.9 h at 200 Hz, the same reach in seconds as [`DeviceEngine`] at 1 kHz).
 pub type MagEngine = Engine<8, 22, 12, 18>;
+
+// The firmware's per-channel memory (docs/allan.md), checked on every target including
+// thumbv6m: the layout is repr(C) and u64/i64 align to 8 there as on the host.
+const _: () = assert!(core::mem::size_of::<DeviceEngine>() == 3328);
+const _: () = assert!(core::mem::size_of::<MagEngine>() == 3040);
 
 impl<const P: usize, const L: usize, const R: usize, const S: usize> Default
     for Engine<P, L, R, S>

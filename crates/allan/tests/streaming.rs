@@ -5,7 +5,7 @@
 //! * the overflow argument for 30 days at 1 kHz of full-scale 16-bit input;
 //! * the memory budget.
 use allan::batch::{deviation, stride_sums, Stat, TauSet};
-use allan::{DeviceEngine, Engine, LevelSums};
+use allan::{DeviceEngine, Engine, LevelSums, MagEngine};
 use proptest::prelude::*;
 
 fn run<const P: usize, const L: usize, const R: usize, const S: usize>(
@@ -193,8 +193,20 @@ fn no_accumulator_overflows_in_30_days_at_1khz_full_scale_16_bit() {
 
 #[test]
 fn device_engine_fits_the_memory_budget() {
-    let per_channel = core::mem::size_of::<DeviceEngine>();
-    let nine = 9 * per_channel;
-    println!("DeviceEngine (P = 8, L = 24): {per_channel} B per channel, {nine} B for 9 channels (host layout)");
+    // repr(C), and the same sizes and alignments on thumbv6m (u64/i64 align to 8 under the
+    // AAPCS too); stream.rs asserts the same numbers at compile time for every target.
+    let imu = core::mem::size_of::<DeviceEngine>();
+    let mag = core::mem::size_of::<MagEngine>();
+    println!(
+        "DeviceEngine (P = 8, L = 24): {imu} B, MagEngine (P = 8, L = 22): {mag} B per channel"
+    );
+    assert_eq!(
+        imu, 3328,
+        "DeviceEngine layout changed: update docs/allan.md"
+    );
+    assert_eq!(mag, 3040, "MagEngine layout changed: update docs/allan.md");
+    let nine = 9 * imu;
     assert!(nine <= 32 * 1024, "9 channels take {nine} B > 32 KiB");
+    // The firmware: 6 IMU axes and the temperature at 1 kHz, 3 magnetometer axes at 200 Hz.
+    assert!(7 * imu + 3 * mag <= 32 * 1024);
 }
