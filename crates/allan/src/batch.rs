@@ -283,6 +283,7 @@ fn phase_from_rate_checked(y: &[f64]) -> Result<Vec<f64>, AllanError> {
     }
     let mean = shift + total / y.len() as f64;
     let mut x = vec![0.0f64; y.len() + 1];
+    advise_huge_pages(&mut x);
     let fill = |out: &mut [f64], ys: &[f64], mut acc: f64| {
         for (o, v) in out.iter_mut().zip(ys) {
             acc += v - mean;
@@ -303,6 +304,41 @@ fn phase_from_rate_checked(y: &[f64]) -> Result<Vec<f64>, AllanError> {
     }
     Ok(x)
 }
+
+/// Ask Linux to back the 2 MiB-aligned interior of a fresh, not yet touched buffer with
+/// transparent huge pages (`madvise(MADV_HUGEPAGE)`; this machine class runs THP in `madvise`
+/// mode). Filling a 43 MB phase otherwise takes ~10,000 page faults, about a quarter of the
+/// whole computation; with huge pages it takes ~20. Advice only: contents are unchanged, a
+/// refusal (or another OS) just leaves small pages. A raw system call because the crate has
+/// no libc binding.
+#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+fn advise_huge_pages(buf: &mut [f64]) {
+    const HUGE: usize = 2 << 20;
+    const SYS_MADVISE: usize = 28;
+    const MADV_HUGEPAGE: usize = 14;
+    let start = buf.as_mut_ptr() as usize;
+    let end = start + std::mem::size_of_val(buf);
+    let (lo, hi) = (start.next_multiple_of(HUGE), end / HUGE * HUGE);
+    if hi > lo {
+        // SAFETY: madvise(2) on whole pages inside memory this buffer owns; MADV_HUGEPAGE does
+        // not change contents, and the result (0 or −errno) is deliberately ignored.
+        unsafe {
+            std::arch::asm!(
+                "syscall",
+                inlateout("rax") SYS_MADVISE => _,
+                in("rdi") lo,
+                in("rsi") hi - lo,
+                in("rdx") MADV_HUGEPAGE,
+                lateout("rcx") _,
+                lateout("r11") _,
+                options(nostack),
+            );
+        }
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_arch = "x86_64")))]
+fn advise_huge_pages(_: &mut [f64]) {}
 
 fn check(y: &[f64], tau0: f64) -> Result<(), AllanError> {
     if !(tau0 > 0.0 && tau0.is_finite()) {
