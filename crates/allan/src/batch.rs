@@ -253,7 +253,8 @@ fn lane_sum(y: &[f64], shift: f64) -> f64 {
 /// touched (and faulted in) by the cores that write them. Checks the input on the way: a
 /// non-finite sample makes the total non-finite, and only then is it looked for.
 fn phase_from_rate_checked(y: &[f64]) -> Result<Vec<f64>, AllanError> {
-    let threads = cores().min(y.len() / (1 << 16)).max(1);
+    // Several shares a core, so a core that is held up (shared machine) delays little.
+    let threads = (4 * cores()).min(y.len() / (1 << 16)).max(1);
     let chunk = y.len().div_ceil(threads).max(1);
     let shift = y.first().copied().unwrap_or(0.0);
     let sums: Vec<f64> = if threads == 1 {
@@ -784,7 +785,8 @@ fn deviation_of_phase(
         .collect();
     let mut jobs = Vec::new();
     for (g, group) in group_ms.iter().enumerate() {
-        let ranges = split_work(x.len(), group, d, 2 * cores());
+        // Several pieces a core, taken as they come: a core held up delays little.
+        let ranges = split_work(x.len(), group, d, 8 * cores());
         let last = ranges.len().saturating_sub(1);
         for (k, &range) in ranges.iter().enumerate() {
             let tail = k == last;
