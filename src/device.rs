@@ -209,6 +209,8 @@ pub struct Device {
     last_temp: Option<i16>,
     /// Read time of the last magnetometer sample, µs.
     last_mag_us: Option<u64>,
+    /// Stamp of the last IMU sample, µs (stamps never go backwards).
+    last_imu_us: Option<u64>,
     /// Next channel of a table round in progress.
     table_next: Option<usize>,
     /// The table being computed: a snapshot of the engine's sums and the rows done so far.
@@ -245,6 +247,7 @@ impl Device {
             mag_state: SensorState::Unknown,
             last_temp: None,
             last_mag_us: None,
+            last_imu_us: None,
             table_next: None,
             building: None,
             outbox: Outbox::new(),
@@ -420,12 +423,21 @@ impl Device {
             let seq = self.imu_seq;
             self.imu_seq = self.imu_seq.wrapping_add(1);
             self.counters.samples_taken += 1;
+            // The read-time estimate is late by the burst's transfer time (up to ≈ 2 ms), which
+            // varies from burst to burst: the first stamp of a burst can fall before the last
+            // one of the previous burst. Stamps are kept increasing (1 µs after the previous).
+            let nominal = t_read_us.saturating_sub((n - 1 - i as u64) * IMU_PERIOD_US);
+            let t_us = match self.last_imu_us {
+                Some(last) if nominal <= last => last + 1,
+                _ => nominal,
+            };
+            self.last_imu_us = Some(t_us);
             if self.mode == StreamMode::Off {
                 continue;
             }
             let out = ImuSample {
                 seq,
-                t_us: t_read_us.saturating_sub((n - 1 - i as u64) * IMU_PERIOD_US),
+                t_us,
                 accel: if raw { s.accel.map(i32::from) } else { *accel },
                 gyro: if raw { s.gyro.map(i32::from) } else { *gyro },
                 temp: *temp,

@@ -764,3 +764,45 @@ fn the_allan_state_fits_its_32_kib_budget() {
     assert_eq!(bytes, parts);
     assert!(bytes <= 32 * 1024, "{bytes} B");
 }
+
+#[test]
+fn imu_stamps_always_increase_even_when_a_burst_is_read_early() {
+    let mut dev = Device::new(sensors::scales(), "test");
+    let mut sink = Sink::roomy();
+    let burst = |n: usize| {
+        let mut v = imu_proto::Vec::<RawSample, { pico_imu::device::BURST_MAX }>::new();
+        for k in 0..n {
+            let _ = v.push(RawSample {
+                accel: [k as i16, 0, 8192],
+                temp: Some(100),
+                gyro: [0, 0, k as i16],
+            });
+        }
+        v
+    };
+    // Burst 1 read at 10 ms: 6, 7, 8, 9, 10 ms. Burst 2 read at 13.9 ms, i.e. 1.1 ms earlier
+    // than its 5 samples allow: nominally 9.9, 10.9, 11.9, 12.9, 13.9 ms.
+    for t_us in [10_000, 13_900] {
+        dev.on_sensor(
+            &SensorMsg::Imu {
+                t_us,
+                samples: burst(5),
+            },
+            &mut sink,
+        );
+    }
+    dev.flush(&mut sink);
+    let stamps: Vec<u64> = sink
+        .messages()
+        .into_iter()
+        .filter_map(|m| match m {
+            DeviceMsg::Samples(b) => Some(b.imu.iter().map(|s| s.t_us).collect::<Vec<_>>()),
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    assert_eq!(
+        stamps,
+        vec![6_000, 7_000, 8_000, 9_000, 10_000, 10_001, 10_900, 11_900, 12_900, 13_900]
+    );
+}
