@@ -548,6 +548,12 @@ impl Device {
 
     /// Start a round of table frames (one per channel, sent by [`Device::tables_step`]).
     /// A round in progress is not restarted.
+    /// Whether the magnetometer is delivering samples (table work is then scheduled right
+    /// after its reads; see `process_task`).
+    pub fn mag_ok(&self) -> bool {
+        self.mag_state == SensorState::Ok
+    }
+
     pub fn start_tables(&mut self) {
         if self.table_next.is_none() {
             self.table_next = Some(0);

@@ -343,8 +343,16 @@ async fn process_task(
     let mut cpu = cpu::Meter::new();
     let mut log: Option<(imu_proto::AllanTable, usize)> = None;
     loop {
+        // Table work (≈ 0.7 ms of CPU a step) runs right after a magnetometer reading, so it
+        // cannot hold up the next one: a read delayed between its status and data transfers
+        // can miss a sample the chip overwrote in between, unseen (DOR is cleared by the data
+        // read). Without a working magnetometer it runs on the 100 ms tick instead.
+        let mut table_turn = false;
         match select3(sensors.receive(), host.receive(), tick.next()).await {
-            Either3::First(msg) => device.on_sensor(&msg, &mut sink),
+            Either3::First(msg) => {
+                table_turn = matches!(msg, SensorMsg::Mag { .. });
+                device.on_sensor(&msg, &mut sink)
+            }
             Either3::Second(HostIn::Rejected(e)) => {
                 warn!("host frame rejected: {}", e);
                 device.rejected_frame();
@@ -362,6 +370,7 @@ async fn process_task(
                 }
             }
             Either3::Third(()) => {
+                table_turn = !device.mag_ok();
                 let now = Instant::now();
                 let status_ms = u64::from(device.status_interval_ms());
                 if status_ms > 0 && (now - last_status).as_millis() >= status_ms {
@@ -384,11 +393,14 @@ async fn process_task(
                 }
             }
         }
-        // Tables go out one channel per wake-up, as the USB pipe drains.
+        if !table_turn {
+            continue;
+        }
+        // Tables go out a few rows per turn, as the USB pipe drains.
         if let Some(t) = device.tables_step(&mut sink) {
             log = Some((t, 0));
         }
-        // The defmt log of a table (≈ 70 µs a row) also goes a few rows per wake-up.
+        // The defmt log of a table (≈ 70 µs a row) also goes a few rows per turn.
         if let Some((t, next)) = log.as_mut() {
             *next = log_rows(t, *next, 4);
             if *next >= t.levels.len() {
