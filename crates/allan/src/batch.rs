@@ -309,36 +309,24 @@ fn phase_from_rate_checked(y: &[f64]) -> Result<Vec<f64>, AllanError> {
 /// Ask Linux to back the 2 MiB-aligned interior of a fresh, not yet touched buffer with
 /// transparent huge pages (`madvise(MADV_HUGEPAGE)`; this machine class runs THP in `madvise`
 /// mode). Filling a 43 MB phase otherwise takes ~10,000 page faults, about a quarter of the
-/// whole computation; with huge pages it takes ~20. Advice only: contents are unchanged, a
-/// refusal (or another OS) just leaves small pages. A raw system call because the crate has
-/// no libc binding.
-#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+/// whole computation; with huge pages it takes ~20. Advice only: contents are unchanged, and a
+/// refusal (or another OS) just leaves small pages.
+#[cfg(target_os = "linux")]
 fn advise_huge_pages(buf: &mut [f64]) {
     const HUGE: usize = 2 << 20;
-    const SYS_MADVISE: usize = 28;
-    const MADV_HUGEPAGE: usize = 14;
     let start = buf.as_mut_ptr() as usize;
     let end = start + std::mem::size_of_val(buf);
     let (lo, hi) = (start.next_multiple_of(HUGE), end / HUGE * HUGE);
     if hi > lo {
         // SAFETY: madvise(2) on whole pages inside memory this buffer owns; MADV_HUGEPAGE does
-        // not change contents, and the result (0 or −errno) is deliberately ignored.
+        // not change contents, and the result is deliberately ignored (advice only).
         unsafe {
-            std::arch::asm!(
-                "syscall",
-                inlateout("rax") SYS_MADVISE => _,
-                in("rdi") lo,
-                in("rsi") hi - lo,
-                in("rdx") MADV_HUGEPAGE,
-                lateout("rcx") _,
-                lateout("r11") _,
-                options(nostack),
-            );
+            libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE);
         }
     }
 }
 
-#[cfg(not(all(target_os = "linux", target_arch = "x86_64")))]
+#[cfg(not(target_os = "linux"))]
 fn advise_huge_pages(_: &mut [f64]) {}
 
 fn check(y: &[f64], tau0: f64) -> Result<(), AllanError> {
@@ -1032,7 +1020,7 @@ fn edf_for(stat: Stat, alpha: i32, m: f64, np: f64) -> f64 {
 }
 
 /// The host "stride" estimator: exactly the integer sums the streaming engine
-/// [`crate::Engine`]`<P, L, _>` accumulates over the same samples, computed directly from the
+/// [`crate::Engine`]`<P, L, _, _>` accumulates over the same samples, computed directly from the
 /// phase array. `segments` are runs of samples separated by gaps.
 pub fn stride_sums(segments: &[&[i32]], p: usize, levels: usize) -> Vec<LevelSums> {
     let mut out: Vec<LevelSums> = (0..levels)
