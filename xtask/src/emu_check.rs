@@ -5,7 +5,7 @@
 use std::collections::BTreeSet;
 use std::path::Path;
 
-use allan::{DeviceEngine, LevelSums, MagEngine};
+use allan::{Engine, LevelSums};
 use anyhow::{bail, Context, Result};
 use imu_cal::device::Calibration;
 use imu_proto::{AllanTable, Channel};
@@ -102,30 +102,27 @@ pub trait ReplayEngine {
     fn result(&self) -> EngineState;
 }
 
-macro_rules! replay_engine {
-    ($t:ty) => {
-        impl ReplayEngine for $t {
-            fn fresh() -> Box<Self> {
-                Box::new(<$t>::new())
-            }
-            fn push(&mut self, v: i32) {
-                <$t>::push(self, v)
-            }
-            fn gap(&mut self) {
-                <$t>::gap(self)
-            }
-            fn result(&self) -> EngineState {
-                EngineState {
-                    samples: self.samples(),
-                    gaps: self.gaps(),
-                    levels: self.levels().collect(),
-                }
-            }
+/// Every configuration of the firmware's engine (`DeviceEngine`, `MagEngine`) replays alike.
+impl<const P: usize, const L: usize, const R: usize, const S: usize> ReplayEngine
+    for Engine<P, L, R, S>
+{
+    fn fresh() -> Box<Self> {
+        Box::new(Self::new())
+    }
+    fn push(&mut self, v: i32) {
+        Engine::push(self, v)
+    }
+    fn gap(&mut self) {
+        Engine::gap(self)
+    }
+    fn result(&self) -> EngineState {
+        EngineState {
+            samples: self.samples(),
+            gaps: self.gaps(),
+            levels: self.levels().collect(),
         }
-    };
+    }
 }
-replay_engine!(DeviceEngine);
-replay_engine!(MagEngine);
 
 /// What an engine holds after a replay.
 #[derive(Debug, PartialEq, Eq)]
@@ -274,6 +271,7 @@ pub fn index_jumps<T>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use allan::DeviceEngine;
 
     fn engine_with(values: &[i32], gaps_before: &[usize]) -> EngineState {
         let mut e = DeviceEngine::new();

@@ -1127,6 +1127,7 @@ pub fn stream_rows(levels: &[LevelSums], tau0: f64, scale: f64, hadamard: bool) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_rng::rng;
 
     #[test]
     fn term_counts_match_the_sums() {
@@ -1147,16 +1148,6 @@ mod tests {
                     assert_eq!(stat_norm(np, m, stat).0, n, "{} np={np} m={m}", stat.name());
                 }
             }
-        }
-    }
-
-    fn rng(seed: u32) -> impl FnMut() -> f64 {
-        let mut s = seed;
-        move || {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            s as f64 / 4_294_967_296.0 - 0.5
         }
     }
 

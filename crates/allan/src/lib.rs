@@ -24,6 +24,20 @@ pub mod batch;
 #[cfg(feature = "std")]
 pub mod noise_id;
 
+/// Deterministic test input shared by the unit tests: xorshift32 mapped to [−0.5, 0.5).
+#[cfg(all(test, feature = "std"))]
+mod test_rng {
+    pub fn rng(seed: u32) -> impl FnMut() -> f64 {
+        let mut s = seed;
+        move || {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            s as f64 / 4_294_967_296.0 - 0.5
+        }
+    }
+}
+
 pub use stream::{DeviceEngine, Engine, LevelSums, MagEngine};
 
 #[cfg(feature = "std")]

@@ -477,16 +477,7 @@ pub fn pm_alpha(m: usize, rn: Option<f64>) -> i32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn rng(seed: u32) -> impl FnMut() -> f64 {
-        let mut s = seed;
-        move || {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            s as f64 / 4_294_967_296.0 - 0.5
-        }
-    }
+    use crate::test_rng::rng;
 
     /// Phase of rate samples: offset + trend + white + random walk (weights vary per case).
     fn phase(n: usize, seed: u32, offset: f64, trend: f64, walk: f64) -> Vec<f64> {

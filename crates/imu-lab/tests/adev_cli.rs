@@ -3,12 +3,8 @@
 use assert_cmd::Command;
 use serde_json::Value;
 
-fn static_449s() -> String {
-    format!(
-        "{}/../allan/tests/data/mpu6050_static_449s.csv",
-        env!("CARGO_MANIFEST_DIR")
-    )
-}
+mod common;
+use common::{run_ok, static_449s, GZ_RAW};
 
 fn unmoved() -> String {
     format!(
@@ -18,37 +14,19 @@ fn unmoved() -> String {
 }
 
 fn json(args: &[&str]) -> Value {
-    let out = Command::cargo_bin("imu-lab")
-        .unwrap()
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_ok(args);
     serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
 }
 
 #[test]
 fn raw_counts_with_metadata_lines_json_contract() {
     let f = static_449s();
-    let v = json(&[
-        "adev",
-        &f,
-        "--column",
-        "gz",
-        "--skip-lines",
-        "4",
-        "--rate",
-        "100",
-        "--scale",
-        "0.0076336",
-        "--unit",
-        "deg/s",
-        "--json",
-    ]);
+    let args: Vec<&str> = ["adev", &f]
+        .into_iter()
+        .chain(GZ_RAW)
+        .chain(["--json"])
+        .collect();
+    let v = json(&args);
     assert_eq!(v["column"], "gz");
     assert_eq!(v["unit"], "deg/s");
     assert_eq!(v["stat"], "oadev");

@@ -1,43 +1,12 @@
 //! `imu-lab fit` end to end on the real MPU-6050 recording: the JSON contract, the verdict, and
 //! the pictures in both formats.
-use assert_cmd::Command;
-
-fn static_449s() -> String {
-    format!(
-        "{}/../allan/tests/data/mpu6050_static_449s.csv",
-        env!("CARGO_MANIFEST_DIR")
-    )
-}
-
-const FLAGS: [&str; 10] = [
-    "--column",
-    "gz",
-    "--skip-lines",
-    "4",
-    "--rate",
-    "100",
-    "--scale",
-    "0.0076336",
-    "--unit",
-    "deg/s",
-];
+mod common;
+use common::{run, run_ok, static_449s, GZ_RAW};
 
 #[test]
 fn json_contract_and_white_noise_of_the_real_gyro() {
     let f = static_449s();
-    let out = Command::cargo_bin("imu-lab")
-        .unwrap()
-        .arg("fit")
-        .arg(&f)
-        .args(FLAGS)
-        .arg("--json")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_ok(["fit", &f].into_iter().chain(GZ_RAW).chain(["--json"]));
     let v: serde_json::Value =
         serde_json::from_slice(&out.stdout).expect("exactly one JSON object");
     assert_eq!(v["unit"], "deg/s");
@@ -61,21 +30,9 @@ fn plots_in_svg_and_png_and_refuses_other_names() {
     let f = static_449s();
     for name in ["fit.svg", "fit.png"] {
         let p = dir.path().join(name);
-        let out = Command::cargo_bin("imu-lab")
-            .unwrap()
-            .arg("fit")
-            .arg(&f)
-            .args(FLAGS)
-            .arg("--plot")
-            .arg(&p)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let bytes = std::fs::read(&p).unwrap();
+        let p = p.to_str().unwrap();
+        run_ok(["fit", &f].into_iter().chain(GZ_RAW).chain(["--plot", p]));
+        let bytes = std::fs::read(p).unwrap();
         if name.ends_with("png") {
             assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
             let (w, h) = (
@@ -87,15 +44,11 @@ fn plots_in_svg_and_png_and_refuses_other_names() {
             assert!(String::from_utf8_lossy(&bytes).contains("<svg"));
         }
     }
-    let out = Command::cargo_bin("imu-lab")
-        .unwrap()
-        .arg("fit")
-        .arg(&f)
-        .args(FLAGS)
-        .arg("--plot")
-        .arg(dir.path().join("fit.jpg"))
-        .output()
-        .unwrap();
+    let jpg = dir.path().join("fit.jpg");
+    let out = run(["fit", &f]
+        .into_iter()
+        .chain(GZ_RAW)
+        .chain(["--plot", jpg.to_str().unwrap()]));
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains(".svg or .png"));
 }

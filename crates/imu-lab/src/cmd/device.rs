@@ -202,18 +202,23 @@ pub fn fetch_tables(
     Ok(got)
 }
 
-/// Relative disagreement between a row's deviation and the one its sums give
-/// (σ² = Σ D2² / (2 n m²), seed eq. 7 with eq. 9), times the scale. The device sends f32, so
-/// agreement is expected to f32 precision (~1e-7 relative).
-pub fn sums_check(l: &AllanLevel, scale: f32) -> f64 {
-    let sums = allan::stream::LevelSums {
+/// The exact engine sums a table row carries.
+fn level_sums(l: &AllanLevel) -> allan::stream::LevelSums {
+    allan::stream::LevelSums {
         m: l.m,
         stride: l.stride,
         n2: l.n2,
         sum2: l.sum2,
         n3: l.n3,
         sum3: l.sum3,
-    };
+    }
+}
+
+/// Relative disagreement between a row's deviation and the one its sums give
+/// (σ² = Σ D2² / (2 n m²), seed eq. 7 with eq. 9), times the scale. The device sends f32, so
+/// agreement is expected to f32 precision (~1e-7 relative).
+pub fn sums_check(l: &AllanLevel, scale: f32) -> f64 {
+    let sums = level_sums(l);
     let dev = sums.oadev(f64::from(scale)).unwrap_or(0.0);
     if dev == 0.0 {
         return if l.dev == 0.0 { 0.0 } else { f64::INFINITY };
@@ -243,14 +248,7 @@ pub fn host_bounds(t: &AllanTable) -> Vec<(f64, f64, f64)> {
             } else {
                 ci::alpha_from_slope(var(&t.levels[a]), var(&t.levels[b]), 2.0, 2)
             };
-            let sums = allan::stream::LevelSums {
-                m: l.m,
-                stride: l.stride,
-                n2: l.n2,
-                sum2: l.sum2,
-                n3: l.n3,
-                sum3: l.sum3,
-            };
+            let sums = level_sums(l);
             let s_factor = f64::from(l.m) / f64::from(l.stride.max(1));
             match ci::edf_greenhall(
                 alpha,
