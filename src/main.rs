@@ -20,7 +20,7 @@ mod storage;
 
 use defmt::{info, warn};
 use embassy_executor::Spawner;
-use embassy_futures::select::{select3, Either3};
+use embassy_futures::select::{select4, Either4};
 use embassy_rp::bind_interrupts;
 use embassy_rp::i2c::{self, I2c};
 use embassy_rp::peripherals::{I2C0, USB};
@@ -30,6 +30,7 @@ use embassy_sync::channel::Channel;
 use embassy_sync::mutex::Mutex;
 use embassy_sync::pipe::Pipe;
 use embassy_sync::watch::Watch;
+use embassy_sync::zerocopy_channel;
 use embassy_time::{Duration, Instant, Ticker, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::UsbDevice;
@@ -67,7 +68,13 @@ const OUT_PIPE: usize = 8192;
 const MAX_HOST_FRAME: usize = 512;
 
 type OutPipe = Pipe<NoopRawMutex, OUT_PIPE>;
-type SensorChannel = Channel<NoopRawMutex, SensorMsg, 8>;
+/// One sensor task's messages of one tick, filled in place by the task and read in place by
+/// the processing task (no copies of the 150-byte messages through a queue).
+type SensorChannel = zerocopy_channel::Channel<'static, NoopRawMutex, sensors::Out>;
+type SensorTx = zerocopy_channel::Sender<'static, NoopRawMutex, sensors::Out>;
+type SensorRx = zerocopy_channel::Receiver<'static, NoopRawMutex, sensors::Out>;
+/// Ticks in flight per sensor task.
+const SENSOR_SLOTS: usize = 2;
 type HostChannel = Channel<NoopRawMutex, HostIn, 4>;
 /// `true` while measuring; the processing task clears it around a flash write.
 type RunWatch = Watch<NoopRawMutex, bool, 2>;
@@ -98,7 +105,10 @@ impl FrameSink for PipeSink<'_> {
 }
 
 static OUT: StaticCell<OutPipe> = StaticCell::new();
-static SENSORS: StaticCell<SensorChannel> = StaticCell::new();
+static IMU_SLOTS: StaticCell<[sensors::Out; SENSOR_SLOTS]> = StaticCell::new();
+static MAG_SLOTS: StaticCell<[sensors::Out; SENSOR_SLOTS]> = StaticCell::new();
+static IMU_CH: StaticCell<SensorChannel> = StaticCell::new();
+static MAG_CH: StaticCell<SensorChannel> = StaticCell::new();
 static HOST: StaticCell<HostChannel> = StaticCell::new();
 static RUN: StaticCell<RunWatch> = StaticCell::new();
 static BUS: StaticCell<SharedBus> = StaticCell::new();
@@ -141,7 +151,14 @@ async fn main(spawner: Spawner) {
 
     // --- channels ---------------------------------------------------------------------------
     let out: &'static OutPipe = OUT.init(Pipe::new());
-    let sensors: &'static SensorChannel = SENSORS.init(Channel::new());
+    let imu_ch = IMU_CH.init(SensorChannel::new(
+        IMU_SLOTS.init([const { sensors::Out::new() }; SENSOR_SLOTS]),
+    ));
+    let mag_ch = MAG_CH.init(SensorChannel::new(
+        MAG_SLOTS.init([const { sensors::Out::new() }; SENSOR_SLOTS]),
+    ));
+    let (imu_tx, imu_rx) = imu_ch.split();
+    let (mag_tx, mag_rx) = mag_ch.split();
     let host: &'static HostChannel = HOST.init(Channel::new());
     let run: &'static RunWatch = RUN.init(Watch::new());
     run.sender().send(true);
@@ -163,10 +180,11 @@ async fn main(spawner: Spawner) {
     spawner.spawn(usb_task(usb).expect("spawn usb_task"));
     spawner.spawn(usb_tx_task(tx, out).expect("spawn usb_tx_task"));
     spawner.spawn(usb_rx_task(rx, host).expect("spawn usb_rx_task"));
-    spawner.spawn(imu_task(bus, sensors, run).expect("spawn imu_task"));
-    spawner.spawn(mag_task(bus, sensors, run).expect("spawn mag_task"));
-    spawner
-        .spawn(process_task(device, store, sensors, host, out, run).expect("spawn process_task"));
+    spawner.spawn(imu_task(bus, imu_tx, run).expect("spawn imu_task"));
+    spawner.spawn(mag_task(bus, mag_tx, run).expect("spawn mag_task"));
+    spawner.spawn(
+        process_task(device, store, imu_rx, mag_rx, host, out, run).expect("spawn process_task"),
+    );
 }
 
 #[embassy_executor::task]
@@ -244,21 +262,18 @@ async fn wait_running(
 /// MPU-6050: FIFO bursts every 10 ms (`pico_imu::sensors::ImuService`); a lost sensor is
 /// retried with bus recovery and re-initialised.
 #[embassy_executor::task]
-async fn imu_task(
-    bus: &'static SharedBus,
-    out: &'static SensorChannel,
-    run: &'static RunWatch,
-) -> ! {
+async fn imu_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunWatch) -> ! {
     let mut run = run.receiver().expect("watch receiver for imu_task");
     let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
     let mut svc = ImuService::new();
     let period = IMU_BURST_MS * 1000;
-    let mut msgs = sensors::Out::new();
     let mut was = svc.state();
     loop {
         Timer::at(next_slot(period, IMU_SLOT_OFFSET_US)).await;
+        let msgs = out.send().await;
+        msgs.clear();
         if wait_running(&mut run).await {
-            svc.resume(&mut imu, now_us(), &mut msgs).await;
+            svc.resume(&mut imu, now_us(), msgs).await;
         } else {
             let recoveries = if svc.wants_recovery(now_us()) {
                 bus.lock().await.recover()
@@ -270,7 +285,7 @@ async fn imu_task(
                 &mut embassy_time::Delay,
                 &now_us,
                 recoveries,
-                &mut msgs,
+                msgs,
             )
             .await;
         }
@@ -278,27 +293,24 @@ async fn imu_task(
             info!("imu: {} -> {}", was, svc.state());
             was = svc.state();
         }
-        for m in msgs.drain(..) {
-            out.send(m).await;
+        if !msgs.is_empty() {
+            out.send_done();
         }
     }
 }
 
 /// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`).
 #[embassy_executor::task]
-async fn mag_task(
-    bus: &'static SharedBus,
-    out: &'static SensorChannel,
-    run: &'static RunWatch,
-) -> ! {
+async fn mag_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunWatch) -> ! {
     let mut run = run.receiver().expect("watch receiver for mag_task");
     let mut mag = Qmc5883::new(BusDevice::new(bus));
     let mut svc = MagService::new();
     let period = MAG_PERIOD_US;
-    let mut msgs = sensors::Out::new();
     let mut was = svc.state();
     loop {
         Timer::at(next_slot(period, MAG_SLOT_OFFSET_US)).await;
+        let msgs = out.send().await;
+        msgs.clear();
         if wait_running(&mut run).await {
             let _ = msgs.push(SensorMsg::Resumed { t_us: now_us() });
         } else {
@@ -312,7 +324,7 @@ async fn mag_task(
                 &mut embassy_time::Delay,
                 &now_us,
                 recoveries,
-                &mut msgs,
+                msgs,
             )
             .await;
         }
@@ -320,8 +332,8 @@ async fn mag_task(
             info!("mag: {} -> {}", was, svc.state());
             was = svc.state();
         }
-        for m in msgs.drain(..) {
-            out.send(m).await;
+        if !msgs.is_empty() {
+            out.send_done();
         }
     }
 }
@@ -331,7 +343,8 @@ async fn mag_task(
 async fn process_task(
     device: &'static mut Device,
     mut store: storage::Store,
-    sensors: &'static SensorChannel,
+    mut imu: SensorRx,
+    mut mag: SensorRx,
     host: &'static HostChannel,
     out: &'static OutPipe,
     run: &'static RunWatch,
@@ -348,16 +361,25 @@ async fn process_task(
         // can miss a sample the chip overwrote in between, unseen (DOR is cleared by the data
         // read). Without a working magnetometer it runs on the 100 ms tick instead.
         let mut table_turn = false;
-        match select3(sensors.receive(), host.receive(), tick.next()).await {
-            Either3::First(msg) => {
-                table_turn = matches!(msg, SensorMsg::Mag { .. });
-                device.on_sensor(&msg, &mut sink)
+        match select4(imu.receive(), mag.receive(), host.receive(), tick.next()).await {
+            Either4::First(msgs) => {
+                for m in msgs.iter() {
+                    device.on_sensor(m, &mut sink);
+                }
+                imu.receive_done();
             }
-            Either3::Second(HostIn::Rejected(e)) => {
+            Either4::Second(msgs) => {
+                for m in msgs.iter() {
+                    table_turn |= matches!(m, SensorMsg::Mag { .. });
+                    device.on_sensor(m, &mut sink);
+                }
+                mag.receive_done();
+            }
+            Either4::Third(HostIn::Rejected(e)) => {
                 warn!("host frame rejected: {}", e);
                 device.rejected_frame();
             }
-            Either3::Second(HostIn::Frame(f)) => {
+            Either4::Third(HostIn::Frame(f)) => {
                 let load = cpu.last_permille();
                 if let Some(req) = device.handle(f, now_us(), load, &mut sink) {
                     // Flash write: pause sampling, let the tasks see it, write, resume.
@@ -369,7 +391,7 @@ async fn process_task(
                     device.persisted(req.id, ok, &mut sink);
                 }
             }
-            Either3::Third(()) => {
+            Either4::Fourth(()) => {
                 table_turn = !device.mag_ok();
                 let now = Instant::now();
                 let status_ms = u64::from(device.status_interval_ms());

@@ -57,6 +57,12 @@ pub fn scales() -> Scales {
     }
 }
 
+const EMPTY_FRAME: RawSample = RawSample {
+    accel: [0; 3],
+    temp: None,
+    gyro: [0; 3],
+};
+
 /// Messages produced by one tick (at most one burst and one fault report, or a few bursts).
 pub type Out = Vec<SensorMsg, 4>;
 
@@ -83,7 +89,6 @@ pub struct ImuService {
     health: Health,
     ready: bool,
     last_read_us: u64,
-    frames: [RawSample; BURST_FRAMES],
 }
 
 impl Default for ImuService {
@@ -98,11 +103,6 @@ impl ImuService {
             health: Health::new(Sensor::Imu),
             ready: false,
             last_read_us: 0,
-            frames: [RawSample {
-                accel: [0; 3],
-                temp: None,
-                gyro: [0; 3],
-            }; BURST_FRAMES],
         }
     }
 
@@ -163,21 +163,41 @@ impl ImuService {
         // Drain the FIFO: BURST_FRAMES a read, again while reads come back full.
         let first = out.len();
         let mut t_last = None;
-        while !out.is_full() {
-            stage::enter(Stage::I2c);
-            let r = imu.read_fifo(&mut self.frames).await;
-            stage::leave();
+        // Frames are read straight into the message (no copy): a full-length `Imu` message is
+        // pushed first and cut to what the read returned, or taken back if it returned none.
+        while out.len() + 1 < out.capacity() {
+            let slot = out.len();
+            let _ = out.push(SensorMsg::Imu {
+                t_us: 0,
+                samples: Vec::from_array([EMPTY_FRAME; BURST_FRAMES]),
+            });
+            let r = match out.last_mut() {
+                Some(SensorMsg::Imu { samples, .. }) => {
+                    stage::enter(Stage::I2c);
+                    let r = imu.read_fifo(samples).await;
+                    stage::leave();
+                    samples.truncate(*r.as_ref().unwrap_or(&0));
+                    r
+                }
+                _ => Ok(0),
+            };
             let t = now();
+            if !matches!(r, Ok(n) if n > 0) {
+                out.truncate(slot);
+            }
             match r {
                 Ok(0) => break,
                 Ok(n) => {
+                    if let Some(SensorMsg::Imu { t_us, .. }) = out.last_mut() {
+                        *t_us = t;
+                    }
                     if let Some(e) = self.health.ok(t) {
-                        let _ = out.push(fault(Sensor::Imu, &self.health, 0, 0, Some(e), 0));
+                        // The report goes before the frames it precedes.
+                        let f = fault(Sensor::Imu, &self.health, 0, 0, Some(e), 0);
+                        let _ = out.insert(slot, f);
                     }
                     self.last_read_us = t;
                     t_last = Some(t);
-                    let samples = Vec::from_slice(&self.frames[..n]).unwrap_or_default();
-                    let _ = out.push(SensorMsg::Imu { t_us: t, samples });
                     if n < BURST_FRAMES {
                         break;
                     }
