@@ -47,3 +47,20 @@ test('ROL_PNT rolls the pointer from 06H back to 00H', () => {
   const d = readRegs(q, ms(6), 0x05, 3); // 05, 06, 00
   assert.equal(s16(d[2], 0), 120);
 });
+
+test('a sample is served only if its data follows a status read that showed DRDY', () => {
+  const q = continuous(constantStream({ mx: 1 }));
+  writeRegs(q, 0, 0x0a, 0x40); // ROL_PNT
+  // The first sample lands at 5 ms. A roll-over read whose status byte (at 4.99 ms) is clear
+  // and whose data bytes come after 5 ms reads the sample, but the reader discards it.
+  assert.equal(readRegs(q, ms(5) - 10000, 0x06, 1)[0] & 1, 0);
+  readRegs(q, ms(5) + 1, 0x00, 6);
+  assert.equal(q.stats.produced, 1);
+  assert.equal(q.stats.served, 0, 'read without seeing DRDY: not served');
+  assert.equal(readRegs(q, ms(5) + 2, 0x06, 1)[0] & 1, 0, 'DRDY cleared by that read');
+  // The next one is read the normal way: status (DRDY) then data.
+  const d = readRegs(q, ms(10) + 1, 0x06, 7);
+  assert.equal(d[0] & 1, 1);
+  assert.equal(s16(d[1], d[2]), 120);
+  assert.equal(q.stats.served, 1);
+});

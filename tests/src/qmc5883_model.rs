@@ -7,7 +7,8 @@
 //! - OVL is set when any axis exceeds the configured range (and cleared by an in-range result);
 //! - reading any data register clears DRDY and DOR;
 //! - SOFT_RST in CONTROL2 restores the power-on registers (all zero: standby);
-//! - the L has a relative temperature sensor at 0x07/0x08, 100 LSB/°C.
+//! - the L has a relative temperature sensor at 0x07/0x08, 100 LSB/°C;
+//! - with ROL_PNT (L, CONTROL2 bit 6) a read rolls over from 06H to 00H.
 
 use embedded_hal::i2c::{NoAcknowledgeSource, Operation};
 
@@ -184,7 +185,12 @@ impl QmcModel {
             let st = self.status_reg();
             self.regs[st] &= !0x05;
         }
-        self.ptr = (r + 1) % 0x30;
+        // QMC5883L ROL_PNT (CONTROL2 bit 6): the pointer rolls over from 06H to 00H.
+        self.ptr = if self.variant == QmcVariant::L && r == 0x06 && self.regs[0x0A] & 0x40 != 0 {
+            0x00
+        } else {
+            (r + 1) % 0x30
+        };
         v
     }
 

@@ -69,6 +69,7 @@ fn l_other_settings() {
         mode: Mode::Standby,
         set_reset_period: 0x01,
         drdy_pin: false,
+        roll_over: false,
     };
     let exp = [
         T::write_read(L, vec![0x0D], vec![0xFF]),
@@ -207,6 +208,50 @@ fn l_not_ready_does_not_touch_data_registers() {
         async |d| d.read().await.unwrap_err(),
     );
     assert_eq!(e, Error::NotReady);
+}
+
+/// ROL_PNT (CONTROL2 bit 6 → 0x40 with the DRDY pin on): the measurement is one 7-byte read
+/// from 06H, status then X, Y, Z (the pointer rolls from 06H to 00H).
+#[test]
+fn l_roll_over_read_is_one_transfer() {
+    let cfg = Config {
+        roll_over: true,
+        ..Config::default()
+    };
+    let mut exp = l_seed();
+    exp[3] = T::write(L, vec![0x0A, 0x40]);
+    exp.push(T::write_read(
+        L,
+        vec![0x06],
+        vec![0x05, 0xFE, 0xFF, 0xE8, 0x03, 0xFF, 0x7F],
+    ));
+    exp.push(T::write_read(L, vec![0x06], vec![0x00, 1, 2, 3, 4, 5, 6]));
+    let (s, e) = both(
+        Variant::L,
+        &exp,
+        |d| {
+            d.init(&mut NoopDelay, &cfg).unwrap();
+            (d.read().unwrap(), d.read().unwrap_err())
+        },
+        async |d| {
+            d.init(&mut NoopDelay, &cfg).await.unwrap();
+            (d.read().await.unwrap(), d.read().await.unwrap_err())
+        },
+    );
+    assert_eq!(
+        s,
+        MagSample {
+            xyz: [-2, 1000, 32767],
+            temp: None,
+            overflow: false,
+            skipped: true
+        }
+    );
+    assert_eq!(
+        e,
+        Error::NotReady,
+        "DRDY clear: the data bytes are discarded"
+    );
 }
 
 #[test]

@@ -46,6 +46,43 @@ fn l_seed_reads_field_temperature_and_rate() {
 }
 
 #[test]
+fn l_roll_over_reads_status_and_data_in_one_transfer() {
+    let mut m = QmcModel::new(QmcVariant::L);
+    m.field = Box::new(|i| {
+        if i < 2 {
+            [0.1, 0.1, 0.1]
+        } else {
+            [0.2, -0.1, 0.4]
+        }
+    });
+    let bus = SimBus::new().with_mag(m);
+    let cfg = Config {
+        roll_over: true,
+        ..Config::default()
+    };
+    let mut d = init(&bus, Variant::L, &cfg);
+    bus.mag(|m| assert_eq!(m.reg(0x0A), 0x40, "CONTROL2: ROL_PNT, DRDY pin on"));
+    assert_eq!(d.read(), Err(Error::NotReady));
+    bus.advance_us(10_000); // two measurements, the first overwritten
+    let s = d.read().unwrap();
+    assert_eq!(s.xyz, [1200, 1200, 1200]);
+    assert!(s.skipped, "DOR read with the data, in the same transfer");
+    assert_eq!(
+        s.temp, None,
+        "the roll-over read stops before the temperature"
+    );
+    assert_eq!(
+        d.read(),
+        Err(Error::NotReady),
+        "the data bytes cleared DRDY"
+    );
+    bus.advance_us(5_000);
+    let s = d.read().unwrap();
+    assert_eq!(s.xyz, [2400, -1200, 4800]);
+    assert!(!s.skipped);
+}
+
+#[test]
 fn l_skipped_and_overflow_flags() {
     let mut m = QmcModel::new(QmcVariant::L);
     m.field = Box::new(|i| {

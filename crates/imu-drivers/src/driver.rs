@@ -378,7 +378,28 @@ macro_rules! drivers {
             /// Read one measurement: status (with the L's temperature in the same burst),
             /// then the 6 data bytes. [`q::Error::NotReady`] if DRDY is clear — the data
             /// registers are then not read, so DOR keeps counting skipped samples.
+            ///
+            /// With [`q::Config::roll_over`] on the L: one 7-byte read from 06H, status then
+            /// data (no temperature). If DRDY was clear the data bytes are discarded and
+            /// [`q::Error::NotReady`] returned. Reading them clears DRDY and DOR, which were
+            /// clear — unless a measurement completed during the transfer itself: that one is
+            /// then lost without DOR, and the next reading comes a period late (a caller that
+            /// checks the spacing of its readings sees the gap; the firmware does).
             pub $($async)? fn read(&mut self) -> Result<MagSample, MagError<I2C>> {
+                if self.variant == Variant::L && self.config.roll_over {
+                    let mut b = [0u8; 7];
+                    self.read_regs(q::reg_l::STATUS, &mut b) $(.$await)? ?;
+                    let status = Status::from_bits(b[0], Variant::L);
+                    if !status.ready {
+                        return Err(q::Error::NotReady);
+                    }
+                    return Ok(MagSample {
+                        xyz: q::decode_xyz([b[1], b[2], b[3], b[4], b[5], b[6]]),
+                        temp: None,
+                        overflow: status.overflow,
+                        skipped: status.skipped,
+                    });
+                }
                 let (status, temp) = match self.variant {
                     Variant::L => {
                         let mut b = [0u8; 3];

@@ -75,6 +75,8 @@ pub mod bits {
     pub const SOFT_RST: u8 = 1 << 7;
     /// QMC5883L control 2 INT_ENB: 1 disables the DRDY pin.
     pub const INT_DISABLE: u8 = 1 << 0;
+    /// QMC5883L control 2 ROL_PNT: a read that starts in 00H–06H rolls over from 06H to 00H.
+    pub const ROL_PNT: u8 = 1 << 6;
 }
 
 /// Soft-reset recovery time in ms (the QMC-L power-on time is 350 µs; 1 ms margin,
@@ -245,6 +247,12 @@ pub struct Config {
     pub set_reset_period: u8,
     /// QMC5883L: drive the DRDY pin (INT_ENB = 0). Unused on the P (no pin).
     pub drdy_pin: bool,
+    /// QMC5883L: pointer roll-over (ROL_PNT, QMC-L 9.2 control register 2: "the I2C data
+    /// pointer automatically rolls between 00H ~ 06H"), so one 7-byte read from the status
+    /// register 06H returns the status and then the data 00H–05H: a measurement is read in one
+    /// transfer, and no sample can land (and be overwritten unseen) between a status read and
+    /// the data read. The die temperature is then not read. Unused on the P.
+    pub roll_over: bool,
 }
 
 impl Default for Config {
@@ -256,6 +264,7 @@ impl Default for Config {
             mode: Mode::Continuous,
             set_reset_period: 0x01,
             drdy_pin: true,
+            roll_over: false,
         }
     }
 }
@@ -276,13 +285,11 @@ impl Config {
         Some(((self.osr as u8) << 6) | (rng << 4) | ((self.odr as u8) << 2) | mode)
     }
 
-    /// QMC5883L CONTROL2 (0x0A): INT_ENB in bit 0, roll-over and soft reset off.
+    /// QMC5883L CONTROL2 (0x0A): INT_ENB in bit 0, ROL_PNT in bit 6, soft reset off.
     pub const fn control2_l(&self) -> u8 {
-        if self.drdy_pin {
-            0
-        } else {
-            bits::INT_DISABLE
-        }
+        let int = if self.drdy_pin { 0 } else { bits::INT_DISABLE };
+        let rol = if self.roll_over { bits::ROL_PNT } else { 0 };
+        int | rol
     }
 
     /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) `[7:6]`, OSR1 `[5:4]`, ODR `[3:2]`,

@@ -29,6 +29,7 @@ export class Qmc5883l extends RegisterDevice {
     this.nextSample = null;
     this.latest = null;
     this.dataRead = 0;
+    this.readySeen = false;
     this.stats.resets++;
   }
 
@@ -95,13 +96,22 @@ export class Qmc5883l extends RegisterDevice {
     this.advance(nanos);
     r &= 0x0f;
     const v = this.regs[r];
+    // A reader uses the data only after it has seen DRDY set (a roll-over read from 06H reads
+    // the data bytes even when the status it got first was clear, and discards them).
+    if (r === 0x06 && v & 0x01) this.readySeen = true;
     if (r <= 0x05) {
       // Reading any data register clears DRDY and DOR.
       this.regs[0x06] &= ~0x05;
       this.dataRead |= 1 << r;
       if (this.dataRead === 0x3f && this.latest && !this.latest.served) {
-        this.latest.served = nanos;
-        this.stats.served++;
+        // Served: all six bytes read after a status read that showed DRDY. A sample that
+        // landed during a read whose status byte was clear is lost to the reader (and its
+        // DRDY cleared by that read): not served, so the host sees the index jump.
+        if (this.readySeen) {
+          this.latest.served = nanos;
+          this.stats.served++;
+        }
+        this.readySeen = false;
       }
     }
     return v;
