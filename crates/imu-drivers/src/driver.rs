@@ -159,16 +159,19 @@ macro_rules! drivers {
             /// Read whole FIFO frames into `out`; returns how many were written. Never reads
             /// a partial frame: the remainder stays in the FIFO for the next call.
             ///
-            /// Returns [`m::Error::FifoOverflow`] if INT_STATUS.FIFO_OFLOW_INT is set or the
-            /// count reached the FIFO capacity (the chip then overwrites the oldest bytes and
-            /// frame alignment is lost); call [`Self::reset_fifo`] to recover.
+            /// Returns [`m::Error::FifoOverflow`] if the count reached the FIFO capacity (the
+            /// chip then overwrites the oldest bytes and frame alignment is lost); call
+            /// [`Self::reset_fifo`] to recover. Two transfers per call: the count, then the
+            /// frames (in chunks of at most `FIFO_CHUNK_FRAMES`).
             /// [`m::Error::NotConfigured`] if `init` did not enable the FIFO.
             pub $($async)? fn read_fifo(&mut self, out: &mut [RawSample]) -> Result<usize, MpuError<I2C>> {
                 let frame = self.config.fifo.ok_or(m::Error::NotConfigured)?;
                 let chip = self.chip.ok_or(m::Error::NotConfigured)?;
-                if self.int_status() $(.$await)? ?.fifo_overflow {
-                    return Err(m::Error::FifoOverflow);
-                }
+                // Overflow is read from the count, not from INT_STATUS (one transfer fewer per
+                // call): only reads lower the count, and a full FIFO keeps its count at the
+                // FIFO size while new data overwrites the oldest (RM 4.16, 4.30), so a count
+                // below the size means no byte was lost since the previous read. A full count
+                // is treated as an overflow even if the last frame fitted exactly.
                 let count = self.fifo_count() $(.$await)? ?;
                 if count >= chip.fifo_capacity() {
                     return Err(m::Error::FifoOverflow);
