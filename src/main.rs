@@ -308,7 +308,12 @@ async fn mag_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunW
     let period = MAG_PERIOD_US;
     let mut was = svc.state();
     loop {
-        Timer::at(next_slot(period, MAG_SLOT_OFFSET_US)).await;
+        // The service follows the sensor's own phase once it has seen a sample.
+        let at = match svc.next_poll_us() {
+            Some(t) => Instant::from_micros(t),
+            None => next_slot(period, MAG_SLOT_OFFSET_US),
+        };
+        Timer::at(at).await;
         let msgs = out.send().await;
         msgs.clear();
         if wait_running(&mut run).await {

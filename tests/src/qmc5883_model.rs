@@ -43,6 +43,8 @@ pub struct QmcModel {
     next_ns: Option<u64>,
     /// Measurements made.
     pub measurements: u64,
+    /// Reads of the status register (each a DRDY poll).
+    pub status_reads: u64,
 }
 
 impl QmcModel {
@@ -61,6 +63,7 @@ impl QmcModel {
             ptr: 0,
             next_ns: None,
             measurements: 0,
+            status_reads: 0,
         }
     }
 
@@ -184,6 +187,9 @@ impl QmcModel {
         if self.data_regs().contains(&r) {
             let st = self.status_reg();
             self.regs[st] &= !0x05;
+        }
+        if r as usize == self.status_reg() {
+            self.status_reads += 1;
         }
         // QMC5883L ROL_PNT (CONTROL2 bit 6): the pointer rolls over from 06H to 00H.
         self.ptr = if self.variant == QmcVariant::L && r == 0x06 && self.regs[0x0A] & 0x40 != 0 {

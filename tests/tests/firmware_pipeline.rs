@@ -806,3 +806,56 @@ fn imu_stamps_always_increase_even_when_a_burst_is_read_early() {
         vec![6_000, 7_000, 8_000, 9_000, 10_000, 10_001, 10_900, 11_900, 12_900, 13_900]
     );
 }
+
+/// Drives the magnetometer service for `ticks` ticks, either at the times it asks for
+/// (`follow`) or on a fixed 5 ms grid; returns (readings, status polls, sensor measurements).
+fn mag_poll_run(follow: bool, ticks: usize) -> (u64, u64, u64) {
+    let bus = SimBus::new().with_mag(noisy_qmc());
+    let mut mag = Qmc5883::new(bus.clone());
+    let mut svc = MagService::new();
+    let clock = bus.clone();
+    let now = move || clock.now_ns() / 1000;
+    let mut readings = 0;
+    let mut next_grid = 5_000;
+    for _ in 0..ticks {
+        let at = match (follow, svc.next_poll_us()) {
+            (true, Some(t)) => t,
+            _ => next_grid,
+        };
+        while next_grid <= at {
+            next_grid += 5_000;
+        }
+        bus.advance_us(at.saturating_sub(now()));
+        let mut out = sensors::Out::new();
+        block_on(svc.tick(&mut mag, &mut bus.delay(), &now, 0, &mut out));
+        for m in &out {
+            if let SensorMsg::Mag { skipped, .. } = m {
+                assert!(!skipped, "a sample was overwritten");
+                readings += 1;
+            }
+        }
+    }
+    let (polls, made) = bus.mag(|q| (q.status_reads, q.measurements));
+    (readings, polls, made)
+}
+
+#[test]
+fn the_magnetometer_poll_follows_the_sensor_phase() {
+    // Initialised on the 5 ms grid, the sensor's samples land about 1 ms after each grid tick
+    // (soft reset and configuration time), so on the grid every reading needs re-polls.
+    let (grid_reads, grid_polls, grid_made) = mag_poll_run(false, 400);
+    eprintln!("grid: {grid_reads} readings, {grid_polls} status polls, {grid_made} measurements");
+    assert!(
+        grid_polls >= 3 * grid_reads,
+        "the scenario has a phase to find"
+    );
+    // Following the phase: after the first reading, one poll per reading plus one creep
+    // re-poll every 25 readings; still every sample read.
+    let (reads, polls, made) = mag_poll_run(true, 400);
+    eprintln!("following: {reads} readings, {polls} status polls, {made} measurements");
+    assert!(reads + 2 >= made, "{reads} readings of {made} measurements");
+    assert!(
+        polls * 100 <= reads * 110,
+        "{polls} status polls for {reads} readings"
+    );
+}
