@@ -29,6 +29,7 @@ use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::channel::Channel;
 use embassy_sync::mutex::Mutex;
 use embassy_sync::pipe::Pipe;
+use embassy_sync::signal::Signal;
 use embassy_sync::watch::Watch;
 use embassy_sync::zerocopy_channel;
 use embassy_time::{Duration, Instant, Ticker, Timer};
@@ -78,6 +79,12 @@ const SENSOR_SLOTS: usize = 2;
 type HostChannel = Channel<NoopRawMutex, HostIn, 4>;
 /// `true` while measuring; the processing task clears it around a flash write.
 type RunWatch = Watch<NoopRawMutex, bool, 2>;
+/// The 100 ms housekeeping tick (status, tables) from `tick_task` to the processing task. A
+/// task of its own: a `Ticker` polled inside the processing task's select was re-registered
+/// with the timer queue (a walk of every timer) on each of its ≈ 400 wake-ups a second.
+type TickSignal = Signal<NoopRawMutex, ()>;
+/// Housekeeping period.
+const TICK_MS: u64 = 100;
 
 /// What the USB receiver passes on.
 #[allow(clippy::large_enum_variant)] // no heap: requests travel inline
@@ -111,6 +118,7 @@ static IMU_CH: StaticCell<SensorChannel> = StaticCell::new();
 static MAG_CH: StaticCell<SensorChannel> = StaticCell::new();
 static HOST: StaticCell<HostChannel> = StaticCell::new();
 static RUN: StaticCell<RunWatch> = StaticCell::new();
+static TICK: StaticCell<TickSignal> = StaticCell::new();
 static BUS: StaticCell<SharedBus> = StaticCell::new();
 static DEVICE: StaticCell<Device> = StaticCell::new();
 
@@ -161,6 +169,7 @@ async fn main(spawner: Spawner) {
     let (mag_tx, mag_rx) = mag_ch.split();
     let host: &'static HostChannel = HOST.init(Channel::new());
     let run: &'static RunWatch = RUN.init(Watch::new());
+    let tick: &'static TickSignal = TICK.init(Signal::new());
     run.sender().send(true);
 
     // --- calibration from flash -------------------------------------------------------------
@@ -178,13 +187,25 @@ async fn main(spawner: Spawner) {
     info!("calibration: {}", device.cal_status());
 
     spawner.spawn(usb_task(usb).expect("spawn usb_task"));
+    spawner.spawn(tick_task(tick).expect("spawn tick_task"));
     spawner.spawn(usb_tx_task(tx, out).expect("spawn usb_tx_task"));
     spawner.spawn(usb_rx_task(rx, host).expect("spawn usb_rx_task"));
     spawner.spawn(imu_task(bus, imu_tx, run).expect("spawn imu_task"));
     spawner.spawn(mag_task(bus, mag_tx, run).expect("spawn mag_task"));
     spawner.spawn(
-        process_task(device, store, imu_rx, mag_rx, host, out, run).expect("spawn process_task"),
+        process_task(device, store, imu_rx, mag_rx, host, tick, out, run)
+            .expect("spawn process_task"),
     );
+}
+
+/// The housekeeping tick (`TickSignal`).
+#[embassy_executor::task]
+async fn tick_task(tick: &'static TickSignal) -> ! {
+    let mut t = Ticker::every(Duration::from_millis(TICK_MS));
+    loop {
+        t.next().await;
+        tick.signal(());
+    }
 }
 
 #[embassy_executor::task]
@@ -351,11 +372,11 @@ async fn process_task(
     mut imu: SensorRx,
     mut mag: SensorRx,
     host: &'static HostChannel,
+    tick: &'static TickSignal,
     out: &'static OutPipe,
     run: &'static RunWatch,
 ) -> ! {
     let mut sink = PipeSink(out);
-    let mut tick = Ticker::every(Duration::from_millis(100));
     let mut last_status = Instant::now();
     let mut last_tables = Instant::now();
     let mut cpu = cpu::Meter::new();
@@ -366,7 +387,7 @@ async fn process_task(
         // can miss a sample the chip overwrote in between, unseen (DOR is cleared by the data
         // read). Without a working magnetometer it runs on the 100 ms tick instead.
         let mut table_turn = false;
-        match select4(imu.receive(), mag.receive(), host.receive(), tick.next()).await {
+        match select4(imu.receive(), mag.receive(), host.receive(), tick.wait()).await {
             Either4::First(msgs) => {
                 for m in msgs.iter() {
                     device.on_sensor(m, &mut sink);
