@@ -23,6 +23,8 @@
 //! (hammered by the proptests in `tests/`).
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
+mod batch;
+
 pub use heapless::{String, Vec};
 
 /// Wire-format version carried in the first byte of every frame.
@@ -41,6 +43,9 @@ pub const MAX_BATCH_MAG: usize = 8;
 pub const MAX_CAL_BLOB: usize = 256;
 
 const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+// The largest sample batch frame fits the payload limit: version + postcard + CRC.
+const _: () = assert!(1 + batch::MAX_SAMPLES_POSTCARD + 4 <= MAX_PAYLOAD);
 
 /// One characterised channel of the device.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -520,30 +525,97 @@ pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
     if dst.len() < cobs::max_encoding_length(src.len()) {
         return None;
     }
-    // `code_at`: where the current block's code byte goes; `code`: 1 + its data bytes so far.
-    let mut code_at = 0;
-    let mut out = 1;
-    let mut code: u8 = 1;
+    let mut s = Stuffer::new(dst);
     for &b in src {
-        if code == 0xFF {
+        s.push(b);
+    }
+    s.finish()
+}
+
+/// One-pass COBS encoder state. A byte that falls outside `dst` is not stored, but the output
+/// position still advances, so [`Stuffer::finish`] reports a too-small buffer and nothing can
+/// panic (every index written is below the final position).
+struct Stuffer<'a> {
+    dst: &'a mut [u8],
+    /// Where the current block's code byte goes.
+    code_at: usize,
+    /// Where the next data byte goes.
+    out: usize,
+    /// 1 + the current block's data bytes so far.
+    code: u8,
+}
+
+impl<'a> Stuffer<'a> {
+    fn new(dst: &'a mut [u8]) -> Self {
+        Self {
+            dst,
+            code_at: 0,
+            out: 1,
+            code: 1,
+        }
+    }
+
+    #[inline(always)]
+    fn put(&mut self, at: usize, b: u8) {
+        if let Some(slot) = self.dst.get_mut(at) {
+            *slot = b;
+        }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, b: u8) {
+        if self.code == 0xFF {
             // A full block (254 data bytes) ends without an implied zero.
-            *dst.get_mut(code_at)? = code;
-            code_at = out;
-            out += 1;
-            code = 1;
+            self.put(self.code_at, 0xFF);
+            self.code_at = self.out;
+            self.out += 1;
+            self.code = 1;
         }
         if b == 0 {
-            *dst.get_mut(code_at)? = code;
-            code_at = out;
-            code = 1;
+            self.put(self.code_at, self.code);
+            self.code_at = self.out;
+            self.code = 1;
         } else {
-            *dst.get_mut(out)? = b;
-            code += 1;
+            self.put(self.out, b);
+            self.code += 1;
         }
-        out += 1;
+        self.out += 1;
     }
-    *dst.get_mut(code_at)? = code;
-    Some(out)
+
+    /// Close the last block; the encoded length, or `None` if it did not fit `dst`.
+    fn finish(mut self) -> Option<usize> {
+        self.put(self.code_at, self.code);
+        (self.out <= self.dst.len()).then_some(self.out)
+    }
+}
+
+/// The CRC-32/ISO-HDLC byte table (1 KiB, flash) of the `crc` crate, for the fused pass of
+/// [`frame`]; [`CRC`] itself checks received frames.
+static CRC_TABLE: [u32; 256] = CRC.table()[0];
+// The fused pass hard-codes the reflected form with all-ones init and final XOR.
+const _: () = assert!(
+    crc::CRC_32_ISO_HDLC.refin
+        && crc::CRC_32_ISO_HDLC.refout
+        && crc::CRC_32_ISO_HDLC.init == u32::MAX
+        && crc::CRC_32_ISO_HDLC.xorout == u32::MAX
+);
+
+/// `content` (version byte + postcard) → `COBS(content | crc32 LE) 0x00` in `out`, in one pass
+/// over `content`: each byte updates the CRC and is stuffed as it is read. Returns the frame
+/// length (delimiter included).
+fn frame(content: &[u8], out: &mut [u8]) -> Result<usize, EncodeError> {
+    let mut crc = u32::MAX;
+    let mut s = Stuffer::new(out);
+    for &b in content {
+        crc = CRC_TABLE[usize::from(crc as u8 ^ b)] ^ (crc >> 8);
+        s.push(b);
+    }
+    for b in (!crc).to_le_bytes() {
+        s.push(b);
+    }
+    let n = s.finish().ok_or(EncodeError::TooLarge)?;
+    *out.get_mut(n).ok_or(EncodeError::TooLarge)? = 0;
+    Ok(n + 1)
 }
 
 /// Serialises messages into frames; owns the scratch buffer for the un-stuffed payload.
@@ -572,13 +644,22 @@ impl FrameEncoder {
         let body = postcard::to_slice(msg, &mut self.scratch[1..MAX_PAYLOAD - 4])
             .map_err(|_| EncodeError::TooLarge)?
             .len();
-        let end = 1 + body;
-        let crc = CRC.checksum(&self.scratch[..end]);
-        self.scratch[end..end + 4].copy_from_slice(&crc.to_le_bytes());
-        let n = cobs_encode(&self.scratch[..end + 4], out).ok_or(EncodeError::TooLarge)?;
-        let delim = out.get_mut(n).ok_or(EncodeError::TooLarge)?;
-        *delim = 0;
-        Ok(n + 1)
+        frame(&self.scratch[..1 + body], out)
+    }
+
+    /// Encode `DeviceMsg::Samples(batch)` as one frame into `out`, byte for byte what
+    /// [`FrameEncoder::encode`] writes for it (tested), without serde: the firmware's per-batch
+    /// framing path (`batch.rs` writes the postcard bytes). `out` of [`MAX_FRAME`] bytes always
+    /// suffices; a shorter one that cannot hold the frame gives [`EncodeError::TooLarge`].
+    pub fn encode_samples(
+        &mut self,
+        batch: &SampleBatch,
+        out: &mut [u8],
+    ) -> Result<usize, EncodeError> {
+        self.scratch[0] = PROTOCOL_VERSION;
+        let body = batch::write(batch, &mut self.scratch[1..MAX_PAYLOAD - 4])
+            .ok_or(EncodeError::TooLarge)?;
+        frame(&self.scratch[..1 + body], out)
     }
 
     /// Encode into a fresh `Vec` (host convenience).
