@@ -46,6 +46,7 @@ impl Cursor<'_> {
         self.pos += 1;
     }
 
+    #[inline(always)]
     fn varint(&mut self, mut v: u32) {
         while v >= 0x80 {
             self.byte(v as u8 | 0x80);
@@ -55,12 +56,18 @@ impl Cursor<'_> {
     }
 
     /// A `u64` varint with 32-bit arithmetic wherever the value allows (the M0+ has no 64-bit
-    /// shifts): timestamps pass 2^32 µs after 71 minutes of uptime.
+    /// shifts); the common case (below 2^32 µs, 71 minutes of uptime) inline.
+    #[inline(always)]
     fn varint_u64(&mut self, v: u64) {
-        if let Ok(small) = u32::try_from(v) {
-            return self.varint(small);
+        match u32::try_from(v) {
+            Ok(small) => self.varint(small),
+            Err(_) => self.varint_u64_long(v),
         }
-        // v ≥ 2^32: the low 28 bits make the first four bytes, all with the high bit set.
+    }
+
+    /// `v` ≥ 2^32: the low 28 bits make the first four bytes, all with the high bit set.
+    #[inline(never)]
+    fn varint_u64_long(&mut self, v: u64) {
         let lo = v as u32;
         self.byte(lo as u8 | 0x80);
         self.byte((lo >> 7) as u8 | 0x80);
@@ -99,18 +106,24 @@ impl Cursor<'_> {
     fn imu(&mut self, s: &ImuSample) {
         self.varint(s.seq);
         self.varint_u64(s.t_us);
-        for &v in s.accel.iter().chain(&s.gyro) {
-            self.zigzag(v);
-        }
+        let [ax, ay, az] = s.accel;
+        let [gx, gy, gz] = s.gyro;
+        self.zigzag(ax);
+        self.zigzag(ay);
+        self.zigzag(az);
+        self.zigzag(gx);
+        self.zigzag(gy);
+        self.zigzag(gz);
         self.zigzag(s.temp);
     }
 
     fn mag(&mut self, s: &MagSample) {
         self.varint(s.seq);
         self.varint_u64(s.t_us);
-        for &v in &s.mag {
-            self.zigzag(v);
-        }
+        let [x, y, z] = s.mag;
+        self.zigzag(x);
+        self.zigzag(y);
+        self.zigzag(z);
     }
 }
 

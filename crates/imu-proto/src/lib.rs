@@ -574,16 +574,11 @@ impl<'a> Stuffer<'a> {
             }
             let window = &src[..src.len().min(COBS_BLOCK - used)];
             // The run: the bytes before the first zero of the window.
-            let mut run = window.len();
-            for (i, &b) in window.iter().enumerate() {
-                if CRC {
-                    crc = CRC_TABLE[usize::from(crc as u8 ^ b)] ^ (crc >> 8);
-                }
-                if b == 0 {
-                    run = i;
-                    break;
-                }
-            }
+            let run = if CRC {
+                crc_run(window, &mut crc)
+            } else {
+                window.iter().position(|&b| b == 0).unwrap_or(window.len())
+            };
             if let Some(d) = self.dst.get_mut(self.out..self.out + run) {
                 d.copy_from_slice(&window[..run]);
             }
@@ -618,6 +613,24 @@ const _: () = assert!(
         && crc::CRC_32_ISO_HDLC.init == u32::MAX
         && crc::CRC_32_ISO_HDLC.xorout == u32::MAX
 );
+
+/// The bytes of `window` before its first zero (all of them if it has none), running `crc`
+/// over them and the zero. Its own function so that, on the M0+, the loop keeps the pointer,
+/// the CRC and the table in registers.
+#[inline(never)]
+fn crc_run(window: &[u8], crc: &mut u32) -> usize {
+    let mut c = *crc;
+    let mut run = window.len();
+    for (i, &b) in window.iter().enumerate() {
+        c = CRC_TABLE[usize::from(c as u8 ^ b)] ^ (c >> 8);
+        if b == 0 {
+            run = i;
+            break;
+        }
+    }
+    *crc = c;
+    run
+}
 
 /// `content` (version byte + postcard) → `COBS(content | crc32 LE) 0x00` in `out`, in one scan
 /// of `content` that updates the CRC and finds the zeros COBS replaces. Returns the frame
