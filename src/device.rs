@@ -493,16 +493,10 @@ impl Device {
         }
         self.batch.calibrated = self.mode != StreamMode::Raw;
         self.batch.scales = self.scales;
-        let msg = DeviceMsg::Samples(core::mem::replace(
-            &mut self.batch,
-            SampleBatch {
-                calibrated: true,
-                scales: self.scales,
-                imu: Vec::new(),
-                mag: Vec::new(),
-            },
-        ));
-        self.send(&msg, sink);
+        // Framed in place (no copy of the batch into a `DeviceMsg`), then emptied.
+        self.outbox.send_samples(&self.batch, sink);
+        self.batch.imu.clear();
+        self.batch.mag.clear();
     }
 
     fn send(&mut self, msg: &DeviceMsg, sink: &mut impl FrameSink) -> Sent {

@@ -23,6 +23,8 @@
 //! (hammered by the proptests in `tests/`).
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
+mod batch;
+
 pub use heapless::{String, Vec};
 
 /// Wire-format version carried in the first byte of every frame.
@@ -40,7 +42,8 @@ pub const MAX_BATCH_MAG: usize = 8;
 /// Largest calibration blob (`imu_cal::device::encode_blob`), bytes.
 pub const MAX_CAL_BLOB: usize = 256;
 
-const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+// The largest sample batch frame fits the payload limit: version + postcard + CRC.
+const _: () = assert!(1 + batch::MAX_SAMPLES_POSTCARD + 4 <= MAX_PAYLOAD);
 
 /// One characterised channel of the device.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -513,37 +516,141 @@ impl std::error::Error for EncodeError {}
 
 /// COBS-encodes `src` into `dst` (no delimiter); returns the encoded length, or `None` if `dst`
 /// is shorter than [`cobs::max_encoding_length`]. Byte-for-byte the output of
-/// `cobs::try_encode` (tested), in one tight pass: on the Cortex-M0+ the `cobs` crate's
-/// streaming encoder cost ≈ 40 cycles a byte, 5 % of the firmware's CPU at 1 kHz (emulator
-/// profile); decoding stays with the `cobs` crate.
+/// `cobs::try_encode` (tested); the frame encoder runs the same stuffer with the CRC fused in.
+/// Decoding stays with the `cobs` crate.
 pub fn cobs_encode(src: &[u8], dst: &mut [u8]) -> Option<usize> {
     if dst.len() < cobs::max_encoding_length(src.len()) {
         return None;
     }
-    // `code_at`: where the current block's code byte goes; `code`: 1 + its data bytes so far.
-    let mut code_at = 0;
-    let mut out = 1;
-    let mut code: u8 = 1;
-    for &b in src {
-        if code == 0xFF {
-            // A full block (254 data bytes) ends without an implied zero.
-            *dst.get_mut(code_at)? = code;
-            code_at = out;
-            out += 1;
-            code = 1;
+    let mut s = Stuffer::new(dst);
+    s.extend::<false>(src, 0);
+    s.finish()
+}
+
+/// COBS encoder state, fed in slices. It works a run at a time (the bytes up to the next zero
+/// or the end of a 254-byte block): one scan, one copy, one code byte. A run that falls outside
+/// `dst` is not copied, but the output position still advances, so [`Stuffer::finish`] reports
+/// a too-small buffer and nothing can panic (every index written is below the final position).
+struct Stuffer<'a> {
+    dst: &'a mut [u8],
+    /// Where the current block's code byte goes.
+    code_at: usize,
+    /// Where the next data byte goes; the block holds `out - code_at - 1` data bytes.
+    out: usize,
+}
+
+/// Data bytes in a full COBS block (code byte 0xFF, no implied zero).
+const COBS_BLOCK: usize = 254;
+
+impl<'a> Stuffer<'a> {
+    fn new(dst: &'a mut [u8]) -> Self {
+        Self {
+            dst,
+            code_at: 0,
+            out: 1,
         }
-        if b == 0 {
-            *dst.get_mut(code_at)? = code;
-            code_at = out;
-            code = 1;
-        } else {
-            *dst.get_mut(out)? = b;
-            code += 1;
-        }
-        out += 1;
     }
-    *dst.get_mut(code_at)? = code;
-    Some(out)
+
+    #[inline(always)]
+    fn put(&mut self, at: usize, b: u8) {
+        if let Some(slot) = self.dst.get_mut(at) {
+            *slot = b;
+        }
+    }
+
+    /// Stuff `src`; with `CRC`, also run `crc` (CRC-32/ISO-HDLC, reflected, not finalised) over
+    /// it in the same scan and return it.
+    fn extend<const CRC: bool>(&mut self, mut src: &[u8], mut crc: u32) -> u32 {
+        while !src.is_empty() {
+            let used = self.out - self.code_at - 1;
+            if used == COBS_BLOCK {
+                // A full block ends without an implied zero, only when more data follows.
+                self.put(self.code_at, 0xFF);
+                self.code_at = self.out;
+                self.out += 1;
+                continue;
+            }
+            let window = &src[..src.len().min(COBS_BLOCK - used)];
+            // The run: the bytes before the first zero of the window.
+            let run = if CRC {
+                crc_run(window, &mut crc)
+            } else {
+                window.iter().position(|&b| b == 0).unwrap_or(window.len())
+            };
+            if let Some(d) = self.dst.get_mut(self.out..self.out + run) {
+                d.copy_from_slice(&window[..run]);
+            }
+            self.out += run;
+            if run < window.len() {
+                // The zero ends the block: its code byte says where.
+                self.put(self.code_at, (self.out - self.code_at) as u8);
+                self.code_at = self.out;
+                self.out += 1;
+                src = &src[run + 1..];
+            } else {
+                src = &src[run..];
+            }
+        }
+        crc
+    }
+
+    /// Close the last block; the encoded length, or `None` if it did not fit `dst`.
+    fn finish(mut self) -> Option<usize> {
+        self.put(self.code_at, (self.out - self.code_at) as u8);
+        (self.out <= self.dst.len()).then_some(self.out)
+    }
+}
+
+/// The CRC-32/ISO-HDLC byte table (1 KiB, flash) generated by the `crc` crate: one copy, for
+/// the fused pass of [`frame`] and for [`crc32`] on received frames.
+static CRC_TABLE: [u32; 256] = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).table()[0];
+// `crc_step` hard-codes the reflected form with all-ones init and final XOR.
+const _: () = assert!(
+    crc::CRC_32_ISO_HDLC.refin
+        && crc::CRC_32_ISO_HDLC.refout
+        && crc::CRC_32_ISO_HDLC.init == u32::MAX
+        && crc::CRC_32_ISO_HDLC.xorout == u32::MAX
+);
+
+/// One byte into a running (reflected, not finalised) CRC-32/ISO-HDLC.
+#[inline(always)]
+fn crc_step(crc: u32, b: u8) -> u32 {
+    CRC_TABLE[usize::from(crc as u8 ^ b)] ^ (crc >> 8)
+}
+
+/// CRC-32/ISO-HDLC of `bytes` (`crc::CRC_32_ISO_HDLC`'s checksum; tested against it).
+fn crc32(bytes: &[u8]) -> u32 {
+    !bytes.iter().fold(u32::MAX, |c, &b| crc_step(c, b))
+}
+
+/// The bytes of `window` before its first zero (all of them if it has none), running `crc`
+/// over them and the zero. Its own function so that, on the M0+, the loop keeps the pointer,
+/// the CRC and the table in registers.
+#[inline(never)]
+fn crc_run(window: &[u8], crc: &mut u32) -> usize {
+    let mut c = *crc;
+    let mut run = window.len();
+    for (i, &b) in window.iter().enumerate() {
+        c = crc_step(c, b);
+        if b == 0 {
+            run = i;
+            break;
+        }
+    }
+    *crc = c;
+    run
+}
+
+/// `content` (version byte + postcard) → `COBS(content | crc32 LE) 0x00` in `out`, in one scan
+/// of `content` that updates the CRC and finds the zeros COBS replaces. Returns the frame
+/// length (delimiter included).
+fn frame(content: &[u8], out: &mut [u8]) -> Result<usize, EncodeError> {
+    let mut s = Stuffer::new(out);
+    let crc = !s.extend::<true>(content, u32::MAX);
+    s.extend::<false>(&crc.to_le_bytes(), 0);
+    let n = s.finish().ok_or(EncodeError::TooLarge)?;
+    *out.get_mut(n).ok_or(EncodeError::TooLarge)? = 0;
+    Ok(n + 1)
 }
 
 /// Serialises messages into frames; owns the scratch buffer for the un-stuffed payload.
@@ -572,13 +679,22 @@ impl FrameEncoder {
         let body = postcard::to_slice(msg, &mut self.scratch[1..MAX_PAYLOAD - 4])
             .map_err(|_| EncodeError::TooLarge)?
             .len();
-        let end = 1 + body;
-        let crc = CRC.checksum(&self.scratch[..end]);
-        self.scratch[end..end + 4].copy_from_slice(&crc.to_le_bytes());
-        let n = cobs_encode(&self.scratch[..end + 4], out).ok_or(EncodeError::TooLarge)?;
-        let delim = out.get_mut(n).ok_or(EncodeError::TooLarge)?;
-        *delim = 0;
-        Ok(n + 1)
+        frame(&self.scratch[..1 + body], out)
+    }
+
+    /// Encode `DeviceMsg::Samples(batch)` as one frame into `out`, byte for byte what
+    /// [`FrameEncoder::encode`] writes for it (tested), without serde: the firmware's per-batch
+    /// framing path (`batch.rs` writes the postcard bytes). `out` of [`MAX_FRAME`] bytes always
+    /// suffices; a shorter one that cannot hold the frame gives [`EncodeError::TooLarge`].
+    pub fn encode_samples(
+        &mut self,
+        batch: &SampleBatch,
+        out: &mut [u8],
+    ) -> Result<usize, EncodeError> {
+        self.scratch[0] = PROTOCOL_VERSION;
+        let body = batch::write(batch, &mut self.scratch[1..MAX_PAYLOAD - 4])
+            .ok_or(EncodeError::TooLarge)?;
+        frame(&self.scratch[..1 + body], out)
     }
 
     /// Encode into a fresh `Vec` (host convenience).
@@ -606,7 +722,7 @@ pub fn decode<T: DeserializeOwned>(frame: &mut [u8]) -> Result<T, DecodeError> {
     }
     let (content, crc_bytes) = payload.split_at(payload.len() - 4);
     let found = u32::from_le_bytes([crc_bytes[0], crc_bytes[1], crc_bytes[2], crc_bytes[3]]);
-    let expected = CRC.checksum(content);
+    let expected = crc32(content);
     if expected != found {
         return Err(DecodeError::Crc { expected, found });
     }
@@ -742,6 +858,24 @@ impl<const N: usize> FrameReader<N> {
             if let Some(r) = self.push::<T>(b) {
                 f(r);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The table-driven CRC gives CRC-32/ISO-HDLC: the catalogue's check value, and the `crc`
+    /// crate's checksum for every prefix of a byte string with zeros and 0xFF in it.
+    #[test]
+    fn crc32_is_crc_32_iso_hdlc() {
+        assert_eq!(crc32(b"123456789"), crc::CRC_32_ISO_HDLC.check);
+        assert_eq!(crc32(b""), 0);
+        let reference = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+        let bytes: [u8; 300] = core::array::from_fn(|i| (i * 37 % 256) as u8);
+        for n in 0..bytes.len() {
+            assert_eq!(crc32(&bytes[..n]), reference.checksum(&bytes[..n]), "{n}");
         }
     }
 }
