@@ -46,6 +46,7 @@ use crate::bus::{BusDevice, SharedBus};
 
 bind_interrupts!(struct Irqs {
     I2C0_IRQ => i2c::InterruptHandler<I2C0>;
+    TIMER_IRQ_1 => bus::DeadlineHandler;
     USBCTRL_IRQ => usb::InterruptHandler<USB>;
 });
 
@@ -137,6 +138,7 @@ async fn main(spawner: Spawner) {
     let mut i2c_config = i2c::Config::default();
     i2c_config.frequency = I2C_HZ;
     let i2c = I2c::new_async(p.I2C0, p.PIN_5, p.PIN_4, Irqs, i2c_config);
+    bus::init_deadline_alarm(Irqs);
     let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(i2c, i2c_config)));
 
     // --- channels ---------------------------------------------------------------------------
