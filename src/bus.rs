@@ -18,6 +18,7 @@ use embassy_sync::waitqueue::AtomicWaker;
 use embassy_time::{Duration, Instant};
 use embedded_hal_async::i2c::{ErrorType, I2c as AsyncI2c, Operation};
 
+use crate::i2c_dma::I2cDma;
 use crate::Irqs;
 
 /// Half an SCL period of the recovery clock, µs (≈ 100 kHz, slow enough for any slave).
@@ -32,15 +33,18 @@ pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 /// The I2C0 controller, absent only during a recovery.
 pub struct Bus {
     i2c: Option<I2c<'static, I2C0, i2c::Async>>,
+    /// DMA-driven register reads (`crate::i2c_dma`), on the same controller.
+    dma: I2cDma,
     config: i2c::Config,
     /// A transaction was abandoned mid-way: the controller's state is unknown.
     wedged: bool,
 }
 
 impl Bus {
-    pub fn new(i2c: I2c<'static, I2C0, i2c::Async>, config: i2c::Config) -> Self {
+    pub fn new(i2c: I2c<'static, I2C0, i2c::Async>, dma: I2cDma, config: i2c::Config) -> Self {
         Self {
             i2c: Some(i2c),
+            dma,
             config,
             wedged: false,
         }
@@ -54,6 +58,7 @@ impl Bus {
         // other user out until the new controller is stored.
         let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
         self.i2c = Some(I2c::new_async(p, scl, sda, Irqs, self.config));
+        self.dma.forget();
         self.wedged = false;
     }
 
@@ -108,17 +113,31 @@ impl AsyncI2c for BusDevice {
         address: u8,
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
-        let mut bus = self.bus.lock().await;
-        if bus.wedged || bus.i2c.is_none() {
+        let mut guard = self.bus.lock().await;
+        let bus = &mut *guard;
+        // The previous DMA read's STOP must be over before the controller is re-programmed.
+        if bus.wedged || bus.i2c.is_none() || !bus.dma.settle() {
             bus.reset_controller();
         }
         let Some(i2c) = bus.i2c.as_mut() else {
             return Err(i2c::Error::Abort(AbortReason::Other(0)));
         };
         let deadline = Instant::now() + Duration::from_millis(TRANSACTION_TIMEOUT_MS);
-        let result = {
-            let transfer = core::pin::pin!(i2c.transaction(address, operations));
-            Deadline::new(deadline, transfer).await
+        // Register reads (the drivers' `write_read` and plain reads) go through DMA: one wake-up
+        // per transfer. Anything else (register writes) takes embassy's interrupt path.
+        let result = match operations {
+            [Operation::Write(w), Operation::Read(r)] if I2cDma::fits(w, r) => {
+                let transfer = core::pin::pin!(bus.dma.write_read(address, w, r));
+                Deadline::new(deadline, transfer).await
+            }
+            [Operation::Read(r)] if I2cDma::fits(&[], r) => {
+                let transfer = core::pin::pin!(bus.dma.write_read(address, &[], r));
+                Deadline::new(deadline, transfer).await
+            }
+            _ => {
+                let transfer = core::pin::pin!(i2c.transaction(address, operations));
+                Deadline::new(deadline, transfer).await
+            }
         };
         result.unwrap_or_else(|| {
             bus.wedged = true;
