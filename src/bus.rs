@@ -2,14 +2,23 @@
 //! async HAL driver), with bus recovery: while the mutex is held, the I2C block is released,
 //! nine SCL pulses and a STOP are clocked on GP5/GP4 through SIO
 //! (`imu_drivers::recovery::recover_bus`, UM10204 §3.1.16), and the block is re-created.
+use core::future::Future;
+use core::pin::Pin;
+use core::sync::atomic::{AtomicBool, Ordering};
+use core::task::{Context, Poll};
 use embassy_rp::gpio::{Level, OutputOpenDrain};
 use embassy_rp::i2c::{self, AbortReason, I2c};
+use embassy_rp::interrupt::typelevel::{Binding, Handler, TIMER_IRQ_1};
+use embassy_rp::interrupt::InterruptExt;
+use embassy_rp::pac;
 use embassy_rp::peripherals::{I2C0, PIN_4, PIN_5};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::mutex::Mutex;
-use embassy_time::{with_timeout, Duration};
+use embassy_sync::waitqueue::AtomicWaker;
+use embassy_time::{Duration, Instant};
 use embedded_hal_async::i2c::{ErrorType, I2c as AsyncI2c, Operation};
 
+use crate::i2c_dma::I2cDma;
 use crate::Irqs;
 
 /// Half an SCL period of the recovery clock, µs (≈ 100 kHz, slow enough for any slave).
@@ -24,15 +33,18 @@ pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 /// The I2C0 controller, absent only during a recovery.
 pub struct Bus {
     i2c: Option<I2c<'static, I2C0, i2c::Async>>,
+    /// DMA-driven register reads (`crate::i2c_dma`), on the same controller.
+    dma: I2cDma,
     config: i2c::Config,
     /// A transaction was abandoned mid-way: the controller's state is unknown.
     wedged: bool,
 }
 
 impl Bus {
-    pub fn new(i2c: I2c<'static, I2C0, i2c::Async>, config: i2c::Config) -> Self {
+    pub fn new(i2c: I2c<'static, I2C0, i2c::Async>, dma: I2cDma, config: i2c::Config) -> Self {
         Self {
             i2c: Some(i2c),
+            dma,
             config,
             wedged: false,
         }
@@ -46,6 +58,7 @@ impl Bus {
         // other user out until the new controller is stored.
         let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
         self.i2c = Some(I2c::new_async(p, scl, sda, Irqs, self.config));
+        self.dma.forget();
         self.wedged = false;
     }
 
@@ -100,20 +113,135 @@ impl AsyncI2c for BusDevice {
         address: u8,
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
-        let mut bus = self.bus.lock().await;
-        if bus.wedged || bus.i2c.is_none() {
+        let mut guard = self.bus.lock().await;
+        let bus = &mut *guard;
+        // The previous DMA read's STOP must be over before the controller is re-programmed.
+        if bus.wedged || bus.i2c.is_none() || !bus.dma.settle() {
             bus.reset_controller();
         }
         let Some(i2c) = bus.i2c.as_mut() else {
             return Err(i2c::Error::Abort(AbortReason::Other(0)));
         };
-        let t = Duration::from_millis(TRANSACTION_TIMEOUT_MS);
-        match with_timeout(t, i2c.transaction(address, operations)).await {
-            Ok(r) => r,
-            Err(_) => {
-                bus.wedged = true;
-                Err(i2c::Error::Abort(AbortReason::Other(u32::MAX)))
+        let deadline = Instant::now() + Duration::from_millis(TRANSACTION_TIMEOUT_MS);
+        // Register reads (the drivers' `write_read` and plain reads) go through DMA: one wake-up
+        // per transfer. Anything else (register writes) takes embassy's interrupt path.
+        let result = match operations {
+            [Operation::Write(w), Operation::Read(r)] if I2cDma::fits(w, r) => {
+                let transfer = core::pin::pin!(bus.dma.write_read(address, w, r));
+                Deadline::new(deadline, transfer).await
             }
+            [Operation::Read(r)] if I2cDma::fits(&[], r) => {
+                let transfer = core::pin::pin!(bus.dma.write_read(address, &[], r));
+                Deadline::new(deadline, transfer).await
+            }
+            _ => {
+                let transfer = core::pin::pin!(i2c.transaction(address, operations));
+                Deadline::new(deadline, transfer).await
+            }
+        };
+        result.unwrap_or_else(|| {
+            bus.wedged = true;
+            Err(i2c::Error::Abort(AbortReason::Other(u32::MAX)))
+        })
+    }
+}
+
+/// TIMER alarm used for the transaction deadline; embassy-rp's time driver uses alarm 0 only.
+/// One alarm serves both sensors' devices: transactions hold the bus mutex, so one runs at a time.
+const DEADLINE_ALARM: usize = 1;
+// The deadline is programmed into a TIMER alarm in embassy-time ticks: they must be the TIMER's µs.
+const _: () = assert!(embassy_time::TICK_HZ == 1_000_000);
+
+static DEADLINE_WAKER: AtomicWaker = AtomicWaker::new();
+/// Set by the deadline alarm's interrupt, cleared when the alarm is armed.
+static DEADLINE_PASSED: AtomicBool = AtomicBool::new(false);
+
+/// TIMER_IRQ_1: a transaction's deadline passed; wake its task, which abandons it.
+pub struct DeadlineHandler;
+
+impl Handler<TIMER_IRQ_1> for DeadlineHandler {
+    unsafe fn on_interrupt() {
+        pac::TIMER
+            .intr()
+            .write(|w| w.set_alarm(DEADLINE_ALARM, true));
+        DEADLINE_PASSED.store(true, Ordering::Relaxed);
+        DEADLINE_WAKER.wake();
+    }
+}
+
+/// Enable the deadline alarm's interrupt (once, at boot; `DeadlineHandler` must be bound).
+pub fn init_deadline_alarm(_irqs: impl Binding<TIMER_IRQ_1, DeadlineHandler>) {
+    pac::TIMER
+        .inte()
+        .modify(|w| w.set_alarm(DEADLINE_ALARM, true));
+    embassy_rp::interrupt::TIMER_IRQ_1.unpend();
+    // SAFETY: its handler (`DeadlineHandler`) only clears the alarm and wakes a waker.
+    unsafe { embassy_rp::interrupt::TIMER_IRQ_1.enable() };
+}
+
+/// `fut`, abandoned (`None`) once `deadline` has passed: a cheap `embassy_time::with_timeout`.
+///
+/// `with_timeout` polls a `Timer` on every poll, and each poll re-registers the task with
+/// embassy's timer queue, which walks the queue and re-arms the time driver's alarm; even one
+/// registration per transaction cost ≈ 550 cycles (emulator). Here the deadline goes straight
+/// into TIMER alarm 1 on the first poll (one register write); its interrupt sets
+/// `DEADLINE_PASSED` and wakes the task, and later polls only look at that flag. The alarm is
+/// disarmed when the future ends or is dropped (a wake that races with the end is a harmless
+/// extra poll of that task; the flag is cleared again when the next transaction arms the alarm).
+struct Deadline<'a, F> {
+    fut: Pin<&'a mut F>,
+    deadline: Instant,
+    armed: bool,
+}
+
+impl<'a, F> Deadline<'a, F> {
+    fn new(deadline: Instant, fut: Pin<&'a mut F>) -> Self {
+        Self {
+            fut,
+            deadline,
+            armed: false,
         }
+    }
+
+    fn disarm(&mut self) {
+        if self.armed {
+            pac::TIMER
+                .armed()
+                .write(|w| w.set_armed(1 << DEADLINE_ALARM));
+            self.armed = false;
+        }
+    }
+}
+
+impl<F> Drop for Deadline<'_, F> {
+    fn drop(&mut self) {
+        self.disarm();
+    }
+}
+
+impl<F: Future> Future for Deadline<'_, F> {
+    type Output = Option<F::Output>;
+
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<Self::Output> {
+        let this = self.get_mut();
+        if let Poll::Ready(r) = this.fut.as_mut().poll(cx) {
+            this.disarm();
+            return Poll::Ready(Some(r));
+        }
+        if this.armed {
+            if DEADLINE_PASSED.load(Ordering::Relaxed) {
+                this.disarm();
+                return Poll::Ready(None);
+            }
+        } else {
+            DEADLINE_WAKER.register(cx.waker());
+            DEADLINE_PASSED.store(false, Ordering::Relaxed);
+            // The alarm fires when the low 32 bits of the µs counter equal the value.
+            pac::TIMER
+                .alarm(DEADLINE_ALARM)
+                .write_value(this.deadline.as_ticks() as u32);
+            this.armed = true;
+        }
+        Poll::Pending
     }
 }

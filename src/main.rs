@@ -16,6 +16,7 @@
 
 mod bus;
 mod cpu;
+mod i2c_dma;
 mod storage;
 
 use defmt::{info, warn};
@@ -47,7 +48,9 @@ use {defmt_rtt as _, panic_probe as _};
 use crate::bus::{BusDevice, SharedBus};
 
 bind_interrupts!(struct Irqs {
-    I2C0_IRQ => i2c::InterruptHandler<I2C0>;
+    I2C0_IRQ => i2c::InterruptHandler<I2C0>, i2c_dma::I2cAbortHandler;
+    DMA_IRQ_0 => i2c_dma::DmaDoneHandler;
+    TIMER_IRQ_1 => bus::DeadlineHandler;
     USBCTRL_IRQ => usb::InterruptHandler<USB>;
 });
 
@@ -155,7 +158,9 @@ async fn main(spawner: Spawner) {
     let mut i2c_config = i2c::Config::default();
     i2c_config.frequency = I2C_HZ;
     let i2c = I2c::new_async(p.I2C0, p.PIN_5, p.PIN_4, Irqs, i2c_config);
-    let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(i2c, i2c_config)));
+    bus::init_deadline_alarm(Irqs);
+    let dma = i2c_dma::I2cDma::new(p.DMA_CH0, p.DMA_CH1, Irqs);
+    let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(i2c, dma, i2c_config)));
 
     // --- channels ---------------------------------------------------------------------------
     let out: &'static OutPipe = OUT.init(Pipe::new());

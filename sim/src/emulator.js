@@ -5,7 +5,7 @@ import { readFileSync } from 'node:fs';
 import { RP2040, USBCDC } from 'rp2040js';
 import { parseElf } from './elf.js';
 import { buildRom, HC_LOOKUP, ROM_FUNCTIONS } from './rom.js';
-import { patchDmaAbort, patchI2cInterruptMask, patchSevLogger, patchXipCtrl, UsbOutQueue } from './patches.js';
+import { patchDmaAbort, patchI2cDreq, patchI2cInterruptMask, patchSevLogger, patchXipCtrl, UsbOutQueue } from './patches.js';
 import { RttReader } from './rtt.js';
 
 const FLASH_BASE = 0x10000000;
@@ -41,6 +41,7 @@ export class Emulator {
       onLog(level, component, message);
     });
     patchI2cInterruptMask(this.mcu);
+    patchI2cDreq(this.mcu);
     this.xip = patchXipCtrl(this.mcu);
     patchDmaAbort(this.mcu);
     this.usbOut = new UsbOutQueue(this.mcu);

@@ -229,3 +229,91 @@ export function patchDmaAbort(mcu) {
   const read = dma.readUint32.bind(dma);
   dma.readUint32 = (offset) => (offset === 0x444 || offset === 0x440 ? 0 : read(offset));
 }
+
+const IC_DATA_CMD = 0x10;
+const IC_DMA_CR = 0x88;
+const IC_DMA_TDLR = 0x8c;
+const IC_DMA_RDLR = 0x90;
+const IC_DMA_CR_RDMAE = 1 << 0;
+const IC_DMA_CR_TDMAE = 1 << 1;
+const IC_RAW_TX_ABRT = 1 << 6;
+/** DREQ numbers of I2C0 TX/RX; I2C1's are the next two (RP2040 datasheet §2.5.3.1). */
+const DREQ_I2C0_TX = 32;
+
+/**
+ * Bug 8 (found with the pico-imu firmware's DMA I2C path): rp2040js's I2C has no DMA interface.
+ * IC_DMA_CR, IC_DMA_TDLR and IC_DMA_RDLR read as "unimplemented" and no DREQ is ever raised, so a
+ * DMA channel paced by DREQ_I2Cn_TX/RX never moves. Modelled on RP2040 datasheet §4.3.9 and the
+ * register descriptions of §4.3.17:
+ * - TX DREQ (32 + 2n) is asserted while IC_DMA_CR.TDMAE is set and the TX FIFO level is
+ *   ≤ IC_DMA_TDLR; RX DREQ (33 + 2n) while IC_DMA_CR.RDMAE is set and the RX FIFO level is
+ *   > IC_DMA_RDLR. Both are re-evaluated on every FIFO push, pull and flush.
+ * - After a transmit abort the TX FIFO "remains in this flushed state until the register
+ *   IC_CLR_TX_ABRT is read" (IC_TX_ABRT_SOURCE, §4.3.17): writes to IC_DATA_CMD are dropped while
+ *   TX_ABRT is raised, so a DMA channel still feeding commands cannot start a new transfer. The
+ *   model would otherwise run them as a fresh transaction after the abort's STOP.
+ * The bus timing of every byte is unchanged (the FIFOs drain at the device model's pace).
+ */
+export function patchI2cDreq(mcu) {
+  mcu.i2c.forEach((i2c, index) => {
+    const dreqTx = DREQ_I2C0_TX + 2 * index;
+    const dreqRx = dreqTx + 1;
+    const dma = mcu.dma;
+    const state = { cr: 0, tdlr: 0, rdlr: 0 };
+    const update = () => {
+      const tx = state.cr & IC_DMA_CR_TDMAE && i2c.txFIFO.itemCount <= state.tdlr;
+      const rx = state.cr & IC_DMA_CR_RDMAE && i2c.rxFIFO.itemCount > state.rdlr;
+      if (tx) dma.setDREQ(dreqTx);
+      else dma.clearDREQ(dreqTx);
+      if (rx) dma.setDREQ(dreqRx);
+      else dma.clearDREQ(dreqRx);
+    };
+    for (const fifo of [i2c.txFIFO, i2c.rxFIFO]) {
+      for (const name of ['push', 'pull', 'reset']) {
+        const original = fifo[name].bind(fifo);
+        fifo[name] = (value) => {
+          const r = original(value);
+          update();
+          return r;
+        };
+      }
+    }
+    const read = i2c.readUint32.bind(i2c);
+    i2c.readUint32 = (offset) => {
+      switch (offset) {
+        case IC_DMA_CR:
+          return state.cr;
+        case IC_DMA_TDLR:
+          return state.tdlr;
+        case IC_DMA_RDLR:
+          return state.rdlr;
+        default:
+          return read(offset);
+      }
+    };
+    const write = i2c.writeUint32.bind(i2c);
+    i2c.writeUint32 = (offset, value) => {
+      switch (offset) {
+        case IC_DMA_CR:
+          state.cr = value & (IC_DMA_CR_TDMAE | IC_DMA_CR_RDMAE);
+          update();
+          return;
+        case IC_DMA_TDLR:
+          state.tdlr = value & 0xf;
+          update();
+          return;
+        case IC_DMA_RDLR:
+          state.rdlr = value & 0xf;
+          update();
+          return;
+        case IC_DATA_CMD:
+          if (i2c.intRaw & IC_RAW_TX_ABRT) return; // TX FIFO held flushed until TX_ABRT is cleared
+          write(offset, value);
+          return;
+        default:
+          write(offset, value);
+      }
+    };
+    // (Reading IC_CLR_TX_ABRT or IC_CLR_INTR clears TX_ABRT in rp2040js itself.)
+  });
+}

@@ -1,0 +1,315 @@
+//! DMA-driven I2C0 register reads: `[Write(register address), Read(n)]` (or a plain `Read(n)`)
+//! run by two DMA channels, so the task wakes once per transaction instead of once per 16 bytes
+//! (embassy-rp's async I2C refills the 16-entry FIFOs from the interrupt's wake-up).
+//!
+//! RP2040 datasheet §4.3.9 ("Using DMA"), §2.5.3.1 (DREQ 32/33): a TX channel paced by
+//! DREQ_I2C0_TX copies a prepared list of IC_DATA_CMD words (the address bytes as writes, then
+//! `n` read commands, RESTART on the first read after a write, STOP on the last) into
+//! IC_DATA_CMD; an RX channel paced by DREQ_I2C0_RX copies the received bytes from IC_DATA_CMD
+//! into the caller's buffer. The task sleeps until the RX channel's completion interrupt
+//! (`DmaDoneHandler` on DMA_IRQ_0) or an I2C TX_ABRT (a NACK, lost arbitration; `I2cAbortHandler`,
+//! bound next to embassy's I2C handler). The controller's STOP after the last byte (one SCL
+//! period) is not waited for: `settle` checks for its STOP_DET before the next transaction of
+//! either path. Both channels are aborted whenever a transfer ends early, including when its
+//! future is dropped (the transaction timeout in `bus.rs`), so the RX channel never writes into
+//! a buffer that is gone.
+use core::future::poll_fn;
+use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
+use core::task::Poll;
+
+use embassy_rp::i2c::{AbortReason, Error};
+use embassy_rp::interrupt::typelevel::{Handler, DMA_IRQ_0, I2C0_IRQ};
+use embassy_rp::interrupt::InterruptExt;
+use embassy_rp::pac;
+use embassy_rp::pac::dma::vals::{DataSize, TreqSel};
+use embassy_rp::peripherals::{DMA_CH0, DMA_CH1};
+use embassy_rp::Peri;
+use embassy_sync::waitqueue::AtomicWaker;
+use embassy_time::{Duration, Instant};
+
+/// Longest read done by DMA; longer ones go through embassy's path. The MPU-6050 driver reads
+/// the FIFO in chunks of at most 16 frames × 14 bytes.
+pub const MAX_READ: usize = 256;
+/// Most address bytes written before a DMA read (one register address in practice).
+pub const MAX_WRITE: usize = 4;
+
+/// IC_DATA_CMD command bits (datasheet §4.3.17, IC_DATA_CMD).
+const CMD_READ: u32 = 1 << 8;
+const CMD_STOP: u32 = 1 << 9;
+const CMD_RESTART: u32 = 1 << 10;
+/// TX DREQ while the TX FIFO holds ≤ this many commands: keeps it half full, far ahead of the bus.
+const TX_DMA_LEVEL: u8 = 8;
+/// Longest wait for the STOP of the previous DMA transfer (one SCL period, 2.5 µs at 400 kHz,
+/// unless a slave stretches SCL).
+const STOP_WAIT_US: u64 = 200;
+
+const TX_CH: usize = 0;
+const RX_CH: usize = 1;
+
+static WAKER: AtomicWaker = AtomicWaker::new();
+/// A DMA transfer is waiting on `WAKER` (else the I2C interrupt is embassy's path's alone).
+static WAITING: AtomicBool = AtomicBool::new(false);
+
+/// I2C0 interrupt, next to embassy's `i2c::InterruptHandler` (which masks every source and wakes
+/// its own transfer): wakes a DMA transfer, if one is waiting (for TX_ABRT).
+pub struct I2cAbortHandler;
+
+impl Handler<I2C0_IRQ> for I2cAbortHandler {
+    unsafe fn on_interrupt() {
+        pac::I2C0
+            .ic_intr_mask()
+            .write_value(pac::i2c::regs::IcIntrMask(0));
+        if WAITING.load(Ordering::Relaxed) {
+            WAKER.wake();
+        }
+    }
+}
+
+/// DMA_IRQ_0: the RX channel has copied its last byte.
+pub struct DmaDoneHandler;
+
+impl Handler<DMA_IRQ_0> for DmaDoneHandler {
+    unsafe fn on_interrupt() {
+        let ints = pac::DMA.ints(0);
+        if ints.read() & (1 << RX_CH) != 0 {
+            ints.write_value(1 << RX_CH);
+            WAKER.wake();
+        }
+    }
+}
+
+/// The two DMA channels and the command list.
+pub struct I2cDma {
+    _tx: Peri<'static, DMA_CH0>,
+    _rx: Peri<'static, DMA_CH1>,
+    /// `[MAX_WRITE slots for the address bytes | MAX_READ read commands]`. The read slots hold
+    /// `CMD_READ`; a transfer marks its first (RESTART) and last (STOP) read and the next one
+    /// restores them, so setting up a read costs a few stores whatever its length.
+    cmds: [u32; MAX_WRITE + MAX_READ],
+    /// The read slot whose STOP the last transfer set.
+    last_stop: usize,
+    /// A transfer ended (or was NACKed) and its STOP may still be on the bus.
+    stop_pending: bool,
+}
+
+/// What ended a transfer.
+enum Ending {
+    Done,
+    Abort(u32),
+}
+
+impl I2cDma {
+    /// Takes the two channels; the `Binding`s show that both handlers are bound.
+    pub fn new<B>(tx: Peri<'static, DMA_CH0>, rx: Peri<'static, DMA_CH1>, _irqs: B) -> Self
+    where
+        B: embassy_rp::interrupt::typelevel::Binding<DMA_IRQ_0, DmaDoneHandler>
+            + embassy_rp::interrupt::typelevel::Binding<I2C0_IRQ, I2cAbortHandler>,
+    {
+        pac::DMA.inte(0).modify(|v| *v |= 1 << RX_CH);
+        embassy_rp::interrupt::DMA_IRQ_0.unpend();
+        // SAFETY: the handler bound to DMA_IRQ_0 (`DmaDoneHandler`) touches only the RX
+        // channel's status bit and `WAKER`.
+        unsafe { embassy_rp::interrupt::DMA_IRQ_0.enable() };
+        Self {
+            _tx: tx,
+            _rx: rx,
+            cmds: [CMD_READ; MAX_WRITE + MAX_READ],
+            last_stop: MAX_WRITE,
+            stop_pending: false,
+        }
+    }
+
+    /// Wait (spinning, at most `STOP_WAIT_US`) for the STOP that ended the last DMA transfer, so
+    /// the controller is idle before it is re-programmed. `false`: no STOP came, the controller
+    /// must be re-created. Call before every transaction, of either path.
+    pub fn settle(&mut self) -> bool {
+        if !self.stop_pending {
+            return true;
+        }
+        let i2c = pac::I2C0;
+        let mut since: Option<Instant> = None;
+        while !i2c.ic_raw_intr_stat().read().stop_det() {
+            let now = Instant::now();
+            let t0 = *since.get_or_insert(now);
+            if now.saturating_duration_since(t0) > Duration::from_micros(STOP_WAIT_US) {
+                self.stop_pending = false;
+                return false;
+            }
+        }
+        i2c.ic_clr_stop_det().read();
+        self.stop_pending = false;
+        true
+    }
+
+    /// The controller was reset: nothing of a previous transfer is pending.
+    pub fn forget(&mut self) {
+        self.stop_pending = false;
+    }
+
+    /// Whether `write` then `read` fits the DMA path.
+    pub fn fits(write: &[u8], read: &[u8]) -> bool {
+        write.len() <= MAX_WRITE && !read.is_empty() && read.len() <= MAX_READ
+    }
+
+    /// Write `write` (may be empty) to `address`, then read `read.len()` bytes (repeated start
+    /// after a write), then STOP. `fits(write, read)` must hold (else `Err(InvalidReadBufferLength)`).
+    pub async fn write_read(
+        &mut self,
+        address: u8,
+        write: &[u8],
+        read: &mut [u8],
+    ) -> Result<(), Error> {
+        if !Self::fits(write, read) {
+            return Err(Error::InvalidReadBufferLength);
+        }
+        if address >= 0x80 {
+            return Err(Error::AddressOutOfRange(address.into()));
+        }
+        let n = read.len();
+        // Restore the read slots the previous transfer marked, then mark this one's.
+        self.cmds[MAX_WRITE] = CMD_READ;
+        self.cmds[self.last_stop] = CMD_READ;
+        let start = MAX_WRITE - write.len();
+        for (slot, b) in self.cmds[start..MAX_WRITE].iter_mut().zip(write) {
+            *slot = u32::from(*b);
+        }
+        let restart = if write.is_empty() { 0 } else { CMD_RESTART };
+        self.cmds[MAX_WRITE] |= restart;
+        self.last_stop = MAX_WRITE + n - 1;
+        self.cmds[self.last_stop] |= CMD_STOP;
+
+        let i2c = pac::I2C0;
+        i2c.ic_enable().write(|w| w.set_enable(false));
+        i2c.ic_tar().write(|w| w.set_ic_tar(address.into()));
+        i2c.ic_clr_intr().read(); // STOP_DET, TX_ABRT (and its hold on the TX FIFO) from before
+        i2c.ic_dma_tdlr().write(|w| w.set_dmatdl(TX_DMA_LEVEL));
+        i2c.ic_dma_rdlr().write(|w| w.set_dmardl(0));
+        i2c.ic_enable().write(|w| w.set_enable(true));
+
+        let data_cmd = i2c.ic_data_cmd().as_ptr() as u32;
+        // From here on the channels run; `Running` aborts them however this future ends, and
+        // `Waiting` routes the I2C interrupt to this transfer until it ends.
+        let _waiting = Waiting::new();
+        let running = Running;
+        compiler_fence(Ordering::SeqCst);
+        let dma = pac::DMA;
+        let rx = dma.ch(RX_CH);
+        rx.read_addr().write_value(data_cmd);
+        rx.write_addr().write_value(read.as_mut_ptr() as u32);
+        rx.trans_count().write_value(n as u32);
+        rx.ctrl_trig().write(|w| {
+            w.set_treq_sel(TreqSel::I2C0_RX);
+            w.set_data_size(DataSize::SIZE_BYTE);
+            w.set_incr_read(false);
+            w.set_incr_write(true);
+            w.set_chain_to(RX_CH as u8);
+            w.set_en(true);
+        });
+        let tx = dma.ch(TX_CH);
+        tx.read_addr()
+            .write_value(self.cmds[start..].as_ptr() as u32);
+        tx.write_addr().write_value(data_cmd);
+        tx.trans_count().write_value((write.len() + n) as u32);
+        tx.ctrl_trig().write(|w| {
+            w.set_treq_sel(TreqSel::I2C0_TX);
+            w.set_data_size(DataSize::SIZE_WORD);
+            w.set_incr_read(true);
+            w.set_incr_write(false);
+            w.set_chain_to(TX_CH as u8);
+            w.set_en(true);
+        });
+        compiler_fence(Ordering::SeqCst);
+        // DREQs on: the TX channel starts feeding commands.
+        i2c.ic_dma_cr().write(|w| {
+            w.set_tdmae(true);
+            w.set_rdmae(true);
+        });
+
+        let ending = wait_end(rx).await;
+        drop(running);
+        i2c.ic_intr_mask()
+            .write_value(pac::i2c::regs::IcIntrMask(0));
+        compiler_fence(Ordering::SeqCst);
+        match ending {
+            Ending::Done => {
+                self.stop_pending = true;
+                Ok(())
+            }
+            Ending::Abort(source) => {
+                let reason = abort_reason(source);
+                // A NACK ends with a STOP the controller sends itself; after lost arbitration
+                // the bus is someone else's and no STOP of ours follows.
+                self.stop_pending = !matches!(reason, AbortReason::ArbitrationLoss);
+                Err(Error::Abort(reason))
+            }
+        }
+    }
+}
+
+/// Sets `WAITING` while it lives.
+struct Waiting;
+
+impl Waiting {
+    fn new() -> Self {
+        WAITING.store(true, Ordering::Relaxed);
+        Self
+    }
+}
+
+impl Drop for Waiting {
+    fn drop(&mut self) {
+        WAITING.store(false, Ordering::Relaxed);
+    }
+}
+
+/// Aborts both channels and turns the I2C DMA requests off when dropped.
+struct Running;
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        pac::I2C0
+            .ic_dma_cr()
+            .write_value(pac::i2c::regs::IcDmaCr(0));
+        let dma = pac::DMA;
+        dma.chan_abort()
+            .write(|w| w.set_chan_abort((1 << TX_CH) | (1 << RX_CH)));
+        while dma.ch(TX_CH).ctrl_trig().read().busy() || dma.ch(RX_CH).ctrl_trig().read().busy() {}
+        for ch in [TX_CH, RX_CH] {
+            dma.ch(ch).ctrl_trig().write(|w| w.set_en(false));
+        }
+        compiler_fence(Ordering::SeqCst);
+    }
+}
+
+/// Sleep until the RX channel has copied its last byte or TX_ABRT is raised; an abort is read
+/// and cleared (which also ends its hold on the TX FIFO).
+async fn wait_end(rx: pac::dma::Channel) -> Ending {
+    let i2c = pac::I2C0;
+    poll_fn(|cx| {
+        WAKER.register(cx.waker());
+        if i2c.ic_raw_intr_stat().read().tx_abrt() {
+            let source = i2c.ic_tx_abrt_source().read().0;
+            i2c.ic_clr_tx_abrt().read();
+            return Poll::Ready(Ending::Abort(source));
+        }
+        if !rx.ctrl_trig().read().busy() {
+            return Poll::Ready(Ending::Done);
+        }
+        // Raised after the check: the unmasked source interrupts at once.
+        i2c.ic_intr_mask().write(|w| w.set_m_tx_abrt(true));
+        Poll::Pending
+    })
+    .await
+}
+
+/// The same classification as embassy-rp's async path.
+fn abort_reason(source: u32) -> AbortReason {
+    let s = pac::i2c::regs::IcTxAbrtSource(source);
+    if s.abrt_7b_addr_noack() || s.abrt_10addr1_noack() || s.abrt_10addr2_noack() {
+        AbortReason::NoAcknowledge
+    } else if s.arb_lost() {
+        AbortReason::ArbitrationLoss
+    } else {
+        AbortReason::Other(source)
+    }
+}
