@@ -3,13 +3,14 @@
 //! ten channels, and reports over USB CDC-ACM (imu-proto frames) and defmt-RTT.
 //!
 //! Tasks (docs/firmware.md has the diagram):
-//! * `imu_task`     — MPU-6050 FIFO bursts every 10 ms (timer-driven), fault handling;
-//! * `mag_task`     — QMC5883L at 200 Hz, fault handling;
+//! * `imu_task`     — MPU-6050 FIFO bursts every 5 ms (timer slots), fault handling;
+//! * `mag_task`     — QMC5883L at 200 Hz, following the sensor's own phase, fault handling;
 //! * `process_task` — the pipeline and host requests (`pico_imu::device::Device`), calibration
 //!   storage (the only flash writer);
+//! * `tick_task`    — the 100 ms housekeeping tick (status, tables);
 //! * `usb_task`, `usb_tx_task`, `usb_rx_task` — embassy-usb device, frames out, frames in.
 //!
-//! Tasks talk only through the embassy-sync channel, pipe, watch and signal below; the I2C bus
+//! Tasks talk only through the embassy-sync channels, pipe, watch and signal below; the I2C bus
 //! is shared through an embassy-sync mutex.
 #![no_std]
 #![no_main]
@@ -59,8 +60,8 @@ const I2C_HZ: u32 = 400_000;
 /// IMU FIFO service period: 5 ms ≈ 5 frames of 14 bytes (≈ 2 ms of bus time at 400 kHz), far
 /// below the 1024-byte FIFO (73 frames = 73 ms of headroom).
 const IMU_BURST_MS: u64 = 5;
-/// The magnetometer is read half a period after each IMU burst starts, when the bus is free:
-/// a read held up behind a burst could otherwise land after the next sample and lose one.
+/// Until the magnetometer service knows the sensor's phase (at boot, after a fault), its ticks
+/// come half a period after each IMU burst starts, when the bus is free.
 const MAG_SLOT_OFFSET_US: u64 = IMU_SLOT_OFFSET_US + MAG_PERIOD_US / 2;
 /// The slots sit 250 µs off whole milliseconds. On silicon this changes nothing; in rp2040js
 /// 1.4.1 an alarm that falls on the very instant the harness starts a CPU stall (its faults are
@@ -285,7 +286,7 @@ async fn wait_running(
     true
 }
 
-/// MPU-6050: FIFO bursts every 10 ms (`pico_imu::sensors::ImuService`); a lost sensor is
+/// MPU-6050: FIFO bursts every 5 ms (`pico_imu::sensors::ImuService`); a lost sensor is
 /// retried with bus recovery and re-initialised.
 #[embassy_executor::task]
 async fn imu_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunWatch) -> ! {
