@@ -4,6 +4,9 @@
 use imu_proto::*;
 use proptest::prelude::*;
 
+mod common;
+use common::{batch_of, same_batch};
+
 fn frame<T: serde::Serialize>(msg: &T) -> std::vec::Vec<u8> {
     let mut enc = FrameEncoder::new();
     let mut out = std::vec![0u8; MAX_FRAME];
@@ -65,27 +68,7 @@ fn arb_batch() -> impl Strategy<Value = SampleBatch> {
         proptest::collection::vec(mag, 0..=MAX_BATCH_MAG),
         any::<[f32; 5]>(),
     )
-        .prop_map(|(calibrated, imu, mag, s)| SampleBatch {
-            calibrated,
-            scales: Scales {
-                accel: s[0],
-                gyro: s[1],
-                mag: s[2],
-                temp: s[3],
-                temp_offset: s[4],
-            },
-            imu: Vec::from_slice(&imu).unwrap(),
-            mag: Vec::from_slice(&mag).unwrap(),
-        })
-}
-
-/// f32 NaN != NaN, so compare batches through their bit patterns.
-fn same_batch(a: &SampleBatch, b: &SampleBatch) -> bool {
-    let bits = |s: &Scales| [s.accel, s.gyro, s.mag, s.temp, s.temp_offset].map(f32::to_bits);
-    a.calibrated == b.calibrated
-        && a.imu == b.imu
-        && a.mag == b.mag
-        && bits(&a.scales) == bits(&b.scales)
+        .prop_map(|(calibrated, imu, mag, s)| batch_of(calibrated, &imu, &mag, s))
 }
 
 proptest! {
