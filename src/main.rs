@@ -199,8 +199,19 @@ async fn main(spawner: Spawner) {
     spawner.spawn(imu_task(bus, imu_tx, run).expect("spawn imu_task"));
     spawner.spawn(mag_task(bus, mag_tx, run).expect("spawn mag_task"));
     spawner.spawn(
-        process_task(device, store, imu_rx, mag_rx, host, tick, out, run)
-            .expect("spawn process_task"),
+        process_task(
+            device,
+            store,
+            Inputs {
+                imu: imu_rx,
+                mag: mag_rx,
+                host,
+                tick,
+            },
+            out,
+            run,
+        )
+        .expect("spawn process_task"),
     );
 }
 
@@ -370,18 +381,29 @@ async fn mag_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunW
     }
 }
 
+/// What the processing task waits on.
+struct Inputs {
+    imu: SensorRx,
+    mag: SensorRx,
+    host: &'static HostChannel,
+    tick: &'static TickSignal,
+}
+
 /// The pipeline, host requests, periodic status/tables, and flash writes on request.
 #[embassy_executor::task]
 async fn process_task(
     device: &'static mut Device,
     mut store: storage::Store,
-    mut imu: SensorRx,
-    mut mag: SensorRx,
-    host: &'static HostChannel,
-    tick: &'static TickSignal,
+    inputs: Inputs,
     out: &'static OutPipe,
     run: &'static RunWatch,
 ) -> ! {
+    let Inputs {
+        mut imu,
+        mut mag,
+        host,
+        tick,
+    } = inputs;
     let mut sink = PipeSink(out);
     let mut last_status = Instant::now();
     let mut last_tables = Instant::now();
