@@ -633,13 +633,53 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// a multiple of its stride 2^(j+1), i.e. for the levels below the lowest set bit of t
     /// (tested on the low word: strides are below 2^32). `tm` = lo θ[t − 2P]. Levels that are
     /// full and narrow chain like the unit-stride ones; the rest go to [`Self::strided_general`].
+    ///
+    /// Level K0 works on every call and is peeled: its ring and sums are at constant offsets
+    /// from `self`. The higher levels (every other call and rarer) loop in [`Self::strided_up`].
     #[inline(never)]
-    fn strided(&mut self, mut tm: u32) {
+    fn strided(&mut self, tm: u32) {
+        if S == 0 {
+            return;
+        }
+        let t = self.t as u32;
+        let fast = self.full.min(self.narrow) as usize;
+        if Self::K0 >= fast {
+            self.strided_general(self.t, Self::K0);
+            return;
+        }
+        let tm = self.strided_level(0, self.theta as u32, tm);
+        if t & 2 == 0 {
+            self.strided_up(tm, fast);
+        }
+    }
+
+    /// One full, narrow strided level `K0 + j` given lo θ[t] and lo θ[t − m]; returns
+    /// lo θ[t − 2m], the next level's θ[t − m].
+    #[inline(always)]
+    fn strided_level(&mut self, j: usize, t0: u32, tm: u32) -> u32 {
+        // θ[t − 2m] is BACK entries behind the newest of this level's ring, θ[t − 3m] is the
+        // oldest (the one after the newest).
+        let h = (self.heads[j] as usize).min(R - 1);
+        let back = if h >= Self::BACK {
+            h - Self::BACK
+        } else {
+            h + R - Self::BACK
+        };
+        let oldest = if h + 1 == R { 0 } else { h + 1 };
+        let ring = &self.rings[j];
+        let (t2m, t3m) = (ring[back] as u32, ring[oldest] as u32);
+        Self::accumulate_narrow(&mut self.sums[Self::K0 + j], t0, tm, t2m, Some(t3m));
+        t2m
+    }
+
+    /// Strided levels from K0 + 1 on (t a multiple of 4), `tm` = lo θ[t − 2^(K0+1)];
+    /// `fast` = min(full, narrow).
+    #[inline(never)]
+    fn strided_up(&mut self, mut tm: u32, fast: usize) {
         let t = self.t;
         let t0 = self.theta as u32;
-        let fast = self.full.min(self.narrow) as usize;
-        let mut bits = t as u32;
-        let mut j = 0;
+        let mut bits = (t as u32) >> 1;
+        let mut j = 1;
         while j < S {
             if bits & 1 != 0 {
                 return;
@@ -650,19 +690,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
                 self.strided_general(t, k);
                 return;
             }
-            // θ[t − 2m] is BACK entries behind the newest of this level's ring, θ[t − 3m] is the
-            // oldest (the one after the newest).
-            let h = (self.heads[j] as usize).min(R - 1);
-            let back = if h >= Self::BACK {
-                h - Self::BACK
-            } else {
-                h + R - Self::BACK
-            };
-            let oldest = if h + 1 == R { 0 } else { h + 1 };
-            let ring = &self.rings[j];
-            let (t2m, t3m) = (ring[back] as u32, ring[oldest] as u32);
-            Self::accumulate_narrow(&mut self.sums[k], t0, tm, t2m, Some(t3m));
-            tm = t2m;
+            tm = self.strided_level(j, t0, tm);
             j += 1;
         }
     }
@@ -710,18 +738,41 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// real values will take. Differences are only ever formed from indices ≥ 0, so nothing
     /// needs to know when a ring has filled.
     #[inline(never)]
-    fn cascade(&mut self, mut index: u32, mut value: i64) {
-        let mut mask = 1u32;
-        let mut span = 2 * R as u32;
-        let mut j = 0;
+    fn cascade(&mut self, index: u32, value: i64) {
+        // Level K0 (index is always even in the steady state, but the general path calls this
+        // for every index).
+        if S == 0 || index & 1 != 0 {
+            return;
+        }
+        let value = self.ring_enter(0, value);
+        // The value displaced, θ[index − 2R], moves on if that index is a multiple of 4.
+        let index = index.wrapping_sub(2 * R as u32);
+        if index & 3 == 0 {
+            self.cascade_up(index, value);
+        }
+    }
+
+    /// Put `value` into level `K0 + j`'s ring as its newest entry; returns the oldest, which
+    /// it displaces.
+    #[inline(always)]
+    fn ring_enter(&mut self, j: usize, value: i64) -> i64 {
+        let h = (self.heads[j] as usize).min(R - 1);
+        let next = if h + 1 == R { 0 } else { h + 1 };
+        self.heads[j] = next as u8;
+        core::mem::replace(&mut self.rings[j][next], value)
+    }
+
+    /// The cascade from level K0 + 1 on: θ[index] (index a multiple of 4) enters it.
+    #[inline(never)]
+    fn cascade_up(&mut self, mut index: u32, mut value: i64) {
+        let mut mask = 3u32;
+        let mut span = 4 * R as u32;
+        let mut j = 1;
         while j < S {
             if index & mask != 0 {
                 return;
             }
-            let h = (self.heads[j] as usize).min(R - 1);
-            let next = if h + 1 == R { 0 } else { h + 1 };
-            self.heads[j] = next as u8;
-            value = core::mem::replace(&mut self.rings[j][next], value);
+            value = self.ring_enter(j, value);
             index = index.wrapping_sub(span);
             mask = mask << 1 | 1;
             span <<= 1;
