@@ -284,6 +284,9 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     const BASE: usize = 3 * P;
     /// Entries between the newest one of a ring and the value 2P strides older.
     const BACK: usize = 2 * P - R - 1;
+    /// `push` takes the small steady path while gate = max |y| + 1 < 2^SMALL_GATE_BITS: then
+    /// |D3| ≤ 4·m·max|y| < 4·P·2^SMALL_GATE_BITS ≤ 2^16 for every unit-stride level (m ≤ P).
+    const SMALL_GATE_BITS: u32 = 14 - P.trailing_zeros();
     const VALID: () = {
         assert!(
             P >= 2 && P.is_power_of_two(),
@@ -520,8 +523,14 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// Feed one rate sample (already corrected, fixed point).
     #[inline]
     pub fn push(&mut self, y: i32) {
-        if y.unsigned_abs() < self.gate {
-            self.push_steady(y);
+        let gate = self.gate;
+        if y.unsigned_abs() < gate {
+            // gate = max |y| + 1 here; the `LSRS` test is gate < 2^11 (see `SMALL_GATE_BITS`).
+            if gate >> Self::SMALL_GATE_BITS == 0 {
+                self.push_steady::<true>(y);
+            } else {
+                self.push_steady::<false>(y);
+            }
         } else {
             self.push_general(y);
         }
@@ -530,8 +539,11 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and
     /// D3 and the cascade runs), every unit-stride level is narrow and |y| ≤ amax (nothing to
     /// re-derive). No per-level validity checks, no 64-bit multiplies, no variable 64-bit shifts.
+    ///
+    /// `SMALL`: max |y| < 2^11, so every unit-stride difference is below 2^16 (|D3| ≤ 4·m·max|y|
+    /// ≤ 32·(2^11 − 1) < 2^16 for m ≤ 8) and is squared with one multiply and no range test.
     #[inline(always)]
-    fn push_steady(&mut self, y: i32) {
+    fn push_steady<const SMALL: bool>(&mut self, y: i32) {
         // 1. θ[t] enters the (narrow) base ring; θ[t − 3P] leaves it.
         let t = self.t;
         let theta = self.theta;
@@ -546,7 +558,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         self.t = t + 1;
 
         // 2. Unit-stride levels (m ≤ P).
-        let t2p = self.unit_levels(h, theta as u32);
+        let t2p = self.unit_levels::<SMALL>(h, theta as u32);
 
         // 3. θ[t − 3P] trickles up the cascade (even t), or the strided levels work (odd t:
         //    t + 1 is a multiple of their strides); 3P is even, so θ[t − 3P] enters level K0
@@ -565,31 +577,44 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// by hand (`opt-level = "s"` keeps the loop), so every read is at a constant offset.
     /// `h` = t mod 3P. Returns lo θ[t − 2P].
     #[inline(always)]
-    fn unit_levels(&mut self, h: usize, t0: u32) -> u32 {
+    fn unit_levels<const SMALL: bool>(&mut self, h: usize, t0: u32) -> u32 {
         // The last 3P low words of θ, oldest first: w[3P − a] = lo θ[t − a], 1 ≤ a ≤ 3P.
         let w = &self.base.as_flattened()[h..h + Self::BASE];
         let sums = &mut self.sums;
         let tm = w[Self::BASE - 1];
-        let tm = Self::unit_level::<0>(sums, w, t0, tm);
-        let tm = Self::unit_level::<1>(sums, w, t0, tm);
-        let tm = Self::unit_level::<2>(sums, w, t0, tm);
-        let tm = Self::unit_level::<3>(sums, w, t0, tm);
-        let tm = Self::unit_level::<4>(sums, w, t0, tm);
-        let tm = Self::unit_level::<5>(sums, w, t0, tm);
-        Self::unit_level::<6>(sums, w, t0, tm)
+        let tm = Self::unit_level::<0, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<1, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<2, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<3, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<4, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<5, SMALL>(sums, w, t0, tm);
+        Self::unit_level::<6, SMALL>(sums, w, t0, tm)
     }
 
     /// Unit-stride level `K` (m = 2^K ≤ P; nothing for K ≥ K0) given lo θ[t] and lo θ[t − m];
     /// returns lo θ[t − 2m], the next level's θ[t − m].
     #[inline(always)]
-    fn unit_level<const K: usize>(sums: &mut [[Sum128; 2]; L], w: &[u32], t0: u32, tm: u32) -> u32 {
+    fn unit_level<const K: usize, const SMALL: bool>(
+        sums: &mut [[Sum128; 2]; L],
+        w: &[u32],
+        t0: u32,
+        tm: u32,
+    ) -> u32 {
         if K >= Self::K0 {
             return tm;
         }
         let m = 1 << K;
         let t2m = w[Self::BASE - 2 * m];
         let t3m = w[Self::BASE - 3 * m];
-        Self::accumulate_narrow(&mut sums[K], t0, tm, t2m, Some(t3m));
+        if SMALL {
+            let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
+            let d3 = d2.wrapping_sub(tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m));
+            let [s2, s3] = &mut sums[K];
+            s2.add32(d2.wrapping_mul(d2));
+            s3.add32(d3.wrapping_mul(d3));
+        } else {
+            Self::accumulate_narrow(&mut sums[K], t0, tm, t2m, Some(t3m));
+        }
         t2m
     }
 
