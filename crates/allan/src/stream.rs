@@ -35,7 +35,8 @@
 //!
 //! # The hot path
 //! `push` takes a straight steady-state path (no per-level checks) once the base ring is full and
-//! the unit-stride levels are narrow, for every |y| not above the segment's largest so far; the
+//! the unit-stride levels are narrow, for every |y| not above the segment's largest so far (in a
+//! copy without range tests on the unit-stride squares while that largest |y| is small); the
 //! rest goes through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
 //! choices and gives the measured cycles.
 
@@ -525,7 +526,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     pub fn push(&mut self, y: i32) {
         let gate = self.gate;
         if y.unsigned_abs() < gate {
-            // gate = max |y| + 1 here; the `LSRS` test is gate < 2^11 (see `SMALL_GATE_BITS`).
+            // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
                 self.push_steady::<true>(y);
             } else {
