@@ -235,7 +235,7 @@ pub struct Engine<const P: usize, const L: usize, const R: usize, const S: usize
     /// `push` takes the steady-state path for `|y| < gate`: `amax + 1` once the base ring is
     /// full (t ≥ 3P) and every unit-stride level is narrow, else 0 (never).
     gate: u32,
-    /// Largest |y| of this segment.
+    /// Largest |z| = |y − c| of this segment (see `offset`).
     amax: u32,
     /// Base ring: slot of the next write (= t mod 3P).
     base_head: u8,
@@ -248,6 +248,12 @@ pub struct Engine<const P: usize, const L: usize, const R: usize, const S: usize
     heads: [u8; S],
     /// Number of gaps marked since the last reset.
     gaps: u32,
+    /// c, subtracted from every input of the segment: its first sample, clamped to ±2^30.
+    /// D2 and D3 of y − c equal those of y exactly (c·t is linear in t, which second and third
+    /// differences cancel), and for a sensor at rest |y − c| is the noise and the drift only,
+    /// so more channels stay on the small path. Everything below (θ, max |y|, the gate)
+    /// refers to z = y − c, |z| < 2^31 + 2^30. (Fills what was padding before `closed`.)
+    offset: i32,
     /// Samples of the closed segments since the last reset (`samples() = closed + t`).
     closed: u64,
     /// Own rings of the strided levels (row `k − K0` for level `k`).
@@ -318,6 +324,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             narrow: Self::narrow_levels(0),
             heads: [R as u8 - 1; S],
             gaps: 0,
+            offset: 0,
             closed: 0,
             rings: [[0; R]; S],
             counts: [[0; 2]; L],
@@ -525,12 +532,16 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     #[inline]
     pub fn push(&mut self, y: i32) {
         let gate = self.gate;
-        if y.unsigned_abs() < gate {
+        // z = y − c in 32 bits. When the true z does not fit i32, the wrapped one has
+        // |z| ≥ 2^31 − 2^30, above any nonzero gate (≤ 2^(30−K0) + 1, the base ring being
+        // narrow), so only exact values pass; the general path recomputes z in i64.
+        let z = y.wrapping_sub(self.offset);
+        if z.unsigned_abs() < gate {
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
-                self.push_steady::<true>(y);
+                self.push_steady::<true>(z);
             } else {
-                self.push_steady::<false>(y);
+                self.push_steady::<false>(z);
             }
         } else {
             self.push_general(y);
@@ -544,7 +555,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// `SMALL`: max |y| < 2^11, so every unit-stride difference is below 2^16 (|D3| ≤ 4·m·max|y|
     /// ≤ 32·(2^11 − 1) < 2^16 for m ≤ 8) and is squared with one multiply and no range test.
     #[inline(always)]
-    fn push_steady<const SMALL: bool>(&mut self, y: i32) {
+    fn push_steady<const SMALL: bool>(&mut self, z: i32) {
         // 1. θ[t] enters the (narrow) base ring; θ[t − 3P] leaves it.
         let t = self.t;
         let theta = self.theta;
@@ -554,7 +565,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         words[h + Self::BASE] = theta as u32;
         let h = if h + 1 == Self::BASE { 0 } else { h + 1 };
         self.base_head = h as u8;
-        let theta = theta.wrapping_add(y as i64);
+        let theta = theta.wrapping_add(z as i64);
         self.theta = theta;
         self.t = t + 1;
 
@@ -623,7 +634,12 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// that the unit-stride levels need 64-bit differences.
     #[inline(never)]
     fn push_general(&mut self, y: i32) {
-        let a = y.unsigned_abs();
+        if self.t == 0 {
+            self.offset = y.clamp(-(1 << 30), 1 << 30);
+        }
+        let z = y as i64 - self.offset as i64;
+        // |z| ≤ 2^31 + 2^30 < 2^32.
+        let a = z.unsigned_abs() as u32;
         if a > self.amax {
             let was_narrow = self.base_is_narrow();
             self.amax = a;
@@ -634,7 +650,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         }
         let leaving = self.base_push();
         self.cascade((self.t as u32).wrapping_sub(Self::BASE as u32), leaving);
-        self.theta = self.theta.wrapping_add(y as i64);
+        self.theta = self.theta.wrapping_add(z);
         self.t += 1;
         let t = self.t;
         for k in 0..Self::K0 {

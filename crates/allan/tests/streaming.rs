@@ -191,10 +191,18 @@ fn no_accumulator_overflows_in_30_days_at_1khz_full_scale_16_bit() {
     );
 }
 
-/// Square waves of amplitude `a` and half-period `h` (starting at phase `phase`), `n` samples.
-fn square_wave(a: i32, h: usize, phase: usize, n: usize) -> Vec<i32> {
-    (phase..phase + n)
-        .map(|i| if (i / h).is_multiple_of(2) { a } else { -a })
+/// A square wave of amplitude `a` and half-period `h` about `mid` (starting at phase `phase`),
+/// `n` samples, after one sample of `mid` (the engine subtracts a segment's first sample from
+/// all of them, so the wave's amplitude is what it sees).
+fn square_wave(mid: i32, a: i32, h: usize, phase: usize, n: usize) -> Vec<i32> {
+    std::iter::once(mid)
+        .chain((phase..phase + n).map(|i| {
+            if (i / h).is_multiple_of(2) {
+                mid + a
+            } else {
+                mid - a
+            }
+        }))
         .collect()
 }
 
@@ -217,14 +225,14 @@ fn small_inputs_at_the_edge_of_the_one_multiply_bound() {
         ] {
             let mut h = 1;
             while h <= P {
-                for phase in [0, h / 2, h] {
-                    let y = square_wave(a, h, phase, 40 * P + 7);
+                for (phase, mid) in [(0, 0), (h / 2, 16_384), (h, -3_000_000)] {
+                    let y = square_wave(mid, a, h, phase, 40 * P + 7);
                     let segments = vec![y.clone(), y];
                     let e = run::<P, L, R, S>(&segments);
                     assert_eq!(
                         &e.levels().collect::<Vec<_>>()[..],
                         &host::<P>(&segments, L)[..],
-                        "P = {P}, a = {a}, h = {h}, phase = {phase}"
+                        "P = {P}, a = {a}, h = {h}, phase = {phase}, mid = {mid}"
                     );
                     assert!(
                         h < P
@@ -245,12 +253,13 @@ fn small_inputs_at_the_edge_of_the_one_multiply_bound() {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
 
-    /// Random runs of ± twice the largest amplitude of the small path and smaller values, with
-    /// a gap: the one-multiply squares must match the host bit for bit.
+    /// Random runs of ± twice the largest amplitude of the small path and smaller values about a
+    /// random level, with a gap: the one-multiply squares must match the host bit for bit.
     #[test]
     fn small_inputs_match_the_host(
         runs in prop::collection::vec((any::<bool>(), 1usize..20, 0u32..5), 0..400),
         cut in 0usize..3000,
+        mid in prop_oneof![Just(0i32), -40_000i32..40_000],
     ) {
         for p in [8usize, 4, 2] {
             // Twice the small path's largest amplitude, halved 0 to 4 times.
@@ -258,10 +267,14 @@ proptest! {
             let mut y = Vec::new();
             for &(sign, len, shift) in &runs {
                 let v = a >> shift;
-                y.extend(std::iter::repeat_n(if sign { v } else { -v }, len));
+                y.extend(std::iter::repeat_n(mid + if sign { v } else { -v }, len));
             }
+            // Each segment starts at `mid`, the offset the engine then subtracts.
             let cut = cut.min(y.len());
-            let segments = vec![y[..cut].to_vec(), y[cut..].to_vec()];
+            let segments: Vec<Vec<i32>> = [&y[..cut], &y[cut..]]
+                .iter()
+                .map(|s| std::iter::once(mid).chain(s.iter().copied()).collect())
+                .collect();
             let (got, want): (Vec<LevelSums>, Vec<LevelSums>) = match p {
                 8 => (run::<8, 12, 12, 8>(&segments).levels().collect(), host::<8>(&segments, 12)),
                 4 => (run::<4, 11, 6, 8>(&segments).levels().collect(), host::<4>(&segments, 11)),
