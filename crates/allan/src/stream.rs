@@ -517,6 +517,17 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         }
     }
 
+    /// The same for differences known to be below 2^16 in magnitude: one multiply each, no
+    /// range test.
+    #[inline(always)]
+    fn accumulate_small(sums: &mut [Sum128; 2], t0: u32, tm: u32, t2m: u32, t3m: u32) {
+        let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
+        let d3 = d2.wrapping_sub(tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m));
+        let [s2, s3] = sums;
+        s2.add32(d2.wrapping_mul(d2));
+        s3.add32(d3.wrapping_mul(d3));
+    }
+
     #[inline(always)]
     fn accumulate(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
         if k < self.narrow as usize {
@@ -619,11 +630,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         let t2m = w[Self::BASE - 2 * m];
         let t3m = w[Self::BASE - 3 * m];
         if SMALL {
-            let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
-            let d3 = d2.wrapping_sub(tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m));
-            let [s2, s3] = &mut sums[K];
-            s2.add32(d2.wrapping_mul(d2));
-            s3.add32(d3.wrapping_mul(d3));
+            Self::accumulate_small(&mut sums[K], t0, tm, t2m, t3m);
         } else {
             Self::accumulate_narrow(&mut sums[K], t0, tm, t2m, Some(t3m));
         }
@@ -689,7 +696,13 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             self.strided_general(self.t, Self::K0);
             return;
         }
-        let tm = self.strided_level(0, self.theta as u32, tm);
+        // Level K0 (m = 2P) has |D3| ≤ 8·P·max|z| < 2^16 when gate < 2^(SMALL_GATE_BITS − 1).
+        let t0 = self.theta as u32;
+        let tm = if self.gate >> (Self::SMALL_GATE_BITS - 1) == 0 {
+            self.strided_level::<true>(0, t0, tm)
+        } else {
+            self.strided_level::<false>(0, t0, tm)
+        };
         if t & 2 == 0 {
             self.strided_up(tm, fast);
         }
@@ -698,7 +711,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// One full, narrow strided level `K0 + j` given lo θ[t] and lo θ[t − m]; returns
     /// lo θ[t − 2m], the next level's θ[t − m].
     #[inline(always)]
-    fn strided_level(&mut self, j: usize, t0: u32, tm: u32) -> u32 {
+    fn strided_level<const SMALL: bool>(&mut self, j: usize, t0: u32, tm: u32) -> u32 {
         // θ[t − 2m] is BACK entries behind the newest of this level's ring, θ[t − 3m] is the
         // oldest (the one after the newest).
         let h = (self.heads[j] as usize).min(R - 1);
@@ -710,7 +723,12 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         let oldest = if h + 1 == R { 0 } else { h + 1 };
         let ring = &self.rings[j];
         let (t2m, t3m) = (ring[back] as u32, ring[oldest] as u32);
-        Self::accumulate_narrow(&mut self.sums[Self::K0 + j], t0, tm, t2m, Some(t3m));
+        let sums = &mut self.sums[Self::K0 + j];
+        if SMALL {
+            Self::accumulate_small(sums, t0, tm, t2m, t3m);
+        } else {
+            Self::accumulate_narrow(sums, t0, tm, t2m, Some(t3m));
+        }
         t2m
     }
 
@@ -732,7 +750,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
                 self.strided_general(t, k);
                 return;
             }
-            tm = self.strided_level(j, t0, tm);
+            tm = self.strided_level::<false>(j, t0, tm);
             j += 1;
         }
     }

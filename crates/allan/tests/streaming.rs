@@ -216,15 +216,19 @@ fn small_inputs_at_the_edge_of_the_one_multiply_bound() {
     fn check<const P: usize, const L: usize, const R: usize, const S: usize>() {
         let bits = 14 - P.trailing_zeros();
         // The largest amplitude of the small path, the smallest past it, and two past the
-        // bound of an engine one or two bits too generous.
+        // bound of an engine one or two bits too generous; and the same at half the amplitude
+        // for the lowest strided level (m = 2P: |D3| ≤ 8·P·max|y|), waves up to h = 2P.
+        let half = 1i32 << (bits - 1);
         for a in [
-            (1i32 << bits) - 2,
+            half - 2,
+            half - 1,
+            (1 << bits) - 2,
             (1 << bits) - 1,
             (2 << bits) - 2,
             (4 << bits) - 2,
         ] {
             let mut h = 1;
-            while h <= P {
+            while h <= 2 * P {
                 for (phase, mid) in [(0, 0), (h / 2, 16_384), (h, -3_000_000)] {
                     let y = square_wave(mid, a, h, phase, 40 * P + 7);
                     let segments = vec![y.clone(), y];
@@ -236,9 +240,9 @@ fn small_inputs_at_the_edge_of_the_one_multiply_bound() {
                     );
                     assert!(
                         h < P
-                            || e.level(P.trailing_zeros() as usize).unwrap().sum3
-                                >= (4 * P as u128 * a as u128).pow(2),
-                        "the wave of half-period P reaches |D3| = 4·P·a"
+                            || e.level(h.trailing_zeros() as usize).unwrap().sum3
+                                >= (4 * h as u128 * a as u128).pow(2),
+                        "the wave of half-period h ≥ P reaches |D3| = 4·h·a at m = h"
                     );
                 }
                 h *= 2;
