@@ -733,13 +733,31 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     }
 
     /// Strided levels from K0 + 1 on (t a multiple of 4), `tm` = lo θ[t − 2^(K0+1)];
-    /// `fast` = min(full, narrow).
+    /// `fast` = min(full, narrow). Level K0 + 1 is peeled like level K0; the loop over the
+    /// higher ones runs when t is a multiple of 8.
     #[inline(never)]
-    fn strided_up(&mut self, mut tm: u32, fast: usize) {
+    fn strided_up(&mut self, tm: u32, fast: usize) {
+        if S < 2 {
+            return;
+        }
+        let t = self.t;
+        if Self::K0 + 1 >= fast {
+            self.strided_general(t, Self::K0 + 1);
+            return;
+        }
+        let tm = self.strided_level::<false>(1, self.theta as u32, tm);
+        if t as u32 & 4 == 0 {
+            self.strided_rest(tm, fast);
+        }
+    }
+
+    /// Strided levels from K0 + 2 on (t a multiple of 8), `tm` = lo θ[t − 2^(K0+2)].
+    #[inline(never)]
+    fn strided_rest(&mut self, mut tm: u32, fast: usize) {
         let t = self.t;
         let t0 = self.theta as u32;
-        let mut bits = (t as u32) >> 1;
-        let mut j = 1;
+        let mut bits = (t as u32) >> 2;
+        let mut j = 2;
         while j < S {
             if bits & 1 != 0 {
                 return;
