@@ -840,12 +840,26 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         core::mem::replace(&mut self.rings[j][next], value)
     }
 
-    /// The cascade from level K0 + 1 on: θ[index] (index a multiple of 4) enters it.
+    /// The cascade from level K0 + 1 on: θ[index] (index a multiple of 4) enters it. Level
+    /// K0 + 1 is peeled; the loop over the higher ones runs when the value displaced goes on.
     #[inline(never)]
-    fn cascade_up(&mut self, mut index: u32, mut value: i64) {
-        let mut mask = 3u32;
-        let mut span = 4 * R as u32;
-        let mut j = 1;
+    fn cascade_up(&mut self, index: u32, value: i64) {
+        if S < 2 {
+            return;
+        }
+        let value = self.ring_enter(1, value);
+        let index = index.wrapping_sub(4 * R as u32);
+        if index & 7 == 0 {
+            self.cascade_rest(index, value);
+        }
+    }
+
+    /// The cascade from level K0 + 2 on: θ[index] (index a multiple of 8) enters it.
+    #[inline(never)]
+    fn cascade_rest(&mut self, mut index: u32, mut value: i64) {
+        let mut mask = 7u32;
+        let mut span = 8 * R as u32;
+        let mut j = 2;
         while j < S {
             if index & mask != 0 {
                 return;
