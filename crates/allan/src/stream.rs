@@ -35,7 +35,8 @@
 //!
 //! # The hot path
 //! `push` takes a straight steady-state path (no per-level checks) once the base ring is full and
-//! the unit-stride levels are narrow, for every |y| not above the segment's largest so far; the
+//! the unit-stride levels are narrow, for every |y| not above the segment's largest so far (in a
+//! copy without range tests on the unit-stride squares while that largest |y| is small); the
 //! rest goes through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
 //! choices and gives the measured cycles.
 
@@ -234,7 +235,7 @@ pub struct Engine<const P: usize, const L: usize, const R: usize, const S: usize
     /// `push` takes the steady-state path for `|y| < gate`: `amax + 1` once the base ring is
     /// full (t ≥ 3P) and every unit-stride level is narrow, else 0 (never).
     gate: u32,
-    /// Largest |y| of this segment.
+    /// Largest |z| = |y − c| of this segment (see `offset`).
     amax: u32,
     /// Base ring: slot of the next write (= t mod 3P).
     base_head: u8,
@@ -247,6 +248,12 @@ pub struct Engine<const P: usize, const L: usize, const R: usize, const S: usize
     heads: [u8; S],
     /// Number of gaps marked since the last reset.
     gaps: u32,
+    /// c, subtracted from every input of the segment: its first sample, clamped to ±2^30.
+    /// D2 and D3 of y − c equal those of y exactly (c·t is linear in t, which second and third
+    /// differences cancel), and for a sensor at rest |y − c| is the noise and the drift only,
+    /// so more channels stay on the small path. Everything below (θ, max |y|, the gate)
+    /// refers to z = y − c, |z| < 2^31 + 2^30. (Fills what was padding before `closed`.)
+    offset: i32,
     /// Samples of the closed segments since the last reset (`samples() = closed + t`).
     closed: u64,
     /// Own rings of the strided levels (row `k − K0` for level `k`).
@@ -284,6 +291,9 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     const BASE: usize = 3 * P;
     /// Entries between the newest one of a ring and the value 2P strides older.
     const BACK: usize = 2 * P - R - 1;
+    /// `push` takes the small steady path while gate = max |y| + 1 < 2^SMALL_GATE_BITS: then
+    /// |D3| ≤ 4·m·max|y| < 4·P·2^SMALL_GATE_BITS ≤ 2^16 for every unit-stride level (m ≤ P).
+    const SMALL_GATE_BITS: u32 = 14 - P.trailing_zeros();
     const VALID: () = {
         assert!(
             P >= 2 && P.is_power_of_two(),
@@ -314,6 +324,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             narrow: Self::narrow_levels(0),
             heads: [R as u8 - 1; S],
             gaps: 0,
+            offset: 0,
             closed: 0,
             rings: [[0; R]; S],
             counts: [[0; 2]; L],
@@ -506,6 +517,17 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         }
     }
 
+    /// The same for differences known to be below 2^16 in magnitude: one multiply each, no
+    /// range test.
+    #[inline(always)]
+    fn accumulate_small(sums: &mut [Sum128; 2], t0: u32, tm: u32, t2m: u32, t3m: u32) {
+        let d2 = t0.wrapping_sub(tm.wrapping_mul(2)).wrapping_add(t2m);
+        let d3 = d2.wrapping_sub(tm.wrapping_sub(t2m.wrapping_mul(2)).wrapping_add(t3m));
+        let [s2, s3] = sums;
+        s2.add32(d2.wrapping_mul(d2));
+        s3.add32(d3.wrapping_mul(d3));
+    }
+
     #[inline(always)]
     fn accumulate(&mut self, k: usize, tm: i64, t2m: i64, t3m: Option<i64>) {
         if k < self.narrow as usize {
@@ -520,8 +542,18 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// Feed one rate sample (already corrected, fixed point).
     #[inline]
     pub fn push(&mut self, y: i32) {
-        if y.unsigned_abs() < self.gate {
-            self.push_steady(y);
+        let gate = self.gate;
+        // z = y − c in 32 bits. When the true z does not fit i32, the wrapped one has
+        // |z| ≥ 2^31 − 2^30, above any nonzero gate (≤ 2^(30−K0) + 1, the base ring being
+        // narrow), so only exact values pass; the general path recomputes z in i64.
+        let z = y.wrapping_sub(self.offset);
+        if z.unsigned_abs() < gate {
+            // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
+            if gate >> Self::SMALL_GATE_BITS == 0 {
+                self.push_steady::<true>(z);
+            } else {
+                self.push_steady::<false>(z);
+            }
         } else {
             self.push_general(y);
         }
@@ -530,8 +562,11 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and
     /// D3 and the cascade runs), every unit-stride level is narrow and |y| ≤ amax (nothing to
     /// re-derive). No per-level validity checks, no 64-bit multiplies, no variable 64-bit shifts.
+    ///
+    /// `SMALL`: max |y| < 2^11, so every unit-stride difference is below 2^16 (|D3| ≤ 4·m·max|y|
+    /// ≤ 32·(2^11 − 1) < 2^16 for m ≤ 8) and is squared with one multiply and no range test.
     #[inline(always)]
-    fn push_steady(&mut self, y: i32) {
+    fn push_steady<const SMALL: bool>(&mut self, z: i32) {
         // 1. θ[t] enters the (narrow) base ring; θ[t − 3P] leaves it.
         let t = self.t;
         let theta = self.theta;
@@ -541,12 +576,12 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         words[h + Self::BASE] = theta as u32;
         let h = if h + 1 == Self::BASE { 0 } else { h + 1 };
         self.base_head = h as u8;
-        let theta = theta.wrapping_add(y as i64);
+        let theta = theta.wrapping_add(z as i64);
         self.theta = theta;
         self.t = t + 1;
 
         // 2. Unit-stride levels (m ≤ P).
-        let t2p = self.unit_levels(h, theta as u32);
+        let t2p = self.unit_levels::<SMALL>(h, theta as u32);
 
         // 3. θ[t − 3P] trickles up the cascade (even t), or the strided levels work (odd t:
         //    t + 1 is a multiple of their strides); 3P is even, so θ[t − 3P] enters level K0
@@ -565,31 +600,40 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// by hand (`opt-level = "s"` keeps the loop), so every read is at a constant offset.
     /// `h` = t mod 3P. Returns lo θ[t − 2P].
     #[inline(always)]
-    fn unit_levels(&mut self, h: usize, t0: u32) -> u32 {
+    fn unit_levels<const SMALL: bool>(&mut self, h: usize, t0: u32) -> u32 {
         // The last 3P low words of θ, oldest first: w[3P − a] = lo θ[t − a], 1 ≤ a ≤ 3P.
         let w = &self.base.as_flattened()[h..h + Self::BASE];
         let sums = &mut self.sums;
         let tm = w[Self::BASE - 1];
-        let tm = Self::unit_level::<0>(sums, w, t0, tm);
-        let tm = Self::unit_level::<1>(sums, w, t0, tm);
-        let tm = Self::unit_level::<2>(sums, w, t0, tm);
-        let tm = Self::unit_level::<3>(sums, w, t0, tm);
-        let tm = Self::unit_level::<4>(sums, w, t0, tm);
-        let tm = Self::unit_level::<5>(sums, w, t0, tm);
-        Self::unit_level::<6>(sums, w, t0, tm)
+        let tm = Self::unit_level::<0, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<1, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<2, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<3, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<4, SMALL>(sums, w, t0, tm);
+        let tm = Self::unit_level::<5, SMALL>(sums, w, t0, tm);
+        Self::unit_level::<6, SMALL>(sums, w, t0, tm)
     }
 
     /// Unit-stride level `K` (m = 2^K ≤ P; nothing for K ≥ K0) given lo θ[t] and lo θ[t − m];
     /// returns lo θ[t − 2m], the next level's θ[t − m].
     #[inline(always)]
-    fn unit_level<const K: usize>(sums: &mut [[Sum128; 2]; L], w: &[u32], t0: u32, tm: u32) -> u32 {
+    fn unit_level<const K: usize, const SMALL: bool>(
+        sums: &mut [[Sum128; 2]; L],
+        w: &[u32],
+        t0: u32,
+        tm: u32,
+    ) -> u32 {
         if K >= Self::K0 {
             return tm;
         }
         let m = 1 << K;
         let t2m = w[Self::BASE - 2 * m];
         let t3m = w[Self::BASE - 3 * m];
-        Self::accumulate_narrow(&mut sums[K], t0, tm, t2m, Some(t3m));
+        if SMALL {
+            Self::accumulate_small(&mut sums[K], t0, tm, t2m, t3m);
+        } else {
+            Self::accumulate_narrow(&mut sums[K], t0, tm, t2m, Some(t3m));
+        }
         t2m
     }
 
@@ -597,7 +641,12 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// that the unit-stride levels need 64-bit differences.
     #[inline(never)]
     fn push_general(&mut self, y: i32) {
-        let a = y.unsigned_abs();
+        if self.t == 0 {
+            self.offset = y.clamp(-(1 << 30), 1 << 30);
+        }
+        let z = y as i64 - self.offset as i64;
+        // |z| ≤ 2^31 + 2^30 < 2^32.
+        let a = z.unsigned_abs() as u32;
         if a > self.amax {
             let was_narrow = self.base_is_narrow();
             self.amax = a;
@@ -608,7 +657,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         }
         let leaving = self.base_push();
         self.cascade((self.t as u32).wrapping_sub(Self::BASE as u32), leaving);
-        self.theta = self.theta.wrapping_add(y as i64);
+        self.theta = self.theta.wrapping_add(z);
         self.t += 1;
         let t = self.t;
         for k in 0..Self::K0 {
@@ -633,13 +682,82 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// a multiple of its stride 2^(j+1), i.e. for the levels below the lowest set bit of t
     /// (tested on the low word: strides are below 2^32). `tm` = lo θ[t − 2P]. Levels that are
     /// full and narrow chain like the unit-stride ones; the rest go to [`Self::strided_general`].
+    ///
+    /// Level K0 works on every call and is peeled: its ring and sums are at constant offsets
+    /// from `self`. The higher levels (every other call and rarer) loop in [`Self::strided_up`].
     #[inline(never)]
-    fn strided(&mut self, mut tm: u32) {
+    fn strided(&mut self, tm: u32) {
+        if S == 0 {
+            return;
+        }
+        let t = self.t as u32;
+        let fast = self.full.min(self.narrow) as usize;
+        if Self::K0 >= fast {
+            self.strided_general(self.t, Self::K0);
+            return;
+        }
+        // Level K0 (m = 2P) has |D3| ≤ 8·P·max|z| < 2^16 when gate < 2^(SMALL_GATE_BITS − 1).
+        let t0 = self.theta as u32;
+        let tm = if self.gate >> (Self::SMALL_GATE_BITS - 1) == 0 {
+            self.strided_level::<true>(0, t0, tm)
+        } else {
+            self.strided_level::<false>(0, t0, tm)
+        };
+        if t & 2 == 0 {
+            self.strided_up(tm, fast);
+        }
+    }
+
+    /// One full, narrow strided level `K0 + j` given lo θ[t] and lo θ[t − m]; returns
+    /// lo θ[t − 2m], the next level's θ[t − m].
+    #[inline(always)]
+    fn strided_level<const SMALL: bool>(&mut self, j: usize, t0: u32, tm: u32) -> u32 {
+        // θ[t − 2m] is BACK entries behind the newest of this level's ring, θ[t − 3m] is the
+        // oldest (the one after the newest).
+        let h = (self.heads[j] as usize).min(R - 1);
+        let back = if h >= Self::BACK {
+            h - Self::BACK
+        } else {
+            h + R - Self::BACK
+        };
+        let oldest = if h + 1 == R { 0 } else { h + 1 };
+        let ring = &self.rings[j];
+        let (t2m, t3m) = (ring[back] as u32, ring[oldest] as u32);
+        let sums = &mut self.sums[Self::K0 + j];
+        if SMALL {
+            Self::accumulate_small(sums, t0, tm, t2m, t3m);
+        } else {
+            Self::accumulate_narrow(sums, t0, tm, t2m, Some(t3m));
+        }
+        t2m
+    }
+
+    /// Strided levels from K0 + 1 on (t a multiple of 4), `tm` = lo θ[t − 2^(K0+1)];
+    /// `fast` = min(full, narrow). Level K0 + 1 is peeled like level K0; the loop over the
+    /// higher ones runs when t is a multiple of 8.
+    #[inline(never)]
+    fn strided_up(&mut self, tm: u32, fast: usize) {
+        if S < 2 {
+            return;
+        }
+        let t = self.t;
+        if Self::K0 + 1 >= fast {
+            self.strided_general(t, Self::K0 + 1);
+            return;
+        }
+        let tm = self.strided_level::<false>(1, self.theta as u32, tm);
+        if t as u32 & 4 == 0 {
+            self.strided_rest(tm, fast);
+        }
+    }
+
+    /// Strided levels from K0 + 2 on (t a multiple of 8), `tm` = lo θ[t − 2^(K0+2)].
+    #[inline(never)]
+    fn strided_rest(&mut self, mut tm: u32, fast: usize) {
         let t = self.t;
         let t0 = self.theta as u32;
-        let fast = self.full.min(self.narrow) as usize;
-        let mut bits = t as u32;
-        let mut j = 0;
+        let mut bits = (t as u32) >> 2;
+        let mut j = 2;
         while j < S {
             if bits & 1 != 0 {
                 return;
@@ -650,19 +768,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
                 self.strided_general(t, k);
                 return;
             }
-            // θ[t − 2m] is BACK entries behind the newest of this level's ring, θ[t − 3m] is the
-            // oldest (the one after the newest).
-            let h = (self.heads[j] as usize).min(R - 1);
-            let back = if h >= Self::BACK {
-                h - Self::BACK
-            } else {
-                h + R - Self::BACK
-            };
-            let oldest = if h + 1 == R { 0 } else { h + 1 };
-            let ring = &self.rings[j];
-            let (t2m, t3m) = (ring[back] as u32, ring[oldest] as u32);
-            Self::accumulate_narrow(&mut self.sums[k], t0, tm, t2m, Some(t3m));
-            tm = t2m;
+            tm = self.strided_level::<false>(j, t0, tm);
             j += 1;
         }
     }
@@ -710,18 +816,55 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// real values will take. Differences are only ever formed from indices ≥ 0, so nothing
     /// needs to know when a ring has filled.
     #[inline(never)]
-    fn cascade(&mut self, mut index: u32, mut value: i64) {
-        let mut mask = 1u32;
-        let mut span = 2 * R as u32;
-        let mut j = 0;
+    fn cascade(&mut self, index: u32, value: i64) {
+        // Level K0 (index is always even in the steady state, but the general path calls this
+        // for every index).
+        if S == 0 || index & 1 != 0 {
+            return;
+        }
+        let value = self.ring_enter(0, value);
+        // The value displaced, θ[index − 2R], moves on if that index is a multiple of 4.
+        let index = index.wrapping_sub(2 * R as u32);
+        if index & 3 == 0 {
+            self.cascade_up(index, value);
+        }
+    }
+
+    /// Put `value` into level `K0 + j`'s ring as its newest entry; returns the oldest, which
+    /// it displaces.
+    #[inline(always)]
+    fn ring_enter(&mut self, j: usize, value: i64) -> i64 {
+        let h = (self.heads[j] as usize).min(R - 1);
+        let next = if h + 1 == R { 0 } else { h + 1 };
+        self.heads[j] = next as u8;
+        core::mem::replace(&mut self.rings[j][next], value)
+    }
+
+    /// The cascade from level K0 + 1 on: θ[index] (index a multiple of 4) enters it. Level
+    /// K0 + 1 is peeled; the loop over the higher ones runs when the value displaced goes on.
+    #[inline(never)]
+    fn cascade_up(&mut self, index: u32, value: i64) {
+        if S < 2 {
+            return;
+        }
+        let value = self.ring_enter(1, value);
+        let index = index.wrapping_sub(4 * R as u32);
+        if index & 7 == 0 {
+            self.cascade_rest(index, value);
+        }
+    }
+
+    /// The cascade from level K0 + 2 on: θ[index] (index a multiple of 8) enters it.
+    #[inline(never)]
+    fn cascade_rest(&mut self, mut index: u32, mut value: i64) {
+        let mut mask = 7u32;
+        let mut span = 8 * R as u32;
+        let mut j = 2;
         while j < S {
             if index & mask != 0 {
                 return;
             }
-            let h = (self.heads[j] as usize).min(R - 1);
-            let next = if h + 1 == R { 0 } else { h + 1 };
-            self.heads[j] = next as u8;
-            value = core::mem::replace(&mut self.rings[j][next], value);
+            value = self.ring_enter(j, value);
             index = index.wrapping_sub(span);
             mask = mask << 1 | 1;
             span <<= 1;

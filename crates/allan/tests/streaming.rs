@@ -191,6 +191,104 @@ fn no_accumulator_overflows_in_30_days_at_1khz_full_scale_16_bit() {
     );
 }
 
+/// A square wave of amplitude `a` and half-period `h` about `mid` (starting at phase `phase`),
+/// `n` samples, after one sample of `mid` (the engine subtracts a segment's first sample from
+/// all of them, so the wave's amplitude is what it sees).
+fn square_wave(mid: i32, a: i32, h: usize, phase: usize, n: usize) -> Vec<i32> {
+    std::iter::once(mid)
+        .chain((phase..phase + n).map(|i| {
+            if (i / h).is_multiple_of(2) {
+                mid + a
+            } else {
+                mid - a
+            }
+        }))
+        .collect()
+}
+
+/// While max |y| < 2^(14 − log2 P) the engine squares the unit-stride differences with one
+/// 32-bit multiply and no range test, relying on |D3| ≤ 4·m·max|y| < 2^16. A square wave of
+/// half-period m = P attains |D3| = 4·P·max|y| exactly, so amplitudes at the edge of that bound
+/// (and one past it, which must leave the small path) must still match bit for bit; a bound one
+/// bit too generous would wrap the 32-bit squares.
+#[test]
+fn small_inputs_at_the_edge_of_the_one_multiply_bound() {
+    fn check<const P: usize, const L: usize, const R: usize, const S: usize>() {
+        let bits = 14 - P.trailing_zeros();
+        // The largest amplitude of the small path, the smallest past it, and two past the
+        // bound of an engine one or two bits too generous; and the same at half the amplitude
+        // for the lowest strided level (m = 2P: |D3| ≤ 8·P·max|y|), waves up to h = 2P.
+        let half = 1i32 << (bits - 1);
+        for a in [
+            half - 2,
+            half - 1,
+            (1 << bits) - 2,
+            (1 << bits) - 1,
+            (2 << bits) - 2,
+            (4 << bits) - 2,
+        ] {
+            let mut h = 1;
+            while h <= 2 * P {
+                for (phase, mid) in [(0, 0), (h / 2, 16_384), (h, -3_000_000)] {
+                    let y = square_wave(mid, a, h, phase, 40 * P + 7);
+                    let segments = vec![y.clone(), y];
+                    let e = run::<P, L, R, S>(&segments);
+                    assert_eq!(
+                        &e.levels().collect::<Vec<_>>()[..],
+                        &host::<P>(&segments, L)[..],
+                        "P = {P}, a = {a}, h = {h}, phase = {phase}, mid = {mid}"
+                    );
+                    assert!(
+                        h < P
+                            || e.level(h.trailing_zeros() as usize).unwrap().sum3
+                                >= (4 * h as u128 * a as u128).pow(2),
+                        "the wave of half-period h ≥ P reaches |D3| = 4·h·a at m = h"
+                    );
+                }
+                h *= 2;
+            }
+        }
+    }
+    check::<8, 12, 12, 8>();
+    check::<4, 11, 6, 8>();
+    check::<2, 10, 3, 8>();
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, .. ProptestConfig::default() })]
+
+    /// Random runs of ± twice the largest amplitude of the small path and smaller values about a
+    /// random level, with a gap: the one-multiply squares must match the host bit for bit.
+    #[test]
+    fn small_inputs_match_the_host(
+        runs in prop::collection::vec((any::<bool>(), 1usize..20, 0u32..5), 0..400),
+        cut in 0usize..3000,
+        mid in prop_oneof![Just(0i32), -40_000i32..40_000],
+    ) {
+        for p in [8usize, 4, 2] {
+            // Twice the small path's largest amplitude, halved 0 to 4 times.
+            let a = (2i32 << (14 - p.trailing_zeros())) - 4;
+            let mut y = Vec::new();
+            for &(sign, len, shift) in &runs {
+                let v = a >> shift;
+                y.extend(std::iter::repeat_n(mid + if sign { v } else { -v }, len));
+            }
+            // Each segment starts at `mid`, the offset the engine then subtracts.
+            let cut = cut.min(y.len());
+            let segments: Vec<Vec<i32>> = [&y[..cut], &y[cut..]]
+                .iter()
+                .map(|s| std::iter::once(mid).chain(s.iter().copied()).collect())
+                .collect();
+            let (got, want): (Vec<LevelSums>, Vec<LevelSums>) = match p {
+                8 => (run::<8, 12, 12, 8>(&segments).levels().collect(), host::<8>(&segments, 12)),
+                4 => (run::<4, 11, 6, 8>(&segments).levels().collect(), host::<4>(&segments, 11)),
+                _ => (run::<2, 10, 3, 8>(&segments).levels().collect(), host::<2>(&segments, 10)),
+            };
+            prop_assert_eq!(&got[..], &want[..], "P = {}", p);
+        }
+    }
+}
+
 #[test]
 fn device_engine_fits_the_memory_budget() {
     // repr(C), and the same sizes and alignments on thumbv6m (u64/i64 align to 8 under the
