@@ -5,7 +5,7 @@ use imu_proto::*;
 use proptest::prelude::*;
 
 mod common;
-use common::{batch_of, same_batch};
+use common::{batch_of, imu_sample, same_batch};
 
 fn serde_frame(b: &SampleBatch) -> std::vec::Vec<u8> {
     let mut out = std::vec![0u8; MAX_FRAME];
@@ -81,13 +81,7 @@ fn arb_batch() -> impl Strategy<Value = SampleBatch> {
         [arb_i32(), arb_i32(), arb_i32()],
         arb_i32(),
     )
-        .prop_map(|(seq, t_us, accel, gyro, temp)| ImuSample {
-            seq,
-            t_us,
-            accel,
-            gyro,
-            temp,
-        });
+        .prop_map(imu_sample);
     let mag = (arb_u32(), arb_u64(), [arb_i32(), arb_i32(), arb_i32()])
         .prop_map(|(seq, t_us, mag)| MagSample { seq, t_us, mag });
     (

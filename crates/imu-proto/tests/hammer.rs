@@ -5,7 +5,7 @@ use imu_proto::*;
 use proptest::prelude::*;
 
 mod common;
-use common::{batch_of, same_batch};
+use common::{batch_of, imu_sample, same_batch};
 
 fn frame<T: serde::Serialize>(msg: &T) -> std::vec::Vec<u8> {
     let mut enc = FrameEncoder::new();
@@ -53,13 +53,7 @@ fn arb_batch() -> impl Strategy<Value = SampleBatch> {
         any::<[i32; 3]>(),
         any::<i32>(),
     )
-        .prop_map(|(seq, t_us, accel, gyro, temp)| ImuSample {
-            seq,
-            t_us,
-            accel,
-            gyro,
-            temp,
-        });
+        .prop_map(imu_sample);
     let mag = (any::<u32>(), any::<u64>(), any::<[i32; 3]>())
         .prop_map(|(seq, t_us, mag)| MagSample { seq, t_us, mag });
     (

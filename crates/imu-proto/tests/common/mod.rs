@@ -4,6 +4,19 @@
 
 use imu_proto::{ImuSample, MagSample, SampleBatch, Scales, Vec};
 
+/// The IMU sample of generated parts (seq, t_us, accel, gyro, temp).
+pub fn imu_sample(
+    (seq, t_us, accel, gyro, temp): (u32, u64, [i32; 3], [i32; 3], i32),
+) -> ImuSample {
+    ImuSample {
+        seq,
+        t_us,
+        accel,
+        gyro,
+        temp,
+    }
+}
+
 /// The batch of the generated parts (`s` = accel, gyro, mag, temp, temp_offset scales); the
 /// lengths must be within `MAX_BATCH_IMU` and `MAX_BATCH_MAG`.
 pub fn batch_of(
