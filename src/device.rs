@@ -540,14 +540,14 @@ impl Device {
         self.outbox.send(&DeviceMsgRef::Status(&st), sink)
     }
 
-    /// Start a round of table frames (one per channel, sent by [`Device::tables_step`]).
-    /// A round in progress is not restarted.
     /// Whether the magnetometer is delivering samples (table work is then scheduled right
     /// after its reads; see `process_task`).
     pub fn mag_ok(&self) -> bool {
         self.mag_state == SensorState::Ok
     }
 
+    /// Start a round of table frames (one per channel, sent by [`Device::tables_step`]).
+    /// A round in progress is not restarted.
     pub fn start_tables(&mut self) {
         if self.table_next.is_none() {
             self.table_next = Some(0);

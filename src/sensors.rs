@@ -171,6 +171,8 @@ impl ImuService {
         let mut t_last = None;
         // Frames are read straight into the message (no copy): a full-length `Imu` message is
         // pushed first and cut to what the read returned, or taken back if it returned none.
+        // (A local burst pushed after the read measured 10,210 instead of 9,711 cycles per
+        // sample set: the burst lives in the task's future across the await, then is copied.)
         while out.len() + 1 < out.capacity() {
             let slot = out.len();
             let _ = out.push(SensorMsg::Imu {
