@@ -392,21 +392,22 @@ impl Device {
     fn imu_burst(&mut self, samples: &[RawSample], t_read_us: u64, sink: &mut impl FrameSink) {
         // Three passes over the burst, one per budget stage (docs/emulator.md, cycle markers):
         // corrections, Allan update, framing. Each sample still goes through all three in order.
-        let mut fixed = [([0i32; 3], [0i32; 3], 0i32); BURST_MAX];
+        // A `Vec`, not a zeroed array: nothing to clear before it is filled.
+        let mut fixed: Vec<([i32; 3], [i32; 3], i32), BURST_MAX> = Vec::new();
         let samples = &samples[..samples.len().min(BURST_MAX)];
         stage::enter(Stage::Corrections);
-        for (s, f) in samples.iter().zip(fixed.iter_mut()) {
+        for s in samples {
             let temp = s.temp.or(self.last_temp).unwrap_or(0);
             self.last_temp = Some(temp);
-            *f = (
+            // At most BURST_MAX samples (cut above): never full.
+            let _ = fixed.push((
                 self.cal.apply_accel(s.accel),
                 self.cal.apply_gyro(s.gyro, temp),
                 i32::from(temp),
-            );
+            ));
         }
         stage::enter(Stage::Allan);
-        let fixed = &fixed[..samples.len()];
-        for (accel, gyro, temp) in fixed {
+        for (accel, gyro, temp) in &fixed {
             let [ax, ay, az, gx, gy, gz, t] = &mut self.engines.imu;
             ax.push(accel[0]);
             ay.push(accel[1]);
@@ -417,16 +418,18 @@ impl Device {
             t.push(*temp);
         }
         stage::enter(Stage::Usb);
-        let n = samples.len() as u64;
+        let n = samples.len() as u32;
         let raw = self.mode == StreamMode::Raw;
-        for (i, (s, (accel, gyro, temp))) in samples.iter().zip(fixed).enumerate() {
+        for (i, (s, (accel, gyro, temp))) in samples.iter().zip(&fixed).enumerate() {
             let seq = self.imu_seq;
             self.imu_seq = self.imu_seq.wrapping_add(1);
             self.counters.samples_taken += 1;
             // The read-time estimate is late by the burst's transfer time (up to ≈ 2 ms), which
             // varies from burst to burst: the first stamp of a burst can fall before the last
             // one of the previous burst. Stamps are kept increasing (1 µs after the previous).
-            let nominal = t_read_us.saturating_sub((n - 1 - i as u64) * IMU_PERIOD_US);
+            // In u32 (at most BURST_MAX − 1 periods): a u64 multiply is a library call here.
+            let back = (n - 1 - i as u32) * IMU_PERIOD_US as u32;
+            let nominal = t_read_us.saturating_sub(u64::from(back));
             let t_us = match self.last_imu_us {
                 Some(last) if nominal <= last => last + 1,
                 _ => nominal,

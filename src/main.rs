@@ -42,7 +42,7 @@ use imu_drivers::mpu6050::Address;
 use imu_proto::{DecodeError, FrameReader, HostFrame};
 use pico_imu::device::{Device, SensorMsg, MAG_PERIOD_US};
 use pico_imu::outbox::FrameSink;
-use pico_imu::sensors::{self, ImuService, MagService};
+use pico_imu::sensors::{self, ImuService, MagService, Slots};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -277,15 +277,6 @@ fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
-/// The next instant after now that is `offset_us` past a multiple of `period_us` since boot:
-/// the sensor tasks run on fixed slots of one shared time base, so their bus use interleaves
-/// the same way every period (a late slot is skipped, not caught up).
-fn next_slot(period_us: u64, offset_us: u64) -> Instant {
-    let now = now_us();
-    let k = now.saturating_sub(offset_us) / period_us + 1;
-    Instant::from_micros(k * period_us + offset_us)
-}
-
 /// Waits while measurement is paused (flash write); returns whether it was paused.
 async fn wait_running(
     run: &mut embassy_sync::watch::Receiver<'static, NoopRawMutex, bool, 2>,
@@ -304,10 +295,10 @@ async fn imu_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunW
     let mut run = run.receiver().expect("watch receiver for imu_task");
     let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
     let mut svc = ImuService::new();
-    let period = IMU_BURST_MS * 1000;
+    let mut slots = Slots::new(IMU_BURST_MS * 1000, IMU_SLOT_OFFSET_US);
     let mut was = svc.state();
     loop {
-        Timer::at(next_slot(period, IMU_SLOT_OFFSET_US)).await;
+        Timer::at(Instant::from_micros(slots.next_after(now_us()))).await;
         let msgs = out.send().await;
         msgs.clear();
         if wait_running(&mut run).await {
@@ -343,13 +334,13 @@ async fn mag_task(bus: &'static SharedBus, mut out: SensorTx, run: &'static RunW
     let mut run = run.receiver().expect("watch receiver for mag_task");
     let mut mag = Qmc5883::new(BusDevice::new(bus));
     let mut svc = MagService::new();
-    let period = MAG_PERIOD_US;
+    let mut slots = Slots::new(MAG_PERIOD_US, MAG_SLOT_OFFSET_US);
     let mut was = svc.state();
     loop {
         // The service follows the sensor's own phase once it has seen a sample.
         let at = match svc.next_poll_us() {
             Some(t) => Instant::from_micros(t),
-            None => next_slot(period, MAG_SLOT_OFFSET_US),
+            None => Instant::from_micros(slots.next_after(now_us())),
         };
         Timer::at(at).await;
         let msgs = out.send().await;

@@ -369,3 +369,38 @@ impl MagService {
         }
     }
 }
+
+/// A task's fixed slots: `offset_us` past each multiple of `period_us` since boot, so the
+/// sensor tasks' bus use interleaves the same way every period. A slot that has already passed
+/// is skipped, not caught up.
+#[derive(Debug, Clone, Copy)]
+pub struct Slots {
+    period_us: u64,
+    offset_us: u64,
+    /// The slot returned last (0: none yet).
+    last_us: u64,
+}
+
+impl Slots {
+    pub const fn new(period_us: u64, offset_us: u64) -> Self {
+        Self {
+            period_us,
+            offset_us,
+            last_us: 0,
+        }
+    }
+
+    /// The first slot after `now_us`. When the previous slot has passed and the one after it
+    /// has not (a task that kept up), that is one addition; otherwise a 64-bit division
+    /// (≈ 280 cycles on the Cortex-M0+, which has no divide instruction).
+    pub fn next_after(&mut self, now_us: u64) -> u64 {
+        let following = self.last_us + self.period_us;
+        self.last_us = if self.last_us != 0 && self.last_us <= now_us && now_us < following {
+            following
+        } else {
+            let k = now_us.saturating_sub(self.offset_us) / self.period_us + 1;
+            k * self.period_us + self.offset_us
+        };
+        self.last_us
+    }
+}

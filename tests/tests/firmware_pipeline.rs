@@ -16,7 +16,7 @@ use imu_proto::{
 };
 use pico_imu::device::{Device, SensorMsg, TABLE_FRAME_ROOM};
 use pico_imu::outbox::FrameSink;
-use pico_imu::sensors::{self, ImuService, MagService};
+use pico_imu::sensors::{self, ImuService, MagService, Slots};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, QmcModel, QmcVariant, SimBus};
 
@@ -858,4 +858,24 @@ fn the_magnetometer_poll_follows_the_sensor_phase() {
         polls * 100 <= reads * 110,
         "{polls} status polls for {reads} readings"
     );
+}
+
+/// The sensor tasks' slots: the incremental step (one addition) must give exactly what the
+/// division gives, for a task that keeps up, one that wakes late inside the next period, and
+/// one that misses whole periods (those slots are skipped, not caught up).
+#[test]
+fn task_slots_match_the_division_and_skip_missed_ones() {
+    let by_division = |now: u64| (now.saturating_sub(250) / 5000 + 1) * 5000 + 250;
+    let mut slots = Slots::new(5000, 250);
+    assert_eq!(slots.next_after(0), 5250);
+    assert_eq!(slots.next_after(5250), 10_250); // woke on time
+    assert_eq!(slots.next_after(10_900), 15_250); // woke 650 µs late
+    assert_eq!(slots.next_after(15_250 + 4_999), 20_250); // 1 µs before the next slot
+    assert_eq!(slots.next_after(20_250 + 12_000), 35_250); // two slots missed: skipped
+    assert_eq!(slots.next_after(35_000), 35_250); // asked before the last slot passed
+    let mut now = 40_250;
+    for step in [1u64, 4_999, 5_000, 7_777, 13, 23_456, 5_001, 0, 9_999] {
+        now += step;
+        assert_eq!(slots.next_after(now), by_division(now), "now = {now} µs");
+    }
 }

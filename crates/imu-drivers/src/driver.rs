@@ -20,7 +20,7 @@ macro_rules! drivers {
         /// Error type of [`Qmc5883`] on bus `I2C`.
         pub type MagError<I2C> = q::Error<<I2C as ErrorType>::Error>;
 
-        /// Frames moved per FIFO burst read: 16 × 14 bytes = 224 bytes of stack.
+        /// Frames moved per FIFO burst read: 16 × 14 bytes = 224 bytes of scratch in the driver.
         const FIFO_CHUNK_FRAMES: usize = 16;
 
         /// MPU-6050 (and register-compatible clones) driver.
@@ -32,6 +32,8 @@ macro_rules! drivers {
             address: u8,
             chip: Option<ChipId>,
             config: Config,
+            /// FIFO burst scratch, kept here so that a read does not zero it every time.
+            fifo_buf: [u8; FIFO_CHUNK_FRAMES * 14],
         }
 
         impl<I2C: $I2c> Mpu6050<I2C> {
@@ -42,6 +44,7 @@ macro_rules! drivers {
                     address: address.addr(),
                     chip: None,
                     config: Config::default(),
+                    fifo_buf: [0; FIFO_CHUNK_FRAMES * 14],
                 }
             }
 
@@ -176,18 +179,23 @@ macro_rules! drivers {
                 if count >= chip.fifo_capacity() {
                     return Err(m::Error::FifoOverflow);
                 }
-                let available = count as usize / frame.bytes();
-                let wanted = available.min(out.len());
-                let mut buf = [0u8; FIFO_CHUNK_FRAMES * 14];
+                // min(count / frame size, out.len()) by subtraction: the Cortex-M0+ has no
+                // divide instruction, and `out` is a few frames long.
+                let fb = frame.bytes();
+                let (mut wanted, mut left) = (0, count as usize);
+                while wanted < out.len() && left >= fb {
+                    left -= fb;
+                    wanted += 1;
+                }
                 let mut done = 0;
                 while done < wanted {
                     let n = (wanted - done).min(FIFO_CHUNK_FRAMES);
-                    let bytes = &mut buf[..n * frame.bytes()];
-                    self.read_regs(mr::FIFO_R_W, bytes) $(.$await)? ?;
-                    for (slot, chunk) in out[done..done + n]
-                        .iter_mut()
-                        .zip(bytes.chunks_exact(frame.bytes()))
-                    {
+                    // The driver's own scratch: not zeroed on every call.
+                    let mut bytes = &mut self.fifo_buf[..n * fb];
+                    self.i2c.write_read(self.address, &[mr::FIFO_R_W], bytes) $(.$await)? ?;
+                    for slot in out[done..done + n].iter_mut() {
+                        let (chunk, rest) = core::mem::take(&mut bytes).split_at_mut(fb);
+                        bytes = rest;
                         if let Some(s) = m::decode_fifo_frame(chunk, frame) {
                             *slot = s;
                         }
