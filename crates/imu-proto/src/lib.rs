@@ -571,15 +571,21 @@ impl<'a> Stuffer<'a> {
                 continue;
             }
             let window = &src[..src.len().min(COBS_BLOCK - used)];
-            // The run: the bytes before the first zero of the window.
-            let run = if CRC {
-                crc_run(window, &mut crc)
-            } else {
-                window.iter().position(|&b| b == 0).unwrap_or(window.len())
+            // The run: the bytes before the first zero of the window, copied to the output.
+            let run = match self.dst.get_mut(self.out..self.out + window.len()) {
+                // The CRC scan copies as it goes (a separate `copy_from_slice` of the run
+                // cost ≈ 180 cycles per sample set on the M0+: short, unaligned copies).
+                Some(d) if CRC => crc_copy_run(window, d, &mut crc),
+                Some(d) => {
+                    let run = window.iter().position(|&b| b == 0).unwrap_or(window.len());
+                    d[..run].copy_from_slice(&window[..run]);
+                    run
+                }
+                // No room for the window: the frame cannot fit (every input byte takes one
+                // output byte), `finish` reports it; keep counting.
+                None if CRC => crc_run(window, &mut crc),
+                None => window.iter().position(|&b| b == 0).unwrap_or(window.len()),
             };
-            if let Some(d) = self.dst.get_mut(self.out..self.out + run) {
-                d.copy_from_slice(&window[..run]);
-            }
             self.out += run;
             if run < window.len() {
                 // The zero ends the block: its code byte says where.
@@ -636,6 +642,24 @@ fn crc_run(window: &[u8], crc: &mut u32) -> usize {
             run = i;
             break;
         }
+    }
+    *crc = c;
+    run
+}
+
+/// [`crc_run`] that also copies the bytes before the zero into `dst` (at least as long as
+/// `window`).
+#[inline(never)]
+fn crc_copy_run(window: &[u8], dst: &mut [u8], crc: &mut u32) -> usize {
+    let mut c = *crc;
+    let mut run = window.len();
+    for (i, (&b, d)) in window.iter().zip(dst.iter_mut()).enumerate() {
+        c = crc_step(c, b);
+        if b == 0 {
+            run = i;
+            break;
+        }
+        *d = b;
     }
     *crc = c;
     run
