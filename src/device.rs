@@ -38,9 +38,9 @@ pub const ALLAN_OVERLAP: u8 = 8;
 pub const ALLAN_LEVELS: u8 = 24;
 pub const ALLAN_LEVELS_MAG: u8 = 22;
 
-/// Largest burst one [`SensorMsg::Imu`] carries: a 5 ms slot holds 5 frames, so 8 covers it
-/// with slack and keeps the message (copied into and out of the channel) small.
-pub const BURST_MAX: usize = 8;
+/// Largest burst one [`SensorMsg::Imu`] carries: a 10 ms burst holds 10 frames (13 when it
+/// falls back to its timer), so 16 covers it in one I2C transfer.
+pub const BURST_MAX: usize = 16;
 
 /// What the sensor tasks tell the processing task.
 #[derive(Debug, Clone)]

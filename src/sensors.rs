@@ -14,10 +14,22 @@ use crate::health::Health;
 use crate::stage::{self, Stage};
 
 /// FIFO frames read per I2C burst (and per [`SensorMsg::Imu`]); a tick drains up to four
-/// bursts, more than the FIFO gathers in a 5 ms slot.
+/// bursts, more than the FIFO gathers between two ticks.
 pub const BURST_FRAMES: usize = crate::device::BURST_MAX;
 /// Frames the 1024-byte FIFO holds with accel + temp + gyro (14 bytes each).
 pub const FIFO_FRAMES: u64 = 1024 / 14;
+
+/// Whether the FIFO may have overflowed since `count` was read, `dt_us` ago (the task was held
+/// up between the count transfer and the data transfer, e.g. by a stall). The count cannot
+/// show such an overflow, and the frames read after it would be misaligned; the tick then
+/// treats it as an overflow (found by the end-to-end test's 120 ms stall falling between the
+/// two transfers). The FIFO gains at most one 14-byte frame per 512 µs (the sensor's 1 kHz
+/// with a 95 % margin for its clock) plus one in progress; normally `dt_us` is well below 1 ms
+/// and this fires only within two frames of the capacity.
+pub fn count_may_be_stale<I: I2c>(count: u16, dt_us: u64, imu: &Mpu6050<I>) -> bool {
+    let capacity = imu.fifo_capacity().unwrap_or(0) as u64;
+    u64::from(count) + 14 * ((dt_us >> 9) + 1) >= capacity
+}
 
 /// MPU-6050: 1 kHz (DLPF 184 Hz, SMPLRT_DIV 0), ±4 g, ±250 deg/s (the seed's ranges, which the
 /// calibration file assumes), FIFO with temperature, no interrupt pin (timer-driven).
@@ -182,7 +194,14 @@ impl ImuService {
             let r = match out.last_mut() {
                 Some(SensorMsg::Imu { samples, .. }) => {
                     stage::enter(Stage::I2c);
-                    let r = imu.read_fifo(samples).await;
+                    let t0 = now();
+                    let r = match imu.fifo_count().await {
+                        Ok(count) if count_may_be_stale(count, now() - t0, imu) => {
+                            Err(mpu::Error::FifoOverflow)
+                        }
+                        Ok(count) => imu.read_fifo_counted(count, samples).await,
+                        Err(e) => Err(e),
+                    };
                     stage::leave();
                     samples.truncate(*r.as_ref().unwrap_or(&0));
                     r

@@ -879,3 +879,45 @@ fn task_slots_match_the_division_and_skip_missed_ones() {
         assert_eq!(slots.next_after(now), by_division(now), "now = {now} µs");
     }
 }
+
+/// A stall between the FIFO-count transfer and the data transfer: the count (taken before it)
+/// cannot show the overflow the stall causes, and the frames read after it would be
+/// misaligned. The tick must see that the count is stale and handle it as an overflow (the
+/// end-to-end test's 120 ms stall once fell exactly there).
+#[test]
+fn an_overflow_between_the_count_and_the_data_transfers_is_caught() {
+    let mut rig = Rig::new();
+    rig.run(1000);
+    assert_eq!(rig.dev.status(0, 0).fifo_overflows, 0);
+    // One IMU tick whose third clock read (the one right after the count transfer) comes
+    // 120 ms later: the bus model advances, so the FIFO really overflows in between.
+    rig.bus.advance_us(2000);
+    let calls = std::cell::Cell::new(0);
+    let bus = rig.bus.clone();
+    let now = move || {
+        calls.set(calls.get() + 1);
+        if calls.get() == 3 {
+            bus.advance_us(120_000);
+        }
+        bus.now_ns() / 1000
+    };
+    let mut out = sensors::Out::new();
+    block_on(
+        rig.imu_svc
+            .tick(&mut rig.imu, &mut rig.bus.delay(), &now, 0, &mut out),
+    );
+    assert!(
+        out.iter()
+            .any(|m| matches!(m, SensorMsg::ImuOverflow { lost, .. } if *lost >= 40)),
+        "no overflow reported: {out:?}"
+    );
+    assert!(
+        !out.iter().any(|m| matches!(m, SensorMsg::Imu { .. })),
+        "frames read after a stale count: {out:?}"
+    );
+    rig.feed(out);
+    rig.run(200);
+    let st = rig.dev.status(0, 0);
+    assert_eq!(st.fifo_overflows, 1);
+    assert_eq!(rig.dev.table(Channel::Gz).gaps, 1);
+}

@@ -165,9 +165,26 @@ macro_rules! drivers {
             /// Returns [`m::Error::FifoOverflow`] if the count reached the FIFO capacity (the
             /// chip then overwrites the oldest bytes and frame alignment is lost); call
             /// [`Self::reset_fifo`] to recover. Two transfers per call: the count, then the
-            /// frames (in chunks of at most `FIFO_CHUNK_FRAMES`).
+            /// frames (in chunks of at most `FIFO_CHUNK_FRAMES`): [`Self::fifo_count`] and
+            /// [`Self::read_fifo_counted`].
             /// [`m::Error::NotConfigured`] if `init` did not enable the FIFO.
             pub $($async)? fn read_fifo(&mut self, out: &mut [RawSample]) -> Result<usize, MpuError<I2C>> {
+                if self.config.fifo.is_none() || self.chip.is_none() {
+                    return Err(m::Error::NotConfigured);
+                }
+                let count = self.fifo_count() $(.$await)? ?;
+                self.read_fifo_counted(count, out) $(.$await)?
+            }
+
+            /// FIFO capacity of the chip found by `init`, bytes (`None` before it).
+            pub fn fifo_capacity(&self) -> Option<u16> {
+                self.chip.map(ChipId::fifo_capacity)
+            }
+
+            /// [`Self::read_fifo`] given a count just read with [`Self::fifo_count`]: a caller
+            /// that knows how long ago that was can tell whether the FIFO may have overflowed
+            /// since (the count cannot show an overflow after it), and reset it instead.
+            pub $($async)? fn read_fifo_counted(&mut self, count: u16, out: &mut [RawSample]) -> Result<usize, MpuError<I2C>> {
                 let frame = self.config.fifo.ok_or(m::Error::NotConfigured)?;
                 let chip = self.chip.ok_or(m::Error::NotConfigured)?;
                 // Overflow is read from the count, not from INT_STATUS (one transfer fewer per
@@ -175,7 +192,6 @@ macro_rules! drivers {
                 // FIFO size while new data overwrites the oldest (RM 4.16, 4.30), so a count
                 // below the size means no byte was lost since the previous read. A full count
                 // is treated as an overflow even if the last frame fitted exactly.
-                let count = self.fifo_count() $(.$await)? ?;
                 if count >= chip.fifo_capacity() {
                     return Err(m::Error::FifoOverflow);
                 }
