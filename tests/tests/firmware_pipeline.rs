@@ -32,6 +32,13 @@ impl FrameSink for Sink {
     }
     fn put(&mut self, f: &[u8]) {
         assert!(f.len() <= self.room, "put beyond room");
+        // Frames are queued in whole words (zero-padded) so the device's copies are word copies.
+        assert_eq!(
+            f.len() % 4,
+            0,
+            "frame of {} bytes not padded to a word",
+            f.len()
+        );
         self.bytes.extend_from_slice(f);
     }
 }
