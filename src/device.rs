@@ -9,7 +9,7 @@
 //! Gaps (FIFO overflow, a lost sensor, a pause for a flash write) call `gap()` on the
 //! affected engines, so no Allan difference ever straddles missing data.
 use allan::stream::{DeviceEngine, LevelSums, MagEngine};
-use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
+use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, Prepared, MAX_BLOB_LEN};
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
     AllanLevel, AllanTable, CalFault, CalSource, CalStatus, Channel, DeviceMsg, DeviceMsgRef,
@@ -193,7 +193,10 @@ impl Engines {
 
 /// The device state machine.
 pub struct Device {
+    /// The calibration as stored and reported; set only through [`Device::set_cal`].
     cal: Calibration,
+    /// The same, prepared for the per-sample path (split coefficients, diagonal fast path).
+    fast: Prepared,
     cal_status: CalStatus,
     engines: Engines,
     scales: Scales,
@@ -225,6 +228,7 @@ impl Device {
     pub fn new(scales: Scales, firmware: &'static str) -> Self {
         Self {
             cal: Calibration::identity(),
+            fast: Prepared::new(&Calibration::identity()),
             cal_status: CalStatus {
                 source: CalSource::Identity,
                 fault: None,
@@ -255,6 +259,11 @@ impl Device {
         }
     }
 
+    fn set_cal(&mut self, cal: Calibration) {
+        self.cal = cal;
+        self.fast = Prepared::new(&cal);
+    }
+
     /// Use a blob read from flash at boot; a bad one is reported and identity kept.
     pub fn load_stored(&mut self, blob: Option<&[u8]>) {
         match blob.map(decode_blob) {
@@ -265,14 +274,14 @@ impl Device {
                 }
             }
             Some(Ok(cal)) => {
-                self.cal = cal;
+                self.set_cal(cal);
                 self.cal_status = CalStatus {
                     source: CalSource::Flash,
                     fault: None,
                 };
             }
             Some(Err(e)) => {
-                self.cal = Calibration::identity();
+                self.set_cal(Calibration::identity());
                 self.cal_status = CalStatus {
                     source: CalSource::Identity,
                     fault: Some(cal_fault(e)),
@@ -401,8 +410,8 @@ impl Device {
             self.last_temp = Some(temp);
             // At most BURST_MAX samples (cut above): never full.
             let _ = fixed.push((
-                self.cal.apply_accel(s.accel),
-                self.cal.apply_gyro(s.gyro, temp),
+                self.fast.apply_accel(s.accel),
+                self.fast.apply_gyro(s.gyro, temp),
                 i32::from(temp),
             ));
         }
@@ -459,7 +468,7 @@ impl Device {
 
     fn mag_sample(&mut self, xyz: [i16; 3], t_us: u64, sink: &mut impl FrameSink) {
         stage::enter(Stage::Corrections);
-        let mag = self.cal.apply_mag(xyz);
+        let mag = self.fast.apply_mag(xyz);
         stage::enter(Stage::Allan);
         for (e, &v) in self.engines.mag.iter_mut().zip(&mag) {
             e.push(v);
@@ -664,7 +673,7 @@ impl Device {
             }
             Request::SetCalibration { blob, persist } => match decode_blob(&blob) {
                 Ok(cal) => {
-                    self.cal = cal;
+                    self.set_cal(cal);
                     self.cal_status = CalStatus {
                         source: CalSource::Host,
                         fault: None,

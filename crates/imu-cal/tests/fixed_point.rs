@@ -5,7 +5,7 @@
 //! Tolerance: 1 LSB, from the bound in `device`'s docs (≤ 0.51 LSB from the exact value plus the
 //! reference's own ≤ 0.5 LSB rounding). We also check the tighter |fixed − exact| ≤ 0.52 LSB.
 #![allow(clippy::needless_range_loop)]
-use imu_cal::device::{Affine, Calibration, GyroCorrection, Sensor};
+use imu_cal::device::{Affine, Calibration, GyroCorrection, Prepared, Sensor};
 use proptest::prelude::*;
 
 /// Parameters drawn over the ranges the device accepts: gains 0.5–1.6 on the diagonal,
@@ -193,4 +193,79 @@ fn range_limits_do_not_overflow() {
     }
     // c = 3.999·16383 < 2¹⁶ and |κ| ≤ 1.996 < 2 for every pattern: none may be refused.
     assert_eq!(ran, 64);
+}
+
+/// Parameters with some matrices diagonal (the seed's accelerometer model and a bias-only gyro)
+/// and some full, so both paths of the firmware's prepared form are exercised.
+fn maybe_diagonal() -> impl Strategy<Value = Params> {
+    (params(), any::<bool>()).prop_map(|(mut p, diagonal)| {
+        if diagonal {
+            for i in 0..3 {
+                for j in 0..3 {
+                    if i != j {
+                        p.m[i][j] = 0.0;
+                    }
+                }
+            }
+        }
+        p
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(4000))]
+    /// The firmware applies `Prepared` (split coefficients, diagonal fast path): it must give
+    /// exactly what `Calibration` gives, for every parameter set and input.
+    #[test]
+    fn the_prepared_form_is_bit_exact(
+        p in maybe_diagonal(),
+        raw in proptest::array::uniform3(any::<i16>()),
+        t in any::<i16>(),
+    ) {
+        let acc = Affine::from_float(Sensor::Accel, p.m, p.o).unwrap();
+        let gyr = GyroCorrection::from_float(p.m, p.o, p.k, p.t_ref).unwrap();
+        let mag = Affine::from_float(Sensor::Mag, p.m, [0.0; 3]).unwrap();
+        let cal = Calibration::new(acc, gyr, mag).unwrap();
+        let fast = Prepared::new(&cal);
+        prop_assert_eq!(fast.apply_accel(raw), cal.apply_accel(raw));
+        prop_assert_eq!(fast.apply_gyro(raw, t), cal.apply_gyro(raw, t));
+        prop_assert_eq!(fast.apply_mag(raw), cal.apply_mag(raw));
+    }
+}
+
+/// The extremes of every input for a diagonal and a full matrix, and the identity.
+#[test]
+fn the_prepared_form_is_bit_exact_at_the_extremes() {
+    let full = [[1.6, -0.3, 0.3], [0.3, 0.5, -0.3], [-0.3, 0.3, 1.6]];
+    let diag = [[1.6, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 1.0001]];
+    let mut cals = vec![Calibration::identity()];
+    for m in [full, diag] {
+        let acc = Affine::from_float(Sensor::Accel, m, [2999.5, -3000.0, 0.25]).unwrap();
+        let gyr =
+            GyroCorrection::from_float(m, [-100.0, 7.5, 3000.0], [0.05, -0.05, 0.0], -123).unwrap();
+        cals.push(Calibration::new(acc, gyr, acc).unwrap());
+    }
+    let ends = [i16::MIN, -1, 0, 1, i16::MAX];
+    let mut n = 0;
+    for cal in &cals {
+        let fast = Prepared::new(cal);
+        for a in ends {
+            for b in ends {
+                for c in ends {
+                    let raw = [a, b, c];
+                    assert_eq!(fast.apply_accel(raw), cal.apply_accel(raw), "{raw:?}");
+                    assert_eq!(fast.apply_mag(raw), cal.apply_mag(raw), "{raw:?}");
+                    for t in ends {
+                        assert_eq!(
+                            fast.apply_gyro(raw, t),
+                            cal.apply_gyro(raw, t),
+                            "{raw:?} {t}"
+                        );
+                        n += 1;
+                    }
+                }
+            }
+        }
+    }
+    assert_eq!(n, 3 * 125 * 5);
 }
