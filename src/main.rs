@@ -24,7 +24,7 @@ mod storage;
 use core::sync::atomic::{AtomicUsize, Ordering};
 use defmt::{info, warn};
 use embassy_executor::Spawner;
-use embassy_futures::select::{select, select4, Either, Either4};
+use embassy_futures::select::{select, select4, Either4};
 use embassy_rp::bind_interrupts;
 use embassy_rp::i2c::{self, I2c};
 use embassy_rp::peripherals::{I2C0, USB};
@@ -98,7 +98,8 @@ type RunWatch = Watch<NoopRawMutex, bool, 2>;
 /// task of its own: a `Ticker` polled inside the processing task's select was re-registered
 /// with the timer queue (a walk of every timer) on each of its ≈ 400 wake-ups a second.
 type TickSignal = Signal<NoopRawMutex, ()>;
-/// A magnetometer reading just finished (mag_task → imu_task): the bus is free for ≈ 4.5 ms.
+/// Every second magnetometer reading, just finished (mag_task → imu_task): the bus is free for
+/// ≈ 4.5 ms.
 type MagReadSignal = Signal<NoopRawMutex, ()>;
 /// Housekeeping period.
 const TICK_MS: u64 = 100;
@@ -345,13 +346,8 @@ async fn imu_task(
         // On the 250 µs offset like every timer slot (see IMU_SLOT_OFFSET_US).
         let f = last_us + IMU_FALLBACK_US;
         let fallback = Instant::from_micros(f - f % 1000 + IMU_SLOT_OFFSET_US);
-        let mut readings = 0;
-        while readings < 2 {
-            match select(mag_read.wait(), Timer::at(fallback)).await {
-                Either::First(()) => readings += 1,
-                Either::Second(()) => break,
-            }
-        }
+        // Either result starts a burst.
+        let _ = select(mag_read.wait(), Timer::at(fallback)).await;
         last_us = now_us();
         let msgs = out.send().await;
         msgs.clear();
@@ -382,8 +378,8 @@ async fn imu_task(
     }
 }
 
-/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`); each reading is signalled to
-/// `imu_task`, which places its bursts between readings.
+/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`); every second reading is signalled
+/// to `imu_task`, which places its bursts between readings.
 #[embassy_executor::task]
 async fn mag_task(
     bus: &'static SharedBus,
@@ -395,6 +391,7 @@ async fn mag_task(
     let mut mag = Qmc5883::new(BusDevice::new(bus));
     let mut svc = MagService::new();
     let mut slots = Slots::new(MAG_PERIOD_US, MAG_SLOT_OFFSET_US);
+    let mut readings = 0u32;
     let mut was = svc.state();
     loop {
         // The service follows the sensor's own phase once it has seen a sample.
@@ -426,8 +423,12 @@ async fn mag_task(
             info!("mag: {} -> {}", was, svc.state());
             was = svc.state();
         }
+        // Every second reading (one wake-up of imu_task per burst, not two).
         if msgs.iter().any(|m| matches!(m, SensorMsg::Mag { .. })) {
-            mag_read.signal(());
+            readings += 1;
+            if readings % 2 == 0 {
+                mag_read.signal(());
+            }
         }
         if !msgs.is_empty() {
             out.send_done();
