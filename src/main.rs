@@ -4,7 +4,7 @@
 //!
 //! Tasks (docs/firmware.md has the diagram):
 //! * `imu_task`     — MPU-6050 FIFO bursts every 10 ms, right after every second magnetometer
-//!   reading (10 ms timer slots without one), fault handling;
+//!   tick, fault handling;
 //! * `mag_task`     — QMC5883L at 200 Hz, following the sensor's own phase, fault handling;
 //! * `process_task` — the pipeline and host requests (`pico_imu::device::Device`), calibration
 //!   storage (the only flash writer);
@@ -64,11 +64,14 @@ const I2C_HZ: u32 = 400_000;
 /// read, a data read and a round of task wake-ups, whatever its length: 10 ms instead of 5 ms
 /// saves ≈ 750 cycles per sample set (docs/firmware.md, "Budgets").
 const IMU_BURST_MS: u64 = 10;
-/// A burst starts right after every second magnetometer reading: the next one is due 5 ms
+/// A burst starts right after every second magnetometer tick: the next one is due 5 ms
 /// later, and the burst is done well before (it holds the bus ≈ 3.3 ms), so a magnetometer
-/// read never queues behind it. Without readings (magnetometer missing, faulted, or not yet
-/// phase-locked) the burst comes this long after the previous one.
-const IMU_FALLBACK_US: u64 = IMU_BURST_MS * 1000 + 3000;
+/// read never queues behind it. The magnetometer task ticks every 5 ms also while its sensor is
+/// missing; only if it stops ticking (a flash-write pause, a transfer running into its 25 ms
+/// deadline) does a burst come this long after the previous one, well within the FIFO's 73 ms.
+/// (A short fallback costs a spurious wake-up per burst: a timer that lost the race stays in
+/// embassy's timer queue and wakes the task when it expires.)
+const IMU_FALLBACK_US: u64 = 50_000;
 /// Until the magnetometer service knows the sensor's phase (at boot, after a fault), its ticks
 /// come on a 5 ms grid, 2.75 ms past whole multiples.
 const MAG_SLOT_OFFSET_US: u64 = IMU_SLOT_OFFSET_US + MAG_PERIOD_US / 2;
@@ -98,7 +101,7 @@ type RunWatch = Watch<NoopRawMutex, bool, 2>;
 /// task of its own: a `Ticker` polled inside the processing task's select was re-registered
 /// with the timer queue (a walk of every timer) on each of its ≈ 400 wake-ups a second.
 type TickSignal = Signal<NoopRawMutex, ()>;
-/// Every second magnetometer reading, just finished (mag_task → imu_task): the bus is free for
+/// Every second magnetometer tick, just finished (mag_task → imu_task): the bus is free for
 /// ≈ 4.5 ms.
 type MagReadSignal = Signal<NoopRawMutex, ()>;
 /// Housekeeping period.
@@ -329,7 +332,7 @@ async fn wait_running(
 }
 
 /// MPU-6050: FIFO bursts every 10 ms (`pico_imu::sensors::ImuService`), after every second
-/// magnetometer reading; a lost sensor is retried with bus recovery and re-initialised.
+/// magnetometer tick; a lost sensor is retried with bus recovery and re-initialised.
 #[embassy_executor::task]
 async fn imu_task(
     bus: &'static SharedBus,
@@ -378,8 +381,8 @@ async fn imu_task(
     }
 }
 
-/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`); every second reading is signalled
-/// to `imu_task`, which places its bursts between readings.
+/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`); every second tick is signalled to
+/// `imu_task`, which places its bursts between them.
 #[embassy_executor::task]
 async fn mag_task(
     bus: &'static SharedBus,
@@ -391,7 +394,7 @@ async fn mag_task(
     let mut mag = Qmc5883::new(BusDevice::new(bus));
     let mut svc = MagService::new();
     let mut slots = Slots::new(MAG_PERIOD_US, MAG_SLOT_OFFSET_US);
-    let mut readings = 0u32;
+    let mut ticks = 0u32;
     let mut was = svc.state();
     loop {
         // The service follows the sensor's own phase once it has seen a sample.
@@ -423,12 +426,11 @@ async fn mag_task(
             info!("mag: {} -> {}", was, svc.state());
             was = svc.state();
         }
-        // Every second reading (one wake-up of imu_task per burst, not two).
-        if msgs.iter().any(|m| matches!(m, SensorMsg::Mag { .. })) {
-            readings += 1;
-            if readings % 2 == 0 {
-                mag_read.signal(());
-            }
+        // The bus is free until the next tick: every second tick (reading or not, so bursts
+        // keep their 10 ms with the magnetometer missing too) lets imu_task start a burst.
+        ticks += 1;
+        if ticks % 2 == 0 {
+            mag_read.signal(());
         }
         if !msgs.is_empty() {
             out.send_done();
