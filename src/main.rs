@@ -395,6 +395,7 @@ async fn mag_task(
     let mut svc = MagService::new();
     let mut slots = Slots::new(MAG_PERIOD_US, MAG_SLOT_OFFSET_US);
     let mut ticks = 0u32;
+    let mut fresh = true;
     let mut was = svc.state();
     loop {
         // The service follows the sensor's own phase once it has seen a sample.
@@ -403,8 +404,12 @@ async fn mag_task(
             None => Instant::from_micros(slots.next_after(now_us())),
         };
         Timer::at(at).await;
+        // Two ticks' messages share a slot (a tick adds at most two), so the processing task
+        // wakes once per 10 ms for the magnetometer: the slot stays ours until `send_done`.
         let msgs = out.send().await;
-        msgs.clear();
+        if fresh {
+            msgs.clear();
+        }
         if wait_running(&mut run).await {
             let _ = msgs.push(SensorMsg::Resumed { t_us: now_us() });
         } else {
@@ -429,10 +434,12 @@ async fn mag_task(
         // The bus is free until the next tick: every second tick (reading or not, so bursts
         // keep their 10 ms with the magnetometer missing too) lets imu_task start a burst.
         ticks += 1;
-        if ticks % 2 == 0 {
+        let second = ticks % 2 == 0;
+        if second {
             mag_read.signal(());
         }
-        if !msgs.is_empty() {
+        fresh = !msgs.is_empty() && (second || msgs.len() + 2 > msgs.capacity());
+        if fresh {
             out.send_done();
         }
     }
