@@ -28,17 +28,17 @@ mod batch;
 pub use heapless::{String, Vec};
 
 /// Wire-format version carried in the first byte of every frame.
-pub const PROTOCOL_VERSION: u8 = 2;
+pub const PROTOCOL_VERSION: u8 = 3;
 /// Largest serialised message (version + postcard + CRC), bytes, before COBS.
 pub const MAX_PAYLOAD: usize = 3072;
 /// Largest encoded frame, bytes, including the trailing `0x00` delimiter.
 pub const MAX_FRAME: usize = cobs::max_encoding_length(MAX_PAYLOAD) + 1;
 /// Octave levels in a device Allan table (m = 1, 2, 4, … 2^23).
 pub const MAX_LEVELS: usize = 24;
-/// IMU samples per [`SampleBatch`] (16 ms of data at 1 kHz).
-pub const MAX_BATCH_IMU: usize = 16;
+/// IMU samples per [`SampleBatch`] (32 ms of data at 1 kHz).
+pub const MAX_BATCH_IMU: usize = 32;
 /// Magnetometer samples per [`SampleBatch`].
-pub const MAX_BATCH_MAG: usize = 8;
+pub const MAX_BATCH_MAG: usize = 16;
 /// Largest calibration blob (`imu_cal::device::encode_blob`), bytes.
 pub const MAX_CAL_BLOB: usize = 256;
 

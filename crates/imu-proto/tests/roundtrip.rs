@@ -79,7 +79,7 @@ fn batch() -> SampleBatch {
     let mut imu = Vec::new();
     for i in 0..MAX_BATCH_IMU as u32 {
         imu.push(ImuSample {
-            seq: u32::MAX - 20 + i,
+            seq: u32::MAX - MAX_BATCH_IMU as u32 + i,
             t_us: 1_000 * u64::from(i) + u64::MAX / 2,
             accel: [i32::MIN, -1, i32::MAX],
             gyro: [0, 131 * i as i32, -32768],
