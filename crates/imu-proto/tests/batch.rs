@@ -200,3 +200,111 @@ fn an_empty_batch_frames_like_the_serde_path() {
     };
     assert_eq!(direct_frame(&b), serde_frame(&b));
 }
+
+/// Batches as the device makes them: consecutive sequence numbers (sometimes a jump, a gap),
+/// times one period apart with a little jitter (sometimes a long pause or a step backwards).
+fn arb_regular_batch() -> impl Strategy<Value = SampleBatch> {
+    let step = prop_oneof![
+        8 => (Just(1u32), -3i64..=3),
+        1 => (2u32..100_000, 0i64..10_000_000),
+        1 => (Just(1u32), -2_000i64..0),
+    ];
+    (
+        arb_u32(),
+        0u64..(1 << 40),
+        proptest::collection::vec((step.clone(), arb_i32()), 0..=MAX_BATCH_IMU),
+        proptest::collection::vec((step, arb_i32()), 0..=MAX_BATCH_MAG),
+    )
+        .prop_map(|(seq0, t0, imu_steps, mag_steps)| {
+            let (mut seq, mut t) = (seq0, t0);
+            let imu: std::vec::Vec<ImuSample> = imu_steps
+                .iter()
+                .map(|&((ds, jitter), v)| {
+                    seq = seq.wrapping_add(ds);
+                    t = t.wrapping_add(1_000).wrapping_add(jitter as u64);
+                    imu_sample((seq, t, [v, v.wrapping_neg(), 7], [v / 3, 0, -1], v ^ 5))
+                })
+                .collect();
+            let (mut seq, mut t) = (seq0 / 5, t0);
+            let mag: std::vec::Vec<MagSample> = mag_steps
+                .iter()
+                .map(|&((ds, jitter), v)| {
+                    seq = seq.wrapping_add(ds);
+                    t = t.wrapping_add(5_000).wrapping_add(jitter as u64);
+                    MagSample {
+                        seq,
+                        t_us: t,
+                        mag: [v, 1, v.wrapping_neg()],
+                    }
+                })
+                .collect();
+            batch_of(true, &imu, &mag, [1.0, 0.5, 0.25, 2.0, -1.0])
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// The delta layout on realistic runs: the same bytes both ways, and every sample back.
+    #[test]
+    fn regular_runs_round_trip_through_the_delta_layout(b in arb_regular_batch()) {
+        let direct = direct_frame(&b);
+        prop_assert_eq!(&direct, &serde_frame(&b));
+        let mut rd = FrameReader::<MAX_FRAME>::new();
+        let mut got = std::vec::Vec::new();
+        rd.feed::<DeviceMsg>(&direct, |r| got.push(r));
+        match got.pop() {
+            Some(Ok(DeviceMsg::Samples(back))) => prop_assert_eq!(back, b),
+            other => prop_assert!(false, "decoded {:?}", other),
+        }
+    }
+}
+
+/// Two IMU samples one period apart and two magnetometer samples one period + 3 µs apart:
+/// the second of each carries 1 and zig-zag(0) = 0, resp. zig-zag(3) = 6.
+#[test]
+fn later_samples_carry_differences() {
+    let imu = [
+        imu_sample((1000, 50_000_000, [1, 2, 3], [4, 5, 6], 7)),
+        imu_sample((1001, 50_001_000, [1, 2, 3], [4, 5, 6], 7)),
+    ];
+    let mag = [
+        MagSample {
+            seq: 9,
+            t_us: 50_000_500,
+            mag: [0, 0, 0],
+        },
+        MagSample {
+            seq: 10,
+            t_us: 50_005_503,
+            mag: [0, 0, 0],
+        },
+    ];
+    let b = batch_of(false, &imu, &mag, [1.0; 5]);
+    let mut out = std::vec![0u8; MAX_FRAME];
+    let n = FrameEncoder::new()
+        .encode(&DeviceMsg::Samples(b.clone()), &mut out)
+        .unwrap();
+    let mut body = out[..n - 1].to_vec();
+    let k = cobs::decode_in_place(&mut body).unwrap();
+    #[rustfmt::skip]
+    let expected: &[u8] = &[
+        PROTOCOL_VERSION, 0x01, 0x00, // version, Samples, raw
+    ];
+    assert_eq!(&body[..3], expected);
+    // After the 20 bytes of scales: IMU count, sample 0 (seq e8 07, t 80 e1 eb 17, values),
+    // sample 1 (01 00, values).
+    let imu_part = &body[23..];
+    #[rustfmt::skip]
+    let imu_expected: &[u8] = &[
+        0x02,
+        0xe8, 0x07, 0x80, 0xe1, 0xeb, 0x17, 0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x0e,
+        0x01, 0x00, 0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x0e,
+        0x02,
+        0x09, 0xf4, 0xe4, 0xeb, 0x17, 0x00, 0x00, 0x00,
+        0x01, 0x06, 0x00, 0x00, 0x00,
+    ];
+    assert_eq!(&imu_part[..k - 23 - 4], imu_expected);
+    let back: DeviceMsg = decode(&mut out[..n - 1]).unwrap();
+    assert_eq!(back, DeviceMsg::Samples(b));
+}
