@@ -434,7 +434,7 @@ async fn mag_task(
         // The bus is free until the next tick: every second tick (reading or not, so bursts
         // keep their 10 ms with the magnetometer missing too) lets imu_task start a burst.
         ticks += 1;
-        let second = ticks % 2 == 0;
+        let second = ticks.is_multiple_of(2);
         if second {
             mag_read.signal(());
         }
