@@ -59,18 +59,16 @@ bind_interrupts!(struct Irqs {
 
 /// I2C0 clock: 400 kHz fast mode (both sensors support it).
 const I2C_HZ: u32 = 400_000;
-/// IMU FIFO service period: 10 ms ≈ 10 frames of 14 bytes (≈ 3.3 ms of bus time at 400 kHz),
-/// far below the 1024-byte FIFO (73 frames = 73 ms of headroom). Each burst costs a FIFO-count
-/// read, a data read and a round of task wake-ups, whatever its length: 10 ms instead of 5 ms
-/// saves ≈ 750 cycles per sample set (docs/firmware.md, "Budgets").
-const IMU_BURST_MS: u64 = 10;
-/// A burst starts right after every second magnetometer tick: the next one is due 5 ms
-/// later, and the burst is done well before (it holds the bus ≈ 3.3 ms), so a magnetometer
-/// read never queues behind it. The magnetometer task ticks every 5 ms also while its sensor is
-/// missing; only if it stops ticking (a flash-write pause, a transfer running into its 25 ms
-/// deadline) does a burst come this long after the previous one, well within the FIFO's 73 ms.
-/// (A short fallback costs a spurious wake-up per burst: a timer that lost the race stays in
-/// embassy's timer queue and wakes the task when it expires.)
+/// The IMU FIFO is drained every 10 ms (≈ 10 frames of 14 bytes, ≈ 3.3 ms of bus time at
+/// 400 kHz; the 1024-byte FIFO holds 73 ms): each burst costs a FIFO-count read, a data read and
+/// a round of task wake-ups whatever its length, and 10 ms instead of 5 ms saved ≈ 750 cycles
+/// per sample set (docs/firmware.md, "Budgets"). A burst starts right after every second
+/// magnetometer tick: the next one is due 5 ms later, and the burst is done well before, so a
+/// magnetometer read never queues behind it. The magnetometer task ticks every 5 ms also while
+/// its sensor is missing; only if it stops ticking (a flash-write pause, a transfer running into
+/// its 25 ms deadline) does a burst come this long after the previous one, well within the
+/// FIFO's 73 ms. (A short fallback costs a spurious wake-up per burst: a timer that lost the
+/// race stays in embassy's timer queue and wakes the task when it expires.)
 const IMU_FALLBACK_US: u64 = 50_000;
 /// Until the magnetometer service knows the sensor's phase (at boot, after a fault), its ticks
 /// come on a 5 ms grid, 2.75 ms past whole multiples.
@@ -513,8 +511,10 @@ async fn process_task(
                     let load = cpu.last_permille();
                     if let Some(req) = device.handle(f, now_us(), load, &mut sink) {
                         // Flash write: pause sampling, let the tasks see it, write, resume.
+                        // With the magnetometer task paused, imu_task wakes on its fallback
+                        // timer at the latest, IMU_FALLBACK_US after its last burst.
                         run.sender().send(false);
-                        Timer::after_millis(2 * IMU_BURST_MS).await;
+                        Timer::after_micros(IMU_FALLBACK_US + 10_000).await;
                         let ok = store.save(&req.blob).await.is_ok();
                         run.sender().send(true);
                         info!("calibration persisted: {}", ok);
