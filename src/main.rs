@@ -344,9 +344,9 @@ async fn imu_task(
     let mut last_us = now_us();
     let mut was = svc.state();
     loop {
-        // On the 250 µs offset like every timer slot (see IMU_SLOT_OFFSET_US).
-        let f = last_us + IMU_FALLBACK_US;
-        let fallback = Instant::from_micros(f - f % 1000 + IMU_SLOT_OFFSET_US);
+        // An odd µs is never on a whole millisecond (see IMU_SLOT_OFFSET_US), and needs no
+        // 64-bit division to get there.
+        let fallback = Instant::from_micros((last_us + IMU_FALLBACK_US) | 1);
         // Either result starts a burst.
         let _ = select(mag_read.wait(), Timer::at(fallback)).await;
         last_us = now_us();

@@ -22,7 +22,9 @@ const usage = `usage:
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--report F.md] [--json F.json]
-  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies]   (PC samples by function; callers of leaf functions matching RE; memcpy/memset calls by caller)
+  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact]
+                   (PC samples by function; callers of leaf functions matching RE; memcpy/memset
+                   calls by caller; --exact: every instruction's cycles by function per sample set)
 fault SPEC: nack:mpu@5s:3 | vanish:qmc@10s:2s | stuck@20s | overflow@30s:120ms`;
 
 function fail(msg, code = 2) {
@@ -124,6 +126,7 @@ async function main() {
         top: { type: 'string' },
         callers: { type: 'string' },
         copies: { type: 'boolean' },
+        exact: { type: 'boolean' },
       },
     });
   } catch (e) {

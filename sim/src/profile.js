@@ -23,6 +23,7 @@ export function demangle(name) {
 }
 
 export async function profile(v) {
+  if (v.exact) return exactProfile(v);
   const seconds = Number(v.seconds ?? 2);
   const s = new Session({ elf: v.elf, stream: generateStream({ seed: 1, seconds: seconds + 3 }), echoLog: false });
   await s.run(1e9);
@@ -99,4 +100,95 @@ export async function profile(v) {
     const cs = [...callers.entries()].sort((a, b) => b[1] - a[1]).slice(0, Number(v.top ?? 25));
     for (const [n, c] of cs) process.stdout.write(`${((100 * c) / samples).toFixed(1).padStart(5)} %  ${n}\n`);
   }
+}
+
+/** Sorted function symbols of the firmware and a finder from an address to its name. */
+function symbolFinder(elf) {
+  const syms = [...elf.symbols.entries()]
+    .filter(([, x]) => x.size > 0 && x.value >= 0x10000000 && x.value < 0x20042000)
+    .map(([n, x]) => ({ n, a: x.value & ~1, e: (x.value & ~1) + x.size }))
+    .sort((a, b) => a.a - b.a);
+  return (pc) => {
+    let lo = 0;
+    let hi = syms.length - 1;
+    while (lo <= hi) {
+      const mid = (lo + hi) >> 1;
+      if (pc < syms[mid].a) hi = mid - 1;
+      else if (pc >= syms[mid].e) lo = mid + 1;
+      else return syms[mid].n;
+    }
+    return `0x${pc.toString(16)}`;
+  };
+}
+
+/**
+ * `profile --exact`: every executed instruction counted after a 1 s warm-up, its cycles charged
+ * to the function holding it (exclusive), per 1 kHz sample set served by the MPU-6050 model:
+ * the same unit as the bench. With `--callers RE`, calls of library leaf functions matching RE
+ * (memcpy, division, 64-bit multiply, …) are also charged inclusively to their call sites.
+ * Deterministic: the same ELF gives the same table.
+ */
+export async function exactCycles({ elf, seconds = 1, callers = null }) {
+  const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: seconds + 3 }), echoLog: false });
+  await s.run(1e9);
+  const core = s.emu.core;
+  const find = symbolFinder(s.emu.elf);
+  const perPc = new Map();
+  const leafRe = callers ? new RegExp(callers) : null;
+  const leaves = new Map();
+  if (leafRe) {
+    for (const [n, x] of s.emu.elf.symbols.entries()) {
+      if (x.size > 0 && leafRe.test(demangle(n))) leaves.set(x.value & ~1, n);
+    }
+  }
+  const calls = new Map();
+  let open = null;
+  const exec = core.executeInstruction.bind(core);
+  core.executeInstruction = () => {
+    const pc = core.PC >>> 0;
+    if (open && pc === open.ret) {
+      const c = calls.get(open.key) ?? { calls: 0, cycles: 0 };
+      c.calls++;
+      c.cycles += core.cycles - open.c0;
+      calls.set(open.key, c);
+      open = null;
+    }
+    if (!open && leaves.has(pc)) {
+      const ret = (core.LR >>> 0) & ~1;
+      open = { ret, c0: core.cycles, key: `${demangle(leaves.get(pc))} ← ${demangle(find(ret))}` };
+    }
+    const c0 = core.cycles;
+    const r = exec();
+    perPc.set(pc, (perPc.get(pc) ?? 0) + (core.cycles - c0));
+    return r;
+  };
+  const served0 = s.mpu.stats.servedFifo + s.mpu.stats.servedRegs;
+  await s.run((1 + seconds) * 1e9);
+  const sets = s.mpu.stats.servedFifo + s.mpu.stats.servedRegs - served0;
+  await s.close();
+  const byFn = new Map();
+  let total = 0;
+  for (const [pc, c] of perPc) {
+    const f = find(pc & ~1);
+    byFn.set(f, (byFn.get(f) ?? 0) + c);
+    total += c;
+  }
+  return { seconds, sets, total, byFn, calls };
+}
+
+async function exactProfile(v) {
+  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers });
+  const { sets, total, byFn, calls, seconds } = r;
+  const top = Number(v.top ?? 25);
+  const out = [`# executed cycles per sample set, by function (exclusive): ${(total / sets).toFixed(0)} in all, ${sets} sample sets in ${seconds} s`];
+  for (const [n, c] of [...byFn.entries()].sort((a, b) => b[1] - a[1]).slice(0, top)) {
+    out.push(`${(c / sets).toFixed(1).padStart(8)}  ${demangle(n)}`);
+  }
+  if (v.callers) {
+    out.push(`# calls of /${v.callers}/ by call site (inclusive): cycles and calls per sample set`);
+    for (const [k, c] of [...calls.entries()].sort((a, b) => b[1].cycles - a[1].cycles).slice(0, top)) {
+      out.push(`${(c.cycles / sets).toFixed(1).padStart(8)} ${(c.calls / sets).toFixed(2).padStart(6)}  ${k}`);
+    }
+  }
+  process.stdout.write(out.join('\n') + '\n');
 }

@@ -21,3 +21,16 @@ test('the firmware boots, enumerates USB and reads both sensors at their rates',
   assert.ok(s.mpu.stats.servedFifo + s.mpu.stats.servedRegs >= 900, `MPU served ${s.mpu.stats.servedFifo}`);
   assert.ok(s.qmc.stats.served >= 180, `QMC served ${s.qmc.stats.served}`);
 });
+
+test('profile --exact charges every executed cycle to a function, per sample set', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
+  const { exactCycles } = await import('../src/profile.js');
+  const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem' });
+  // 0.2 s after the 1 s warm-up: 200 IMU sample sets (± one burst of slack).
+  assert.ok(r.sets >= 180 && r.sets <= 220, `sets ${r.sets}`);
+  const sum = [...r.byFn.values()].reduce((a, b) => a + b, 0);
+  assert.equal(sum, r.total, 'the per-function charges add up to the executed cycles');
+  const perSet = r.total / r.sets;
+  assert.ok(perSet > 1000 && perSet < 60000, `cycles per sample set ${perSet}`);
+  const push = [...r.byFn.entries()].find(([n]) => /Engine.*push/.test(n));
+  assert.ok(push && push[1] / r.sets > 100, 'the Allan push shows up with its cycles');
+});
