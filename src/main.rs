@@ -21,7 +21,7 @@ mod cpu;
 mod i2c_dma;
 mod storage;
 
-use core::sync::atomic::{AtomicUsize, Ordering};
+use core::cell::Cell;
 use defmt::{info, warn};
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, select4, Either4};
@@ -29,7 +29,7 @@ use embassy_rp::bind_interrupts;
 use embassy_rp::i2c::{self, I2c};
 use embassy_rp::peripherals::{I2C0, USB};
 use embassy_rp::usb::{self, Driver};
-use embassy_sync::blocking_mutex::raw::NoopRawMutex;
+use embassy_sync::blocking_mutex::{self, raw::NoopRawMutex};
 use embassy_sync::channel::Channel;
 use embassy_sync::mutex::Mutex;
 use embassy_sync::pipe::{self, Pipe};
@@ -114,34 +114,27 @@ enum HostIn {
 
 /// Bytes in the output pipe. The pipe is split so that the USB task can send from it in place
 /// (`Reader::fill_buf`; a copy out of the pipe cost ≈ 170 cycles per sample set), and a
-/// `Writer` cannot tell its free space, so the two tasks keep the count: the processing task
-/// adds what it writes, the USB task subtracts what it consumes. Both run on the thread-mode
-/// executor and no interrupt touches it, so one task's load and store never interleave with
-/// the other's (the M0+ has no atomic read-modify-write).
-static OUT_QUEUED: AtomicUsize = AtomicUsize::new(0);
+/// `Writer` cannot tell its free space, so the two tasks keep the count here: the processing
+/// task adds what it writes, the USB task subtracts what it consumes.
+type OutQueued = blocking_mutex::Mutex<NoopRawMutex, Cell<usize>>;
 
-fn out_queued_add(n: usize) {
-    OUT_QUEUED.store(OUT_QUEUED.load(Ordering::Relaxed) + n, Ordering::Relaxed);
+/// The processing task's end of the output pipe.
+struct PipeSink {
+    pipe: OutWriter,
+    queued: &'static OutQueued,
 }
-
-fn out_queued_sub(n: usize) {
-    let q = OUT_QUEUED.load(Ordering::Relaxed);
-    OUT_QUEUED.store(q.saturating_sub(n), Ordering::Relaxed);
-}
-
-struct PipeSink(OutWriter);
 
 impl FrameSink for PipeSink {
     fn room(&self) -> usize {
-        OUT_PIPE.saturating_sub(OUT_QUEUED.load(Ordering::Relaxed))
+        OUT_PIPE.saturating_sub(self.queued.lock(Cell::get))
     }
     fn put(&mut self, mut frame: &[u8]) {
         // `room()` was checked by the caller and only this task writes, so it fits whole; a
         // ring buffer takes it in at most two contiguous pieces.
         while !frame.is_empty() {
-            match self.0.try_write(frame) {
+            match self.pipe.try_write(frame) {
                 Ok(n) => {
-                    out_queued_add(n);
+                    self.queued.lock(|q| q.set(q.get() + n));
                     frame = &frame[n..];
                 }
                 Err(_) => break, // unreachable given room(); never spin
@@ -159,6 +152,7 @@ static HOST: StaticCell<HostChannel> = StaticCell::new();
 static RUN: StaticCell<RunWatch> = StaticCell::new();
 static TICK: StaticCell<TickSignal> = StaticCell::new();
 static MAG_READ: StaticCell<MagReadSignal> = StaticCell::new();
+static OUT_QUEUED: StaticCell<OutQueued> = StaticCell::new();
 static BUS: StaticCell<SharedBus> = StaticCell::new();
 static DEVICE: StaticCell<Device> = StaticCell::new();
 
@@ -201,6 +195,7 @@ async fn main(spawner: Spawner) {
 
     // --- channels ---------------------------------------------------------------------------
     let (out_rx, out_tx) = OUT.init(Pipe::new()).split();
+    let out_queued: &'static OutQueued = OUT_QUEUED.init(blocking_mutex::Mutex::new(Cell::new(0)));
     let imu_ch = IMU_CH.init(SensorChannel::new(
         IMU_SLOTS.init([const { sensors::Out::new() }; SENSOR_SLOTS]),
     ));
@@ -231,7 +226,7 @@ async fn main(spawner: Spawner) {
 
     spawner.spawn(usb_task(usb).expect("spawn usb_task"));
     spawner.spawn(tick_task(tick).expect("spawn tick_task"));
-    spawner.spawn(usb_tx_task(tx, out_rx).expect("spawn usb_tx_task"));
+    spawner.spawn(usb_tx_task(tx, out_rx, out_queued).expect("spawn usb_tx_task"));
     spawner.spawn(usb_rx_task(rx, host).expect("spawn usb_rx_task"));
     spawner.spawn(imu_task(bus, imu_tx, run, mag_read).expect("spawn imu_task"));
     spawner.spawn(mag_task(bus, mag_tx, run, mag_read).expect("spawn mag_task"));
@@ -245,7 +240,10 @@ async fn main(spawner: Spawner) {
                 host,
                 tick,
             },
-            out_tx,
+            PipeSink {
+                pipe: out_tx,
+                queued: out_queued,
+            },
             run,
         )
         .expect("spawn process_task"),
@@ -270,7 +268,11 @@ async fn usb_task(mut usb: UsbDevice<'static, Driver<'static, USB>>) -> ! {
 /// Moves encoded frames from the pipe to the IN endpoint, up to 64 bytes a packet, sent
 /// straight from the pipe's buffer.
 #[embassy_executor::task]
-async fn usb_tx_task(mut tx: Sender<'static, Driver<'static, USB>>, mut out: OutReader) -> ! {
+async fn usb_tx_task(
+    mut tx: Sender<'static, Driver<'static, USB>>,
+    mut out: OutReader,
+    queued: &'static OutQueued,
+) -> ! {
     loop {
         tx.wait_connection().await;
         info!("usb: host connected");
@@ -283,7 +285,7 @@ async fn usb_tx_task(mut tx: Sender<'static, Driver<'static, USB>>, mut out: Out
                 break;
             }
             out.consume(n);
-            out_queued_sub(n);
+            queued.lock(|q| q.set(q.get().saturating_sub(n)));
         }
     }
 }
@@ -457,7 +459,7 @@ async fn process_task(
     device: &'static mut Device,
     mut store: storage::Store,
     inputs: Inputs,
-    out: OutWriter,
+    mut sink: PipeSink,
     run: &'static RunWatch,
 ) -> ! {
     let Inputs {
@@ -466,7 +468,6 @@ async fn process_task(
         host,
         tick,
     } = inputs;
-    let mut sink = PipeSink(out);
     let mut last_status = Instant::now();
     let mut last_tables = Instant::now();
     let mut cpu = cpu::Meter::new();
