@@ -27,21 +27,7 @@ export async function profile(v) {
   const seconds = Number(v.seconds ?? 2);
   const s = new Session({ elf: v.elf, stream: generateStream({ seed: 1, seconds: seconds + 3 }), echoLog: false });
   await s.run(1e9);
-  const syms = [...s.emu.elf.symbols.entries()]
-    .filter(([, x]) => x.size > 0 && x.value >= 0x10000000 && x.value < 0x20042000)
-    .map(([n, x]) => ({ n, a: x.value & ~1, e: (x.value & ~1) + x.size }))
-    .sort((a, b) => a.a - b.a);
-  const find = (pc) => {
-    let lo = 0;
-    let hi = syms.length - 1;
-    while (lo <= hi) {
-      const mid = (lo + hi) >> 1;
-      if (pc < syms[mid].a) hi = mid - 1;
-      else if (pc >= syms[mid].e) lo = mid + 1;
-      else return syms[mid].n;
-    }
-    return `0x${pc.toString(16)}`;
-  };
+  const find = symbolFinder(s.emu.elf);
   const hist = new Map();
   const callers = new Map();
   const callersRe = v.callers ? new RegExp(v.callers) : null;
