@@ -416,8 +416,35 @@ impl Device {
             ));
         }
         stage::enter(Stage::Allan);
-        for (accel, gyro, temp) in &fixed {
-            let [ax, ay, az, gx, gy, gz, t] = &mut self.engines.imu;
+        // In pairs (`push_pair`: two samples per engine call, the steady state in hand-scheduled
+        // Thumb code). Pairs start at even segment counts; the seven IMU engines split together,
+        // so they share the count, and a burst that starts odd pushes its first sample alone.
+        let [ax, ay, az, gx, gy, gz, t] = &mut self.engines.imu;
+        let mut rest = fixed.as_slice();
+        if ax.segment_samples() & 1 == 1 {
+            if let Some(((accel, gyro, temp), tail)) = rest.split_first() {
+                ax.push(accel[0]);
+                ay.push(accel[1]);
+                az.push(accel[2]);
+                gx.push(gyro[0]);
+                gy.push(gyro[1]);
+                gz.push(gyro[2]);
+                t.push(*temp);
+                rest = tail;
+            }
+        }
+        let mut pairs = rest.chunks_exact(2);
+        for pair in &mut pairs {
+            let ((a0, g0, t0), (a1, g1, t1)) = (&pair[0], &pair[1]);
+            ax.push_pair(a0[0], a1[0]);
+            ay.push_pair(a0[1], a1[1]);
+            az.push_pair(a0[2], a1[2]);
+            gx.push_pair(g0[0], g1[0]);
+            gy.push_pair(g0[1], g1[1]);
+            gz.push_pair(g0[2], g1[2]);
+            t.push_pair(*t0, *t1);
+        }
+        if let [(accel, gyro, temp)] = pairs.remainder() {
             ax.push(accel[0]);
             ay.push(accel[1]);
             az.push(accel[2]);

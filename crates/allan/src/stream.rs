@@ -40,6 +40,9 @@
 //! rest goes through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
 //! choices and gives the measured cycles.
 
+#[cfg(target_arch = "arm")]
+mod thumb;
+
 /// Sums of one octave level: everything a deviation, its EDF and its bounds derive from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -94,6 +97,7 @@ impl LevelSums {
 /// a 64-bit square is a 64-bit add and a rarely taken carry. The M0+ has no 64-bit registers, so
 /// a `u128 +=` would touch all four words every time.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[repr(C)]
 struct Sum128 {
     w: [u32; 4],
 }
@@ -559,6 +563,42 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         }
     }
 
+    /// Feed two consecutive rate samples: exactly `push(y0)` then `push(y1)`.
+    ///
+    /// On ARM the firmware's [`DeviceEngine`] takes both in one hand-scheduled Thumb routine
+    /// (`stream/thumb.rs`) when they are steady-state samples and [`Engine::segment_samples`]
+    /// is even; everything else, and every other target, goes through [`Engine::push`].
+    #[inline]
+    pub fn push_pair(&mut self, y0: i32, y1: i32) {
+        #[cfg(target_arch = "arm")]
+        if P == 8 && L == 24 && R == 12 && S == 20 {
+            let gate = self.gate;
+            let z0 = y0.wrapping_sub(self.offset);
+            let z1 = y1.wrapping_sub(self.offset);
+            if self.t as u32 & 1 == 0
+                && z0.unsigned_abs() < gate
+                && z1.unsigned_abs() < gate
+                && gate >> Self::SMALL_GATE_BITS == 0
+            {
+                // SAFETY: with these parameters `Self` is `DeviceEngine`, and the conditions
+                // above are `push_pair_small`'s (gate != 0 means the base ring is full and
+                // narrow, see `push_general`).
+                unsafe {
+                    let e = &mut *(self as *mut Self).cast::<DeviceEngine>();
+                    thumb::push_pair_small(e, z0, z1);
+                }
+                return;
+            }
+        }
+        self.push(y0);
+        self.push(y1);
+    }
+
+    /// Samples pushed since the current segment began (the last gap or reset).
+    pub fn segment_samples(&self) -> u64 {
+        self.t
+    }
+
     /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and
     /// D3 and the cascade runs), every unit-stride level is narrow and |y| ≤ amax (nothing to
     /// re-derive). No per-level validity checks, no 64-bit multiplies, no variable 64-bit shifts.
@@ -686,7 +726,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// Level K0 works on every call and is peeled: its ring and sums are at constant offsets
     /// from `self`. The higher levels (every other call and rarer) loop in [`Self::strided_up`].
     #[inline(never)]
-    fn strided(&mut self, tm: u32) {
+    extern "C" fn strided(&mut self, tm: u32) {
         if S == 0 {
             return;
         }
@@ -816,7 +856,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// real values will take. Differences are only ever formed from indices ≥ 0, so nothing
     /// needs to know when a ring has filled.
     #[inline(never)]
-    fn cascade(&mut self, index: u32, value: i64) {
+    extern "C" fn cascade(&mut self, index: u32, value: i64) {
         // Level K0 (index is always even in the steady state, but the general path calls this
         // for every index).
         if S == 0 || index & 1 != 0 {

@@ -1,0 +1,199 @@
+//! The firmware's hottest path in hand-scheduled Thumb code: two steady-state samples of a
+//! [`DeviceEngine`] (ARMv6-M and later; built only for `target_arch = "arm"`).
+//!
+//! [`Engine::push_pair`] calls it when both samples would take `push_steady::<true>` (the base
+//! ring full and narrow, |z| below the gate, the gate below 2^11) and the segment's sample count
+//! is even. It does exactly what two calls of `push_steady::<true>` do, in the same 32-bit
+//! arithmetic, so the sums are bit for bit the same (the emulator's end-to-end test compares the
+//! device's tables with the host's Rust engine):
+//!
+//! 1. θ[t] enters base slot h = t mod 24 and its mirror h + 24; θ[t+1] and θ[t+2] are formed;
+//!    `theta`, `t` and `base_head` are stored once.
+//! 2. Sample 1 (count t+1): the four unit-stride levels over the window at h + 1; then θ[t+1]
+//!    enters slot h + 1 (after the window was read: its oldest value lived there).
+//! 3. Sample 2 (count t+2): the four unit-stride levels over the window at h + 2.
+//! 4. `cascade(t − 24, θ[t−24])` for sample 1 (its count before the push was even) and
+//!    `strided(lo θ[t+2−16])` for sample 2 (odd), as `push_steady` would call them, in that order.
+//!
+//! Why by hand: LLVM spills `self`, the window pointer and θ on every level (8 low registers);
+//! here each level is 2 loads, 9 ALU operations, 2 multiplies and two 32-bit sum updates with
+//! the carry out of line, and the per-sample bookkeeping is shared by the pair. The cycles are
+//! in docs/allan.md ("Cost on the Cortex-M0+").
+//!
+//! Registers in the level loop: r0 = self (the unit-stride sums are its first 128 bytes),
+//! r2 = window (w[24 − a] = lo θ[t − a]), r5 = lo θ of the sample, r4/r6 = lo θ[t − m] and
+//! lo θ[t − 2m] (they swap roles from level to level), r1, r3, r7 scratch.
+
+use super::{DeviceEngine, Engine};
+use core::mem::offset_of;
+
+// What the code below assumes about the layout (offsets are immediates in the instructions).
+const THETA: usize = offset_of!(DeviceEngine, theta);
+const BASE: usize = offset_of!(DeviceEngine, base);
+const T: usize = offset_of!(DeviceEngine, t);
+const HEAD: usize = offset_of!(DeviceEngine, base_head);
+const _: () = {
+    assert!(offset_of!(DeviceEngine, sums) == 0);
+    assert!(THETA % 4 == 0 && THETA / 4 <= 255);
+    assert!(THETA - BASE <= 255 && BASE + 2 * 24 * 4 == THETA);
+    assert!(T == THETA + 8);
+    assert!(HEAD - THETA <= 31);
+};
+
+extern "C" {
+    /// Two steady-state samples z0, z1 (already offset, |z| < gate < 2^11, t even).
+    fn pico_imu_allan_push_pair_small(engine: *mut DeviceEngine, z0: i32, z1: i32);
+}
+
+/// Two `push_steady::<true>` calls on `e` (conditions checked by the caller).
+///
+/// # Safety
+/// `e.t` is even, the base ring is full and narrow (`gate != 0`), `gate < 2^11`, and
+/// |z0|, |z1| < `gate`.
+#[inline(always)]
+pub(super) unsafe fn push_pair_small(e: &mut DeviceEngine, z0: i32, z1: i32) {
+    // SAFETY: the caller upholds the steady-state conditions; the routine touches only `*e`
+    // (and the stack) and calls `cascade`/`strided` on it like `push_steady` does.
+    unsafe { pico_imu_allan_push_pair_small(e, z0, z1) }
+}
+
+core::arch::global_asm!(
+    ".pushsection .text.pico_imu_allan_push_pair_small,\"ax\",%progbits",
+    ".p2align 2",
+    ".global pico_imu_allan_push_pair_small",
+    ".type pico_imu_allan_push_pair_small,%function",
+    ".thumb_func",
+    // One unit-stride level: \tm = lo θ[t − m] in, \t2 = lo θ[t − 2m] out.
+    ".macro APP_LEVEL tm, t2, o2, o3, s2, s3",
+    "    ldr \\t2, [r2, #\\o2]",
+    "    ldr r7, [r2, #\\o3]",
+    "    lsls r1, \\tm, #1",
+    "    subs r1, r5, r1",
+    "    adds r1, r1, \\t2", // D2 = θ[t] − 2θ[t−m] + θ[t−2m]
+    "    lsls r3, \\t2, #1",
+    "    subs r3, \\tm, r3",
+    "    adds r3, r3, r7",
+    "    subs r3, r1, r3", // D3 = D2 − (θ[t−m] − 2θ[t−2m] + θ[t−3m])
+    "    muls r1, r1, r1",
+    "    muls r3, r3, r3",
+    "    ldr r7, [r0, #\\s2]",
+    "    adds r7, r7, r1",
+    "    str r7, [r0, #\\s2]",
+    "    bcc 1f",
+    "    movs r7, #(\\s2 + 4)",
+    "    adds r7, r7, r0",
+    "    bl pico_imu_allan_carry",
+    "1:",
+    "    ldr r7, [r0, #\\s3]",
+    "    adds r7, r7, r3",
+    "    str r7, [r0, #\\s3]",
+    "    bcc 2f",
+    "    movs r7, #(\\s3 + 4)",
+    "    adds r7, r7, r0",
+    "    bl pico_imu_allan_carry",
+    "2:",
+    ".endm",
+    // The four unit-stride levels of one sample (P = 8): leaves lo θ[t − 16] in r4.
+    ".macro APP_UNIT",
+    "    ldr r4, [r2, #92]",
+    "    APP_LEVEL r4, r6, 88, 84, 0, 16",
+    "    APP_LEVEL r6, r4, 80, 72, 32, 48",
+    "    APP_LEVEL r4, r6, 64, 48, 64, 80",
+    "    APP_LEVEL r6, r4, 32, 0, 96, 112",
+    ".endm",
+    "pico_imu_allan_push_pair_small:",
+    "    push {{r4, r5, r6, r7, lr}}",
+    // [sp] = lo θ[t − 24] (leaves for the cascade), [sp, #4] = t, [sp, #8] = lo θ[t + 2].
+    "    sub sp, #12",
+    "    movs r3, #{theta4}",
+    "    lsls r3, r3, #2",
+    "    adds r3, r0, r3",
+    "    ldrb r4, [r3, #{head}]",
+    "    lsls r4, r4, #2",
+    "    adds r4, r4, r3",
+    "    subs r4, #{back}", // r4 = &base word h
+    "    ldr r5, [r3, #0]",
+    "    ldr r6, [r3, #4]",
+    "    ldr r7, [r4, #0]",
+    "    str r7, [sp, #0]",
+    "    str r5, [r4, #0]",
+    "    str r5, [r4, #96]", // θ[t] and its mirror
+    "    asrs r7, r1, #31",
+    "    adds r5, r5, r1",
+    "    adcs r6, r7", // θ[t + 1] = (r5, r6)
+    "    asrs r7, r2, #31",
+    "    adds r1, r5, r2",
+    "    adcs r7, r6", // θ[t + 2] = (r1, r7)
+    "    str r1, [r3, #0]",
+    "    str r7, [r3, #4]",
+    "    str r1, [sp, #8]",
+    "    ldr r6, [r3, #{t}]",
+    "    ldr r7, [r3, #{t} + 4]",
+    "    str r6, [sp, #4]",
+    "    movs r1, #0",
+    "    adds r6, r6, #2",
+    "    adcs r7, r1",
+    "    str r6, [r3, #{t}]",
+    "    str r7, [r3, #{t} + 4]",
+    "    ldrb r6, [r3, #{head}]",
+    "    adds r6, r6, #2",
+    "    cmp r6, #24",
+    "    bne 3f",
+    "    movs r6, #0",
+    "3:",
+    "    strb r6, [r3, #{head}]",
+    // Sample 1: window at h + 1, θ = lo θ[t + 1] in r5.
+    "    adds r2, r4, #4",
+    "    APP_UNIT",
+    "    str r5, [r2, #0]",
+    "    str r5, [r2, #96]", // θ[t + 1] enters slot h + 1 and its mirror
+    // Sample 2: window at h + 2.
+    "    ldr r5, [sp, #8]",
+    "    adds r2, r2, #4",
+    "    APP_UNIT",
+    // cascade(self, t − 24, θ[t − 24]); θ[t − 24] = θ[t+2] − (lo θ[t+2] − lo θ[t−24]) as i32.
+    "    mov r6, r0",
+    "    movs r3, #{theta4}",
+    "    lsls r3, r3, #2",
+    "    adds r3, r0, r3",
+    "    ldr r3, [r3, #4]",
+    "    ldr r1, [sp, #0]",
+    "    subs r1, r5, r1",
+    "    asrs r7, r1, #31",
+    "    subs r2, r5, r1",
+    "    sbcs r3, r7",
+    "    ldr r1, [sp, #4]",
+    "    subs r1, #24",
+    "    bl {cascade}",
+    // strided(self, lo θ[t + 2 − 16]).
+    "    mov r0, r6",
+    "    mov r1, r4",
+    "    bl {strided}",
+    "    add sp, #12",
+    "    pop {{r4, r5, r6, r7, pc}}",
+    // Carry out of word 0 of a Sum128: r7 = &word 1; clobbers r1 only.
+    "pico_imu_allan_carry:",
+    "    ldr r1, [r7, #0]",
+    "    adds r1, r1, #1",
+    "    str r1, [r7, #0]",
+    "    bcc 9f",
+    "    ldr r1, [r7, #4]",
+    "    adds r1, r1, #1",
+    "    str r1, [r7, #4]",
+    "    bcc 9f",
+    "    ldr r1, [r7, #8]",
+    "    adds r1, r1, #1",
+    "    str r1, [r7, #8]",
+    "9:",
+    "    bx lr",
+    ".size pico_imu_allan_push_pair_small, . - pico_imu_allan_push_pair_small",
+    ".purgem APP_UNIT",
+    ".purgem APP_LEVEL",
+    ".popsection",
+    theta4 = const THETA / 4,
+    back = const THETA - BASE,
+    t = const T - THETA,
+    head = const HEAD - THETA,
+    cascade = sym Engine::<8, 24, 12, 20>::cascade,
+    strided = sym Engine::<8, 24, 12, 20>::strided,
+);
