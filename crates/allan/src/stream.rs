@@ -776,7 +776,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// `fast` = min(full, narrow). Level K0 + 1 is peeled like level K0; the loop over the
     /// higher ones runs when t is a multiple of 8.
     #[inline(never)]
-    fn strided_up(&mut self, tm: u32, fast: usize) {
+    extern "C" fn strided_up(&mut self, tm: u32, fast: usize) {
         if S < 2 {
             return;
         }
@@ -883,7 +883,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// The cascade from level K0 + 1 on: θ[index] (index a multiple of 4) enters it. Level
     /// K0 + 1 is peeled; the loop over the higher ones runs when the value displaced goes on.
     #[inline(never)]
-    fn cascade_up(&mut self, index: u32, value: i64) {
+    extern "C" fn cascade_up(&mut self, index: u32, value: i64) {
         if S < 2 {
             return;
         }

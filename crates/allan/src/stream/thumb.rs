@@ -12,8 +12,11 @@
 //! 2. Sample 1 (count t+1): the four unit-stride levels over the window at h + 1; then θ[t+1]
 //!    enters slot h + 1 (after the window was read: its oldest value lived there).
 //! 3. Sample 2 (count t+2): the four unit-stride levels over the window at h + 2.
-//! 4. `cascade(t − 24, θ[t−24])` for sample 1 (its count before the push was even) and
-//!    `strided(lo θ[t+2−16])` for sample 2 (odd), as `push_steady` would call them, in that order.
+//! 4. What `cascade(t − 24, θ[t−24])` does for sample 1 (its count before the push was even):
+//!    level K0's ring here, `cascade_up` for the rest; then what `strided(lo θ[t+2−16])` does
+//!    for sample 2 (odd): level K0 here when it is full, narrow and small (its differences below
+//!    2^16), `strided_up` for the levels above; `strided` itself otherwise. Same order as
+//!    `push_steady`.
 //!
 //! Why by hand: LLVM spills `self`, the window pointer and θ on every level (8 low registers);
 //! here each level is 2 loads, 9 ALU operations, 2 multiplies and two 32-bit sum updates with
@@ -32,12 +35,19 @@ const THETA: usize = offset_of!(DeviceEngine, theta);
 const BASE: usize = offset_of!(DeviceEngine, base);
 const T: usize = offset_of!(DeviceEngine, t);
 const HEAD: usize = offset_of!(DeviceEngine, base_head);
+const HEADS: usize = offset_of!(DeviceEngine, heads);
+const FULL: usize = offset_of!(DeviceEngine, full);
+const NARROW: usize = offset_of!(DeviceEngine, narrow);
+const GATE: usize = offset_of!(DeviceEngine, gate);
+const RINGS: usize = offset_of!(DeviceEngine, rings);
 const _: () = {
     assert!(offset_of!(DeviceEngine, sums) == 0);
     assert!(THETA % 4 == 0 && THETA / 4 <= 255);
     assert!(THETA - BASE <= 255 && BASE + 2 * 24 * 4 == THETA);
     assert!(T == THETA + 8);
-    assert!(HEAD - THETA <= 31);
+    assert!(HEAD - THETA <= 31 && HEADS - THETA <= 31);
+    assert!(FULL - THETA <= 31 && NARROW - THETA <= 31 && GATE - THETA <= 124);
+    assert!(RINGS - THETA <= 255);
 };
 
 extern "C" {
@@ -151,24 +161,110 @@ core::arch::global_asm!(
     "    ldr r5, [sp, #8]",
     "    adds r2, r2, #4",
     "    APP_UNIT",
-    // cascade(self, t − 24, θ[t − 24]); θ[t − 24] = θ[t+2] − (lo θ[t+2] − lo θ[t−24]) as i32.
-    "    mov r6, r0",
-    "    movs r3, #{theta4}",
-    "    lsls r3, r3, #2",
-    "    adds r3, r0, r3",
-    "    ldr r3, [r3, #4]",
+    // Sample 1's cascade (its count t was even), as `cascade` does: θ[t − 24] enters level
+    // K0's ring; the value it displaces moves on (`cascade_up`) if its index is a multiple of 4.
+    // θ[t − 24] = θ[t+2] − (lo θ[t+2] − lo θ[t−24]) as i32, exact (26 samples below 2^11).
+    "    str r0, [sp, #8]",
+    "    movs r6, #{theta4}",
+    "    lsls r6, r6, #2",
+    "    adds r6, r0, r6", // r6 = &theta from here on
+    "    ldr r3, [r6, #4]",
     "    ldr r1, [sp, #0]",
     "    subs r1, r5, r1",
     "    asrs r7, r1, #31",
     "    subs r2, r5, r1",
-    "    sbcs r3, r7",
+    "    sbcs r3, r7", // (r2, r3) = θ[t − 24]
+    "    ldrb r1, [r6, #{heads0}]",
+    "    adds r1, r1, #1",
+    "    cmp r1, #12",
+    "    bne 4f",
+    "    movs r1, #0",
+    "4:",
+    "    strb r1, [r6, #{heads0}]",
+    "    lsls r1, r1, #3",
+    "    adds r1, r1, r6",
+    "    adds r1, #{rings}", // &rings[0][next]
+    "    ldr r7, [r1, #0]",
+    "    str r2, [r1, #0]",
+    "    ldr r2, [r1, #4]",
+    "    str r3, [r1, #4]", // (r7, r2) = the value displaced, θ[t − 48]
     "    ldr r1, [sp, #4]",
-    "    subs r1, #24",
-    "    bl {cascade}",
-    // strided(self, lo θ[t + 2 − 16]).
-    "    mov r0, r6",
+    "    subs r1, #48",
+    "    lsls r3, r1, #30",
+    "    bne 5f",
+    "    mov r3, r2",
+    "    mov r2, r7",
+    "    bl {cascade_up}",
+    "    ldr r0, [sp, #8]",
+    "5:",
+    // Sample 2's strided levels (its count t+1 was odd), as `strided` does: level K0 here when
+    // it is full and narrow and its differences are below 2^16 (gate < 2^10), else `strided`.
+    "    ldrb r1, [r6, #{full}]",
+    "    ldrb r2, [r6, #{narrow}]",
+    "    cmp r1, r2",
+    "    bls 6f",
+    "    mov r1, r2",
+    "6:",
+    "    cmp r1, #{k0}",
+    "    bls 10f",
+    "    ldr r2, [r6, #{gate}]",
+    "    lsrs r2, r2, #10",
+    "    bne 10f",
+    "    str r1, [sp, #4]", // fast = min(full, narrow)
+    "    ldrb r2, [r6, #{heads0}]",
+    "    mov r3, r6",
+    "    adds r3, #{rings}", // &rings[0]
+    "    subs r7, r2, #3", // θ[t − 2m]: 3 entries behind the newest
+    "    bhs 7f",
+    "    adds r7, #12",
+    "7:",
+    "    lsls r7, r7, #3",
+    "    ldr r7, [r3, r7]",
+    "    adds r2, r2, #1", // θ[t − 3m]: the oldest
+    "    cmp r2, #12",
+    "    bne 8f",
+    "    movs r2, #0",
+    "8:",
+    "    lsls r2, r2, #3",
+    "    ldr r2, [r3, r2]",
+    "    lsls r1, r4, #1",
+    "    subs r1, r5, r1",
+    "    adds r1, r1, r7",
+    "    lsls r3, r7, #1",
+    "    subs r3, r4, r3",
+    "    adds r3, r3, r2",
+    "    subs r3, r1, r3",
+    "    muls r1, r1, r1",
+    "    muls r3, r3, r3",
+    "    mov r4, r7", // lo θ[t − 2m]: level K0 + 1's θ[t − m]
+    "    mov r2, r0",
+    "    adds r2, #{k0sums}",
+    "    ldr r7, [r2, #0]",
+    "    adds r7, r7, r1",
+    "    str r7, [r2, #0]",
+    "    bcc 1f",
+    "    adds r7, r2, #4",
+    "    bl pico_imu_allan_carry",
+    "1:",
+    "    ldr r7, [r2, #16]",
+    "    adds r7, r7, r3",
+    "    str r7, [r2, #16]",
+    "    bcc 2f",
+    "    movs r7, #20",
+    "    adds r7, r7, r2",
+    "    bl pico_imu_allan_carry",
+    "2:",
+    "    ldr r1, [r6, #{t}]",
+    "    lsls r1, r1, #30",
+    "    bmi 11f",
+    "    mov r1, r4",
+    "    ldr r2, [sp, #4]",
+    "    bl {strided_up}",
+    "    b 11f",
+    "10:",
     "    mov r1, r4",
     "    bl {strided}",
+    "11:",
     "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
     // Carry out of word 0 of a Sum128: r7 = &word 1; clobbers r1 only.
@@ -194,6 +290,14 @@ core::arch::global_asm!(
     back = const THETA - BASE,
     t = const T - THETA,
     head = const HEAD - THETA,
-    cascade = sym Engine::<8, 24, 12, 20>::cascade,
+    heads0 = const HEADS - THETA,
+    full = const FULL - THETA,
+    narrow = const NARROW - THETA,
+    gate = const GATE - THETA,
+    rings = const RINGS - THETA,
+    k0 = const 4,
+    k0sums = const 4 * 32,
+    cascade_up = sym Engine::<8, 24, 12, 20>::cascade_up,
+    strided_up = sym Engine::<8, 24, 12, 20>::strided_up,
     strided = sym Engine::<8, 24, 12, 20>::strided,
 );
