@@ -554,6 +554,16 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         if z.unsigned_abs() < gate {
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
+                #[cfg(target_arch = "arm")]
+                if P == 8 && L == 24 && R == 12 && S == 20 {
+                    // SAFETY: with these parameters `Self` is `DeviceEngine`; the steady, small
+                    // conditions were just checked (see `push_pair`).
+                    unsafe {
+                        let e = &mut *(self as *mut Self).cast::<DeviceEngine>();
+                        thumb::push_small(e, z);
+                    }
+                    return;
+                }
                 self.push_steady::<true>(z);
             } else {
                 self.push_steady::<false>(z);

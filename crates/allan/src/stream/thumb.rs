@@ -51,8 +51,20 @@ const _: () = {
 };
 
 extern "C" {
+    /// One steady-state sample z (already offset, |z| < gate < 2^11), either parity.
+    fn pico_imu_allan_push_small(engine: *mut DeviceEngine, z: i32);
     /// Two steady-state samples z0, z1 (already offset, |z| < gate < 2^11, t even).
     fn pico_imu_allan_push_pair_small(engine: *mut DeviceEngine, z0: i32, z1: i32);
+}
+
+/// `push_steady::<true>` on `e` (conditions checked by the caller).
+///
+/// # Safety
+/// The base ring is full and narrow (`gate != 0`), `gate < 2^11`, and |z| < `gate`.
+#[inline(always)]
+pub(super) unsafe fn push_small(e: &mut DeviceEngine, z: i32) {
+    // SAFETY: as for `push_pair_small`.
+    unsafe { pico_imu_allan_push_small(e, z) }
 }
 
 /// Two `push_steady::<true>` calls on `e` (conditions checked by the caller).
@@ -267,7 +279,78 @@ core::arch::global_asm!(
     "11:",
     "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
+    ".size pico_imu_allan_push_pair_small, . - pico_imu_allan_push_pair_small",
+    // One sample: the same steps as the pair's first, then `cascade` (even count) or `strided`
+    // (odd count) in Rust. Used at the ends of bursts that do not split into pairs.
+    ".p2align 2",
+    ".global pico_imu_allan_push_small",
+    ".type pico_imu_allan_push_small,%function",
+    ".thumb_func",
+    "pico_imu_allan_push_small:",
+    "    push {{r4, r5, r6, r7, lr}}",
+    // [sp] = lo θ[t − 24], [sp, #4] = t.
+    "    sub sp, #8",
+    "    movs r3, #{theta4}",
+    "    lsls r3, r3, #2",
+    "    adds r3, r0, r3",
+    "    ldrb r4, [r3, #{head}]",
+    "    lsls r4, r4, #2",
+    "    adds r4, r4, r3",
+    "    subs r4, #{back}",
+    "    ldr r5, [r3, #0]",
+    "    ldr r6, [r3, #4]",
+    "    ldr r7, [r4, #0]",
+    "    str r7, [sp, #0]",
+    "    str r5, [r4, #0]",
+    "    str r5, [r4, #96]",
+    "    asrs r7, r1, #31",
+    "    adds r5, r5, r1",
+    "    adcs r6, r7",
+    "    str r5, [r3, #0]",
+    "    str r6, [r3, #4]",
+    "    ldr r6, [r3, #{t}]",
+    "    ldr r7, [r3, #{t} + 4]",
+    "    str r6, [sp, #4]",
+    "    movs r1, #0",
+    "    adds r6, r6, #1",
+    "    adcs r7, r1",
+    "    str r6, [r3, #{t}]",
+    "    str r7, [r3, #{t} + 4]",
+    "    adds r2, r4, #4", // the window starts at slot h + 1 …
+    "    ldrb r6, [r3, #{head}]",
+    "    adds r6, r6, #1",
+    "    cmp r6, #24",
+    "    bne 3f",
+    "    movs r6, #0",
+    "    subs r2, #96", // … or at slot 0 when h + 1 wraps
+    "3:",
+    "    strb r6, [r3, #{head}]",
+    "    APP_UNIT",
+    "    ldr r1, [sp, #4]",
+    "    lsls r2, r1, #31",
+    "    bne 4f",
+    "    movs r6, #{theta4}",
+    "    lsls r6, r6, #2",
+    "    adds r6, r0, r6",
+    "    ldr r3, [r6, #4]",
+    "    ldr r6, [sp, #0]",
+    "    subs r6, r5, r6",
+    "    asrs r7, r6, #31",
+    "    subs r2, r5, r6",
+    "    sbcs r3, r7", // (r2, r3) = θ[t − 24] from θ[t + 1]
+    "    subs r1, #24",
+    "    bl {cascade}",
+    "    b 5f",
+    "4:",
+    "    mov r1, r4",
+    "    bl {strided}",
+    "5:",
+    "    add sp, #8",
+    "    pop {{r4, r5, r6, r7, pc}}",
+    ".size pico_imu_allan_push_small, . - pico_imu_allan_push_small",
     // Carry out of word 0 of a Sum128: r7 = &word 1; clobbers r1 only.
+    ".type pico_imu_allan_carry,%function",
+    ".thumb_func",
     "pico_imu_allan_carry:",
     "    ldr r1, [r7, #0]",
     "    adds r1, r1, #1",
@@ -282,7 +365,7 @@ core::arch::global_asm!(
     "    str r1, [r7, #8]",
     "9:",
     "    bx lr",
-    ".size pico_imu_allan_push_pair_small, . - pico_imu_allan_push_pair_small",
+    ".size pico_imu_allan_carry, . - pico_imu_allan_carry",
     ".purgem APP_UNIT",
     ".purgem APP_LEVEL",
     ".popsection",
@@ -297,6 +380,7 @@ core::arch::global_asm!(
     rings = const RINGS - THETA,
     k0 = const 4,
     k0sums = const 4 * 32,
+    cascade = sym Engine::<8, 24, 12, 20>::cascade,
     cascade_up = sym Engine::<8, 24, 12, 20>::cascade_up,
     strided_up = sym Engine::<8, 24, 12, 20>::strided_up,
     strided = sym Engine::<8, 24, 12, 20>::strided,
