@@ -786,7 +786,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// `fast` = min(full, narrow). Level K0 + 1 is peeled like level K0; the loop over the
     /// higher ones runs when t is a multiple of 8.
     #[inline(never)]
-    extern "C" fn strided_up(&mut self, tm: u32, fast: usize) {
+    fn strided_up(&mut self, tm: u32, fast: usize) {
         if S < 2 {
             return;
         }
@@ -821,6 +821,13 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             tm = self.strided_level::<false>(j, t0, tm);
             j += 1;
         }
+    }
+
+    /// [`Self::strided_general`] from level `from` at the current count (for the Thumb code).
+    #[cfg(target_arch = "arm")]
+    #[inline(never)]
+    extern "C" fn strided_tail(&mut self, from: u32) {
+        self.strided_general(self.t, from as usize);
     }
 
     /// Strided levels from level `from` on at sample count `t`, any state (start of a segment,
