@@ -900,7 +900,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// The cascade from level K0 + 1 on: θ[index] (index a multiple of 4) enters it. Level
     /// K0 + 1 is peeled; the loop over the higher ones runs when the value displaced goes on.
     #[inline(never)]
-    extern "C" fn cascade_up(&mut self, index: u32, value: i64) {
+    fn cascade_up(&mut self, index: u32, value: i64) {
         if S < 2 {
             return;
         }

@@ -13,10 +13,10 @@
 //!    enters slot h + 1 (after the window was read: its oldest value lived there).
 //! 3. Sample 2 (count t+2): the four unit-stride levels over the window at h + 2.
 //! 4. What `cascade(t − 24, θ[t−24])` does for sample 1 (its count before the push was even):
-//!    level K0's ring here, `cascade_up` for the rest; then what `strided(lo θ[t+2−16])` does
-//!    for sample 2 (odd): level K0 here when it is full, narrow and small (its differences below
-//!    2^16), `strided_up` for the levels above; `strided` itself otherwise. Same order as
-//!    `push_steady`.
+//!    every level's ring here; then what `strided(lo θ[t+2−16])` does for sample 2 (odd): level
+//!    K0 when it is full, narrow and small (its differences below 2^16) and the levels above
+//!    while they are full and narrow, here; `strided` or `strided_general` for the rest. Same
+//!    order as `push_steady`.
 //!
 //! Why by hand: LLVM spills `self`, the window pointer and θ on every level (8 low registers);
 //! here each level is 2 loads, 9 ALU operations, 2 multiplies and two 32-bit sum updates with
@@ -204,9 +204,48 @@ core::arch::global_asm!(
     "    subs r1, #48",
     "    lsls r3, r1, #30",
     "    bne 5f",
-    "    mov r3, r2",
-    "    mov r2, r7",
-    "    bl {cascade_up}",
+    // The displaced values move on up, as `cascade_up` and `cascade_rest` do: level K0 + j
+    // (j ≥ 1) takes θ[index] when index is a multiple of 2^(j+1), and index drops by 24·2^j.
+    // With q = index / 2^(j+1): q − 12 odd ends the climb, else q ← (q − 12)/2 (exact in
+    // wrapping u32, the bits that matter are the low ones). r0 = q, r1 = &heads[j],
+    // r2 = &rings[j], (r3, r7) = the value; lo θ[t − 16] waits in r12, lo θ[t + 2] in [sp].
+    "    mov r12, r4",
+    "    str r5, [sp, #0]",
+    "    lsrs r0, r1, #2",
+    "    mov r3, r7",
+    "    mov r7, r2",
+    "    mov r1, r6",
+    "    adds r1, #{heads0} + 1",
+    "    mov r2, r6",
+    "    adds r2, #{rings} + 96",
+    "24:",
+    "    ldrb r4, [r1, #0]",
+    "    adds r4, r4, #1",
+    "    cmp r4, #12",
+    "    bne 25f",
+    "    movs r4, #0",
+    "25:",
+    "    strb r4, [r1, #0]",
+    "    lsls r4, r4, #3",
+    "    adds r4, r4, r2",
+    "    ldr r5, [r4, #0]",
+    "    str r3, [r4, #0]",
+    "    mov r3, r5",
+    "    ldr r5, [r4, #4]",
+    "    str r7, [r4, #4]",
+    "    mov r7, r5",
+    "    subs r0, #12",
+    "    lsrs r0, r0, #1",
+    "    bcs 26f",
+    "    adds r1, r1, #1",
+    "    adds r2, #96",
+    "    mov r4, r1",
+    "    subs r4, r4, r6",
+    "    cmp r4, #{heads0} + {s}",
+    "    bne 24b",
+    "26:",
+    "    mov r4, r12",
+    "    ldr r5, [sp, #0]",
     "    ldr r0, [sp, #8]",
     "5:",
     // Sample 2's strided levels (its count t+1 was odd), as `strided` does: level K0 here when
@@ -514,7 +553,6 @@ core::arch::global_asm!(
     k0 = const 4,
     k0sums = const 4 * 32,
     cascade = sym Engine::<8, 24, 12, 20>::cascade,
-    cascade_up = sym Engine::<8, 24, 12, 20>::cascade_up,
     strided_tail = sym Engine::<8, 24, 12, 20>::strided_tail,
     s = const 20,
     strided = sym Engine::<8, 24, 12, 20>::strided,
