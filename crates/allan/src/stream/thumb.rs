@@ -123,56 +123,10 @@ core::arch::global_asm!(
     "    APP_LEVEL r4, r6, 64, 48, 64, 80",
     "    APP_LEVEL r6, r4, 32, 0, 96, 112",
     ".endm",
-    "pico_imu_allan_push_pair_small:",
-    "    push {{r4, r5, r6, r7, lr}}",
-    // [sp] = lo θ[t − 24] (leaves for the cascade), [sp, #4] = t, [sp, #8] = lo θ[t + 2].
-    "    sub sp, #12",
-    "    movs r3, #{theta4}",
-    "    lsls r3, r3, #2",
-    "    adds r3, r0, r3",
-    "    ldrb r4, [r3, #{head}]",
-    "    lsls r4, r4, #2",
-    "    adds r4, r4, r3",
-    "    subs r4, #{back}", // r4 = &base word h
-    "    ldr r5, [r3, #0]",
-    "    ldr r6, [r3, #4]",
-    "    ldr r7, [r4, #0]",
-    "    str r7, [sp, #0]",
-    "    str r5, [r4, #0]",
-    "    str r5, [r4, #96]", // θ[t] and its mirror
-    "    asrs r7, r1, #31",
-    "    adds r5, r5, r1",
-    "    adcs r6, r7", // θ[t + 1] = (r5, r6)
-    "    asrs r7, r2, #31",
-    "    adds r1, r5, r2",
-    "    adcs r7, r6", // θ[t + 2] = (r1, r7)
-    "    str r1, [r3, #0]",
-    "    str r7, [r3, #4]",
-    "    str r1, [sp, #8]",
-    "    ldr r6, [r3, #{t}]",
-    "    ldr r7, [r3, #{t} + 4]",
-    "    str r6, [sp, #4]",
-    "    movs r1, #0",
-    "    adds r6, r6, #2",
-    "    adcs r7, r1",
-    "    str r6, [r3, #{t}]",
-    "    str r7, [r3, #{t} + 4]",
-    "    ldrb r6, [r3, #{head}]",
-    "    adds r6, r6, #2",
-    "    cmp r6, #24",
-    "    bne 3f",
-    "    movs r6, #0",
-    "3:",
-    "    strb r6, [r3, #{head}]",
-    // Sample 1: window at h + 1, θ = lo θ[t + 1] in r5.
-    "    adds r2, r4, #4",
-    "    APP_UNIT",
-    "    str r5, [r2, #0]",
-    "    str r5, [r2, #96]", // θ[t + 1] enters slot h + 1 and its mirror
-    // Sample 2: window at h + 2.
-    "    ldr r5, [sp, #8]",
-    "    adds r2, r2, #4",
-    "    APP_UNIT",
+    // The cascade for a sample whose count t_c (before it) was even, as `cascade` does.
+    // In: r0 = self, r5 = lo θ now, [sp] = lo θ[t_c − 24], [sp, #4] = t_c. Out: r6 = &theta,
+    // [sp, #8] = self; r4 and r5 kept.
+    ".macro APP_CASCADE",
     // Sample 1's cascade (its count t was even), as `cascade` does: θ[t − 24] enters level
     // K0's ring; the value it displaces moves on (`cascade_up`) if its index is a multiple of 4.
     // θ[t − 24] = θ[t+2] − (lo θ[t+2] − lo θ[t−24]) as i32, exact (26 samples below 2^11).
@@ -248,6 +202,10 @@ core::arch::global_asm!(
     "    ldr r5, [sp, #0]",
     "    ldr r0, [sp, #8]",
     "5:",
+    ".endm",
+    // The strided levels for a sample whose count (before it) was odd, as `strided` does.
+    // In: r0 = self, r4 = lo θ[t − 16], r5 = lo θ[t], r6 = &theta. Uses [sp] to [sp, #8].
+    ".macro APP_STRIDED",
     // Sample 2's strided levels (its count t+1 was odd), as `strided` does: level K0 here when
     // it is full and narrow and its differences are below 2^16 (gate < 2^10), else `strided`.
     "    ldrb r1, [r6, #{full}]",
@@ -413,19 +371,72 @@ core::arch::global_asm!(
     "    mov r1, r4",
     "    bl {strided}",
     "11:",
+    ".endm",
+    "pico_imu_allan_push_pair_small:",
+    "    push {{r4, r5, r6, r7, lr}}",
+    // [sp] = lo θ[t − 24] (leaves for the cascade), [sp, #4] = t, [sp, #8] = lo θ[t + 2].
+    "    sub sp, #12",
+    "    movs r3, #{theta4}",
+    "    lsls r3, r3, #2",
+    "    adds r3, r0, r3",
+    "    ldrb r4, [r3, #{head}]",
+    "    lsls r4, r4, #2",
+    "    adds r4, r4, r3",
+    "    subs r4, #{back}", // r4 = &base word h
+    "    ldr r5, [r3, #0]",
+    "    ldr r6, [r3, #4]",
+    "    ldr r7, [r4, #0]",
+    "    str r7, [sp, #0]",
+    "    str r5, [r4, #0]",
+    "    str r5, [r4, #96]", // θ[t] and its mirror
+    "    asrs r7, r1, #31",
+    "    adds r5, r5, r1",
+    "    adcs r6, r7", // θ[t + 1] = (r5, r6)
+    "    asrs r7, r2, #31",
+    "    adds r1, r5, r2",
+    "    adcs r7, r6", // θ[t + 2] = (r1, r7)
+    "    str r1, [r3, #0]",
+    "    str r7, [r3, #4]",
+    "    str r1, [sp, #8]",
+    "    ldr r6, [r3, #{t}]",
+    "    ldr r7, [r3, #{t} + 4]",
+    "    str r6, [sp, #4]",
+    "    movs r1, #0",
+    "    adds r6, r6, #2",
+    "    adcs r7, r1",
+    "    str r6, [r3, #{t}]",
+    "    str r7, [r3, #{t} + 4]",
+    "    ldrb r6, [r3, #{head}]",
+    "    adds r6, r6, #2",
+    "    cmp r6, #24",
+    "    bne 3f",
+    "    movs r6, #0",
+    "3:",
+    "    strb r6, [r3, #{head}]",
+    // Sample 1: window at h + 1, θ = lo θ[t + 1] in r5.
+    "    adds r2, r4, #4",
+    "    APP_UNIT",
+    "    str r5, [r2, #0]",
+    "    str r5, [r2, #96]", // θ[t + 1] enters slot h + 1 and its mirror
+    // Sample 2: window at h + 2.
+    "    ldr r5, [sp, #8]",
+    "    adds r2, r2, #4",
+    "    APP_UNIT",
+    "    APP_CASCADE",
+    "    APP_STRIDED",
     "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
     ".size pico_imu_allan_push_pair_small, . - pico_imu_allan_push_pair_small",
-    // One sample: the same steps as the pair's first, then `cascade` (even count) or `strided`
-    // (odd count) in Rust. Used at the ends of bursts that do not split into pairs.
+    // One sample: the same steps as the pair's first, then the cascade (even count) or the
+    // strided levels (odd count). Used at the ends of bursts that do not split into pairs.
     ".p2align 2",
     ".global pico_imu_allan_push_small",
     ".type pico_imu_allan_push_small,%function",
     ".thumb_func",
     "pico_imu_allan_push_small:",
     "    push {{r4, r5, r6, r7, lr}}",
-    // [sp] = lo θ[t − 24], [sp, #4] = t.
-    "    sub sp, #8",
+    // [sp] = lo θ[t − 24], [sp, #4] = t, [sp, #8] scratch.
+    "    sub sp, #12",
     "    movs r3, #{theta4}",
     "    lsls r3, r3, #2",
     "    adds r3, r0, r3",
@@ -464,24 +475,18 @@ core::arch::global_asm!(
     "    APP_UNIT",
     "    ldr r1, [sp, #4]",
     "    lsls r2, r1, #31",
-    "    bne 4f",
+    "    beq 30f",
+    "    b 31f",
+    "30:", // even count: the cascade (θ[t − 24] from θ[t + 1])
+    "    APP_CASCADE",
+    "    b 32f",
+    "31:", // odd count: the strided levels
     "    movs r6, #{theta4}",
     "    lsls r6, r6, #2",
     "    adds r6, r0, r6",
-    "    ldr r3, [r6, #4]",
-    "    ldr r6, [sp, #0]",
-    "    subs r6, r5, r6",
-    "    asrs r7, r6, #31",
-    "    subs r2, r5, r6",
-    "    sbcs r3, r7", // (r2, r3) = θ[t − 24] from θ[t + 1]
-    "    subs r1, #24",
-    "    bl {cascade}",
-    "    b 5f",
-    "4:",
-    "    mov r1, r4",
-    "    bl {strided}",
-    "5:",
-    "    add sp, #8",
+    "    APP_STRIDED",
+    "32:",
+    "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
     ".size pico_imu_allan_push_small, . - pico_imu_allan_push_small",
     // [r7] (a Sum128) += r1² as a 64-bit square (any i32 r1); clobbers r1 and r7 only.
@@ -552,7 +557,6 @@ core::arch::global_asm!(
     rings = const RINGS - THETA,
     k0 = const 4,
     k0sums = const 4 * 32,
-    cascade = sym Engine::<8, 24, 12, 20>::cascade,
     strided_tail = sym Engine::<8, 24, 12, 20>::strided_tail,
     s = const 20,
     strided = sym Engine::<8, 24, 12, 20>::strided,
