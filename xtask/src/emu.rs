@@ -207,12 +207,18 @@ pub fn e2e(args: &[String]) -> Result<()> {
     let out = out_dir(&arg_value(args, "--out").unwrap_or_else(|| "e2e".into()))?;
     // The stream: 1 kHz rows in the CSV contract, from the seeded generator.
     let stream = out.join("stream.csv");
-    run(Command::new("node")
-        .arg(sim_dir.join("src/cli.js"))
+    let mut gen = Command::new("node");
+    gen.arg(sim_dir.join("src/cli.js"))
         .args(["gen-stream", "--seed", "7", "--seconds"])
         .arg(format!("{}", seconds + 120.0))
         .arg("--out")
-        .arg(&stream))?;
+        .arg(&stream);
+    // `--sine AMP_DPS,FREQ_HZ`: a sine on the x gyro (the scenario that drives the Allan
+    // engine's wide squares on the device, see `cargo xtask test`).
+    if let Some(sine) = arg_value(args, "--sine") {
+        gen.args(["--sine", &sine]);
+    }
+    run(&mut gen)?;
     let mut sim_args: Vec<String> = vec![
         // The run ends when the test disconnects (--exit-on-disconnect); the limit is a safety net.
         "--seconds".into(),

@@ -68,7 +68,12 @@ fn test(extra: &[String]) -> Result<()> {
     c.args(extra);
     run(&mut c)?;
     if emu::node_available() {
-        emu::e2e(&[])
+        emu::e2e(&[])?;
+        // The same run with a slow sine on the x gyro: small enough for the Thumb fast path
+        // (|z| < 2^10), large enough for 64-bit squares at τ ≥ 128 ms, so the device's
+        // hand-written squares are compared with the host's too (allan/src/stream/thumb.rs).
+        let sine = ["--sine", "3,3", "--out", "e2e-sine"].map(String::from);
+        emu::e2e(&sine)
     } else {
         eprintln!("xtask: node >= 20 not found: emulator end-to-end test skipped");
         Ok(())
