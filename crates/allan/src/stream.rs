@@ -582,24 +582,9 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     pub fn push_pair(&mut self, y0: i32, y1: i32) {
         #[cfg(target_arch = "arm")]
         if P == 8 && L == 24 && R == 12 && S == 20 {
-            let gate = self.gate;
-            let z0 = y0.wrapping_sub(self.offset);
-            let z1 = y1.wrapping_sub(self.offset);
-            // 1 ≤ gate < 2^11 (steady and small), then |z| < gate ⟺ z + gate − 1 ∈ [0, 2·gate − 2]
-            // (one add and one unsigned compare each, no overflow at these sizes).
-            let span = gate.wrapping_sub(1).wrapping_mul(2);
-            if gate.wrapping_sub(1) < (1 << Self::SMALL_GATE_BITS) - 1
-                && self.t as u32 & 1 == 0
-                && (z0 as u32).wrapping_add(gate - 1) <= span
-                && (z1 as u32).wrapping_add(gate - 1) <= span
-            {
-                // SAFETY: with these parameters `Self` is `DeviceEngine`, and the conditions
-                // above are `push_pair_small`'s (gate != 0 means the base ring is full and
-                // narrow, see `push_general`).
-                unsafe {
-                    let e = &mut *(self as *mut Self).cast::<DeviceEngine>();
-                    thumb::push_pair_small(e, z0, z1);
-                }
+            // SAFETY: with these parameters `Self` is `DeviceEngine`.
+            let e = unsafe { &mut *(self as *mut Self).cast::<DeviceEngine>() };
+            if thumb::push_pair_small(e, y0, y1) {
                 return;
             }
         }

@@ -1,9 +1,10 @@
 //! The firmware's hottest path in hand-scheduled Thumb code: two steady-state samples of a
 //! [`DeviceEngine`] (ARMv6-M and later; built only for `target_arch = "arm"`).
 //!
-//! [`Engine::push_pair`] calls it when both samples would take `push_steady::<true>` (the base
-//! ring full and narrow, |z| below the gate, the gate below 2^11) and the segment's sample count
-//! is even. It does exactly what two calls of `push_steady::<true>` do, in the same 32-bit
+//! [`Engine::push_pair`] hands it every pair; it goes on only when both samples would take
+//! `push_steady::<true>` (the base ring full and narrow, |z| below the gate, the gate below
+//! 2^11) and the segment's sample count is even, and otherwise returns 0 having changed nothing
+//! (the Rust path takes the pair then). It does exactly what two calls of `push_steady::<true>` do, in the same 32-bit
 //! arithmetic, so the sums are bit for bit the same (the emulator's end-to-end test compares the
 //! device's tables with the host's Rust engine):
 //!
@@ -40,6 +41,7 @@ const FULL: usize = offset_of!(DeviceEngine, full);
 const NARROW: usize = offset_of!(DeviceEngine, narrow);
 const GATE: usize = offset_of!(DeviceEngine, gate);
 const RINGS: usize = offset_of!(DeviceEngine, rings);
+const OFFSET: usize = offset_of!(DeviceEngine, offset);
 const _: () = {
     assert!(offset_of!(DeviceEngine, sums) == 0);
     assert!(THETA % 4 == 0 && THETA / 4 <= 255);
@@ -47,14 +49,15 @@ const _: () = {
     assert!(T == THETA + 8);
     assert!(HEAD - THETA <= 31 && HEADS - THETA <= 31);
     assert!(FULL - THETA <= 31 && NARROW - THETA <= 31 && GATE - THETA <= 124);
-    assert!(RINGS - THETA <= 255);
+    assert!(RINGS - THETA <= 255 && OFFSET - THETA <= 124);
 };
 
 extern "C" {
     /// One steady-state sample z (already offset, |z| < gate < 2^11), either parity.
     fn pico_imu_allan_push_small(engine: *mut DeviceEngine, z: i32);
-    /// Two steady-state samples z0, z1 (already offset, |z| < gate < 2^11, t even).
-    fn pico_imu_allan_push_pair_small(engine: *mut DeviceEngine, z0: i32, z1: i32);
+    /// Two samples y0, y1 if they are steady-state ones (|y − offset| < gate < 2^11, t even):
+    /// returns 1; else 0 and nothing changed.
+    fn pico_imu_allan_push_pair_small(engine: *mut DeviceEngine, y0: i32, y1: i32) -> u32;
 }
 
 /// `push_steady::<true>` on `e` (conditions checked by the caller).
@@ -67,16 +70,14 @@ pub(super) unsafe fn push_small(e: &mut DeviceEngine, z: i32) {
     unsafe { pico_imu_allan_push_small(e, z) }
 }
 
-/// Two `push_steady::<true>` calls on `e` (conditions checked by the caller).
-///
-/// # Safety
-/// `e.t` is even, the base ring is full and narrow (`gate != 0`), `gate < 2^11`, and
-/// |z0|, |z1| < `gate`.
+/// Two `push_steady::<true>` calls on `e` when both samples are steady-state ones and the
+/// segment's count is even (the routine checks); `false`, and nothing changed, otherwise.
 #[inline(always)]
-pub(super) unsafe fn push_pair_small(e: &mut DeviceEngine, z0: i32, z1: i32) {
-    // SAFETY: the caller upholds the steady-state conditions; the routine touches only `*e`
-    // (and the stack) and calls `cascade`/`strided` on it like `push_steady` does.
-    unsafe { pico_imu_allan_push_pair_small(e, z0, z1) }
+pub(super) fn push_pair_small(e: &mut DeviceEngine, y0: i32, y1: i32) -> bool {
+    // SAFETY: the routine checks the steady-state conditions itself before touching `*e`; it
+    // touches only `*e` (and the stack) and calls `strided`/`strided_tail` on it like
+    // `push_steady` does.
+    unsafe { pico_imu_allan_push_pair_small(e, y0, y1) != 0 }
 }
 
 core::arch::global_asm!(
@@ -394,6 +395,31 @@ core::arch::global_asm!(
     "    movs r3, #{theta4}",
     "    lsls r3, r3, #2",
     "    adds r3, r0, r3",
+    // Only in the steady, small state with an even count (else return 0, nothing changed):
+    // 1 ≤ gate < 2^11, and |z| < gate ⟺ z + gate − 1 ≤ 2·(gate − 1) unsigned.
+    "    ldr r4, [r3, #{offset}]",
+    "    subs r1, r1, r4",
+    "    subs r2, r2, r4", // z0, z1
+    "    ldr r6, [r3, #{t}]",
+    "    lsls r6, r6, #31",
+    "    bne 90f",
+    "    ldr r4, [r3, #{gate}]",
+    "    lsrs r6, r4, #11",
+    "    bne 90f",
+    "    subs r5, r4, #1",
+    "    bcc 90f", // gate = 0
+    "    lsls r6, r5, #1",
+    "    adds r7, r1, r5",
+    "    cmp r7, r6",
+    "    bhi 90f",
+    "    adds r7, r2, r5",
+    "    cmp r7, r6",
+    "    bls 92f",
+    "90:",
+    "    movs r0, #0",
+    "    add sp, #12",
+    "    pop {{r4, r5, r6, r7, pc}}",
+    "92:",
     "    ldrb r4, [r3, #{head}]",
     "    lsls r4, r4, #2",
     "    adds r4, r4, r3",
@@ -439,6 +465,7 @@ core::arch::global_asm!(
     "    APP_UNIT",
     "    APP_CASCADE",
     "    APP_STRIDED",
+    "    movs r0, #1",
     "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
     ".size pico_imu_allan_push_pair_small, . - pico_imu_allan_push_pair_small",
@@ -563,6 +590,7 @@ core::arch::global_asm!(
     ".purgem APP_LEVEL",
     ".popsection",
     theta4 = const THETA / 4,
+    offset = const OFFSET - THETA,
     back = const THETA - BASE,
     t = const T - THETA,
     head = const HEAD - THETA,
