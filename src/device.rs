@@ -107,7 +107,15 @@ pub struct Counters {
 struct Engines {
     imu: [DeviceEngine; 7],
     mag: [MagEngine; 3],
+    /// The last IMU sample of a burst that did not complete a pair: it waits for the first of
+    /// the next burst, so the IMU engines take every sample in pairs (`push_pair`, two samples
+    /// in one hand-scheduled Thumb call) and their counts stay even. Not yet pushed: a table's
+    /// `pushed` leaves it out, and a split pushes it first (it came before the gap).
+    imu_pending: Option<ImuInputs>,
 }
+
+/// The seven IMU engines' inputs for one sample: corrected accel, gyro and the raw temperature.
+type ImuInputs = ([i32; 3], [i32; 3], i32);
 
 /// Bytes of Allan state on the device: the ten engines (size_of on the target, checked against
 /// the 32 KiB budget at compile time).
@@ -149,7 +157,43 @@ impl Engines {
         Engines {
             imu: core::array::from_fn(|_| DeviceEngine::new()),
             mag: core::array::from_fn(|_| MagEngine::new()),
+            imu_pending: None,
         }
+    }
+
+    /// Push a burst of IMU samples, in pairs (see `imu_pending`).
+    fn push_imu(&mut self, burst: &[ImuInputs]) {
+        let mut rest = burst;
+        if let Some(first) = self.imu_pending.take() {
+            match rest.split_first() {
+                Some((second, tail)) => {
+                    self.push_imu_pair(&first, second);
+                    rest = tail;
+                }
+                None => {
+                    self.imu_pending = Some(first);
+                    return;
+                }
+            }
+        }
+        let mut pairs = rest.chunks_exact(2);
+        for pair in &mut pairs {
+            self.push_imu_pair(&pair[0], &pair[1]);
+        }
+        if let [last] = pairs.remainder() {
+            self.imu_pending = Some(*last);
+        }
+    }
+
+    fn push_imu_pair(&mut self, (a0, g0, t0): &ImuInputs, (a1, g1, t1): &ImuInputs) {
+        let [ax, ay, az, gx, gy, gz, t] = &mut self.imu;
+        ax.push_pair(a0[0], a1[0]);
+        ay.push_pair(a0[1], a1[1]);
+        az.push_pair(a0[2], a1[2]);
+        gx.push_pair(g0[0], g1[0]);
+        gy.push_pair(g0[1], g1[1]);
+        gz.push_pair(g0[2], g1[2]);
+        t.push_pair(*t0, *t1);
     }
 
     fn of(&self, ch: Channel) -> EngineRef<'_> {
@@ -172,6 +216,16 @@ impl Engines {
     fn split(&mut self, sensor: Sensor) -> Option<u64> {
         let (before, after, at) = match sensor {
             Sensor::Imu => {
+                if let Some((accel, gyro, temp)) = self.imu_pending.take() {
+                    let [ax, ay, az, gx, gy, gz, t] = &mut self.imu;
+                    ax.push(accel[0]);
+                    ay.push(accel[1]);
+                    az.push(accel[2]);
+                    gx.push(gyro[0]);
+                    gy.push(gyro[1]);
+                    gz.push(gyro[2]);
+                    t.push(temp);
+                }
                 let before = self.imu[0].gaps();
                 self.imu.iter_mut().for_each(DeviceEngine::gap);
                 (before, self.imu[0].gaps(), self.imu[0].samples())
@@ -186,6 +240,8 @@ impl Engines {
     }
 
     fn reset(&mut self) {
+        // A waiting sample was taken before the reset: forgotten with the rest.
+        self.imu_pending = None;
         self.imu.iter_mut().for_each(DeviceEngine::reset);
         self.mag.iter_mut().for_each(MagEngine::reset);
     }
@@ -402,7 +458,7 @@ impl Device {
         // Three passes over the burst, one per budget stage (docs/emulator.md, cycle markers):
         // corrections, Allan update, framing. Each sample still goes through all three in order.
         // A `Vec`, not a zeroed array: nothing to clear before it is filled.
-        let mut fixed: Vec<([i32; 3], [i32; 3], i32), BURST_MAX> = Vec::new();
+        let mut fixed: Vec<ImuInputs, BURST_MAX> = Vec::new();
         let samples = &samples[..samples.len().min(BURST_MAX)];
         stage::enter(Stage::Corrections);
         for s in samples {
@@ -416,43 +472,7 @@ impl Device {
             ));
         }
         stage::enter(Stage::Allan);
-        // In pairs (`push_pair`: two samples per engine call, the steady state in hand-scheduled
-        // Thumb code). Pairs start at even segment counts; the seven IMU engines split together,
-        // so they share the count, and a burst that starts odd pushes its first sample alone.
-        let [ax, ay, az, gx, gy, gz, t] = &mut self.engines.imu;
-        let mut rest = fixed.as_slice();
-        if ax.segment_samples() & 1 == 1 {
-            if let Some(((accel, gyro, temp), tail)) = rest.split_first() {
-                ax.push(accel[0]);
-                ay.push(accel[1]);
-                az.push(accel[2]);
-                gx.push(gyro[0]);
-                gy.push(gyro[1]);
-                gz.push(gyro[2]);
-                t.push(*temp);
-                rest = tail;
-            }
-        }
-        let mut pairs = rest.chunks_exact(2);
-        for pair in &mut pairs {
-            let ((a0, g0, t0), (a1, g1, t1)) = (&pair[0], &pair[1]);
-            ax.push_pair(a0[0], a1[0]);
-            ay.push_pair(a0[1], a1[1]);
-            az.push_pair(a0[2], a1[2]);
-            gx.push_pair(g0[0], g1[0]);
-            gy.push_pair(g0[1], g1[1]);
-            gz.push_pair(g0[2], g1[2]);
-            t.push_pair(*t0, *t1);
-        }
-        if let [(accel, gyro, temp)] = pairs.remainder() {
-            ax.push(accel[0]);
-            ay.push(accel[1]);
-            az.push(accel[2]);
-            gx.push(gyro[0]);
-            gy.push(gyro[1]);
-            gz.push(gyro[2]);
-            t.push(*temp);
-        }
+        self.engines.push_imu(&fixed);
         stage::enter(Stage::Usb);
         let n = samples.len() as u32;
         let raw = self.mode == StreamMode::Raw;
