@@ -576,8 +576,10 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// Feed two consecutive rate samples: exactly `push(y0)` then `push(y1)`.
     ///
     /// On ARM the firmware's [`DeviceEngine`] takes both in one hand-scheduled Thumb routine
-    /// (`stream/thumb.rs`) when they are steady-state samples and [`Engine::segment_samples`]
-    /// is even; everything else, and every other target, goes through [`Engine::push`].
+    /// (`stream/thumb.rs`) when they are steady-state samples and the segment's count is even
+    /// (feed a segment in pairs from its start to keep it so); everything else, and every other
+    /// target, goes through [`Engine::push`]. Single samples of a `DeviceEngine` in the steady
+    /// state take the same Thumb code, one at a time.
     #[inline]
     pub fn push_pair(&mut self, y0: i32, y1: i32) {
         #[cfg(target_arch = "arm")]
@@ -590,11 +592,6 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         }
         self.push(y0);
         self.push(y1);
-    }
-
-    /// Samples pushed since the current segment began (the last gap or reset).
-    pub fn segment_samples(&self) -> u64 {
-        self.t
     }
 
     /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and
@@ -960,5 +957,35 @@ mod tests {
             };
             assert_eq!(l.n2, expect, "m = {}", l.m);
         }
+    }
+
+    /// `push_pair` is two `push`es, whatever the parity, the size of the inputs or the gaps.
+    /// (On the device it is the Thumb routine; the emulator's end-to-end test compares that one
+    /// with this engine.)
+    #[test]
+    fn push_pair_is_two_pushes() {
+        let mut s = 12345u32;
+        let mut next = |amp: i32| {
+            s ^= s << 13;
+            s ^= s >> 17;
+            s ^= s << 5;
+            (s % (2 * amp as u32 + 1)) as i32 - amp
+        };
+        let (mut a, mut b) = (DeviceEngine::new(), DeviceEngine::new());
+        a.push(7);
+        b.push(7);
+        for round in 0..40_000 {
+            let amp = [100, 1_500, 40_000, 1 << 30][round / 10_000];
+            let (y0, y1) = (next(amp), next(amp));
+            a.push_pair(y0, y1);
+            b.push(y0);
+            b.push(y1);
+            if round % 9_973 == 0 {
+                a.gap();
+                b.gap();
+            }
+        }
+        assert_eq!(a.samples(), 80_001);
+        assert!(a.levels().eq(b.levels()));
     }
 }

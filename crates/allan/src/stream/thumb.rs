@@ -44,7 +44,7 @@ const RINGS: usize = offset_of!(DeviceEngine, rings);
 const OFFSET: usize = offset_of!(DeviceEngine, offset);
 const _: () = {
     assert!(offset_of!(DeviceEngine, sums) == 0);
-    assert!(THETA % 4 == 0 && THETA / 4 <= 255);
+    assert!(THETA.is_multiple_of(4) && THETA / 4 <= 255);
     assert!(THETA - BASE <= 255 && BASE + 2 * 24 * 4 == THETA);
     assert!(T == THETA + 8);
     assert!(HEAD - THETA <= 31 && HEADS - THETA <= 31);
