@@ -4,9 +4,12 @@
 //! [`Engine::push_pair`] hands it every pair; it goes on only when both samples would take
 //! `push_steady::<true>` (the base ring full and narrow, |z| below the gate, the gate below
 //! 2^11) and the segment's sample count is even, and otherwise returns 0 having changed nothing
-//! (the Rust path takes the pair then). It does exactly what two calls of `push_steady::<true>` do, in the same 32-bit
-//! arithmetic, so the sums are bit for bit the same (the emulator's end-to-end test compares the
-//! device's tables with the host's Rust engine):
+//! (the Rust path takes the pair then). It does exactly what two calls of `push_steady::<true>`
+//! do, in the same 32-bit arithmetic, so the sums are bit for bit the same (the emulator's
+//! end-to-end test compares the device's tables with the host's Rust engine). A second routine
+//! does the same for one sample of either parity (`push_small`, from [`Engine::push`]).
+//!
+//! The pair, step by step:
 //!
 //! 1. θ[t] enters base slot h = t mod 24 and its mirror h + 24; θ[t+1] and θ[t+2] are formed;
 //!    `theta`, `t` and `base_head` are stored once.
@@ -66,7 +69,9 @@ extern "C" {
 /// The base ring is full and narrow (`gate != 0`), `gate < 2^11`, and |z| < `gate`.
 #[inline(always)]
 pub(super) unsafe fn push_small(e: &mut DeviceEngine, z: i32) {
-    // SAFETY: as for `push_pair_small`.
+    // SAFETY: the caller has checked the steady-state conditions the routine relies on; it
+    // touches only `*e` (and the stack) and calls `strided`/`strided_tail` on it like
+    // `push_steady` does.
     unsafe { pico_imu_allan_push_small(e, z) }
 }
 
@@ -82,10 +87,6 @@ pub(super) fn push_pair_small(e: &mut DeviceEngine, y0: i32, y1: i32) -> bool {
 
 core::arch::global_asm!(
     ".pushsection .text.pico_imu_allan_push_pair_small,\"ax\",%progbits",
-    ".p2align 2",
-    ".global pico_imu_allan_push_pair_small",
-    ".type pico_imu_allan_push_pair_small,%function",
-    ".thumb_func",
     // Second and third differences from r5 = lo θ[t], \tm = lo θ[t − m], \t2 = lo θ[t − 2m] and
     // \t3 = lo θ[t − 3m]: r1 = D2 = θ[t] − 2θ[t−m] + θ[t−2m], r3 = D3 = D2 − (θ[t−m] −
     // 2θ[t−2m] + θ[t−3m]), in wrapping 32-bit words (exact: both are known to fit i32).
@@ -375,6 +376,10 @@ core::arch::global_asm!(
     "    bl {strided}",
     "11:",
     ".endm",
+    ".p2align 2",
+    ".global pico_imu_allan_push_pair_small",
+    ".type pico_imu_allan_push_pair_small,%function",
+    ".thumb_func",
     "pico_imu_allan_push_pair_small:",
     "    push {{r4, r5, r6, r7, lr}}",
     // [sp] = lo θ[t − 24] (leaves for the cascade), [sp, #4] = t, [sp, #8] = lo θ[t + 2].
