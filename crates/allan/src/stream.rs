@@ -40,7 +40,7 @@
 //! rest goes through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
 //! choices and gives the measured cycles.
 
-#[cfg(target_arch = "arm")]
+#[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
 mod thumb;
 
 /// Sums of one octave level: everything a deviation, its EDF and its bounds derive from.
@@ -554,7 +554,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         if z.unsigned_abs() < gate {
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
-                #[cfg(target_arch = "arm")]
+                #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
                 if P == 8 && L == 24 && R == 12 && S == 20 {
                     // SAFETY: with these parameters `Self` is `DeviceEngine`; the steady, small
                     // conditions were just checked (see `push_pair`).
@@ -575,14 +575,14 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
 
     /// Feed two consecutive rate samples: exactly `push(y0)` then `push(y1)`.
     ///
-    /// On ARM the firmware's [`DeviceEngine`] takes both in one hand-scheduled Thumb routine
-    /// (`stream/thumb.rs`) when they are steady-state samples and the segment's count is even
-    /// (feed a segment in pairs from its start to keep it so); everything else, and every other
-    /// target, goes through [`Engine::push`]. Single samples of a `DeviceEngine` in the steady
-    /// state take the same Thumb code, one at a time.
+    /// On ARM with the `thumb-asm` feature (the firmware's build), a [`DeviceEngine`] takes both
+    /// in one hand-scheduled Thumb routine (`stream/thumb.rs`) when they are steady-state samples
+    /// and the segment's count is even (feed a segment in pairs from its start to keep it so);
+    /// everything else, and every other build, goes through [`Engine::push`]. Single samples of
+    /// a `DeviceEngine` in the steady state take the same Thumb code, one at a time.
     #[inline]
     pub fn push_pair(&mut self, y0: i32, y1: i32) {
-        #[cfg(target_arch = "arm")]
+        #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
         if P == 8 && L == 24 && R == 12 && S == 20 {
             // SAFETY: with these parameters `Self` is `DeviceEngine`.
             let e = unsafe { &mut *(self as *mut Self).cast::<DeviceEngine>() };
@@ -809,7 +809,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     }
 
     /// [`Self::strided_general`] from level `from` at the current count (for the Thumb code).
-    #[cfg(target_arch = "arm")]
+    #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
     #[inline(never)]
     extern "C" fn strided_tail(&mut self, from: u32) {
         self.strided_general(self.t, from as usize);

@@ -1,5 +1,6 @@
 //! The firmware's hottest path in hand-scheduled Thumb code: two steady-state samples of a
-//! [`DeviceEngine`] (ARMv6-M and later; built only for `target_arch = "arm"`).
+//! [`DeviceEngine`] (Thumb-1: ARMv6-M and later M-profile cores; built with the `thumb-asm`
+//! feature on `target_arch = "arm"`).
 //!
 //! [`Engine::push_pair`] hands it every pair; it goes on only when both samples would take
 //! `push_steady::<true>` (the base ring full and narrow, |z| below the gate, the gate below
