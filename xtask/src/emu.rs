@@ -52,6 +52,17 @@ fn ensure_sim() -> Result<PathBuf> {
     Ok(sim)
 }
 
+/// The emulator harness's own tests (`npm test` in sim/: the chip models, the rp2040js patches,
+/// the profiler; the two that boot the firmware use the release ELF, built first).
+pub fn harness_tests() -> Result<()> {
+    build_firmware()?;
+    let sim = ensure_sim()?;
+    run(Command::new("npm")
+        .args(["test", "--prefix"])
+        .arg(&sim)
+        .env("PICO_IMU_ELF", firmware_elf()))
+}
+
 fn out_dir(name: &str) -> Result<PathBuf> {
     let d = root().join("out").join(name);
     std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;

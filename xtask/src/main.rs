@@ -73,9 +73,12 @@ fn test(extra: &[String]) -> Result<()> {
         // (|z| < 2^10), large enough for 64-bit squares at τ ≥ 128 ms, so the device's
         // hand-written squares are compared with the host's too (allan/src/stream/thumb.rs).
         let sine = ["--sine", "3,3", "--out", "e2e-sine"].map(String::from);
-        emu::e2e(&sine)
+        emu::e2e(&sine)?;
+        emu::harness_tests()
     } else {
-        eprintln!("xtask: node >= 20 not found: emulator end-to-end test skipped");
+        eprintln!(
+            "xtask: node >= 20 not found: emulator end-to-end test and harness tests skipped"
+        );
         Ok(())
     }
 }
