@@ -185,6 +185,17 @@ impl Engines {
         }
     }
 
+    fn push_imu_one(&mut self, (accel, gyro, temp): &ImuInputs) {
+        let [ax, ay, az, gx, gy, gz, t] = &mut self.imu;
+        ax.push(accel[0]);
+        ay.push(accel[1]);
+        az.push(accel[2]);
+        gx.push(gyro[0]);
+        gy.push(gyro[1]);
+        gz.push(gyro[2]);
+        t.push(*temp);
+    }
+
     fn push_imu_pair(&mut self, (a0, g0, t0): &ImuInputs, (a1, g1, t1): &ImuInputs) {
         let [ax, ay, az, gx, gy, gz, t] = &mut self.imu;
         ax.push_pair(a0[0], a1[0]);
@@ -216,15 +227,8 @@ impl Engines {
     fn split(&mut self, sensor: Sensor) -> Option<u64> {
         let (before, after, at) = match sensor {
             Sensor::Imu => {
-                if let Some((accel, gyro, temp)) = self.imu_pending.take() {
-                    let [ax, ay, az, gx, gy, gz, t] = &mut self.imu;
-                    ax.push(accel[0]);
-                    ay.push(accel[1]);
-                    az.push(accel[2]);
-                    gx.push(gyro[0]);
-                    gy.push(gyro[1]);
-                    gz.push(gyro[2]);
-                    t.push(temp);
+                if let Some(last) = self.imu_pending.take() {
+                    self.push_imu_one(&last);
                 }
                 let before = self.imu[0].gaps();
                 self.imu.iter_mut().for_each(DeviceEngine::gap);

@@ -555,13 +555,9 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
                 #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
-                if P == 8 && L == 24 && R == 12 && S == 20 {
-                    // SAFETY: with these parameters `Self` is `DeviceEngine`; the steady, small
-                    // conditions were just checked (see `push_pair`).
-                    unsafe {
-                        let e = &mut *(self as *mut Self).cast::<DeviceEngine>();
-                        thumb::push_small(e, z);
-                    }
+                if let Some(e) = self.as_device_engine() {
+                    // SAFETY: the steady, small conditions were just checked.
+                    unsafe { thumb::push_small(e, z) };
                     return;
                 }
                 self.push_steady::<true>(z);
@@ -583,15 +579,23 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     #[inline]
     pub fn push_pair(&mut self, y0: i32, y1: i32) {
         #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
-        if P == 8 && L == 24 && R == 12 && S == 20 {
-            // SAFETY: with these parameters `Self` is `DeviceEngine`.
-            let e = unsafe { &mut *(self as *mut Self).cast::<DeviceEngine>() };
+        if let Some(e) = self.as_device_engine() {
             if thumb::push_pair_small(e, y0, y1) {
                 return;
             }
         }
         self.push(y0);
         self.push(y1);
+    }
+
+    /// `self` as the firmware's [`DeviceEngine`], whose layout the Thumb routines are written
+    /// for, if that is what it is.
+    #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
+    #[inline(always)]
+    fn as_device_engine(&mut self) -> Option<&mut DeviceEngine> {
+        (P == 8 && L == 24 && R == 12 && S == 20)
+            // SAFETY: with these parameters `Self` is `DeviceEngine`.
+            .then(|| unsafe { &mut *(self as *mut Self).cast::<DeviceEngine>() })
     }
 
     /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and
@@ -858,7 +862,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// real values will take. Differences are only ever formed from indices ≥ 0, so nothing
     /// needs to know when a ring has filled.
     #[inline(never)]
-    extern "C" fn cascade(&mut self, index: u32, value: i64) {
+    fn cascade(&mut self, index: u32, value: i64) {
         // Level K0 (index is always even in the steady state, but the general path calls this
         // for every index).
         if S == 0 || index & 1 != 0 {
@@ -957,35 +961,5 @@ mod tests {
             };
             assert_eq!(l.n2, expect, "m = {}", l.m);
         }
-    }
-
-    /// `push_pair` is two `push`es, whatever the parity, the size of the inputs or the gaps.
-    /// (On the device it is the Thumb routine; the emulator's end-to-end test compares that one
-    /// with this engine.)
-    #[test]
-    fn push_pair_is_two_pushes() {
-        let mut s = 12345u32;
-        let mut next = |amp: i32| {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            (s % (2 * amp as u32 + 1)) as i32 - amp
-        };
-        let (mut a, mut b) = (DeviceEngine::new(), DeviceEngine::new());
-        a.push(7);
-        b.push(7);
-        for round in 0..40_000 {
-            let amp = [100, 1_500, 40_000, 1 << 30][round / 10_000];
-            let (y0, y1) = (next(amp), next(amp));
-            a.push_pair(y0, y1);
-            b.push(y0);
-            b.push(y1);
-            if round % 9_973 == 0 {
-                a.gap();
-                b.gap();
-            }
-        }
-        assert_eq!(a.samples(), 80_001);
-        assert!(a.levels().eq(b.levels()));
     }
 }
