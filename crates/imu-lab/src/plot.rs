@@ -17,7 +17,7 @@ const TOP_H: f64 = 330.0;
 const GAP: f64 = 56.0;
 const BOT_H: f64 = 110.0;
 
-fn color(e: Effect) -> &'static str {
+fn color(e: &Effect) -> &'static str {
     match e {
         Effect::Quantization => "#9467bd",
         Effect::White => "#1f77b4",
@@ -26,6 +26,12 @@ fn color(e: Effect) -> &'static str {
         Effect::RateRamp => "#8c564b",
         Effect::Markov => "#d62728",
         Effect::Sinusoid => "#e377c2",
+        Effect::Resolution => "#7f7f7f",
+        Effect::BiasStep => "#bcbd22",
+        Effect::Temperature => "#17becf",
+        Effect::Lowpass | Effect::Lowpass2 => "#1f3f9f",
+        Effect::Boxcar | Effect::Bartlett => "#3f9f1f",
+        Effect::User(_) => "#aa5500",
     }
 }
 
@@ -146,13 +152,13 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
         if t.coef <= 0.0 {
             continue;
         }
-        let vals: Vec<f64> = grid.iter().map(|&g| t.avar(g, fit.tau0).sqrt()).collect();
+        let vals: Vec<f64> = grid.iter().map(|&g| t.avar(g, &fit.ctx).sqrt()).collect();
         let _ = write!(
             s,
             r#"<path d="{}" fill="none" stroke="{}" stroke-width="1.5" stroke-dasharray="6 4" clip-path="url(#{clip})"/>
 "#,
             path(&vals),
-            color(t.effect)
+            color(&t.effect)
         );
         legend.push((
             format!(
@@ -160,7 +166,7 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
                 t.effect.name(),
                 if t.detected { "" } else { " (n.d.)" }
             ),
-            color(t.effect).to_string(),
+            color(&t.effect).to_string(),
             true,
         ));
     }

@@ -3,7 +3,7 @@
 // SVG/HTML fragments are raw multi-line strings that end in a newline.
 #![allow(clippy::write_with_newline)]
 
-use noise_model::{Assessment, Diagnosis, Fit, Step, UnitFamily};
+use noise_model::{Assessment, Diagnosis, Effect, Fit, Step, UnitFamily};
 use std::fmt::Write;
 
 /// `x` with `sig` significant digits, fixed notation for 1e-3 ≤ |x| < 1e5, else scientific.
@@ -40,32 +40,39 @@ pub struct ParamRow {
     pub status: String,
 }
 
-/// The parameter rows of a fit for a channel in `unit`.
+/// The parameter rows of a fit for a channel in `unit`: every estimate with its 1σ, whether or
+/// not the data detect it (then its 95 % interval says how far it may go).
 pub fn param_rows(fit: &Fit, unit: &str) -> Vec<ParamRow> {
     let fam = UnitFamily::of(unit);
+    let warm_up = fit.ctx.temp_avar.is_none();
     let mut out = Vec::new();
     for t in &fit.terms {
-        let e = t.effect;
-        let disp = e.amp_display(fam);
-        let cu = e.amp_unit(unit);
-        let (canon, conv) = if t.detected {
-            (
-                format!("{} {cu}", pm(t.amplitude(), t.amplitude_sigma())),
-                disp.as_ref().map_or(String::new(), |d| {
-                    format!(
-                        "{} {}",
-                        pm(t.amplitude() * d.factor, t.amplitude_sigma() * d.factor),
-                        d.unit
-                    )
-                }),
-            )
+        let e = &t.effect;
+        let disp = e.amp_display(fam, warm_up);
+        let cu = e.amp_unit(unit, warm_up);
+        let (a, s) = (t.amplitude(), t.amplitude_sigma());
+        let (lo, hi) = t.amplitude_interval();
+        let canon = format!("{} {cu}", pm(a, s));
+        let conv = disp.as_ref().map_or(String::new(), |d| {
+            format!("{} {}", pm(a * d.factor, s * d.factor), d.unit)
+        });
+        let status = if t.known {
+            match e {
+                Effect::Resolution => "from the data's lattice".to_string(),
+                _ => format!(
+                    "{}time-domain estimate; a non-stationarity, not noise",
+                    if t.detected { "" } else { "not detected; " }
+                ),
+            }
+        } else if t.detected && *e == Effect::RateRamp {
+            "detected: a drift of this record (non-stationary), not a noise of the sensor".into()
+        } else if t.detected {
+            "detected".into()
         } else {
-            let ub = t.upper_bound().unwrap_or(f64::NAN);
-            (
-                format!("< {} {cu}", sig(ub, 2)),
-                disp.as_ref().map_or(String::new(), |d| {
-                    format!("< {} {}", sig(ub * d.factor, 2), d.unit)
-                }),
+            format!(
+                "not detected: 95 % in [{}, {}] {cu}",
+                sig(lo, 2),
+                sig(hi, 2)
             )
         };
         out.push(ParamRow {
@@ -73,37 +80,33 @@ pub fn param_rows(fit: &Fit, unit: &str) -> Vec<ParamRow> {
             param: e.amp_name().into(),
             canonical: canon,
             conventional: conv,
-            status: if t.detected {
-                "detected".into()
-            } else {
-                "not detected (2σ upper bound)".into()
-            },
+            status,
         });
-        if let (Some(name), Some(u)) = (e.nonlinear_name(), e.nonlinear_unit()) {
+        for (i, spec) in t.specs.iter().enumerate() {
             let (v, s) = (
-                t.theta.unwrap_or(f64::NAN),
-                t.theta_sigma.unwrap_or(f64::NAN),
+                t.theta.get(i).copied().unwrap_or(f64::NAN),
+                t.theta_sigma.get(i).copied().unwrap_or(f64::NAN),
             );
-            let conv = match (e, t.theta) {
-                (noise_model::Effect::Markov, Some(tc)) if t.detected => {
+            let conv = match (e, spec.name.as_str()) {
+                (Effect::Markov, "tau_c") => format!(
+                    "peak at τ ≈ {} s; f_c = 1/(2π τ_c) = {} Hz",
+                    sig(1.89 * v, 3),
+                    sig(1.0 / (2.0 * std::f64::consts::PI * v), 3)
+                ),
+                (Effect::Sinusoid, _) => format!("period {} s", sig(1.0 / v, 4)),
+                (Effect::Lowpass | Effect::Lowpass2, _) => {
                     format!(
-                        "f_c = 1/(2π τ_c) = {} Hz",
-                        sig(1.0 / (2.0 * std::f64::consts::PI * tc), 3)
+                        "τ_c = 1/(2π f_c) = {} s",
+                        sig(1.0 / (2.0 * std::f64::consts::PI * v), 3)
                     )
                 }
-                (noise_model::Effect::Sinusoid, Some(f)) if t.detected => {
-                    format!("period {} s", sig(1.0 / f, 4))
-                }
+                (Effect::Boxcar | Effect::Bartlett, _) => format!("{} s", sig(v * fit.tau0, 3)),
                 _ => String::new(),
             };
             out.push(ParamRow {
                 effect: String::new(),
-                param: name.into(),
-                canonical: if t.detected {
-                    format!("{} {u}", pm(v, s))
-                } else {
-                    "—".into()
-                },
+                param: spec.name.clone(),
+                canonical: format!("{} {}", pm(v, s), spec.unit),
                 conventional: conv,
                 status: String::new(),
             });
@@ -215,27 +218,32 @@ pub fn tau_table(fit: &Fit, a: &Assessment, unit: &str) -> String {
     s
 }
 
-/// "χ²/dof a → b, RMS log-residual c → d, adequate no → yes".
-pub fn step_line(st: &Step) -> String {
+/// "+ effect: χ²/dof a → b, RMS log-residual c → d, adequate no → yes".
+pub fn step_line(st: &Step<Effect>) -> String {
     let yn = |b: bool| if b { "yes" } else { "no" };
     format!(
-        "+ {}: χ²/dof {} → {}, RMS log-residual {} → {}, adequate {} → {}",
-        st.added
-            .iter()
-            .map(|e| e.name())
-            .collect::<Vec<_>>()
-            .join(" + "),
+        "{}: χ²/dof {} → {}, RMS log-residual {} → {}, adequate {} → {}",
+        st.edit,
         sig(st.before.chi2_dof, 3),
         sig(st.after.chi2_dof, 3),
-        sig(st.before.rms_log_residual, 3),
-        sig(st.after.rms_log_residual, 3),
+        sig(st.before.rms_residual, 3),
+        sig(st.after.rms_residual, 3),
         yn(st.before.adequate),
         yn(st.after.adequate)
     )
 }
 
-/// The verdict sentence.
-pub fn verdict(fit: &Fit, a: &Assessment) -> String {
+/// The verdict sentence. `adequate` is the lab's whole verdict (the Allan test, the time-domain
+/// checks and the candidates' nested tests).
+pub fn verdict(fit: &Fit, a: &Assessment, adequate: bool) -> String {
+    if a.adequate && !adequate {
+        return format!(
+            "NOT ADEQUATE — the Allan curve alone passes (χ²/dof = {}, global p = {}), but the \
+             record shows an effect the model lacks (see the diagnosis).",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2)
+        );
+    }
     if a.adequate {
         format!(
             "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (all |z| ≤ {:.1}).",
@@ -327,6 +335,7 @@ section {{ border-top: 2px solid #888; margin-top: 2em; padding-top: 0.5em; }}
                 s,
                 "<p><b>Diagnosis{}:</b> {}</p>\n",
                 d.missing
+                    .as_ref()
                     .map_or(String::new(), |e| format!(" — missing effect: {e}")),
                 esc(&d.explanation)
             );

@@ -1,9 +1,11 @@
-//! Calibration study for the adequacy verdict and the diagnosis: runs many simulated cases
-//! (control and hidden effects) and prints the statistics. `cargo run --release -p imu-sim
-//! --example calibrate --target host-tuple -- [cases] [log2 samples]`.
+//! Calibration study of the noise lab's verdict and automatic walk: many seeds of one case
+//! (control or a hidden effect), the walk on each, and the tally of what was named.
+//! `cargo run --release -p imu-sim --example calibrate --target host-tuple -- CASES LOG2N KIND`
+//! with KIND one of control, markov, sine, dlpf, step.
 use allan::{deviation, Stat, TauSet};
 use imu_sim::{SimConfig, SimEffect};
-use noise_model::{assess, diagnose, fit, FitOptions, Point, DEFAULT_TERMS};
+use noise_model::{walk, NoiseLab, Point, Record, Stop};
+use std::collections::BTreeMap;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -11,7 +13,8 @@ fn main() {
     let lg: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(18);
     let kind = args.get(3).cloned().unwrap_or("control".into());
     let n = 1usize << lg;
-    let mut n_ok = 0;
+    let mut named: BTreeMap<String, usize> = BTreeMap::new();
+    let mut adequate = 0;
     for seed in 0..cases {
         let mut eff = vec![
             SimEffect::Quantization { q: 2e-4 },
@@ -38,6 +41,13 @@ fn main() {
                 cutoff_hz: 5.0,
                 order: 1,
             }),
+            "step" => {
+                eff.push(SimEffect::White { n: 5e-3 });
+                eff.push(SimEffect::BiasStep {
+                    at_s: n as f64 / 100.0 * 0.37,
+                    size: 0.03,
+                });
+            }
             _ => eff.push(SimEffect::White { n: 5e-3 }),
         }
         let cfg = SimConfig {
@@ -45,43 +55,43 @@ fn main() {
             n_samples: n,
             seed: 1000 + seed,
             effects: eff,
+            lsb: None,
         };
         let y = cfg.generate();
         let rows = deviation(&y, cfg.tau0(), Stat::Oadev, &TauSet::Octave).unwrap();
-        let (pts, skipped) = Point::from_rows(&rows);
-        let f = fit(&pts, cfg.tau0(), &DEFAULT_TERMS, &FitOptions::default()).unwrap();
-        let a = assess(&f);
-        let d = diagnose(&f, &a, Some((&y, 100.0)));
-        let line = d.line;
-        if a.adequate {
-            n_ok += 1;
+        let (points, _) = Point::from_rows(&rows);
+        let lab = NoiseLab::new(Record {
+            y: &y,
+            tau0: cfg.tau0(),
+            segments: vec![(0, y.len() as u64)],
+            temp: None,
+            timing: None,
+            points,
+            user_effects: vec![],
+        })
+        .unwrap();
+        let start = lab.fit(&lab.default_specs()).unwrap();
+        let w = walk(&lab, start, 5).unwrap();
+        let added: Vec<String> = w.steps.iter().map(|s| s.edit.to_string()).collect();
+        if w.stop == Stop::Adequate {
+            adequate += 1;
         }
-        let maxr = a.residuals.iter().fold(0.0f64, |m, r| m.max(r.abs()));
-        let cand = d.candidates.first().map(|c| {
-            format!(
-                "{} p={:.1e} sig={} after chi2/dof={:.2} ok={} params={:?}",
-                c.effect,
-                c.p_value,
-                c.significant,
-                c.fit.chi2_dof(),
-                c.assessment.adequate,
-                c.fit.term(c.effect).map(|t| (t.amplitude(), t.theta))
-            )
-        });
+        *named
+            .entry(if added.is_empty() {
+                "(nothing)".into()
+            } else {
+                added.join(" then ")
+            })
+            .or_default() += 1;
         println!(
-            "seed {seed}: pts {} skip {skipped} z2dof {:.3} maxz {:.2} chi2/dof {:.2} p {:.3} max|r| {:.2} (thr {:.2}) adequate {} missing {:?} line {:?} | {:?}",
-            pts.len(),
-            a.sum_z2 / f.dof as f64,
-            a.z.iter().fold(0.0f64, |m, z| m.max(z.abs())),
-            f.chi2_dof(),
-            a.p_value,
-            maxr,
-            a.threshold,
-            a.adequate,
-            d.missing,
-            line.map(|l| l.freq_hz),
-            cand
+            "seed {seed}: start χ²/dof {:.2}, steps [{}], stop: {}",
+            w.models[0].fit.chi2_dof(),
+            added.join(", "),
+            w.stop
         );
     }
-    println!("adequate {n_ok}/{cases}");
+    println!("adequate at the end: {adequate}/{cases}");
+    for (k, v) in named {
+        println!("  {k}: {v}");
+    }
 }

@@ -101,6 +101,27 @@ pub enum SimEffect {
     /// order 1 = y_k = φy_{k−1} + (1−φ)w_k, φ = e^{−2π f_c τ0}; order 2 = two such sections.
     /// The DC gain is 1, so the long-τ Allan curve is the white line N²/τ.
     LowPassWhite { n: f64, cutoff_hz: f64, order: u8 },
+    /// White noise of density N through a decimation filter of `length` output samples:
+    /// internally sampled 16× faster, averaged over 16·length internal samples (boxcar) or
+    /// through two such boxcars in cascade (Bartlett), output every 16th internal sample.
+    Decimated {
+        n: f64,
+        length: usize,
+        bartlett: bool,
+    },
+    /// A bias step of `size` [u] at `at_s` [s].
+    BiasStep { at_s: f64, size: f64 },
+    /// A bias of `coef` [u/°C] times the temperature, which warms from `start_c` by `rise_c`
+    /// with time constant `tau_s` [s]; the temperature column is returned by
+    /// [`SimConfig::generate_with_temp`].
+    Temperature {
+        coef: f64,
+        start_c: f64,
+        rise_c: f64,
+        tau_s: f64,
+    },
+    /// A warm-up transient A·e^{−t/τ} [u] (no temperature column).
+    WarmUp { amplitude: f64, tau_s: f64 },
 }
 
 /// A simulation: what to generate.
@@ -110,6 +131,8 @@ pub struct SimConfig {
     pub n_samples: usize,
     pub seed: u64,
     pub effects: Vec<SimEffect>,
+    /// Round every output sample to a multiple of this LSB (the part's resolution).
+    pub lsb: Option<f64>,
 }
 
 /// Components (sigma, tau_c) of the AR(1) sum used for flicker of level B at sampling τ0 over a
@@ -179,6 +202,59 @@ fn filtered_white_avar(h: &[f64], var_w: f64, m: usize) -> f64 {
     (4.0 * s(m) - s(2 * m)) / (2.0 * (m * m) as f64)
 }
 
+/// Internal oversampling of the decimation filters.
+pub const DECIMATION: usize = 16;
+
+/// Expected Allan variance at m output samples of white noise (per-sample variance `var_w` at
+/// the internal rate) through the FIR `h` at the internal rate, output every `r` internal
+/// samples: R(k) = var_w Σ_i h_i h_{i+kr}.
+fn decimated_white_avar(h: &[f64], var_w: f64, r: usize, m: usize) -> f64 {
+    let r_out = |k: usize| -> f64 {
+        let lag = k * r;
+        if lag >= h.len() {
+            0.0
+        } else {
+            var_w
+                * h[..h.len() - lag]
+                    .iter()
+                    .zip(&h[lag..])
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+        }
+    };
+    let s = |n: usize| -> f64 {
+        let mut acc = n as f64 * r_out(0);
+        for k in 1..n {
+            let v = r_out(k);
+            if v == 0.0 {
+                break;
+            }
+            acc += 2.0 * (n - k) as f64 * v;
+        }
+        acc
+    };
+    (4.0 * s(m) - s(2 * m)) / (2.0 * (m * m) as f64)
+}
+
+/// Overlapping Allan variance of a deterministic series at m samples (its exact value).
+fn exact_oavar(x: &[f64], m: usize) -> f64 {
+    let mut pre = Vec::with_capacity(x.len() + 1);
+    pre.push(0.0);
+    let mut a = 0.0;
+    for v in x {
+        a += v;
+        pre.push(a);
+    }
+    if x.len() < 2 * m {
+        return f64::NAN;
+    }
+    let n = x.len() + 1 - 2 * m;
+    let s: f64 = (0..n)
+        .map(|i| (pre[i + 2 * m] - 2.0 * pre[i + m] + pre[i]).powi(2))
+        .sum();
+    s / (2.0 * (m * m) as f64 * n as f64)
+}
+
 impl SimConfig {
     pub fn tau0(&self) -> f64 {
         1.0 / self.rate_hz
@@ -186,6 +262,28 @@ impl SimConfig {
 
     /// Generate the rate samples (length `n_samples`).
     pub fn generate(&self) -> Vec<f64> {
+        self.generate_with_temp().0
+    }
+
+    /// The temperature profile [°C] of a `Temperature` effect, if any.
+    pub fn temperature(&self) -> Option<Vec<f64>> {
+        self.effects.iter().find_map(|e| match *e {
+            SimEffect::Temperature {
+                start_c,
+                rise_c,
+                tau_s,
+                ..
+            } => Some(
+                (0..self.n_samples)
+                    .map(|i| start_c + rise_c * -(-(i as f64) * self.tau0() / tau_s).exp_m1())
+                    .collect(),
+            ),
+            _ => None,
+        })
+    }
+
+    /// Generate the rate samples and, when a `Temperature` effect is present, the temperature.
+    pub fn generate_with_temp(&self) -> (Vec<f64>, Option<Vec<f64>>) {
         let n = self.n_samples;
         let tau0 = self.tau0();
         let mut rng = Rng::new(self.seed);
@@ -260,53 +358,154 @@ impl SimConfig {
                         }
                     }
                 }
+                SimEffect::Decimated {
+                    n: nd,
+                    length,
+                    bartlett,
+                } => {
+                    let r = DECIMATION;
+                    let m = length * r;
+                    let s = nd / (tau0 / r as f64).sqrt();
+                    // running sums over the last m internal samples, once or twice
+                    let stages = if bartlett { 2 } else { 1 };
+                    let warm = stages * m;
+                    let mut ring1 = vec![0.0; m];
+                    let mut ring2 = vec![0.0; m];
+                    let (mut s1, mut s2) = (0.0, 0.0);
+                    for i in 0..(warm + n * r) {
+                        let w = s * rng.normal();
+                        let k = i % m;
+                        s1 += w - ring1[k];
+                        ring1[k] = w;
+                        let a = s1 / m as f64;
+                        let out = if bartlett {
+                            s2 += a - ring2[k];
+                            ring2[k] = a;
+                            s2 / m as f64
+                        } else {
+                            a
+                        };
+                        if i >= warm && (i - warm) % r == r - 1 {
+                            y[(i - warm) / r] += out;
+                        }
+                    }
+                }
+                SimEffect::BiasStep { at_s, size } => {
+                    let k0 = (at_s / tau0).round().max(0.0) as usize;
+                    for v in y.iter_mut().skip(k0) {
+                        *v += size;
+                    }
+                }
+                SimEffect::Temperature { coef, .. } => {
+                    let t = self.temperature().expect("temperature effect");
+                    for (v, c) in y.iter_mut().zip(&t) {
+                        *v += coef * c;
+                    }
+                }
+                SimEffect::WarmUp { amplitude, tau_s } => {
+                    for (i, v) in y.iter_mut().enumerate() {
+                        *v += amplitude * (-(i as f64) * tau0 / tau_s).exp();
+                    }
+                }
             }
         }
-        y
+        if let Some(q) = self.lsb {
+            for v in y.iter_mut() {
+                *v = (*v / q).round() * q;
+            }
+        }
+        (y, self.temperature())
     }
 
-    /// Exact expected overlapping Allan variance at τ = m·τ0 of the generated process.
+    /// Exact expected overlapping Allan variance at τ = m·τ0 of the generated process (the
+    /// rounding of `lsb` adds its white floor LSB²/12 per sample, exact when the noise spans
+    /// many LSBs).
     pub fn avar(&self, m: usize) -> f64 {
         let tau0 = self.tau0();
         let tau = m as f64 * tau0;
-        self.effects
-            .iter()
-            .map(|e| match *e {
-                SimEffect::Quantization { q } => 3.0 * q * q / (tau * tau),
-                SimEffect::White { n } => n * n / tau,
-                SimEffect::Flicker { b } => flicker_components(b, tau0, self.n_samples)
-                    .iter()
-                    .map(|&(s, tc)| s * s * markov_avar_unit(tau, tau0, tc))
-                    .sum(),
-                SimEffect::RateRandomWalk { k } => k * k * (tau / 3.0 + tau0 * tau0 / (6.0 * tau)),
-                SimEffect::RateRamp { r } => r * r * tau * tau / 2.0,
-                SimEffect::Markov { sigma, tau_c } => {
-                    sigma * sigma * markov_avar_unit(tau, tau0, tau_c)
-                }
-                SimEffect::Sinusoid { amplitude, freq_hz } => {
-                    amplitude * amplitude * sinusoid_avar_unit(tau, tau0, freq_hz)
-                }
-                SimEffect::LowPassWhite {
-                    n,
-                    cutoff_hz,
-                    order,
-                } => {
-                    if order <= 1 {
-                        // AR(1) with φ = e^{−2πf_cτ0}: variance (N²/τ0)(1−φ)/(1+φ), τ_c = 1/(2πf_c)
-                        let phi = (-2.0 * std::f64::consts::PI * cutoff_hz * tau0).exp();
-                        let var = n * n / tau0 * (1.0 - phi) / (1.0 + phi);
-                        var * markov_avar_unit(
-                            tau,
-                            tau0,
-                            1.0 / (2.0 * std::f64::consts::PI * cutoff_hz),
-                        )
-                    } else {
-                        let h = lowpass_impulse(cutoff_hz, tau0, order);
-                        filtered_white_avar(&h, n * n / tau0, m)
+        let ctx = noise_model::Context::uniform(tau0, self.n_samples as u64);
+        let round = self.lsb.map_or(0.0, |q| q * q / 12.0 / m as f64);
+        round
+            + self
+                .effects
+                .iter()
+                .map(|e| match *e {
+                    SimEffect::Quantization { q } => 3.0 * q * q / (tau * tau),
+                    SimEffect::White { n } => n * n / tau,
+                    SimEffect::Flicker { b } => flicker_components(b, tau0, self.n_samples)
+                        .iter()
+                        .map(|&(s, tc)| s * s * markov_avar_unit(tau, tau0, tc))
+                        .sum(),
+                    SimEffect::RateRandomWalk { k } => {
+                        k * k * (tau / 3.0 + tau0 * tau0 / (6.0 * tau))
                     }
-                }
-            })
-            .sum()
+                    SimEffect::RateRamp { r } => r * r * tau * tau / 2.0,
+                    SimEffect::Markov { sigma, tau_c } => {
+                        sigma * sigma * markov_avar_unit(tau, tau0, tau_c)
+                    }
+                    SimEffect::Sinusoid { amplitude, freq_hz } => {
+                        amplitude * amplitude * sinusoid_avar_unit(tau, tau0, freq_hz)
+                    }
+                    SimEffect::LowPassWhite {
+                        n,
+                        cutoff_hz,
+                        order,
+                    } => {
+                        if order <= 1 {
+                            // AR(1) with φ = e^{−2πf_cτ0}: variance (N²/τ0)(1−φ)/(1+φ), τ_c = 1/(2πf_c)
+                            let phi = (-2.0 * std::f64::consts::PI * cutoff_hz * tau0).exp();
+                            let var = n * n / tau0 * (1.0 - phi) / (1.0 + phi);
+                            var * markov_avar_unit(
+                                tau,
+                                tau0,
+                                1.0 / (2.0 * std::f64::consts::PI * cutoff_hz),
+                            )
+                        } else {
+                            let h = lowpass_impulse(cutoff_hz, tau0, order);
+                            filtered_white_avar(&h, n * n / tau0, m)
+                        }
+                    }
+                    SimEffect::Decimated {
+                        n,
+                        length,
+                        bartlett,
+                    } => {
+                        // the discrete construction's own impulse response at the internal rate
+                        let r = DECIMATION;
+                        let len = length * r;
+                        let boxcar = vec![1.0 / len as f64; len];
+                        let h = if bartlett {
+                            let mut c = vec![0.0; 2 * len - 1];
+                            for (i, a) in boxcar.iter().enumerate() {
+                                for (j, b) in boxcar.iter().enumerate() {
+                                    c[i + j] += a * b;
+                                }
+                            }
+                            c
+                        } else {
+                            boxcar
+                        };
+                        decimated_white_avar(&h, n * n / (tau0 / r as f64), r, m)
+                    }
+                    SimEffect::BiasStep { at_s, size } => {
+                        size * size
+                            * noise_model::effect::step_avar(
+                                (at_s / tau0).round() as u64,
+                                m as u64,
+                                &ctx,
+                            )
+                    }
+                    SimEffect::Temperature { coef, .. } => {
+                        let t = self.temperature().expect("temperature");
+                        coef * coef * exact_oavar(&t, m)
+                    }
+                    SimEffect::WarmUp { amplitude, tau_s } => {
+                        amplitude
+                            * amplitude
+                            * noise_model::effect::warmup_avar(tau_s / tau0, m as u64, &ctx)
+                    }
+                })
+                .sum::<f64>()
     }
 
     /// Exact expected overlapping Allan deviation at each m.
@@ -362,6 +561,7 @@ mod tests {
                 cutoff_hz: 5.0,
                 order: 1,
             }],
+            lsb: None,
         };
         let h = lowpass_impulse(5.0, 0.01, 1);
         for m in [1usize, 2, 5, 40, 300] {
@@ -382,6 +582,7 @@ mod tests {
             n_samples: 1 << 18,
             seed: 1,
             effects: vec![SimEffect::Flicker { b }],
+            lsb: None,
         };
         let target = 2.0 * std::f64::consts::LN_2 / std::f64::consts::PI * b * b;
         for k in 0..17 {

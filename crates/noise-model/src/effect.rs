@@ -1,18 +1,28 @@
-//! The effect library: every noise or error effect the lab knows, its Allan-variance contribution,
-//! its canonical parameters and their units, the conventional display units with the conversions,
-//! a paragraph on the physics and its Allan-plot signature.
+//! The effect library: every noise or error effect the lab knows, its exact sampled-data Allan
+//! variance, its canonical parameters and their units, the conventional display units, a
+//! paragraph on the physics and its Allan-plot signature.
 //!
-//! Power-law terms follow IEEE Std 952-1997 Annex C and the seed paper's eqs. 10–14:
-//! σ²(τ) = 3Q²/τ², N²/τ, (2 ln2/π)B², K²τ/3, R²τ²/2. The Gauss–Markov and sinusoid terms follow
-//! IEEE Std 952-1997 C.7/C.8 (σ(τ) = A·sin²(πfτ)/(πfτ) for a sinusoid).
+//! Power-law terms follow IEEE Std 952-1997 Annex C and eqs. 10–14 of I. Jaime, F. Beck Ferrero,
+//! M. L. Miretti, E. Bernardi, "Caracterización y calibración de unidades de medición inercial de
+//! bajo costo" (UTN Facultad Regional San Francisco): σ²(τ) = 3Q²/τ², N²/τ, (2 ln2/π)B², K²τ/3,
+//! R²τ²/2. The Gauss–Markov and sinusoid terms follow IEEE Std 952-1997 C.7/C.8.
 //!
-//! Every term is written as `coefficient × basis(τ)` with a non-negative coefficient (the square
-//! of the canonical amplitude parameter), which is what makes the fit a non-negative linear least
-//! squares problem once the non-linear parameters (τ_c, f) are fixed.
+//! Every term is `coefficient × basis(τ)` with a non-negative coefficient (the square of the
+//! amplitude parameter), which makes the fit a non-negative linear least-squares problem once the
+//! non-linear parameters (τ_c, f, a filter's corner or length) are fixed. Stochastic effects are
+//! defined by their structure function V(k) ([`crate::structure`]), which gives both the exact
+//! expected overlapping Allan variance of the *sampled* process, σ²(m) = (4V(m) − V(2m))/(2m²),
+//! and the covariance of the Allan estimates ([`crate::cov`]). Deterministic effects (a ramp, a
+//! sinusoid, a bias step, a temperature-driven bias) have their exact expected Allan variance
+//! computed over the record's own segments.
+use crate::structure::{RTable, Structure};
+use crate::user::UserEffect;
 use core::fmt;
+use std::sync::Arc;
 
-/// The fixed vocabulary of effects.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+/// An effect of the vocabulary. Built-ins are named in [`Effect::name`]; user effects come from a
+/// description file ([`crate::user`]).
+#[derive(Debug, Clone)]
 pub enum Effect {
     Quantization,
     White,
@@ -21,9 +31,38 @@ pub enum Effect {
     RateRamp,
     Markov,
     Sinusoid,
+    /// Rounding of the rate samples to the data's LSB: white, variance LSB²/12 per sample.
+    Resolution,
+    /// A jump of the bias at one instant.
+    BiasStep,
+    /// The bias following the temperature column, or a warm-up transient when there is none.
+    Temperature,
+    /// White noise through a one-pole low-pass filter (corner f_c).
+    Lowpass,
+    /// White noise through two cascaded one-pole sections (critically damped two-pole low-pass).
+    Lowpass2,
+    /// White noise through a moving average of L output samples (boxcar decimation filter).
+    Boxcar,
+    /// White noise through a triangular (Bartlett) filter, two boxcars of L samples in cascade.
+    Bartlett,
+    /// A user-described effect.
+    User(Arc<UserEffect>),
 }
 
-/// The seed paper's five terms (eqs. 10–14), the default model.
+impl PartialEq for Effect {
+    fn eq(&self, other: &Self) -> bool {
+        self.name() == other.name()
+    }
+}
+impl Eq for Effect {}
+
+impl std::hash::Hash for Effect {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.name().hash(state)
+    }
+}
+
+/// The five power-law terms of eqs. 10–14 (Jaime et al.), the default model.
 pub const DEFAULT_TERMS: [Effect; 5] = [
     Effect::Quantization,
     Effect::White,
@@ -32,8 +71,8 @@ pub const DEFAULT_TERMS: [Effect; 5] = [
     Effect::RateRamp,
 ];
 
-/// Every effect, in vocabulary order.
-pub const ALL_EFFECTS: [Effect; 7] = [
+/// Every built-in effect, in vocabulary order.
+pub const ALL_EFFECTS: [Effect; 14] = [
     Effect::Quantization,
     Effect::White,
     Effect::Flicker,
@@ -41,6 +80,13 @@ pub const ALL_EFFECTS: [Effect; 7] = [
     Effect::RateRamp,
     Effect::Markov,
     Effect::Sinusoid,
+    Effect::Resolution,
+    Effect::BiasStep,
+    Effect::Temperature,
+    Effect::Lowpass,
+    Effect::Lowpass2,
+    Effect::Boxcar,
+    Effect::Bartlett,
 ];
 
 /// One conventional display unit: `display = canonical × factor`.
@@ -77,9 +123,137 @@ impl UnitFamily {
     }
 }
 
+/// How an effect enters the Allan variance and the covariance of the estimates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// A Gaussian noise with a structure function.
+    Stochastic,
+    /// A constant rate ramp: every second difference is the same.
+    Ramp,
+    /// A random-phase sinusoid.
+    Sine,
+    /// A deterministic signal localised or shaped in time (step, temperature, warm-up).
+    Signal,
+}
+
+/// A non-linear parameter of an effect and its search range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamSpec {
+    pub name: String,
+    pub unit: String,
+    /// Search range [lo, hi] and whether the grid is logarithmic.
+    pub lo: f64,
+    pub hi: f64,
+    pub log: bool,
+    /// Grid points per decade (log) or in all (linear).
+    pub density: f64,
+}
+
+/// What the bases of record-dependent effects need to know about the recording.
+#[derive(Debug, Clone, Default)]
+pub struct Context {
+    /// Sample period [s].
+    pub tau0: f64,
+    /// Segments of uninterrupted samples: (index of the first sample counted from the start of
+    /// the record as if there were no gaps, number of samples).
+    pub segments: Vec<(u64, u64)>,
+    /// The exact overlapping Allan variance of the temperature column [°C²] at averaging factors
+    /// m (ascending), when the record has one.
+    pub temp_avar: Option<Vec<(u64, f64)>>,
+    /// Shortest and longest τ of the measured points [s] (search ranges).
+    pub tau_min: f64,
+    pub tau_max: f64,
+}
+
+impl Context {
+    /// A context for an uninterrupted record of `n` samples.
+    pub fn uniform(tau0: f64, n: u64) -> Context {
+        Context {
+            tau0,
+            segments: vec![(0, n)],
+            temp_avar: None,
+            tau_min: tau0,
+            tau_max: tau0 * (n as f64 / 4.0).max(1.0),
+        }
+    }
+
+    /// Total number of samples.
+    pub fn samples(&self) -> u64 {
+        self.segments.iter().map(|s| s.1).sum()
+    }
+
+    /// Number of second differences at m over all segments.
+    pub fn terms(&self, m: u64) -> u64 {
+        self.segments
+            .iter()
+            .map(|&(_, l)| (l + 1).saturating_sub(2 * m))
+            .sum()
+    }
+}
+
+/// The basis of one term with its non-linear parameters fixed: σ²(m) = c · basis(m).
+#[derive(Debug, Clone)]
+pub enum Basis {
+    /// V(k) = factor · structure.v(k) per unit coefficient.
+    Stochastic { structure: Structure, factor: f64 },
+    /// σ² = (mτ0)²/2 per unit R².
+    Ramp,
+    /// Random-phase sinusoid at θ = 2πfτ0.
+    Sine { theta: f64 },
+    /// Values at the integer averaging factors (ascending m, exact for this record), interpolated
+    /// log-log elsewhere.
+    Table(Vec<(u64, f64)>),
+    /// Contributes nothing (an absent non-linear parameter).
+    Zero,
+}
+
+impl Basis {
+    /// The unit-coefficient Allan variance at m samples (τ = m·τ0).
+    pub fn avar(&self, m: f64, tau0: f64) -> f64 {
+        match self {
+            Basis::Stochastic { structure, factor } => factor * structure.avar(m),
+            Basis::Ramp => (m * tau0).powi(2) / 2.0,
+            Basis::Sine { theta } => sine_avar(m, *theta),
+            Basis::Table(t) => interp_loglog(t, m),
+            Basis::Zero => 0.0,
+        }
+    }
+}
+
+fn sine_avar(m: f64, theta: f64) -> f64 {
+    let h = (theta / 2.0).sin();
+    if h.abs() < 1e-300 {
+        return 0.0;
+    }
+    (m * theta / 2.0).sin().powi(4) / (m * m * h * h)
+}
+
+fn interp_loglog(t: &[(u64, f64)], m: f64) -> f64 {
+    if t.is_empty() {
+        return 0.0;
+    }
+    if let Some(&(_, v)) = t.iter().find(|p| p.0 as f64 == m) {
+        return v;
+    }
+    let i = t.partition_point(|p| (p.0 as f64) < m);
+    if i == 0 {
+        return t[0].1;
+    }
+    if i == t.len() {
+        return t[t.len() - 1].1;
+    }
+    let (m0, v0) = (t[i - 1].0 as f64, t[i - 1].1);
+    let (m1, v1) = (t[i].0 as f64, t[i].1);
+    if v0 <= 0.0 || v1 <= 0.0 {
+        return v0 + (v1 - v0) * (m - m0) / (m1 - m0);
+    }
+    let f = (m / m0).ln() / (m1 / m0).ln();
+    (v0.ln() + f * (v1 / v0).ln()).exp()
+}
+
 impl Effect {
     /// The name used in the vocabulary, the CLI and the JSON output.
-    pub fn name(self) -> &'static str {
+    pub fn name(&self) -> &str {
         match self {
             Effect::Quantization => "quantization",
             Effect::White => "white",
@@ -88,10 +262,18 @@ impl Effect {
             Effect::RateRamp => "rate_ramp",
             Effect::Markov => "markov",
             Effect::Sinusoid => "sinusoid",
+            Effect::Resolution => "resolution",
+            Effect::BiasStep => "bias_step",
+            Effect::Temperature => "temperature",
+            Effect::Lowpass => "lowpass",
+            Effect::Lowpass2 => "lowpass2",
+            Effect::Boxcar => "boxcar",
+            Effect::Bartlett => "bartlett",
+            Effect::User(u) => &u.name,
         }
     }
 
-    /// Parse a vocabulary name (a few common aliases accepted).
+    /// Parse a built-in vocabulary name (a few common aliases accepted).
     pub fn parse(s: &str) -> Option<Effect> {
         Some(
             match s.trim().to_ascii_lowercase().replace('-', "_").as_str() {
@@ -102,22 +284,52 @@ impl Effect {
                 "rate_ramp" | "ramp" | "r" => Effect::RateRamp,
                 "markov" | "gauss_markov" | "correlated" => Effect::Markov,
                 "sinusoid" | "sine" | "sinusoidal" => Effect::Sinusoid,
+                "resolution" | "lsb" | "rounding" => Effect::Resolution,
+                "bias_step" | "step" => Effect::BiasStep,
+                "temperature" | "temp" | "warm_up" | "warmup" => Effect::Temperature,
+                "lowpass" | "lowpass1" | "dlpf" => Effect::Lowpass,
+                "lowpass2" => Effect::Lowpass2,
+                "boxcar" | "moving_average" => Effect::Boxcar,
+                "bartlett" | "triangular" => Effect::Bartlett,
                 _ => return None,
             },
         )
     }
 
-    /// Number of parameters (1 amplitude + 0 or 1 non-linear).
-    pub fn n_params(self) -> usize {
-        if self.nonlinear_name().is_some() {
-            2
-        } else {
-            1
+    /// How the effect enters the statistics.
+    pub fn kind(&self) -> Kind {
+        match self {
+            Effect::RateRamp => Kind::Ramp,
+            Effect::Sinusoid => Kind::Sine,
+            Effect::BiasStep | Effect::Temperature => Kind::Signal,
+            _ => Kind::Stochastic,
         }
     }
 
+    /// Whether the amplitude is estimated outside the Allan fit (in the time domain or from the
+    /// data's lattice) and enters the Allan model as a known term.
+    pub fn time_domain(&self) -> bool {
+        matches!(
+            self,
+            Effect::BiasStep | Effect::Temperature | Effect::Resolution
+        )
+    }
+
+    /// Whether a model may hold more than one term of this effect.
+    pub fn repeatable(&self) -> bool {
+        matches!(self, Effect::Markov | Effect::Sinusoid | Effect::BiasStep)
+    }
+
+    /// A filter effect describes the white noise it shapes, so it takes the white term's place.
+    pub fn replaces_white(&self) -> bool {
+        matches!(
+            self,
+            Effect::Lowpass | Effect::Lowpass2 | Effect::Boxcar | Effect::Bartlett
+        )
+    }
+
     /// Name of the amplitude parameter (the square root of the linear coefficient).
-    pub fn amp_name(self) -> &'static str {
+    pub fn amp_name(&self) -> &str {
         match self {
             Effect::Quantization => "Q",
             Effect::White => "N",
@@ -126,21 +338,17 @@ impl Effect {
             Effect::RateRamp => "R",
             Effect::Markov => "sigma",
             Effect::Sinusoid => "amplitude",
-        }
-    }
-
-    /// Name of the non-linear parameter, if the effect has one.
-    pub fn nonlinear_name(self) -> Option<&'static str> {
-        match self {
-            Effect::Markov => Some("tau_c"),
-            Effect::Sinusoid => Some("freq_hz"),
-            _ => None,
+            Effect::Resolution => "lsb",
+            Effect::BiasStep => "size",
+            Effect::Temperature => "coefficient",
+            Effect::Lowpass | Effect::Lowpass2 | Effect::Boxcar | Effect::Bartlett => "N",
+            Effect::User(u) => &u.amplitude.name,
         }
     }
 
     /// Canonical unit of the amplitude parameter for a channel in unit `u` (τ in seconds).
-    pub fn amp_unit(self, u: &str) -> String {
-        // u·s and u/s simplified for the usual channel units (deg/s·s = deg, m/s²/s = m/s³)
+    /// `warm_up`: the temperature effect without a temperature column (amplitude in u).
+    pub fn amp_unit(&self, u: &str, warm_up: bool) -> String {
         match (self, u) {
             (Effect::Quantization, "deg/s") => return "deg".into(),
             (Effect::Quantization, "rad/s") => return "rad".into(),
@@ -152,18 +360,233 @@ impl Effect {
         }
         match self {
             Effect::Quantization => format!("{u}·s"),
-            Effect::White => format!("{u}·√s"),
-            Effect::Flicker | Effect::Markov | Effect::Sinusoid => u.to_string(),
+            Effect::White
+            | Effect::Lowpass
+            | Effect::Lowpass2
+            | Effect::Boxcar
+            | Effect::Bartlett => {
+                format!("{u}·√s")
+            }
+            Effect::Flicker
+            | Effect::Markov
+            | Effect::Sinusoid
+            | Effect::Resolution
+            | Effect::BiasStep => u.to_string(),
+            Effect::Temperature => {
+                if warm_up {
+                    u.to_string()
+                } else {
+                    format!("{u}/°C")
+                }
+            }
             Effect::RateRandomWalk => format!("{u}/√s"),
             Effect::RateRamp => format!("{u}/s"),
+            Effect::User(e) => e.amplitude.unit.replace('u', u),
         }
     }
 
-    /// Canonical unit of the non-linear parameter.
-    pub fn nonlinear_unit(self) -> Option<&'static str> {
+    /// The non-linear parameters and their search ranges for a record (`ctx`). The temperature
+    /// effect has none with a temperature column and a warm-up time constant without one.
+    pub fn nonlinear(&self, ctx: &Context) -> Vec<ParamSpec> {
+        let (tmin, tmax, tau0) = (
+            ctx.tau_min.max(ctx.tau0),
+            ctx.tau_max.max(ctx.tau0),
+            ctx.tau0,
+        );
+        let spec = |name: &str, unit: &str, lo: f64, hi: f64, density: f64| ParamSpec {
+            name: name.into(),
+            unit: unit.into(),
+            lo,
+            hi,
+            log: true,
+            density,
+        };
+        let record = ctx.samples() as f64 * tau0;
         match self {
-            Effect::Markov => Some("s"),
-            Effect::Sinusoid => Some("Hz"),
+            Effect::Markov => vec![spec(
+                "tau_c",
+                "s",
+                (tmin / 4.0).max(tau0 / 8.0),
+                4.0 * tmax,
+                16.0,
+            )],
+            Effect::Sinusoid => vec![spec("freq_hz", "Hz", 0.25 / tmax, 0.5 / tau0 * 0.999, 80.0)],
+            // A sensor's own filter acts within a few hundred samples: corners from fs/2000 to
+            // 2·fs, lengths up to 1024 samples. Slower correlation is a Markov process.
+            Effect::Lowpass | Effect::Lowpass2 => vec![spec(
+                "cutoff_hz",
+                "Hz",
+                1.0 / (2000.0 * tau0),
+                2.0 / tau0,
+                16.0,
+            )],
+            Effect::Boxcar | Effect::Bartlett => {
+                let hi = (ctx.samples() as f64 / 16.0).clamp(2.0, 1024.0);
+                vec![spec("length", "samples", 1.0, hi, 24.0)]
+            }
+            Effect::BiasStep => vec![ParamSpec {
+                name: "time_s".into(),
+                unit: "s".into(),
+                lo: 0.0,
+                hi: record,
+                log: false,
+                density: 0.0,
+            }],
+            Effect::Temperature if ctx.temp_avar.is_none() => {
+                vec![spec(
+                    "time_constant_s",
+                    "s",
+                    record / 300.0,
+                    record * 3.0,
+                    8.0,
+                )]
+            }
+            Effect::User(u) => u.params.clone(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The basis for fixed non-linear parameters `theta` (as ordered by [`Effect::nonlinear`]).
+    pub fn basis(&self, theta: &[f64], ctx: &Context) -> Result<Basis, String> {
+        let tau0 = ctx.tau0;
+        let th = |i: usize| theta.get(i).copied().unwrap_or(f64::NAN);
+        let pi = std::f64::consts::PI;
+        Ok(match self {
+            Effect::Quantization => Basis::Stochastic {
+                structure: Structure::PhaseWhite,
+                factor: 1.0 / (tau0 * tau0),
+            },
+            Effect::White => Basis::Stochastic {
+                structure: Structure::Linear,
+                factor: 1.0 / tau0,
+            },
+            Effect::Resolution => Basis::Stochastic {
+                structure: Structure::Linear,
+                factor: 1.0 / 12.0,
+            },
+            Effect::Flicker => Basis::Stochastic {
+                structure: Structure::Flicker,
+                factor: 1.0,
+            },
+            Effect::RateRandomWalk => Basis::Stochastic {
+                structure: Structure::Cubic,
+                factor: tau0,
+            },
+            Effect::RateRamp => Basis::Ramp,
+            Effect::Markov => {
+                let tc = th(0);
+                if !(tc > 0.0) {
+                    return Ok(Basis::Zero);
+                }
+                Basis::Stochastic {
+                    structure: Structure::Ar1 {
+                        phi: (-tau0 / tc).exp(),
+                    },
+                    factor: 1.0,
+                }
+            }
+            Effect::Sinusoid => {
+                let f = th(0);
+                if !(f > 0.0) {
+                    return Ok(Basis::Zero);
+                }
+                Basis::Sine {
+                    theta: 2.0 * pi * f * tau0,
+                }
+            }
+            Effect::Lowpass => {
+                let fc = th(0);
+                if !(fc > 0.0) {
+                    return Ok(Basis::Zero);
+                }
+                let phi = (-2.0 * pi * fc * tau0).exp();
+                Basis::Stochastic {
+                    structure: Structure::Ar1 { phi },
+                    factor: (1.0 - phi) / (1.0 + phi) / tau0,
+                }
+            }
+            Effect::Lowpass2 => {
+                let fc = th(0);
+                if !(fc > 0.0) {
+                    return Ok(Basis::Zero);
+                }
+                let phi = (-2.0 * pi * fc * tau0).exp();
+                let q = phi * phi;
+                let g = (1.0 - phi).powi(4);
+                let (a, b) = ((1.0 + q) / (1.0 - q).powi(3), 1.0 / (1.0 - q).powi(2));
+                let t = RTable::from_fn(
+                    |k| g * phi.powi(k as i32) * (a + k as f64 * b),
+                    1e-13,
+                    50_000_000,
+                )?;
+                Basis::Stochastic {
+                    structure: Structure::Table(Arc::new(t)),
+                    factor: 1.0 / tau0,
+                }
+            }
+            Effect::Boxcar | Effect::Bartlett => {
+                let l = th(0);
+                if !(l >= 1.0) {
+                    return Ok(Basis::Zero);
+                }
+                let bartlett = matches!(self, Effect::Bartlett);
+                let r = |k: usize| {
+                    let x = k as f64 / l;
+                    let v = if bartlett {
+                        if x <= 1.0 {
+                            2.0 / 3.0 - x * x + x * x * x / 2.0
+                        } else if x < 2.0 {
+                            (2.0 - x).powi(3) / 6.0
+                        } else {
+                            0.0
+                        }
+                    } else {
+                        (1.0 - x).max(0.0)
+                    };
+                    v / l
+                };
+                let len = if bartlett { 2.0 * l } else { l }.ceil() as usize + 1;
+                let vals: Vec<f64> = (0..=len).map(r).collect();
+                Basis::Stochastic {
+                    structure: Structure::Table(Arc::new(RTable::new(&vals))),
+                    factor: 1.0 / tau0,
+                }
+            }
+            Effect::BiasStep => {
+                let t = th(0);
+                if !t.is_finite() {
+                    return Ok(Basis::Zero);
+                }
+                let s = (t / tau0).round().max(0.0) as u64;
+                Basis::Table(octaves(ctx).map(|m| (m, step_avar(s, m, ctx))).collect())
+            }
+            Effect::Temperature => match &ctx.temp_avar {
+                Some(t) => Basis::Table(t.clone()),
+                None => {
+                    let tw = th(0);
+                    if !(tw > 0.0) {
+                        return Ok(Basis::Zero);
+                    }
+                    let kappa = tw / tau0;
+                    Basis::Table(
+                        octaves(ctx)
+                            .map(|m| (m, warmup_avar(kappa, m, ctx)))
+                            .collect(),
+                    )
+                }
+            },
+            Effect::User(u) => u.basis(theta, tau0)?,
+        })
+    }
+
+    /// Log-log slope of σ(τ) for the power-law terms (None otherwise).
+    pub fn adev_slope(&self) -> Option<f64> {
+        match self {
+            Effect::Quantization => Some(-1.0),
+            Effect::White | Effect::Resolution => Some(-0.5),
+            Effect::Flicker => Some(0.0),
+            Effect::RateRandomWalk => Some(0.5),
+            Effect::RateRamp => Some(1.0),
             _ => None,
         }
     }
@@ -174,7 +597,7 @@ impl Effect {
     /// B[°/h] = 3600·B[°/s]; K[°/h/√h] = 3600·60·K[°/s/√s]; R[°/h²] = 3600²·R[°/s²];
     /// 1 µg = 9.80665e-6 m/s²; N[µg/√Hz] = N[m/s²·√s]/9.80665e-6 (a one-sided PSD level
     /// of white noise equals N², IEEE 952 C.2).
-    pub fn amp_display(self, family: UnitFamily) -> Option<DisplayUnit> {
+    pub fn amp_display(&self, family: UnitFamily, warm_up: bool) -> Option<DisplayUnit> {
         let d = |unit: &str, factor: f64| {
             Some(DisplayUnit {
                 unit: unit.to_string(),
@@ -192,54 +615,43 @@ impl Effect {
                 };
                 match self {
                     Effect::Quantization => d("arcsec", 3600.0 * k),
-                    Effect::White => d("°/√h", 60.0 * k),
-                    Effect::Flicker | Effect::Markov | Effect::Sinusoid => d("°/h", 3600.0 * k),
+                    Effect::White
+                    | Effect::Lowpass
+                    | Effect::Lowpass2
+                    | Effect::Boxcar
+                    | Effect::Bartlett => d("°/√h", 60.0 * k),
+                    Effect::Flicker | Effect::Markov | Effect::Sinusoid | Effect::BiasStep => {
+                        d("°/h", 3600.0 * k)
+                    }
+                    Effect::Temperature if warm_up => d("°/h", 3600.0 * k),
+                    Effect::Temperature => d("°/h/°C", 3600.0 * k),
                     Effect::RateRandomWalk => d("°/h/√h", 3600.0 * 60.0 * k),
                     Effect::RateRamp => d("°/h²", 3600.0 * 3600.0 * k),
+                    Effect::Resolution | Effect::User(_) => None,
                 }
             }
             UnitFamily::MPerS2 => match self {
                 Effect::Quantization => d("m/s", 1.0),
-                Effect::White => d("µg/√Hz", ug),
-                Effect::Flicker | Effect::Markov | Effect::Sinusoid => d("µg", ug),
+                Effect::White
+                | Effect::Lowpass
+                | Effect::Lowpass2
+                | Effect::Boxcar
+                | Effect::Bartlett => d("µg/√Hz", ug),
+                Effect::Flicker | Effect::Markov | Effect::Sinusoid | Effect::BiasStep => {
+                    d("µg", ug)
+                }
+                Effect::Temperature if warm_up => d("µg", ug),
+                Effect::Temperature => d("µg/°C", ug),
                 Effect::RateRandomWalk => d("µg/√s", ug),
                 Effect::RateRamp => d("µg/h", ug * 3600.0),
+                Effect::Resolution | Effect::User(_) => None,
             },
             UnitFamily::Other => None,
         }
     }
 
-    /// Allan-variance basis b(τ) so that σ²(τ) = c·b(τ), c = amplitude².
-    ///
-    /// `tau0` is the sampling interval: the Markov and sinusoid terms use the exact expression for
-    /// point-sampled data (see [`markov_avar_unit`], [`sinusoid_avar_unit`]) which tends to the
-    /// issue's continuous formula as τ0 → 0. `theta` is τ_c [s] or f [Hz]; ignored otherwise.
-    pub fn basis(self, tau: f64, tau0: f64, theta: f64) -> f64 {
-        match self {
-            Effect::Quantization => 3.0 / (tau * tau),
-            Effect::White => 1.0 / tau,
-            Effect::Flicker => 2.0 * std::f64::consts::LN_2 / std::f64::consts::PI,
-            Effect::RateRandomWalk => tau / 3.0,
-            Effect::RateRamp => tau * tau / 2.0,
-            Effect::Markov => markov_avar_unit(tau, tau0, theta),
-            Effect::Sinusoid => sinusoid_avar_unit(tau, tau0, theta),
-        }
-    }
-
-    /// Log-log slope of σ(τ) for the power-law terms (None for markov/sinusoid).
-    pub fn adev_slope(self) -> Option<f64> {
-        match self {
-            Effect::Quantization => Some(-1.0),
-            Effect::White => Some(-0.5),
-            Effect::Flicker => Some(0.0),
-            Effect::RateRandomWalk => Some(0.5),
-            Effect::RateRamp => Some(1.0),
-            _ => None,
-        }
-    }
-
     /// How the effect shows on the Allan plot — the signature used in the diagnosis text.
-    pub fn signature(self) -> &'static str {
+    pub fn signature(&self) -> &str {
         match self {
             Effect::Quantization => "slope −1 in σ(τ) at the shortest τ (phase/angle white noise)",
             Effect::White => "slope −½ in σ(τ); N is read at τ = 1 s",
@@ -254,20 +666,42 @@ impl Effect {
                 "an oscillation with envelope slope −1, a first maximum σ ≈ 0.725·A at \
                  τ ≈ 0.371/f and nulls at τ = k/f; a line at f in the PSD"
             }
+            Effect::Resolution => {
+                "a white floor of LSB²/12 per sample (slope −½), known from the spacing of the \
+                 values: it sets how far below the white line the shortest τ can go"
+            }
+            Effect::BiasStep => {
+                "slope +½ at long τ like a rate random walk (σ² ≈ Δ²τ/3T for a step Δ in a \
+                 record of length T), but one large jump in the time series instead of many small \
+                 ones; the robust Allan variance does not see it"
+            }
+            Effect::Temperature => {
+                "slope +½ to +1 at long τ, following the Allan variance of the temperature \
+                 column itself; in the time series the bias tracks the temperature"
+            }
+            Effect::Lowpass | Effect::Lowpass2 => {
+                "σ(τ) below the white line at τ ≲ 1/(2πf_c) (slope +½ at the shortest τ for one \
+                 pole, steeper for two), joining it for τ ≫ 1/f_c; the PSD falls off above f_c"
+            }
+            Effect::Boxcar | Effect::Bartlett => {
+                "σ(τ) below the white line for τ shorter than the filter length L·τ0 and on it \
+                 beyond; the PSD has the filter's sinc² (boxcar) or sinc⁴ (Bartlett) shape"
+            }
+            Effect::User(u) => &u.signature,
         }
     }
 
     /// A paragraph on the physics: cause in a MEMS IMU, typical MPU-6050 magnitude, Allan look.
-    pub fn physics(self) -> &'static str {
+    pub fn physics(&self) -> &str {
         match self {
             Effect::Quantization => {
                 "Quantization noise is white noise on the integrated output (angle or velocity): \
                  the rounding error of a quantizer that accumulates rate into counts, or timing \
                  jitter of the samples. On a rate-output MEMS part such as the MPU-6050 the rate \
-                 LSB (1/131 °/s at ±250 °/s) rounds each sample, which mostly adds white rate \
-                 noise of LSB/√12 per sample; a genuine Q term usually comes from sample-time \
-                 jitter or from digital filtering/decimation. Typical fitted Q on an MPU-6050 at \
-                 100 Hz is a few 1e-4 °. It dominates only the first one or two octaves of τ."
+                 LSB (1/131 °/s at ±250 °/s) rounds each sample, which adds white rate noise \
+                 (the resolution effect); a genuine Q term usually comes from sample-time jitter \
+                 or from digital filtering/decimation. Typical fitted Q on an MPU-6050 at 100 Hz \
+                 is a few 1e-4 °. It dominates only the first one or two octaves of τ."
             }
             Effect::White => {
                 "White rate noise (angle/velocity random walk): thermo-mechanical (Brownian) \
@@ -287,25 +721,27 @@ impl Effect {
             Effect::RateRandomWalk => {
                 "Rate random walk: the bias itself random walks (integrated white noise on the \
                  rate), driven by temperature changes, package stress relaxation and slow \
-                 electronic drift. It decides how long a bias calibration stays valid (the seed's \
-                 use for recalibration planning). On an MPU-6050 at room conditions K is of order \
-                 0.001–0.01 °/s/√s and needs recordings of many minutes to hours to appear. \
-                 Slope +½ at long τ."
+                 electronic drift. It decides how long a bias calibration stays valid (the use \
+                 Jaime et al. make of it for recalibration planning). On an MPU-6050 at room \
+                 conditions K is of order 0.001–0.01 °/s/√s and needs recordings of many minutes \
+                 to hours to appear. Slope +½ at long τ. A bias step or a temperature-driven drift \
+                 looks the same on the Allan plot; the lab checks the time series for those."
             }
             Effect::RateRamp => {
                 "Rate ramp: a deterministic, monotonic bias drift over the record — warm-up after \
                  power-on, a steady temperature change, or a slow motion of the platform. Often \
                  the first minutes of an MPU-6050 recording drift by 0.01–0.1 °/s while the die \
                  warms. It appears as slope +1 at the longest τ, and a longer warm-up before \
-                 recording usually removes it."
+                 recording usually removes it. It is a non-stationarity, not a noise: its value \
+                 describes this record, not the sensor."
             }
             Effect::Markov => {
                 "Exponentially correlated (first-order Gauss–Markov) noise: a noise with finite \
-                 memory τ_c. In a MEMS IMU it arises from a low-pass filter applied to white noise \
-                 — the MPU-6050 digital low-pass filter (DLPF; the seed uses 5 Hz, τ_c = \
-                 1/(2π·5 Hz) ≈ 32 ms) — or from mechanical/thermal relaxations with a time \
-                 constant. It makes the short-τ deviation fall below the white-noise line (a \
-                 bump of slope +½ rising to a maximum near τ ≈ 1.9·τ_c, then −½)."
+                 memory τ_c, from a mechanical or thermal relaxation with a time constant, or a \
+                 slowly fluctuating defect. It makes a bump on the Allan curve (slope +½ rising to \
+                 a maximum near τ ≈ 1.9·τ_c, then −½). White noise shaped by the sensor's own \
+                 low-pass filter is the lowpass effect, which ties the correlated part to the \
+                 white noise it filters."
             }
             Effect::Sinusoid => {
                 "A sinusoidal disturbance: vibration of the bench or a fan, mains pickup \
@@ -314,6 +750,55 @@ impl Effect {
                  host's sampling. It gives an oscillating Allan curve with nulls at τ = k/f and a \
                  single line in the power spectral density."
             }
+            Effect::Resolution => {
+                "Resolution: each rate sample is an integer number of LSBs, so rounding adds a \
+                 white error of LSB²/12 per sample. The LSB is read from the spacing of the values \
+                 (the lattice they sit on); the white term N then describes the sensor's own \
+                 noise above that floor. When N² approaches LSB²·τ0/12, the channel is \
+                 resolution-limited and a finer range or more gain would show more of its noise."
+            }
+            Effect::BiasStep => {
+                "A bias step: the bias jumps at one instant — a mechanical shock, a change of \
+                 the sensor's range or filter setting, a brown-out and re-initialisation, or a \
+                 solder joint or connector that shifts. It is not noise: averaged over the record \
+                 it looks like a rate random walk of K² ≈ Δ²/T, which says nothing about the \
+                 sensor's long-term stability. The step is located by a change-point test on the \
+                 time series and estimated there."
+            }
+            Effect::Temperature => {
+                "Temperature sensitivity of the bias: the MEMS structure and its readout change \
+                 with die temperature (thermal stress, the drive amplitude), so the bias follows \
+                 the temperature — typically 0.01–0.05 °/s/°C for an MPU-6050 gyro and ~1 mg/°C \
+                 for its accelerometer. With a temperature column the coefficient is regressed on \
+                 it and the Allan curve is shown before and after compensation; without one, a \
+                 warm-up after power-on shows as an exponential approach of the bias with a time \
+                 constant of minutes. Like a ramp it is a non-stationarity of this record."
+            }
+            Effect::Lowpass => {
+                "The sensor's own digital low-pass filter on its white noise, one pole at f_c: \
+                 the MPU-6050's DLPF (DLPF_CFG 1–6: 188, 98, 42, 20, 10, 5 Hz gyro bandwidth in \
+                 its register map) or an analog anti-alias filter. Sampled, it is a Gauss–Markov \
+                 sequence with τ_c = 1/(2πf_c) whose variance is fixed by the white noise it \
+                 filters, so it has one parameter fewer than a free Markov term."
+            }
+            Effect::Lowpass2 => {
+                "A two-pole digital low-pass on the sensor's white noise (two cascaded \
+                 first-order sections at f_c): many MEMS parts implement their DLPF as a \
+                 second-order section; it falls off twice as steeply above f_c as one pole."
+            }
+            Effect::Boxcar => {
+                "A moving-average (boxcar) decimation filter: the part samples its sensing \
+                 element internally at a higher rate and outputs the mean of the last L output \
+                 periods' worth of internal samples (CIC/sinc filters of sigma-delta readouts). \
+                 Neighbouring output samples then share internal samples and are correlated for \
+                 L samples."
+            }
+            Effect::Bartlett => {
+                "A triangular (Bartlett, sinc²) decimation filter: two boxcar stages of L output \
+                 samples in cascade, common in MEMS readouts (second-order CIC); it correlates the \
+                 output for 2L samples with a smoother shape than a single boxcar."
+            }
+            Effect::User(u) => &u.physics,
         }
     }
 }
@@ -324,16 +809,82 @@ impl fmt::Display for Effect {
     }
 }
 
+/// The octave averaging factors 1, 2, 4, … up to the longest segment's quarter.
+fn octaves(ctx: &Context) -> impl Iterator<Item = u64> {
+    let longest = ctx.segments.iter().map(|s| s.1).max().unwrap_or(0);
+    (0..63)
+        .map(|k| 1u64 << k)
+        .take_while(move |&m| 2 * m < longest.max(2))
+}
+
+/// Σ_{u=1}^{U} d(u)² for the triangular response of an m-sample Allan difference to a unit step,
+/// d(u) = u/m for 0 < u ≤ m, (2m − u)/m for m < u < 2m, U clamped to [0, 2m].
+fn tri_sq_sum(u: i128, m: i128) -> f64 {
+    let s = |n: i128| -> f64 {
+        if n <= 0 {
+            0.0
+        } else {
+            (n * (n + 1) * (2 * n + 1)) as f64 / 6.0
+        }
+    };
+    let u = u.clamp(0, 2 * m);
+    let mm = (m * m) as f64;
+    if u <= m {
+        s(u) / mm
+    } else {
+        (s(m) + s(m - 1) - s(2 * m - u - 1)) / mm
+    }
+}
+
+/// Expected overlapping Allan variance at m of a unit bias step at sample `s` (0-based, counted as
+/// in [`Context::segments`]): Σ_i d(s − i)² / (2M) over the differences of every segment.
+pub fn step_avar(s: u64, m: u64, ctx: &Context) -> f64 {
+    let total = ctx.terms(m);
+    if total == 0 {
+        return 0.0;
+    }
+    let mut acc = 0.0;
+    for &(a, l) in &ctx.segments {
+        if s <= a || s >= a + l || l + 1 < 2 * m {
+            continue;
+        }
+        let mi = m as i128;
+        let (lo_i, hi_i) = (a as i128, (a + l) as i128 - 2 * mi);
+        // u = s − i runs over [s − hi_i, s − lo_i]
+        let (u_lo, u_hi) = (s as i128 - hi_i, s as i128 - lo_i);
+        acc += tri_sq_sum(u_hi, mi) - tri_sq_sum(u_lo - 1, mi);
+    }
+    acc / (2.0 * total as f64)
+}
+
+/// Expected overlapping Allan variance at m of a unit exponential e^{−k/κ} (k the sample index
+/// from the record's start): the window means of an exponential are exponentials, so the sum over
+/// differences is geometric.
+pub fn warmup_avar(kappa: f64, m: u64, ctx: &Context) -> f64 {
+    let total = ctx.terms(m);
+    if total == 0 || !(kappa > 0.0) {
+        return 0.0;
+    }
+    let mf = m as f64;
+    let e1 = -(-1.0 / kappa).exp_m1(); // 1 − e^{−1/κ}
+    let em = -(-mf / kappa).exp_m1(); // 1 − e^{−m/κ}
+    let g = em / (mf * e1);
+    let d2 = (g * em).powi(2);
+    let mut acc = 0.0;
+    for &(a, l) in &ctx.segments {
+        let mm = (l + 1).saturating_sub(2 * m) as f64;
+        if mm == 0.0 {
+            continue;
+        }
+        let geo = -(-2.0 * mm / kappa).exp_m1() / -(-2.0 / kappa).exp_m1();
+        acc += (-2.0 * a as f64 / kappa).exp() * geo;
+    }
+    d2 * acc / (2.0 * total as f64)
+}
+
 /// Allan variance of unit-variance first-order Gauss–Markov noise with correlation time `tau_c`,
-/// point-sampled every `tau0`, at τ = m·τ0 (m may be fractional).
-///
-/// Derivation: for a stationary sequence with autocovariance R(k) = φ^|k|, φ = e^{−τ0/τ_c},
-/// σ²(m) = (4S(m) − S(2m)) / (2m²) with S(n) = Σ_{|k|<n}(n−|k|)R(k)
-/// = n(1+φ)/(1−φ) − 2φ(1−φⁿ)/(1−φ)². With a = 1−φ, b = 1−φ^m:
-/// σ²(m) = [2m(2−a)a − 2(1−a)b(2+b)] / (2m²a²). As τ0 → 0 this is IEEE 952 eq. C.7 (the issue's
-/// formula). For x = τ/τ_c < 1e-4 the cancellation is avoided by the expansion
-/// σ² = β(2m²+1)/(3m) − x²/2 + 7x³/30 (β = τ0/τ_c), whose first term is the sampled
-/// rate-random-walk form with K² = 2/τ_c. Relative accuracy ≈ 1e-8 or better everywhere.
+/// point-sampled every `tau0`, at τ = m·τ0 (the sampled AR(1) form of [`Structure::Ar1`]; tends to
+/// IEEE 952 eq. C.7 as τ0 → 0, see [`markov_avar_continuous`]).
 pub fn markov_avar_unit(tau: f64, tau0: f64, tau_c: f64) -> f64 {
     if !(tau_c > 0.0) || !(tau > 0.0) {
         return 0.0;
@@ -341,16 +892,11 @@ pub fn markov_avar_unit(tau: f64, tau0: f64, tau_c: f64) -> f64 {
     if tau0 <= 0.0 {
         return markov_avar_continuous(tau, tau_c);
     }
-    let m = tau / tau0;
-    let beta = tau0 / tau_c;
-    let x = tau / tau_c;
-    if x < 1e-4 {
-        return beta * (2.0 * m * m + 1.0) / (3.0 * m) - x * x / 2.0 + 7.0 * x * x * x / 30.0;
+    Structure::Ar1 {
+        phi: (-tau0 / tau_c).exp(),
     }
-    let a = -(-beta).exp_m1();
-    let b = -(-x).exp_m1();
-    let num = 2.0 * m * (2.0 - a) * a - 2.0 * (1.0 - a) * b * (2.0 + b);
-    (num / (2.0 * m * m * a * a)).max(0.0)
+    .avar(tau / tau0)
+    .max(0.0)
 }
 
 /// The continuous-time Gauss–Markov Allan variance (IEEE 952 C.7), unit steady-state variance:
@@ -383,21 +929,17 @@ pub fn markov_avar_continuous(tau: f64, tau_c: f64) -> f64 {
 
 /// Allan variance of a unit-amplitude sinusoid of frequency `f` point-sampled every `tau0`,
 /// averaged over phase (the overlapping estimator averages over all starting phases):
-/// σ²(m) = sin⁴(mθ/2) / (m² sin²(θ/2)), θ = 2πfτ0, from the Fejér kernel
-/// S(n) = ½·sin²(nθ/2)/sin²(θ/2). As τ0 → 0 it is IEEE 952 C.8, σ = A·sin²(πfτ)/(πfτ).
+/// σ²(m) = sin⁴(mθ/2) / (m² sin²(θ/2)), θ = 2πfτ0, from the Fejér kernel. As τ0 → 0 it is
+/// IEEE 952 C.8, σ = A·sin²(πfτ)/(πfτ).
 pub fn sinusoid_avar_unit(tau: f64, tau0: f64, f: f64) -> f64 {
     if !(f > 0.0) || !(tau > 0.0) {
         return 0.0;
     }
-    let x = std::f64::consts::PI * f * tau;
     if tau0 <= 0.0 {
-        let s = x.sin();
-        return s.powi(4) / (x * x);
+        let x = std::f64::consts::PI * f * tau;
+        return x.sin().powi(4) / (x * x);
     }
-    let m = tau / tau0;
-    let h = std::f64::consts::PI * f * tau0; // θ/2
-    let s = x.sin();
-    s.powi(4) / (m * m * h.sin().powi(2))
+    sine_avar(tau / tau0, 2.0 * std::f64::consts::PI * f * tau0)
 }
 
 #[cfg(test)]
@@ -444,10 +986,8 @@ mod tests {
             let s = markov_avar_unit(x, x.min(1.0) / 1e4, 1.0);
             assert!((c - s).abs() < 1e-6 * c, "x {x}: {c} vs {s}");
         }
-        // continuous series and closed form agree at the switch point
         let h = |x: f64| 2.0 / x - (3.0 - 4.0 * (-x).exp() + (-2.0 * x).exp()) / (x * x);
         assert!((markov_avar_continuous(0.4999999, 1.0) - h(0.4999999)).abs() < 1e-12);
-        // peak of σ at τ ≈ 1.89 τ_c with σ ≈ 0.618·sigma
         let (mut best, mut bt) = (0.0, 0.0);
         for i in 0..2000 {
             let t = 0.5 + i as f64 * 0.002;
@@ -465,14 +1005,96 @@ mod tests {
         let a = sinusoid_avar_unit(0.37, 1e-5, 1.0);
         let b = sinusoid_avar_unit(0.37, 0.0, 1.0);
         assert!((a - b).abs() < 1e-6 * b);
-        // nulls at τ = k/f
         assert!(sinusoid_avar_unit(2.0, 0.01, 1.0) < 1e-25);
+    }
+
+    /// Direct OADEV expectation of a deterministic signal: mean over differences of (ȳ2 − ȳ1)²/2.
+    fn signal_avar(x: &[f64], segs: &[(u64, u64)], m: usize) -> f64 {
+        let (mut acc, mut n) = (0.0, 0usize);
+        for &(a, l) in segs {
+            let (a, l) = (a as usize, l as usize);
+            for i in a..=(a + l).saturating_sub(2 * m) {
+                if i + 2 * m > a + l {
+                    break;
+                }
+                let y1: f64 = x[i..i + m].iter().sum::<f64>() / m as f64;
+                let y2: f64 = x[i + m..i + 2 * m].iter().sum::<f64>() / m as f64;
+                acc += (y2 - y1).powi(2);
+                n += 1;
+            }
+        }
+        acc / (2.0 * n as f64)
+    }
+
+    #[test]
+    fn step_and_warmup_bases_are_exact() {
+        let segs = vec![(0u64, 700u64), (750, 500)];
+        let ctx = Context {
+            tau0: 0.01,
+            segments: segs.clone(),
+            ..Context::default()
+        };
+        for s in [1u64, 40, 350, 699, 760, 1100] {
+            let x: Vec<f64> = (0..1250)
+                .map(|k| if k as u64 >= s { 1.0 } else { 0.0 })
+                .collect();
+            for m in [1usize, 3, 16, 100, 240] {
+                let want = signal_avar(&x, &segs, m);
+                let got = step_avar(s, m as u64, &ctx);
+                assert!(
+                    (got - want).abs() <= 1e-12 + 1e-9 * want,
+                    "s {s} m {m}: {got} vs {want}"
+                );
+            }
+        }
+        let kappa = 180.0;
+        let x: Vec<f64> = (0..1250).map(|k| (-(k as f64) / kappa).exp()).collect();
+        for m in [1usize, 5, 64, 200] {
+            let want = signal_avar(&x, &segs, m);
+            let got = warmup_avar(kappa, m as u64, &ctx);
+            assert!((got - want).abs() <= 1e-9 * want, "m {m}: {got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn filters_join_the_white_line_and_match_their_impulse_responses() {
+        let ctx = Context::uniform(0.01, 1 << 16);
+        let white = Effect::White.basis(&[], &ctx).unwrap();
+        for (e, th) in [
+            (Effect::Lowpass, 5.0),
+            (Effect::Lowpass2, 5.0),
+            (Effect::Boxcar, 8.0),
+            (Effect::Bartlett, 8.0),
+        ] {
+            let b = e.basis(&[th], &ctx).unwrap();
+            let (lo, hi) = (b.avar(1.0, 0.01), b.avar(4096.0, 0.01));
+            assert!(lo < 0.7 * white.avar(1.0, 0.01), "{e}: {lo}");
+            assert!(
+                (hi / white.avar(4096.0, 0.01) - 1.0).abs() < 0.01,
+                "{e}: {hi}"
+            );
+        }
+        // two cascaded sections: the direct impulse-response sum
+        let (fc, tau0) = (5.0, 0.01);
+        let phi = (-2.0 * std::f64::consts::PI * fc * tau0).exp();
+        let h: Vec<f64> = (0..5000)
+            .map(|n| (1.0 - phi).powi(2) * (n as f64 + 1.0) * phi.powi(n))
+            .collect();
+        let r = |k: usize| h.iter().zip(&h[k..]).map(|(a, b)| a * b).sum::<f64>() / tau0;
+        let v =
+            |n: usize| n as f64 * r(0) + 2.0 * (1..n).map(|k| (n - k) as f64 * r(k)).sum::<f64>();
+        let b = Effect::Lowpass2.basis(&[fc], &ctx).unwrap();
+        for m in [1usize, 3, 10, 77] {
+            let want = (4.0 * v(m) - v(2 * m)) / (2.0 * (m * m) as f64);
+            let got = b.avar(m as f64, tau0);
+            assert!((got - want).abs() < 1e-9 * want, "m {m}: {got} vs {want}");
+        }
     }
 
     #[test]
     fn names_roundtrip() {
         for e in ALL_EFFECTS {
-            assert_eq!(Effect::parse(e.name()), Some(e));
+            assert_eq!(Effect::parse(e.name()), Some(e.clone()));
         }
     }
 }

@@ -1,21 +1,43 @@
-//! Weighted least-squares fit of a sum of effects to a measured Allan curve.
+//! Generalised least-squares fit of a sum of effects to a measured Allan curve.
 //!
 //! Model: σ²(τ) = Σ_k c_k·b_k(τ; θ_k), c_k ≥ 0 (see [`Effect::basis`]).
-//! Weights: an Allan-variance estimate with ν equivalent degrees of freedom is distributed as
-//! σ²·χ²_ν/ν, so var(σ̂²) ≈ 2σ⁴/ν (NIST SP 1065 §5.3). The fit minimises
-//! χ² = Σ_j ν_j (σ̂²_j − σ²_model,j)² / (2 σ⁴_model,j) by iteratively re-weighted non-negative least
-//! squares: the weights use the model (not the noisy measurement, whose low points would otherwise
-//! pull the fit down), starting from the measurement. The non-linear parameters τ_c (markov) and
-//! f (sinusoid) are found by a dense logarithmic grid search of the profile χ² followed by a
-//! golden-section refinement; several non-linear terms are refined by coordinate descent.
-//! Uncertainties: the inverse of the Fisher matrix JᵀWJ at the optimum, scaled by χ²/dof when that
-//! exceeds 1 (Bevington & Robinson, *Data Reduction and Error Analysis*, §8.5).
-use crate::effect::Effect;
+//!
+//! **Weights.** The octave overlapping Allan estimates are correlated (neighbouring octaves share
+//! most of their data) and, on long records, precise to 0.1 % at short τ. The fit therefore
+//! minimises the generalised χ² = rᵀ C⁻¹ r, r = σ̂² − σ²_model, with C the covariance of the
+//! estimates *under the model* ([`crate::cov`], exact for Gaussian noise on this record's
+//! segments) — the weighting GMWM uses in wavelet-variance space (Guerrier et al., JASA 2013).
+//! C depends on the model, so the fit iterates (at most [`OUTER_ITERATIONS`] times): fit with C
+//! fixed, recompute C from the new model. With C fixed the problem is linear in c: the whitened
+//! system L⁻¹S⁻¹(σ̂² − b·c), C = S ρ S, ρ = L Lᵀ, is solved by Lawson–Hanson NNLS.
+//! When only points are known (e.g. a device's table without its record), C is diagonal from the
+//! points' EDFs, var(σ̂²) = 2σ⁴/ν (NIST SP 1065 §5.3), the model's σ⁴ in place of the noisy
+//! measurement's.
+//!
+//! **Non-linear parameters** (τ_c, f, a filter corner or length, a user effect's parameters) are
+//! found on the profile χ² (NNLS inside): a dense grid over the effect's range, then a bounded
+//! golden-section refinement, several parameters by coordinate descent.
+//!
+//! **Uncertainties.** Cov = (JᵀC⁻¹J)⁻¹ at the optimum over every coefficient and free non-linear
+//! parameter, scaled by χ²/dof when that exceeds 1 (Bevington & Robinson, *Data Reduction and
+//! Error Analysis*, §8.5). Every term reports its estimate, σ and interval whether or not it is
+//! detected (c > 2σ_c); the model curve is exactly Σ c_k b_k with the reported values.
+use crate::cov::{Component, CovCache, Design, Deterministic};
+use crate::effect::{Basis, Context, Effect, ParamSpec};
 use crate::nnls::nnls;
 use nalgebra::{DMatrix, DVector};
 use std::fmt;
+use std::sync::Arc;
 
-/// One measured Allan point: τ [s], the deviation and its 68.3 % bounds [u], and its EDF.
+/// Outer iterations of the covariance update.
+pub const OUTER_ITERATIONS: usize = 4;
+/// Golden-section iterations per non-linear parameter.
+const GOLDEN_ITERATIONS: usize = 60;
+/// Coordinate-descent rounds over several non-linear parameters.
+const NONLINEAR_ROUNDS: usize = 4;
+
+/// One measured Allan point: τ [s], the deviation and its 68.3 % bounds [u], its EDF (as the
+/// estimator reported it), and the averaging factor m (0 when unknown: derived from τ/τ0).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Point {
     pub tau: f64,
@@ -23,6 +45,7 @@ pub struct Point {
     pub edf: f64,
     pub lo: f64,
     pub hi: f64,
+    pub m: u64,
 }
 
 /// Why a fit could not be made.
@@ -32,8 +55,10 @@ pub enum FitError {
     BadPoint { index: usize, what: String },
     /// Fewer usable points than parameters + 1.
     TooFewPoints { points: usize, params: usize },
-    /// The same effect was listed twice, or no effect at all.
+    /// The same effect was listed twice, no effect at all, or a bad parameter.
     BadTerms(String),
+    /// A numerical routine did not converge within its iteration cap.
+    NoConvergence(String),
 }
 
 impl fmt::Display for FitError {
@@ -47,21 +72,132 @@ impl fmt::Display for FitError {
                 params + 1
             ),
             FitError::BadTerms(s) => write!(f, "{s}"),
+            FitError::NoConvergence(s) => write!(f, "{s}"),
         }
     }
 }
 
 impl std::error::Error for FitError {}
 
-/// Optional starting information for the non-linear parameters.
+/// How the covariance of the Allan estimates is obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Weighting {
+    /// The full covariance under the model, for points computed by the overlapping estimator
+    /// from the record described by the context.
+    Model,
+    /// Independent points with the EDFs they came with.
+    Diagonal,
+}
+
+/// What the fit is given: the points, what is known about the record, and how to weight.
+#[derive(Debug, Clone)]
+pub struct Measurement {
+    pub points: Vec<Point>,
+    pub ctx: Context,
+    pub weighting: Weighting,
+    /// The covariance pieces of this design, shared by every fit of the measurement.
+    pub cache: Arc<CovCache>,
+}
+
+impl Measurement {
+    /// A measurement; points without an averaging factor get m = round(τ/τ0).
+    pub fn new(points: Vec<Point>, ctx: Context, weighting: Weighting) -> Measurement {
+        let points = with_m(points, ctx.tau0);
+        let cache = Arc::new(CovCache::new(Design {
+            ms: points.iter().map(|p| p.m).collect(),
+            segments: ctx.segments.iter().map(|s| s.1).collect(),
+        }));
+        Measurement {
+            points,
+            ctx,
+            weighting,
+            cache,
+        }
+    }
+
+    /// Points from an uninterrupted record of `n` samples at `tau0` (full covariance).
+    pub fn from_record(points: Vec<Point>, tau0: f64, n: u64) -> Measurement {
+        let mut ctx = Context::uniform(tau0, n);
+        set_range(&mut ctx, &points);
+        Measurement::new(points, ctx, Weighting::Model)
+    }
+
+    /// Points alone (diagonal weights from their EDFs).
+    pub fn from_points(points: Vec<Point>, tau0: f64) -> Measurement {
+        let longest = points.iter().map(|p| p.tau).fold(tau0, f64::max);
+        let mut ctx = Context::uniform(tau0, ((longest / tau0) * 4.0).ceil() as u64);
+        set_range(&mut ctx, &points);
+        Measurement::new(points, ctx, Weighting::Diagonal)
+    }
+}
+
+fn with_m(mut points: Vec<Point>, tau0: f64) -> Vec<Point> {
+    for p in &mut points {
+        if p.m == 0 {
+            p.m = (p.tau / tau0).round().max(1.0) as u64;
+        }
+    }
+    points
+}
+
+/// Set the context's τ range from the points.
+pub fn set_range(ctx: &mut Context, points: &[Point]) {
+    if !points.is_empty() {
+        ctx.tau_min = points.iter().map(|p| p.tau).fold(f64::INFINITY, f64::min);
+        ctx.tau_max = points.iter().map(|p| p.tau).fold(0.0, f64::max);
+    }
+}
+
+/// A term to fit: the effect, optional starting or fixed non-linear parameters, and optionally a
+/// coefficient estimated elsewhere (time domain, data lattice) that the Allan fit takes as known.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TermSpec {
+    pub effect: Effect,
+    /// Starting values of the non-linear parameters (searched from these when given).
+    pub theta: Option<Vec<f64>>,
+    /// Keep the non-linear parameters at `theta` (e.g. a sinusoid at its periodogram line).
+    pub theta_fixed: bool,
+    /// 1σ of fixed non-linear parameters, when known.
+    pub theta_sigma: Option<Vec<f64>>,
+    /// A known coefficient c with its 1σ and the sign of the amplitude (time-domain estimates).
+    pub known: Option<Known>,
+}
+
+/// A coefficient estimated outside the Allan fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Known {
+    pub coef: f64,
+    pub coef_sigma: f64,
+    /// Sign of the amplitude (a step up or down, a positive or negative coefficient).
+    pub sign: f64,
+}
+
+impl TermSpec {
+    pub fn new(effect: Effect) -> TermSpec {
+        TermSpec {
+            effect,
+            theta: None,
+            theta_fixed: false,
+            theta_sigma: None,
+            known: None,
+        }
+    }
+}
+
+impl From<Effect> for TermSpec {
+    fn from(e: Effect) -> Self {
+        TermSpec::new(e)
+    }
+}
+
+/// Optional search hints, for the points-only entry point [`fit`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct FitOptions {
     /// A frequency [Hz] to include in the sinusoid search (e.g. the PSD line).
     pub freq_hint: Option<f64>,
     /// A correlation time [s] to include in the Markov search.
     pub tau_c_hint: Option<f64>,
-    /// Fix the sinusoid frequency (value [Hz], 1σ [Hz]) instead of searching it, e.g. to the
-    /// periodogram peak, which resolves f far better than octave-spaced Allan points.
+    /// Fix the sinusoid frequency (value [Hz], 1σ [Hz]) instead of searching it.
     pub freq_fixed: Option<(f64, f64)>,
 }
 
@@ -73,9 +209,14 @@ pub struct TermFit {
     pub coef: f64,
     /// 1σ of `coef`.
     pub coef_sigma: f64,
-    /// τ_c [s] or f [Hz] for markov / sinusoid, when the term is present.
-    pub theta: Option<f64>,
-    pub theta_sigma: Option<f64>,
+    /// Sign of the amplitude for signed effects (step size, temperature coefficient); +1 else.
+    pub sign: f64,
+    /// The non-linear parameters (names in `specs`).
+    pub theta: Vec<f64>,
+    pub theta_sigma: Vec<f64>,
+    pub specs: Vec<ParamSpec>,
+    /// The coefficient was estimated outside the Allan fit (time domain or data lattice).
+    pub known: bool,
     /// Whether the data support the term: c > 2σ_c.
     pub detected: bool,
 }
@@ -83,92 +224,122 @@ pub struct TermFit {
 /// A named parameter value in canonical units.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamValue {
-    pub name: &'static str,
-    /// Best estimate (0 when not detected).
+    pub name: String,
+    /// Best estimate (the value the model uses).
     pub value: f64,
     /// 1σ uncertainty (NaN when not defined).
     pub sigma: f64,
-    /// For a term not detected: the 2σ (≈97.7 % one-sided) upper bound.
+    /// 95 % interval (2σ on the coefficient for amplitudes, bounded at 0).
+    pub interval: (f64, f64),
+    /// For a term not detected: the 2σ (≈ 97.7 % one-sided) upper bound of the amplitude.
     pub upper_bound: Option<f64>,
 }
 
 impl TermFit {
-    /// The amplitude parameter √c (Q, N, B, K, R, sigma, amplitude).
+    /// The amplitude parameter √c (Q, N, B, K, R, sigma, amplitude), signed where it has a sign.
     pub fn amplitude(&self) -> f64 {
-        self.coef.max(0.0).sqrt()
+        self.sign * self.coef.max(0.0).sqrt()
     }
 
-    /// 1σ of the amplitude by propagation σ_A = σ_c / (2A).
+    /// 1σ of the amplitude: half the width of [√(c − σ_c), √(c + σ_c)] (σ_c/(2A) when A ≫ σ_A;
+    /// finite at c = 0).
     pub fn amplitude_sigma(&self) -> f64 {
-        let a = self.amplitude();
-        if a > 0.0 {
-            self.coef_sigma / (2.0 * a)
+        let s = if self.coef_sigma.is_finite() {
+            self.coef_sigma
         } else {
-            f64::NAN
+            return f64::NAN;
+        };
+        ((self.coef.max(0.0) + s).sqrt() - (self.coef - s).max(0.0).sqrt()) / 2.0
+    }
+
+    /// 95 % interval of |amplitude|: √ of c ± 2σ_c, bounded at 0.
+    pub fn amplitude_interval(&self) -> (f64, f64) {
+        let s = if self.coef_sigma.is_finite() {
+            self.coef_sigma
+        } else {
+            0.0
+        };
+        let (lo, hi) = (
+            (self.coef - 2.0 * s).max(0.0).sqrt(),
+            (self.coef.max(0.0) + 2.0 * s).sqrt(),
+        );
+        if self.sign < 0.0 {
+            (-hi, -lo)
+        } else {
+            (lo, hi)
         }
     }
 
     /// Upper bound √(max(c,0) + 2σ_c) when the term is not detected.
     pub fn upper_bound(&self) -> Option<f64> {
-        if self.detected {
-            None
-        } else {
-            let s = if self.coef_sigma.is_finite() {
-                self.coef_sigma
-            } else {
-                0.0
-            };
-            Some((self.coef.max(0.0) + 2.0 * s).sqrt())
-        }
+        (!self.detected).then(|| self.amplitude_interval().1.abs())
     }
 
-    /// Parameters in canonical units, in the order amplitude, non-linear.
+    /// τ_c / f / corner / length: the first non-linear parameter, if any.
+    pub fn theta0(&self) -> Option<f64> {
+        self.theta.first().copied()
+    }
+
+    /// Parameters in canonical units: amplitude, then the non-linear ones.
     pub fn params(&self) -> Vec<ParamValue> {
         let mut v = vec![ParamValue {
-            name: self.effect.amp_name(),
-            value: if self.detected { self.amplitude() } else { 0.0 },
-            sigma: if self.detected {
-                self.amplitude_sigma()
-            } else {
-                f64::NAN
-            },
+            name: self.effect.amp_name().to_string(),
+            value: self.amplitude(),
+            sigma: self.amplitude_sigma(),
+            interval: self.amplitude_interval(),
             upper_bound: self.upper_bound(),
         }];
-        if let Some(name) = self.effect.nonlinear_name() {
+        for (i, s) in self.specs.iter().enumerate() {
+            let val = self.theta.get(i).copied().unwrap_or(f64::NAN);
+            let sig = self.theta_sigma.get(i).copied().unwrap_or(f64::NAN);
             v.push(ParamValue {
-                name,
-                value: if self.detected {
-                    self.theta.unwrap_or(f64::NAN)
+                name: s.name.clone(),
+                value: val,
+                sigma: sig,
+                interval: if sig.is_finite() {
+                    (val - 2.0 * sig, val + 2.0 * sig)
                 } else {
-                    f64::NAN
-                },
-                sigma: if self.detected {
-                    self.theta_sigma.unwrap_or(f64::NAN)
-                } else {
-                    f64::NAN
+                    (f64::NAN, f64::NAN)
                 },
                 upper_bound: None,
             });
         }
         v
     }
-
-    /// This term's Allan variance at τ.
-    pub fn avar(&self, tau: f64, tau0: f64) -> f64 {
-        self.coef.max(0.0) * self.effect.basis(tau, tau0, self.theta.unwrap_or(f64::NAN))
-    }
 }
 
 /// The result of a fit.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Fit {
     pub tau0: f64,
     pub points: Vec<Point>,
+    pub ctx: Context,
+    pub weighting: Weighting,
     pub terms: Vec<TermFit>,
-    /// Model Allan variance at each point.
+    /// Model Allan variance at each point (Σ c·b with the reported parameters).
     pub model_avar: Vec<f64>,
+    /// Covariance of the Allan variance estimates under the model [u⁴].
+    pub point_cov: DMatrix<f64>,
+    /// EDF of each point under the model, 2σ⁴/var(σ̂²).
+    pub model_edf: Vec<f64>,
+    /// The goodness-of-fit statistic T = zᵀρ⁻¹z of the points' exact z-scores
+    /// ([`crate::assess::statistic`]), χ² with `dof` degrees of freedom for a complete model.
     pub chi2: f64,
+    /// The fit's criterion, the generalised χ² rᵀC⁻¹r in variance space, at the optimum.
+    pub objective: f64,
+    /// Points minus free parameters (at least 1).
     pub dof: usize,
+    /// Covariance of the free parameters, in the order of `param_index`.
+    pub param_cov: DMatrix<f64>,
+    /// (term, 0 = coefficient / i+1 = non-linear parameter i) for each row of `param_cov`.
+    pub param_index: Vec<(usize, usize)>,
+    per_term_basis: Vec<Vec<f64>>,
+}
+
+impl PartialEq for Fit {
+    fn eq(&self, o: &Self) -> bool {
+        self.terms == o.terms && self.model_avar == o.model_avar && self.chi2 == o.chi2
+    }
 }
 
 impl Fit {
@@ -176,26 +347,71 @@ impl Fit {
         self.chi2 / self.dof.max(1) as f64
     }
 
-    /// Model Allan deviation at any τ.
+    /// Model Allan deviation at any τ, from the reported parameters.
     pub fn model_dev(&self, tau: f64) -> f64 {
+        self.model_avar_at(tau).max(0.0).sqrt()
+    }
+
+    /// Model Allan variance at any τ.
+    pub fn model_avar_at(&self, tau: f64) -> f64 {
         self.terms
             .iter()
-            .map(|t| t.avar(tau, self.tau0))
+            .map(|t| t.avar(tau, &self.ctx))
             .sum::<f64>()
-            .sqrt()
     }
 
     pub fn effects(&self) -> Vec<Effect> {
-        self.terms.iter().map(|t| t.effect).collect()
+        self.terms.iter().map(|t| t.effect.clone()).collect()
     }
 
-    pub fn term(&self, e: Effect) -> Option<&TermFit> {
-        self.terms.iter().find(|t| t.effect == e)
+    pub fn term(&self, e: &Effect) -> Option<&TermFit> {
+        self.terms.iter().find(|t| t.effect == *e)
     }
 
-    /// Number of fitted parameters.
+    /// Number of free parameters.
     pub fn n_params(&self) -> usize {
-        self.terms.iter().map(|t| t.effect.n_params()).sum()
+        self.param_index.len()
+    }
+
+    /// This term's share of the model variance at each point.
+    pub fn term_avar(&self, k: usize) -> Vec<f64> {
+        let t = &self.terms[k];
+        self.per_term_basis[k].iter().map(|b| t.coef * b).collect()
+    }
+
+    /// The stochastic part of the model as structure-function components (for the covariance of
+    /// Allan estimates and the time-domain tests).
+    pub fn components(&self) -> Vec<Component> {
+        self.terms
+            .iter()
+            .filter(|t| t.coef > 0.0)
+            .filter_map(|t| match t.effect.basis(&t.theta, &self.ctx) {
+                Ok(Basis::Stochastic { structure, factor }) => Some(Component {
+                    coef: t.coef * factor,
+                    structure,
+                }),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Correlation between two free parameters (rows of `param_cov`).
+    pub fn param_corr(&self, a: usize, b: usize) -> f64 {
+        let c = &self.param_cov;
+        c[(a, b)] / (c[(a, a)] * c[(b, b)]).sqrt()
+    }
+}
+
+impl TermFit {
+    /// This term's Allan variance at τ.
+    pub fn avar(&self, tau: f64, ctx: &Context) -> f64 {
+        if self.coef <= 0.0 {
+            return 0.0;
+        }
+        match self.effect.basis(&self.theta, ctx) {
+            Ok(b) => self.coef * b.avar(tau / ctx.tau0, ctx.tau0),
+            Err(_) => f64::NAN,
+        }
     }
 }
 
@@ -223,228 +439,368 @@ fn validate(points: &[Point]) -> Result<(), FitError> {
     Ok(())
 }
 
-/// Internal evaluation: coefficients, model, χ² for fixed non-linear parameters.
-struct LinSol {
-    coef: Vec<f64>,
-    model: Vec<f64>,
-    chi2: f64,
+/// Floor applied to the model variance in diagonal weights, relative to the measurement, so that
+/// a model that is (for now) far too low cannot create infinite weights.
+const MODEL_FLOOR: f64 = 1e-3;
+
+/// The whitening of the residuals: W = L⁻¹ S⁻¹ with C = S ρ S, ρ = L Lᵀ.
+#[derive(Clone)]
+struct Whitener {
+    inv_s: Vec<f64>,
+    l: DMatrix<f64>,
+}
+
+impl Whitener {
+    fn diagonal(var: &[f64]) -> Whitener {
+        let n = var.len();
+        Whitener {
+            inv_s: var.iter().map(|v| 1.0 / v.max(1e-300).sqrt()).collect(),
+            l: DMatrix::identity(n, n),
+        }
+    }
+
+    fn from_cov(c: &DMatrix<f64>) -> Whitener {
+        let n = c.nrows();
+        let s: Vec<f64> = (0..n).map(|j| c[(j, j)].max(1e-300).sqrt()).collect();
+        let rho = DMatrix::from_fn(n, n, |a, b| {
+            if a == b {
+                1.0
+            } else {
+                (c[(a, b)] / (s[a] * s[b])).clamp(-1.0, 1.0)
+            }
+        });
+        for jitter in [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2] {
+            let r = &rho + DMatrix::identity(n, n) * jitter;
+            if let Some(ch) = r.cholesky() {
+                return Whitener {
+                    inv_s: s.iter().map(|v| 1.0 / v).collect(),
+                    l: ch.l(),
+                };
+            }
+        }
+        Whitener::diagonal(&(0..n).map(|j| c[(j, j)]).collect::<Vec<_>>())
+    }
+
+    fn apply(&self, v: &[f64]) -> DVector<f64> {
+        let x = DVector::from_iterator(v.len(), v.iter().zip(&self.inv_s).map(|(a, b)| a * b));
+        self.l.solve_lower_triangular(&x).unwrap_or(x)
+    }
+}
+
+/// One term during the fit.
+#[derive(Clone)]
+struct Work {
+    spec: TermSpec,
+    specs: Vec<ParamSpec>,
+    theta: Vec<f64>,
+    basis: Basis,
+    /// basis values at the points
+    b: Vec<f64>,
 }
 
 struct Problem<'a> {
-    points: &'a [Point],
-    tau0: f64,
-    effects: &'a [Effect],
-    meas: Vec<f64>,
+    meas: &'a Measurement,
+    y: Vec<f64>,
+    ms: Vec<f64>,
 }
 
-/// Floor applied to the model variance in the weights, relative to the measurement, so that a
-/// model that is (for now) far too low cannot create infinite weights.
-const MODEL_FLOOR: f64 = 1e-3;
-
 impl Problem<'_> {
-    fn basis(&self, thetas: &[f64]) -> DMatrix<f64> {
-        let n = self.points.len();
-        let p = self.effects.len();
-        DMatrix::from_fn(n, p, |j, k| {
-            self.effects[k].basis(self.points[j].tau, self.tau0, thetas[k])
-        })
-    }
-
-    fn chi2_of(&self, model: &[f64]) -> f64 {
-        self.points
+    fn eval_basis(&self, e: &Effect, theta: &[f64]) -> Result<(Basis, Vec<f64>), FitError> {
+        let basis = e
+            .basis(theta, &self.meas.ctx)
+            .map_err(|m| FitError::BadTerms(format!("{e}: {m}")))?;
+        let b = self
+            .ms
             .iter()
-            .zip(model)
-            .zip(&self.meas)
-            .map(|((p, &m), &y)| {
-                let v = m.max(MODEL_FLOOR * y);
-                p.edf * (y - v).powi(2) / (2.0 * v * v)
+            .map(|&m| {
+                let v = basis.avar(m, self.meas.ctx.tau0);
+                if v.is_finite() {
+                    v.max(0.0)
+                } else {
+                    0.0
+                }
             })
-            .sum()
+            .collect();
+        Ok((basis, b))
     }
 
-    fn solve(&self, thetas: &[f64]) -> LinSol {
-        let n = self.points.len();
-        let p = self.effects.len();
-        let bmat = self.basis(thetas);
-        let mut var_w: Vec<f64> = self.meas.clone();
-        let mut coef = vec![0.0; p];
-        let mut model = vec![0.0; n];
-        for _iter in 0..12 {
-            let sw: Vec<f64> = (0..n)
-                .map(|j| (self.points[j].edf / 2.0).sqrt() / var_w[j])
-                .collect();
-            let mut a = DMatrix::<f64>::zeros(n, p);
-            let mut scale = vec![0.0; p];
-            for k in 0..p {
-                let mut s2 = 0.0;
-                for j in 0..n {
-                    let v = sw[j] * bmat[(j, k)];
-                    a[(j, k)] = if v.is_finite() { v } else { 0.0 };
-                    s2 += a[(j, k)] * a[(j, k)];
+    /// NNLS for the free coefficients with the whitening fixed; returns (coefficients, χ²).
+    fn solve(&self, work: &[Work], w: &Whitener) -> (Vec<f64>, f64) {
+        let n = self.y.len();
+        let mut target = self.y.clone();
+        let free: Vec<usize> = (0..work.len())
+            .filter(|&k| work[k].spec.known.is_none())
+            .collect();
+        for t in work.iter() {
+            if let Some(k) = t.spec.known {
+                for (j, v) in target.iter_mut().enumerate() {
+                    *v -= k.coef * t.b[j];
                 }
-                scale[k] = s2.sqrt();
-                if scale[k] > 0.0 {
-                    for j in 0..n {
-                        a[(j, k)] /= scale[k];
+            }
+        }
+        let yw = w.apply(&target);
+        let mut coef: Vec<f64> = work
+            .iter()
+            .map(|t| t.spec.known.map_or(0.0, |k| k.coef))
+            .collect();
+        if free.is_empty() {
+            return (coef, yw.norm_squared());
+        }
+        let mut a = DMatrix::<f64>::zeros(n, free.len());
+        let mut scale = vec![0.0; free.len()];
+        for (c, &k) in free.iter().enumerate() {
+            let col = w.apply(&work[k].b);
+            let s = col.norm();
+            scale[c] = s;
+            if s > 0.0 && s.is_finite() {
+                a.set_column(c, &(col / s));
+            }
+        }
+        let x = nnls(&a, &yw);
+        for (c, &k) in free.iter().enumerate() {
+            coef[k] = if scale[c] > 0.0 && scale[c].is_finite() {
+                x[c] / scale[c]
+            } else {
+                0.0
+            };
+        }
+        let model = self.model(work, &coef);
+        let r: Vec<f64> = self.y.iter().zip(&model).map(|(a, b)| a - b).collect();
+        (coef, w.apply(&r).norm_squared())
+    }
+
+    fn model(&self, work: &[Work], coef: &[f64]) -> Vec<f64> {
+        (0..self.y.len())
+            .map(|j| work.iter().zip(coef).map(|(t, c)| c * t.b[j]).sum())
+            .collect()
+    }
+
+    fn whitener(&self, work: &[Work], coef: &[f64]) -> Whitener {
+        let model = self.model(work, coef);
+        match self.meas.weighting {
+            Weighting::Diagonal => Whitener::diagonal(
+                &self
+                    .meas
+                    .points
+                    .iter()
+                    .zip(&model)
+                    .zip(&self.y)
+                    .map(|((p, &m), &y)| 2.0 * m.max(MODEL_FLOOR * y).powi(2) / p.edf)
+                    .collect::<Vec<_>>(),
+            ),
+            Weighting::Model => {
+                let c = self.point_cov(work, coef, &model);
+                Whitener::from_cov(&c)
+            }
+        }
+    }
+
+    fn point_cov(&self, work: &[Work], coef: &[f64], model: &[f64]) -> DMatrix<f64> {
+        let n = self.y.len();
+        if self.meas.weighting == Weighting::Diagonal {
+            return DMatrix::from_fn(n, n, |a, b| {
+                if a == b {
+                    2.0 * model[a].max(MODEL_FLOOR * self.y[a]).powi(2) / self.meas.points[a].edf
+                } else {
+                    0.0
+                }
+            });
+        }
+        let mut comps = Vec::new();
+        let mut det = Deterministic {
+            mean_diff: vec![0.0; n],
+            sines: Vec::new(),
+        };
+        let mut det_avar = vec![0.0; n];
+        for (t, &c) in work.iter().zip(coef) {
+            if c <= 0.0 {
+                continue;
+            }
+            match (&t.basis, t.spec.effect.kind()) {
+                (Basis::Stochastic { structure, factor }, _) => comps.push(Component {
+                    coef: c * factor,
+                    structure: structure.clone(),
+                }),
+                (Basis::Sine { theta }, _) => det.sines.push((c, *theta)),
+                _ => {
+                    for (d, b) in det_avar.iter_mut().zip(&t.b) {
+                        *d += c * b;
                     }
                 }
             }
-            let b = DVector::from_iterator(n, (0..n).map(|j| sw[j] * self.meas[j]));
-            let x = nnls(&a, &b);
-            let new_coef: Vec<f64> = (0..p)
-                .map(|k| if scale[k] > 0.0 { x[k] / scale[k] } else { 0.0 })
-                .collect();
-            for (j, mj) in model.iter_mut().enumerate() {
-                *mj = (0..p)
-                    .map(|k| new_coef[k] * bmat[(j, k)])
-                    .filter(|v| v.is_finite())
-                    .sum();
-            }
-            let change = new_coef
-                .iter()
-                .zip(&coef)
-                .map(|(a, b)| (a - b).abs() / a.abs().max(b.abs()).max(1e-300))
-                .fold(0.0, f64::max);
-            coef = new_coef;
-            for j in 0..n {
-                var_w[j] = model[j].max(MODEL_FLOOR * self.meas[j]);
-            }
-            if change < 1e-9 {
-                break;
+        }
+        for ((md, m), a) in det.mean_diff.iter_mut().zip(&self.ms).zip(&det_avar) {
+            *md = m * (2.0 * a).sqrt();
+        }
+        // Floor: a point the model cannot produce (model ≈ 0) keeps a finite weight.
+        let mut c = self.meas.cache.covariance(&comps, &det);
+        for j in 0..n {
+            let floor = 2.0 * (MODEL_FLOOR * self.y[j]).powi(2) / self.meas.points[j].edf.max(1.0);
+            if !(c[(j, j)] > floor) {
+                c[(j, j)] = floor;
             }
         }
-        let chi2 = self.chi2_of(&model);
-        LinSol { coef, model, chi2 }
+        c
     }
 
-    fn tau_range(&self) -> (f64, f64) {
-        let lo = self
-            .points
-            .iter()
-            .map(|p| p.tau)
-            .fold(f64::INFINITY, f64::min);
-        let hi = self.points.iter().map(|p| p.tau).fold(0.0, f64::max);
-        (lo, hi)
-    }
-
-    /// Logarithmic search grid for the non-linear parameter of effect k.
-    fn grid(&self, e: Effect, opts: &FitOptions) -> Vec<f64> {
-        let (tmin, tmax) = self.tau_range();
-        let (lo, hi, per_decade, hint) = match e {
-            Effect::Markov => (
-                (tmin / 4.0).max(self.tau0 / 8.0),
-                tmax * 4.0,
-                16.0,
-                opts.tau_c_hint,
-            ),
-            Effect::Sinusoid => {
-                if let Some((f, _)) = opts.freq_fixed {
-                    return vec![f];
-                }
-                (
-                    0.25 / tmax,
-                    0.5 / self.tau0.max(tmin * 1e-3),
-                    80.0,
-                    opts.freq_hint,
-                )
-            }
-            _ => return vec![f64::NAN],
+    fn grid(spec: &ParamSpec, start: Option<f64>) -> Vec<f64> {
+        let mut g: Vec<f64> = if spec.log {
+            let (lo, hi) = (spec.lo.max(1e-300), spec.hi.max(spec.lo * 1.0001));
+            let n = ((hi / lo).log10() * spec.density).ceil().clamp(2.0, 2000.0) as usize + 1;
+            (0..n)
+                .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
+                .collect()
+        } else {
+            let n = spec.density.clamp(2.0, 2000.0) as usize;
+            (0..n)
+                .map(|i| spec.lo + (spec.hi - spec.lo) * i as f64 / (n - 1) as f64)
+                .collect()
         };
-        let hi = hi * 0.999;
-        let decades = (hi / lo).log10().max(0.1);
-        let n = (decades * per_decade).ceil() as usize + 1;
-        let mut g: Vec<f64> = (0..n)
-            .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
-            .collect();
-        if let Some(h) = hint {
-            if h > lo && h < hi {
-                g.push(h);
+        if let Some(s) = start {
+            if s > spec.lo && s < spec.hi {
+                g.push(s);
                 g.sort_by(f64::total_cmp);
             }
         }
         g
     }
 
-    /// Minimise χ² over θ_k with the others fixed: grid, then golden section around the best.
-    fn refine(&self, k: usize, thetas: &mut [f64], opts: &FitOptions) -> f64 {
-        let g = self.grid(self.effects[k], opts);
-        let eval = |th: &mut Vec<f64>, v: f64| {
-            th[k] = v;
-            self.solve(th).chi2
-        };
-        let mut th = thetas.to_vec();
-        let mut best = (f64::INFINITY, 0usize);
-        for (i, &v) in g.iter().enumerate() {
-            let c = eval(&mut th, v);
-            if c < best.0 {
-                best = (c, i);
-            }
-        }
-        let i = best.1;
-        if g.len() == 1 {
-            thetas[k] = g[0];
-            return best.0;
-        }
-        let (mut a, mut b) = (
-            g[i.saturating_sub(1)].ln(),
-            g[(i + 1).min(g.len() - 1)].ln(),
-        );
-        let r = 0.618_033_988_749_895;
-        let mut x1 = b - r * (b - a);
-        let mut x2 = a + r * (b - a);
-        let mut f1 = eval(&mut th, x1.exp());
-        let mut f2 = eval(&mut th, x2.exp());
-        for _ in 0..40 {
-            if f1 < f2 {
-                b = x2;
-                x2 = x1;
-                f2 = f1;
-                x1 = b - r * (b - a);
-                f1 = eval(&mut th, x1.exp());
-            } else {
-                a = x1;
-                x1 = x2;
-                f1 = f2;
-                x2 = a + r * (b - a);
-                f2 = eval(&mut th, x2.exp());
-            }
-            if (b - a).abs() < 1e-7 {
-                break;
-            }
-        }
-        let (xm, fm) = if f1 < f2 { (x1, f1) } else { (x2, f2) };
-        if fm <= best.0 {
-            thetas[k] = xm.exp();
-            fm
+    /// Minimise χ² over non-linear parameter `i` of term `k`, others fixed.
+    fn refine(
+        &self,
+        work: &mut [Work],
+        k: usize,
+        i: usize,
+        w: &Whitener,
+        full_grid: bool,
+    ) -> Result<f64, FitError> {
+        let spec = work[k].specs[i].clone();
+        let start = work[k].theta.get(i).copied().filter(|v| v.is_finite());
+        let grid = if full_grid || start.is_none() {
+            Self::grid(&spec, start)
         } else {
-            thetas[k] = g[i];
-            best.0
+            // local: ±1/2 decade (log) or ±10 % of the range around the current value
+            let s = start.unwrap_or(spec.lo);
+            let local = ParamSpec {
+                lo: if spec.log {
+                    (s / 3.2).max(spec.lo)
+                } else {
+                    (s - 0.1 * (spec.hi - spec.lo)).max(spec.lo)
+                },
+                hi: if spec.log {
+                    (s * 3.2).min(spec.hi)
+                } else {
+                    (s + 0.1 * (spec.hi - spec.lo)).min(spec.hi)
+                },
+                density: if spec.log { spec.density * 2.0 } else { 9.0 },
+                ..spec.clone()
+            };
+            Self::grid(&local, start)
+        };
+        let eval = |v: f64, work: &mut [Work]| -> Result<f64, FitError> {
+            work[k].theta[i] = v;
+            let (basis, b) = self.eval_basis(&work[k].spec.effect, &work[k].theta)?;
+            work[k].basis = basis;
+            work[k].b = b;
+            Ok(self.solve(work, w).1)
+        };
+        let mut best = (f64::INFINITY, 0usize);
+        for (gi, &v) in grid.iter().enumerate() {
+            let c = eval(v, work).unwrap_or(f64::INFINITY);
+            if c < best.0 {
+                best = (c, gi);
+            }
         }
+        if !best.0.is_finite() {
+            return Err(FitError::BadTerms(format!(
+                "{}: no value of {} in [{}, {}] gives a finite fit",
+                work[k].spec.effect, spec.name, spec.lo, spec.hi
+            )));
+        }
+        let gi = best.1;
+        let tr = |v: f64| if spec.log { v.ln() } else { v };
+        let inv = |v: f64| if spec.log { v.exp() } else { v };
+        let (mut a, mut b) = (
+            tr(grid[gi.saturating_sub(1)]),
+            tr(grid[(gi + 1).min(grid.len() - 1)]),
+        );
+        let mut best_v = grid[gi];
+        let mut best_c = best.0;
+        if b > a {
+            let r = 0.618_033_988_749_895;
+            let mut x1 = b - r * (b - a);
+            let mut x2 = a + r * (b - a);
+            let mut f1 = eval(inv(x1), work).unwrap_or(f64::INFINITY);
+            let mut f2 = eval(inv(x2), work).unwrap_or(f64::INFINITY);
+            for _ in 0..GOLDEN_ITERATIONS {
+                if f1 < f2 {
+                    b = x2;
+                    x2 = x1;
+                    f2 = f1;
+                    x1 = b - r * (b - a);
+                    f1 = eval(inv(x1), work).unwrap_or(f64::INFINITY);
+                } else {
+                    a = x1;
+                    x1 = x2;
+                    f1 = f2;
+                    x2 = a + r * (b - a);
+                    f2 = eval(inv(x2), work).unwrap_or(f64::INFINITY);
+                }
+                if (b - a).abs() <= 1e-7 * (a.abs() + b.abs()).max(1e-300) {
+                    break;
+                }
+            }
+            let (xm, fm) = if f1 < f2 { (x1, f1) } else { (x2, f2) };
+            if fm < best_c {
+                best_c = fm;
+                best_v = inv(xm);
+            }
+        }
+        eval(best_v, work)?;
+        Ok(best_c)
     }
 }
 
-/// Fit `effects` to the measured points (`tau0` = sampling interval [s]).
-pub fn fit(
-    points: &[Point],
-    tau0: f64,
-    effects: &[Effect],
-    opts: &FitOptions,
-) -> Result<Fit, FitError> {
+/// Fit the terms `specs` to the measurement.
+pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError> {
+    let points = &meas.points;
     validate(points)?;
-    if effects.is_empty() {
-        return Err(FitError::BadTerms("no terms to fit".into()));
-    }
-    for (i, e) in effects.iter().enumerate() {
-        if effects[..i].contains(e) {
-            return Err(FitError::BadTerms(format!("term {e} listed twice")));
-        }
-    }
+    let tau0 = meas.ctx.tau0;
     if !(tau0 > 0.0 && tau0.is_finite()) {
         return Err(FitError::BadTerms(format!(
             "sampling interval τ0 = {tau0} s is not positive"
         )));
     }
-    let n_params: usize = effects.iter().map(|e| e.n_params()).sum();
+    if specs.is_empty() {
+        return Err(FitError::BadTerms("no terms to fit".into()));
+    }
+    for (i, s) in specs.iter().enumerate() {
+        if !s.effect.repeatable() && specs[..i].iter().any(|o| o.effect == s.effect) {
+            return Err(FitError::BadTerms(format!(
+                "term {} listed twice",
+                s.effect
+            )));
+        }
+        if let Some(k) = s.known {
+            if !(k.coef.is_finite() && k.coef >= 0.0) {
+                return Err(FitError::BadTerms(format!(
+                    "{}: the known coefficient {} is not a non-negative number",
+                    s.effect, k.coef
+                )));
+            }
+        }
+    }
+    let n_params: usize = specs
+        .iter()
+        .map(|s| {
+            usize::from(s.known.is_none())
+                + if s.theta_fixed {
+                    0
+                } else {
+                    s.effect.nonlinear(&meas.ctx).len()
+                }
+        })
+        .sum();
     if points.len() < n_params + 1 {
         return Err(FitError::TooFewPoints {
             points: points.len(),
@@ -452,109 +808,194 @@ pub fn fit(
         });
     }
     let prob = Problem {
-        points,
-        tau0,
-        effects,
-        meas: points.iter().map(|p| p.dev * p.dev).collect(),
+        meas,
+        y: points.iter().map(|p| p.dev * p.dev).collect(),
+        ms: points.iter().map(|p| p.m as f64).collect(),
     };
-    let nl: Vec<usize> = (0..effects.len())
-        .filter(|&k| effects[k].nonlinear_name().is_some())
-        .collect();
-    let mut thetas: Vec<f64> = effects
+    let mut work: Vec<Work> = Vec::with_capacity(specs.len());
+    for s in specs {
+        let pspecs = s.effect.nonlinear(&meas.ctx);
+        let theta: Vec<f64> = match &s.theta {
+            Some(t) if t.len() == pspecs.len() => t.clone(),
+            Some(t) => {
+                return Err(FitError::BadTerms(format!(
+                    "{}: {} non-linear parameter(s) given, {} expected ({})",
+                    s.effect,
+                    t.len(),
+                    pspecs.len(),
+                    pspecs
+                        .iter()
+                        .map(|p| p.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )))
+            }
+            None => vec![f64::NAN; pspecs.len()],
+        };
+        if s.theta_fixed && theta.iter().any(|v| !v.is_finite()) {
+            return Err(FitError::BadTerms(format!(
+                "{}: fixed non-linear parameters must be given",
+                s.effect
+            )));
+        }
+        let (basis, b) = if theta.iter().all(|v| v.is_finite()) {
+            prob.eval_basis(&s.effect, &theta)?
+        } else {
+            (Basis::Zero, vec![0.0; points.len()])
+        };
+        work.push(Work {
+            spec: s.clone(),
+            specs: pspecs,
+            theta,
+            basis,
+            b,
+        });
+    }
+    let nl: Vec<(usize, usize)> = work
         .iter()
-        .map(|e| match e {
-            Effect::Markov => opts.tau_c_hint.unwrap_or(1.0),
-            Effect::Sinusoid => opts
-                .freq_fixed
-                .map(|f| f.0)
-                .or(opts.freq_hint)
-                .unwrap_or(0.1),
-            _ => f64::NAN,
-        })
+        .enumerate()
+        .filter(|(_, t)| !t.spec.theta_fixed)
+        .flat_map(|(k, t)| (0..t.specs.len()).map(move |i| (k, i)))
         .collect();
-    if !nl.is_empty() {
-        // Initialise each non-linear term alone (the others absent: θ = NaN gives b = 0).
-        let saved = thetas.clone();
-        for &k in &nl {
-            let mut th = saved.clone();
-            for &o in &nl {
-                if o != k {
-                    th[o] = f64::NAN;
-                }
-            }
-            prob.refine(k, &mut th, opts);
-            thetas[k] = th[k];
-        }
-        let rounds = if nl.len() > 1 { 4 } else { 1 };
-        if nl.len() > 1 {
-            for _ in 0..rounds {
-                for &k in &nl {
-                    prob.refine(k, &mut thetas, opts);
-                }
-            }
-        }
-    }
-    let sol = prob.solve(&thetas);
-    let dof = points.len() - n_params;
-    let chi2_dof = sol.chi2 / dof as f64;
 
-    // Fisher matrix at the optimum, model-based weights.
-    let n = points.len();
-    let mut cols: Vec<Vec<f64>> = Vec::new();
-    enum Col {
-        Coef(usize),
-        Theta(usize),
-    }
-    let mut col_ids = Vec::new();
-    for k in 0..effects.len() {
-        cols.push(
-            points
-                .iter()
-                .map(|p| {
-                    let v = effects[k].basis(p.tau, tau0, thetas[k]);
-                    if v.is_finite() {
-                        v
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
-        );
-        col_ids.push(Col::Coef(k));
-    }
-    for &k in &nl {
-        let fixed = effects[k] == Effect::Sinusoid && opts.freq_fixed.is_some();
-        if sol.coef[k] > 0.0 && !fixed {
-            let h = 1e-4;
-            let col = points
-                .iter()
-                .map(|p| {
-                    let up = effects[k].basis(p.tau, tau0, thetas[k] * (1.0 + h));
-                    let dn = effects[k].basis(p.tau, tau0, thetas[k] * (1.0 - h));
-                    sol.coef[k] * (up - dn) / (2.0 * h * thetas[k])
-                })
-                .collect();
-            cols.push(col);
-            col_ids.push(Col::Theta(k));
+    // Start: diagonal weights from the measurement's own EDFs.
+    let mut w = Whitener::diagonal(
+        &points
+            .iter()
+            .map(|p| 2.0 * (p.dev * p.dev).powi(2) / p.edf)
+            .collect::<Vec<_>>(),
+    );
+    // Initialise each searched term alone (the others' searched terms absent), then jointly.
+    for &(k, i) in &nl {
+        let saved: Vec<(Basis, Vec<f64>)> = work
+            .iter()
+            .map(|t| (t.basis.clone(), t.b.clone()))
+            .collect();
+        for &(o, _) in &nl {
+            if o != k && work[o].theta.iter().any(|v| !v.is_finite()) {
+                work[o].b = vec![0.0; points.len()];
+            }
         }
+        prob.refine(&mut work, k, i, &w, true)?;
+        for (o, (bs, b)) in saved.into_iter().enumerate() {
+            if o != k {
+                work[o].basis = bs;
+                work[o].b = b;
+            }
+        }
+    }
+    for &(k, _) in &nl {
+        let (basis, b) = prob.eval_basis(&work[k].spec.effect, &work[k].theta.clone())?;
+        work[k].basis = basis;
+        work[k].b = b;
+    }
+    let rounds = if nl.len() > 1 { NONLINEAR_ROUNDS } else { 0 };
+    for _ in 0..rounds {
+        for &(k, i) in &nl {
+            prob.refine(&mut work, k, i, &w, true)?;
+        }
+    }
+    let (mut coef, _) = prob.solve(&work, &w);
+    // Outer iterations: covariance (or diagonal weights) from the model.
+    let mut converged = false;
+    for it in 0..OUTER_ITERATIONS.max(if meas.weighting == Weighting::Diagonal {
+        12
+    } else {
+        0
+    }) {
+        w = prob.whitener(&work, &coef);
+        for _ in 0..if nl.len() > 1 { 2 } else { 1 } {
+            for &(k, i) in &nl {
+                prob.refine(&mut work, k, i, &w, it == 0)?;
+            }
+        }
+        let (new_coef, _) = prob.solve(&work, &w);
+        // converged when no coefficient that matters moved by more than 1e-4 of the largest
+        // contribution it makes (the covariance, hence the weights, then no longer changes)
+        let change = new_coef
+            .iter()
+            .zip(&coef)
+            .zip(&work)
+            .map(|((a, b), t)| {
+                let peak =
+                    t.b.iter()
+                        .zip(&prob.y)
+                        .map(|(bv, y)| bv / y)
+                        .fold(0.0, f64::max);
+                (a - b).abs() * peak
+            })
+            .fold(0.0, f64::max);
+        coef = new_coef;
+        if change < 1e-4 {
+            converged = true;
+            break;
+        }
+    }
+    let _ = converged; // the last iterate is used either way; χ² below is evaluated at it
+    let model = prob.model(&work, &coef);
+    let point_cov = prob.point_cov(&work, &coef, &model);
+    let wf = match meas.weighting {
+        Weighting::Model => Whitener::from_cov(&point_cov),
+        Weighting::Diagonal => prob.whitener(&work, &coef),
+    };
+    let r: Vec<f64> = prob.y.iter().zip(&model).map(|(a, b)| a - b).collect();
+    let chi2 = wf.apply(&r).norm_squared();
+    let model_edf: Vec<f64> = (0..points.len())
+        .map(|j| 2.0 * model[j].max(1e-300).powi(2) / point_cov[(j, j)])
+        .collect();
+
+    // Fisher matrix over the free parameters: coefficients of non-known terms and the searched
+    // non-linear parameters of terms present.
+    let mut cols: Vec<DVector<f64>> = Vec::new();
+    let mut index = Vec::new();
+    for (k, t) in work.iter().enumerate() {
+        if t.spec.known.is_none() {
+            cols.push(wf.apply(&t.b));
+            index.push((k, 0));
+        }
+    }
+    for &(k, i) in &nl {
+        if coef[k] <= 0.0 {
+            continue;
+        }
+        let v = work[k].theta[i];
+        let spec = &work[k].specs[i];
+        let h = if spec.log {
+            1e-4 * v.abs()
+        } else {
+            1e-4 * (spec.hi - spec.lo)
+        };
+        if !(h > 0.0) {
+            continue;
+        }
+        let mut up = work[k].theta.clone();
+        let mut dn = work[k].theta.clone();
+        up[i] = v + h;
+        dn[i] = v - h;
+        let (_, bu) = prob.eval_basis(&work[k].spec.effect, &up)?;
+        let (_, bd) = prob.eval_basis(&work[k].spec.effect, &dn)?;
+        let d: Vec<f64> = bu
+            .iter()
+            .zip(&bd)
+            .map(|(a, b)| coef[k] * (a - b) / (2.0 * h))
+            .collect();
+        if d.iter().all(|x| *x == 0.0) {
+            continue;
+        }
+        cols.push(wf.apply(&d));
+        index.push((k, i + 1));
     }
     let q = cols.len();
-    let w: Vec<f64> = (0..n)
-        .map(|j| {
-            let v = sol.model[j].max(MODEL_FLOOR * prob.meas[j]);
-            points[j].edf / (2.0 * v * v)
-        })
-        .collect();
-    let mut f = DMatrix::<f64>::zeros(q, q);
-    for a in 0..q {
-        for b in 0..q {
-            f[(a, b)] = (0..n).map(|j| w[j] * cols[a][j] * cols[b][j]).sum();
-        }
-    }
-    // Scale to unit diagonal before inverting (the columns span many decades).
+    let free_present = index
+        .iter()
+        .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
+        .count();
+    let dof = points.len().saturating_sub(free_present).max(1);
+    let chi2_dof = chi2 / dof as f64;
+    let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
     let d: Vec<f64> = (0..q)
         .map(|a| {
-            let v = f[(a, a)];
+            let v = fisher[(a, a)];
             if v > 0.0 {
                 1.0 / v.sqrt()
             } else {
@@ -562,70 +1003,103 @@ pub fn fit(
             }
         })
         .collect();
-    let fs = DMatrix::from_fn(q, q, |a, b| f[(a, b)] * d[a] * d[b]);
-    let inv = fs
-        .clone()
-        .try_inverse()
-        .or_else(|| fs.pseudo_inverse(1e-12).ok());
+    let fs = DMatrix::from_fn(q, q, |a, b| fisher[(a, b)] * d[a] * d[b]);
+    let inv = fs.clone().try_inverse().or_else(|| crate::nnls::pinv(&fs));
     let infl = chi2_dof.max(1.0);
-    let var_of = |a: usize| -> f64 {
-        match &inv {
-            Some(m) if d[a] > 0.0 => (m[(a, a)] * d[a] * d[a] * infl).max(0.0),
-            _ => f64::NAN,
-        }
+    let param_cov = match &inv {
+        Some(m) => DMatrix::from_fn(q, q, |a, b| m[(a, b)] * d[a] * d[b] * infl),
+        None => DMatrix::from_element(q, q, f64::NAN),
     };
-    let mut terms: Vec<TermFit> = effects
+    let mut terms: Vec<TermFit> = work
         .iter()
-        .enumerate()
-        .map(|(k, &e)| TermFit {
-            effect: e,
-            coef: sol.coef[k],
-            coef_sigma: f64::NAN,
-            theta: if e.nonlinear_name().is_some() && sol.coef[k] > 0.0 {
-                Some(thetas[k])
-            } else {
-                None
-            },
-            theta_sigma: None,
+        .zip(&coef)
+        .map(|(t, &c)| TermFit {
+            effect: t.spec.effect.clone(),
+            coef: c,
+            coef_sigma: t.spec.known.map_or(f64::NAN, |k| k.coef_sigma),
+            sign: t
+                .spec
+                .known
+                .map_or(1.0, |k| if k.sign < 0.0 { -1.0 } else { 1.0 }),
+            theta: t.theta.clone(),
+            theta_sigma: t
+                .spec
+                .theta_sigma
+                .clone()
+                .unwrap_or_else(|| vec![f64::NAN; t.theta.len()]),
+            specs: t.specs.clone(),
+            known: t.spec.known.is_some(),
             detected: false,
         })
         .collect();
-    for (a, id) in col_ids.iter().enumerate() {
-        match *id {
-            Col::Coef(k) => terms[k].coef_sigma = var_of(a).sqrt(),
-            Col::Theta(k) => terms[k].theta_sigma = Some(var_of(a).sqrt()),
-        }
-    }
-    if let Some((_, fs)) = opts.freq_fixed {
-        for t in &mut terms {
-            if t.effect == Effect::Sinusoid && t.theta.is_some() {
-                t.theta_sigma = Some(fs);
-            }
+    for (a, &(k, i)) in index.iter().enumerate() {
+        let s = param_cov[(a, a)].max(0.0).sqrt();
+        if i == 0 {
+            terms[k].coef_sigma = s;
+        } else {
+            terms[k].theta_sigma[i - 1] = s;
         }
     }
     for t in &mut terms {
         t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
-        if !t.detected {
-            t.theta = if t.coef > 0.0 { t.theta } else { None };
-        }
     }
-    Ok(Fit {
+    let per_term_basis = work.iter().map(|t| t.b.clone()).collect();
+    let mut out = Fit {
         tau0,
-        points: points.to_vec(),
+        points: points.clone(),
+        ctx: meas.ctx.clone(),
+        weighting: meas.weighting,
         terms,
-        model_avar: sol.model,
-        chi2: sol.chi2,
+        model_avar: model,
+        point_cov,
+        model_edf,
+        chi2: f64::NAN,
+        objective: chi2,
         dof,
-    })
+        param_cov,
+        param_index: index,
+        per_term_basis,
+    };
+    out.chi2 = crate::assess::statistic(&out).1;
+    Ok(out)
+}
+
+/// Fit `effects` to points alone (diagonal weights from their EDFs), e.g. a device's table.
+pub fn fit(
+    points: &[Point],
+    tau0: f64,
+    effects: &[Effect],
+    opts: &FitOptions,
+) -> Result<Fit, FitError> {
+    let meas = Measurement::from_points(points.to_vec(), tau0);
+    let specs: Vec<TermSpec> = effects
+        .iter()
+        .map(|e| {
+            let mut s = TermSpec::new(e.clone());
+            match e {
+                Effect::Sinusoid => {
+                    if let Some((f, sf)) = opts.freq_fixed {
+                        s.theta = Some(vec![f]);
+                        s.theta_fixed = true;
+                        s.theta_sigma = Some(vec![sf]);
+                    } else if let Some(f) = opts.freq_hint {
+                        s.theta = Some(vec![f]);
+                    }
+                }
+                Effect::Markov => s.theta = opts.tau_c_hint.map(|t| vec![t]),
+                _ => {}
+            }
+            s
+        })
+        .collect();
+    fit_model(&meas, &specs)
 }
 
 impl Point {
     /// Convert deviation rows of the `allan` crate (OADEV is what the fit expects), in τ order.
     ///
     /// Rows whose EDF or bounds are not finite cannot be weighted and are left out (the second
-    /// value counts them). The EDFs are taken as the allan crate gives them: it already keeps
-    /// the noise exponent from rising with τ, which is what stops a long-τ row with few clusters
-    /// from being trusted blindly.
+    /// value counts them).
     pub fn from_rows(rows: &[allan::Row]) -> (Vec<Point>, usize) {
         let mut skipped = 0;
         let mut pts = Vec::new();
@@ -647,39 +1121,9 @@ impl Point {
                 edf: r.edf,
                 lo: r.lo,
                 hi: r.hi,
+                m: r.m,
             });
         }
         (pts, skipped)
-    }
-}
-/// Fit with the raw data at hand: as [`fit`], and when the model has a sinusoid whose frequency
-/// shows a line in the whole-record periodogram (p < 1e-3, [`crate::psd::line_near`] within
-/// ±15 %), refit with f fixed at the periodogram peak (1σ = half a periodogram bin, f_s/(2N)).
-pub fn fit_with_data(
-    points: &[Point],
-    tau0: f64,
-    effects: &[Effect],
-    data: Option<(&[f64], f64)>,
-) -> Result<Fit, FitError> {
-    let first = fit(points, tau0, effects, &FitOptions::default())?;
-    let (Some((y, fs)), Some(f)) = (data, first.term(Effect::Sinusoid).and_then(|t| t.theta))
-    else {
-        return Ok(first);
-    };
-    match crate::psd::line_near(y, fs, f, 0.15) {
-        Some(lt) if lt.p_value < 1e-3 => {
-            let half_bin = fs / (2.0 * y.len().next_power_of_two() as f64);
-            let opts = FitOptions {
-                freq_fixed: Some((lt.freq_hz, half_bin)),
-                ..FitOptions::default()
-            };
-            let second = fit(points, tau0, effects, &opts)?;
-            Ok(if second.chi2 <= first.chi2 * 1.5 + 10.0 {
-                second
-            } else {
-                first
-            })
-        }
-        _ => Ok(first),
     }
 }

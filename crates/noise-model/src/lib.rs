@@ -1,18 +1,22 @@
-//! The pico-imu noise-model lab (issue 3): an effect library for Allan-variance curves, a weighted
-//! non-negative least-squares fit with uncertainties, residuals and an adequacy verdict, a
-//! diagnosis that names the missing physical effect, and practical outputs (recalibration period,
-//! Kalibr noise values). Pure maths: no I/O. Inputs are measured Allan points (τ, σ, EDF, 68.3 %
-//! bounds), e.g. rows of `allan::deviation(…, Stat::Oadev, …)`.
+//! The pico-imu noise-model lab: an effect library for Allan-variance curves (power-law noise,
+//! Gauss–Markov, sinusoids, the sensor's own filters, resolution, bias steps, temperature,
+//! user-described effects), the covariance of overlapping Allan estimates, a generalised
+//! least-squares fit with an uncertainty for every estimate, an adequacy verdict, time-domain
+//! tests for non-stationarity, and the lab workflow (diagnose → add → refit) on a recording.
+//! Pure maths: no I/O. Inputs are measured Allan points (τ, σ, EDF, 68.3 % bounds, m), e.g. rows
+//! of `allan::deviation(…, Stat::Oadev, …)`, and for the lab the record's samples.
 //!
 //! ```
-//! use noise_model::{fit, assess, Effect, FitOptions, Point};
-//! // an exact white-noise curve, N = 0.01 u·√s, with a generous EDF
+//! use noise_model::{assess, fit_model, Effect, Measurement, Point, TermSpec};
+//! // an exact white-noise curve, N = 0.01 u·√s, from a record of 2^16 samples at 100 Hz
 //! let pts: Vec<Point> = (0..12).map(|k| {
-//!     let tau = 0.01 * 2f64.powi(k);
+//!     let m = 1u64 << k;
+//!     let tau = 0.01 * m as f64;
 //!     let dev = 0.01 / tau.sqrt();
-//!     Point { tau, dev, edf: 100.0, lo: dev * 0.93, hi: dev * 1.08 }
+//!     Point { tau, dev, edf: 100.0, lo: dev * 0.93, hi: dev * 1.08, m }
 //! }).collect();
-//! let f = fit(&pts, 0.01, &[Effect::White, Effect::Flicker], &FitOptions::default()).unwrap();
+//! let meas = Measurement::from_record(pts, 0.01, 1 << 16);
+//! let f = fit_model(&meas, &[TermSpec::new(Effect::White), TermSpec::new(Effect::Flicker)]).unwrap();
 //! assert!((f.terms[0].amplitude() - 0.01).abs() < 1e-9);
 //! assert!(!f.terms[1].detected);
 //! assert!(assess(&f).adequate);
@@ -21,16 +25,26 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod assess;
+pub mod cov;
 pub mod diagnose;
 pub mod effect;
 pub mod fit;
+pub mod lab;
 pub mod nnls;
+pub mod nonstat;
 pub mod practical;
 pub mod psd;
+pub mod structure;
+pub mod user;
 
-pub use assess::{assess, Assessment, TauRange};
-pub use diagnose::{diagnose, step, Candidate, Diagnosis, Step, StepSide};
-pub use effect::{Effect, UnitFamily, ALL_EFFECTS, DEFAULT_TERMS};
-pub use fit::{fit, fit_with_data, Fit, FitError, FitOptions, ParamValue, Point, TermFit};
+pub use assess::{assess, assess_at, Assessment, TauRange};
+pub use diagnose::{diagnose, Diagnosis};
+pub use effect::{Context, Effect, UnitFamily, ALL_EFFECTS, DEFAULT_TERMS};
+pub use fit::{
+    fit, fit_model, Fit, FitError, FitOptions, Known, Measurement, ParamValue, Point, TermFit,
+    TermSpec, Weighting,
+};
+pub use lab::{Model, NoiseLab, Record, TimingSummary};
+pub use model_lab::{walk, Candidate, Edit, Step, Stop, Summary, Walk};
 pub use practical::{recalibration, KalibrImu, Recalibration};
 pub use psd::{find_line, line_near, welch, Line, LineTest, Psd};

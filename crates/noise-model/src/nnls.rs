@@ -1,6 +1,23 @@
 //! Non-negative least squares, min ‖A·x − b‖² subject to x ≥ 0, by the Lawson–Hanson active-set
 //! algorithm (C. L. Lawson & R. J. Hanson, *Solving Least Squares Problems*, 1974, ch. 23).
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SVD};
+
+/// Iteration cap of the SVDs (nalgebra's default, 0, means "until converged", which never
+/// happens on some inputs with extreme dynamic range).
+const SVD_ITERATIONS: usize = 500;
+
+/// SVD with an iteration cap; None when the input is not finite or it does not converge.
+fn svd(m: DMatrix<f64>) -> Option<SVD<f64, nalgebra::Dyn, nalgebra::Dyn>> {
+    if m.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    SVD::try_new(m, true, true, f64::EPSILON, SVD_ITERATIONS)
+}
+
+/// Moore–Penrose pseudo-inverse (relative singular-value cut 1e-12), None when the SVD fails.
+pub fn pinv(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    svd(m.clone())?.pseudo_inverse(1e-12).ok()
+}
 
 /// Least squares restricted to the columns in `set` (others are zero), via SVD (rank-safe).
 fn ls_subset(a: &DMatrix<f64>, b: &DVector<f64>, set: &[usize]) -> DVector<f64> {
@@ -9,10 +26,9 @@ fn ls_subset(a: &DMatrix<f64>, b: &DVector<f64>, set: &[usize]) -> DVector<f64> 
     for (k, &j) in set.iter().enumerate() {
         sub.set_column(k, &a.column(j));
     }
-    let svd = sub.svd(true, true);
-    let z = svd
-        .solve(b, 1e-12)
-        .unwrap_or_else(|_| DVector::zeros(set.len()));
+    let z = svd(sub)
+        .and_then(|s| s.solve(b, 1e-12).ok())
+        .unwrap_or_else(|| DVector::zeros(set.len()));
     let mut x = DVector::zeros(a.ncols());
     for (k, &j) in set.iter().enumerate() {
         x[j] = z[k];
@@ -23,6 +39,9 @@ fn ls_subset(a: &DMatrix<f64>, b: &DVector<f64>, set: &[usize]) -> DVector<f64> 
 /// Solve min ‖A·x − b‖², x ≥ 0. Columns should be scaled to comparable norms by the caller.
 pub fn nnls(a: &DMatrix<f64>, b: &DVector<f64>) -> DVector<f64> {
     let p = a.ncols();
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        return DVector::zeros(p);
+    }
     let mut x = DVector::<f64>::zeros(p);
     let mut passive: Vec<usize> = Vec::new();
     let scale = a.norm() * b.norm();

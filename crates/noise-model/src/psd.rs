@@ -120,21 +120,26 @@ pub fn default_segment(n: usize) -> usize {
     s
 }
 
-/// The strongest significant line of the PSD, if any. The background at each bin is a local power
-/// law fitted robustly to ±16 neighbours (the line's own ±2 bins excluded); bins below 6·df are
-/// not searched.
+/// The strongest significant line of the PSD, if any (see [`find_lines`]).
 pub fn find_line(psd: &Psd) -> Option<Line> {
+    find_lines(psd).into_iter().next()
+}
+
+/// Every significant line of the PSD (local maxima), strongest first. The background at each bin
+/// is a local power law fitted robustly to ±16 neighbours (the line's own ±2 bins excluded); bins
+/// below 6·df are not searched.
+pub fn find_lines(psd: &Psd) -> Vec<Line> {
     let p = &psd.density;
     let nb = p.len();
     if nb < 16 {
-        return None;
+        return Vec::new();
     }
     let half = 16usize;
     let nu = psd.edf;
     // median of χ²_ν/ν relative to its mean, Wilson–Hilferty: (1 − 2/(9ν))³
     let med_corr = (1.0 - 2.0 / (9.0 * nu)).powi(3);
     let threshold = chi2_quantile(1.0 - 1e-3 / nb as f64, nu) / nu;
-    let mut best: Option<(usize, f64, f64)> = None;
+    let mut peaks: Vec<(usize, f64, f64)> = Vec::new();
     let med = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
@@ -171,11 +176,25 @@ pub fn find_line(psd: &Psd) -> Option<Line> {
             continue;
         }
         let r = p[k] / bg;
-        if r > threshold && best.is_none_or(|b| r > b.1) {
-            best = Some((k, r, bg));
+        if r > threshold && p[k] >= p[k - 1] && p[k] >= p[k + 1] {
+            peaks.push((k, r, bg));
         }
     }
-    let (k, ratio, bg) = best?;
+    peaks.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut lines: Vec<Line> = Vec::new();
+    let mut taken: Vec<usize> = Vec::new();
+    for (k, ratio, bg) in peaks {
+        if taken.iter().any(|&t| t.abs_diff(k) <= 3) {
+            continue;
+        }
+        taken.push(k);
+        lines.push(line_at(p, psd.df, k, ratio, bg, threshold));
+    }
+    lines
+}
+
+fn line_at(p: &[f64], df: f64, k: usize, ratio: f64, bg: f64, threshold: f64) -> Line {
+    let nb = p.len();
     // parabolic interpolation of the peak on ln P
     let (a, b, c) = (p[k - 1].ln(), p[k].ln(), p[k + 1].ln());
     let den = a - 2.0 * b + c;
@@ -187,13 +206,13 @@ pub fn find_line(psd: &Psd) -> Option<Line> {
     let excess: f64 = (k.saturating_sub(2)..=(k + 2).min(nb - 1))
         .map(|i| (p[i] - bg).max(0.0))
         .sum::<f64>()
-        * psd.df;
-    Some(Line {
-        freq_hz: (k as f64 + delta) * psd.df,
+        * df;
+    Line {
+        freq_hz: (k as f64 + delta) * df,
         amplitude: (2.0 * excess).sqrt(),
         ratio,
         threshold,
-    })
+    }
 }
 
 #[cfg(test)]

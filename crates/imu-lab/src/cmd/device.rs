@@ -340,6 +340,7 @@ fn fit_table(t: &AllanTable, bounds: &[(f64, f64, f64)]) {
             edf,
             lo,
             hi,
+            m: 0,
         })
         .collect();
     let tau0 = f64::from(t.tau0_us) * 1e-6;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use allan::{deviation, Stat, TauSet};
 use anyhow::{anyhow, bail, Context, Result};
-use noise_model::{assess, fit_with_data, practical, Effect, Fit, Point, DEFAULT_TERMS};
+use noise_model::{practical, Effect, NoiseLab, Point, Record};
 
 use crate::input::{self, InputArgs};
 use crate::report::sig;
@@ -69,24 +69,30 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
     let rows = deviation(y, 1.0 / rec.rate_hz, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{}: column {column:?}", input.file.display()))?;
     let (pts, _) = Point::from_rows(&rows);
-    let f: Fit = fit_with_data(
-        &pts,
-        1.0 / rec.rate_hz,
-        &DEFAULT_TERMS,
-        Some((y, rec.rate_hz)),
-    )
+    let lab = NoiseLab::new(Record {
+        y,
+        tau0: 1.0 / rec.rate_hz,
+        segments: vec![(0, y.len() as u64)],
+        temp: None,
+        timing: None,
+        points: pts,
+        user_effects: vec![],
+    })
     .map_err(|e| anyhow!("{column}: {e}"))?;
-    let a = assess(&f);
+    let m = lab
+        .fit(&lab.default_specs())
+        .map_err(|e| anyhow!("{column}: {e}"))?;
+    let f = &m.fit;
     let n = f
-        .term(Effect::White)
+        .term(&Effect::White)
         .filter(|t| t.detected)
         .map(|t| t.amplitude())
         .ok_or_else(|| anyhow!("{column}: no white noise detected; cannot give a noise density"))?;
-    let kt = f.term(Effect::RateRandomWalk).expect("default terms");
+    let kt = f.term(&Effect::RateRandomWalk).expect("default terms");
     let (k, k_is_bound) = if kt.detected {
         (kt.amplitude(), false)
     } else {
-        (kt.upper_bound().unwrap_or(0.0), true)
+        (kt.amplitude_interval().1, true)
     };
     Ok(Axis {
         name: column.into(),
@@ -94,7 +100,7 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
         n,
         k,
         k_is_bound,
-        adequate: a.adequate,
+        adequate: m.adequate,
     })
 }
 

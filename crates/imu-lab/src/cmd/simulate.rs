@@ -163,6 +163,7 @@ pub fn run(args: Args) -> Result<()> {
             n_samples: args.samples,
             seed: args.seed.wrapping_add(i as u64),
             effects: effects.clone(),
+            lsb: None,
         };
         data.push(cfg.generate());
         cfg0.get_or_insert(cfg);

@@ -1,0 +1,965 @@
+//! The noise lab: a recording's Allan curve against a model of named effects, with the record's
+//! own evidence (time series, spectrum, timestamps) where the Allan curve alone cannot tell
+//! effects apart. It implements the project's lab workflow ([`model_lab::Lab`]): fit, assess,
+//! rank candidate edits, add the best, watch the error fall.
+//!
+//! What the lab looks at, in order:
+//! 1. **Timing.** Irregular or bursty timestamps (host read times rather than sample times) are
+//!    named first: the samples are taken as uniformly spaced at the mean rate, and spectral
+//!    effects (sinusoids, Markov and filter shapes) are not named while the timing cannot
+//!    support them.
+//! 2. **Non-stationarity** ([`crate::nonstat`]): a bias step, a bias following the temperature
+//!    column, a warm-up transient — tested in the time domain with the noise model's covariance,
+//!    estimated there, and entered into the Allan model as known terms with their exact Allan
+//!    variance. While one is found and not in the model, the model is not adequate, whatever its
+//!    χ² says: a step or a warm-up absorbed into rate random walk or a ramp is not a noise density.
+//! 3. **The Allan curve**: the generalised χ² fit and verdict ([`crate::fit`], [`crate::assess`]).
+//!    Candidates are refitted and tested by the nested χ² difference (Δχ²/s ~ χ²_k, s the new
+//!    model's χ²/dof when above 1); among the significant ones (p < [`P_CANDIDATE`]) the one with
+//!    the lowest AIC on the covariance-weighted χ², χ² + 2p, is preferred, and one that does not
+//!    lower it is refused as over-fitting. Spectral evidence gates the spectral names: a sinusoid
+//!    needs a line in the periodogram (its frequency is fixed there), and when a line explains the
+//!    misfit a Markov term is not named in its place.
+use crate::assess::{assess, Assessment, TauRange};
+use crate::effect::{Context, Effect, DEFAULT_TERMS};
+use crate::fit::{
+    fit_model, set_range, Fit, FitError, Known, Measurement, Point, TermSpec, Weighting,
+};
+use crate::nonstat::{self, Blocks, Signal};
+use crate::psd::{default_segment, find_lines, line_near, welch, Line};
+use allan::ci::chi2_sf;
+use model_lab::{Candidate, Edit, Summary};
+
+/// Significance level for naming a candidate.
+pub const P_CANDIDATE: f64 = 1e-3;
+/// Significance level of the time-domain tests (temperature, warm-up) per test.
+pub const P_SIGNAL: f64 = 1e-3;
+/// Most steps of a walk.
+pub const MAX_STEPS: usize = 6;
+
+/// What the timestamps say.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimingSummary {
+    /// Median, mean and 95th-percentile spacing of consecutive stamps [s], largest spacing [s].
+    pub median_dt: f64,
+    pub mean_dt: f64,
+    pub p95_dt: f64,
+    pub max_dt: f64,
+    /// Stamps equal to their predecessor.
+    pub duplicates: usize,
+}
+
+impl TimingSummary {
+    /// From a time column (ascending; gaps already split off by the caller are fine to include).
+    pub fn of(t: &[f64]) -> Option<TimingSummary> {
+        if t.len() < 3 {
+            return None;
+        }
+        let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let duplicates = d.iter().filter(|&&x| x == 0.0).count();
+        let mean_dt = (t[t.len() - 1] - t[0]) / d.len() as f64;
+        d.sort_by(f64::total_cmp);
+        let q = |p: f64| d[((d.len() - 1) as f64 * p).round() as usize];
+        Some(TimingSummary {
+            median_dt: q(0.5),
+            mean_dt,
+            p95_dt: q(0.95),
+            max_dt: d[d.len() - 1],
+            duplicates,
+        })
+    }
+
+    /// Stamps that are not sample times: bursts (median spacing well below the mean, or a 95th
+    /// percentile well above it), jitter of more than 10 % of the period, or repeated stamps.
+    pub fn irregular(&self) -> bool {
+        self.duplicates > 0
+            || self.median_dt < 0.8 * self.mean_dt
+            || self.p95_dt > 1.2 * self.mean_dt
+    }
+
+    pub fn describe(&self) -> String {
+        format!(
+            "the timestamps are irregular: median spacing {}, mean {}, 95th percentile {}, largest \
+             {}{} — these are read times (bursts of buffered samples), not sample times. The \
+             samples are taken as uniformly spaced at the mean rate {:.4} Hz; spectral effects \
+             (sinusoids, Markov and filter shapes) are not named from such data, since bursty \
+             reads and a mismatch between the assumed and the true sample clock bend the \
+             short-τ Allan curve by themselves",
+            fmt_s(self.median_dt),
+            fmt_s(self.mean_dt),
+            fmt_s(self.p95_dt),
+            fmt_s(self.max_dt),
+            if self.duplicates > 0 {
+                format!(", {} repeated stamps", self.duplicates)
+            } else {
+                String::new()
+            },
+            1.0 / self.mean_dt
+        )
+    }
+}
+
+/// The recording the lab works from.
+#[derive(Debug, Clone)]
+pub struct Record<'a> {
+    /// The rate samples of every segment, concatenated in time order.
+    pub y: &'a [f64],
+    /// Sample period [s].
+    pub tau0: f64,
+    /// Segments (first sample's index counted as if there were no gaps, length).
+    pub segments: Vec<(u64, u64)>,
+    /// The temperature column, aligned with `y` [°C].
+    pub temp: Option<&'a [f64]>,
+    /// The timestamps' summary, when the file had them.
+    pub timing: Option<TimingSummary>,
+    /// The Allan points (overlapping ADEV at octave τ over the segments).
+    pub points: Vec<Point>,
+    /// User-described effects to consider as candidates.
+    pub user_effects: Vec<Effect>,
+}
+
+/// A finding of the time-domain or spectral checks that the model does not account for.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Finding {
+    pub effect: Effect,
+    /// The term that would account for it (parameters estimated).
+    pub spec: TermSpec,
+    pub p_value: f64,
+    pub text: String,
+}
+
+/// A fitted noise model with its assessment and the record's checks.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub specs: Vec<TermSpec>,
+    pub fit: Fit,
+    pub assessment: Assessment,
+    /// Non-stationarity the model does not account for.
+    pub findings: Vec<Finding>,
+    /// Allan-adequate and no finding.
+    pub adequate: bool,
+    /// −2 log-likelihood of the Allan points under the model.
+    pub neg2ll: f64,
+    /// −2 log-likelihood of the block differences at the time-domain scale.
+    pub neg2ll_time: f64,
+}
+
+/// The lab over one recording.
+pub struct NoiseLab<'a> {
+    pub record: Record<'a>,
+    pub meas: Measurement,
+    /// Block means for the time-domain tests.
+    pub blocks: Blocks,
+    /// The data's LSB, when the values sit on a lattice.
+    pub lsb: Option<f64>,
+    /// Significant spectral lines of the Welch PSD, strongest first.
+    pub lines: Vec<Line>,
+    /// Frequency resolution of the whole-record periodogram [Hz].
+    pub periodogram_df: f64,
+}
+
+fn fmt_s(t: f64) -> String {
+    if !t.is_finite() {
+        "n/a".into()
+    } else if t < 1e-3 {
+        format!("{:.1} µs", t * 1e6)
+    } else if t < 1.0 {
+        format!("{:.3} s", t)
+    } else if t < 100.0 {
+        format!("{:.2} s", t)
+    } else {
+        format!("{:.0} s", t)
+    }
+}
+
+/// The step between neighbouring values if the samples sit on a lattice (integer counts times a
+/// scale), else None. Looks at up to 2^17 values spread over the record.
+pub fn lattice(y: &[f64]) -> Option<f64> {
+    if y.len() < 16 {
+        return None;
+    }
+    let stride = (y.len() / 131_072).max(1);
+    let mut v: Vec<f64> = y.iter().step_by(stride).copied().collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    if v.len() < 3 {
+        return None;
+    }
+    let d: Vec<f64> = v.windows(2).map(|w| w[1] - w[0]).collect();
+    let delta = d.iter().copied().fold(f64::INFINITY, f64::min);
+    let scale = v.iter().map(|x| x.abs()).fold(0.0, f64::max);
+    if !(delta > 0.0) || scale / delta > 1e9 {
+        return None;
+    }
+    let tol = 1e-6 + 1e-12 * scale / delta;
+    d.iter()
+        .all(|x| {
+            let k = x / delta;
+            (k - k.round()).abs() < tol * k.max(1.0)
+        })
+        .then_some(delta)
+}
+
+/// Exact overlapping Allan variance of `x` (segments concatenated) at averaging factor m.
+fn oavar(x: &[f64], segments: &[(u64, u64)], m: u64) -> Option<f64> {
+    let (mut acc, mut n) = (0.0, 0u64);
+    let mut off = 0usize;
+    let m = m as usize;
+    for &(_, len) in segments {
+        let s = &x[off..off + len as usize];
+        off += len as usize;
+        if s.len() < 2 * m {
+            continue;
+        }
+        let mut pre = Vec::with_capacity(s.len() + 1);
+        let mut a = 0.0;
+        pre.push(0.0);
+        let mean = s.iter().sum::<f64>() / s.len() as f64;
+        for v in s {
+            a += v - mean;
+            pre.push(a);
+        }
+        for i in 0..=s.len() - 2 * m {
+            let d = pre[i + 2 * m] - 2.0 * pre[i + m] + pre[i];
+            acc += d * d;
+            n += 1;
+        }
+    }
+    (n > 0).then(|| acc / (2.0 * (m * m) as f64 * n as f64))
+}
+
+impl<'a> NoiseLab<'a> {
+    /// Prepare the lab: the measurement, block means, the lattice and the spectral lines.
+    pub fn new(record: Record<'a>) -> Result<NoiseLab<'a>, FitError> {
+        let tau0 = record.tau0;
+        if !(tau0 > 0.0 && tau0.is_finite()) {
+            return Err(FitError::BadTerms(format!(
+                "sample period {tau0} s is not positive"
+            )));
+        }
+        let total: u64 = record.segments.iter().map(|s| s.1).sum();
+        if total as usize != record.y.len() {
+            return Err(FitError::BadTerms(format!(
+                "the segments hold {total} samples but {} were given",
+                record.y.len()
+            )));
+        }
+        if let Some(i) = record.y.iter().position(|v| !v.is_finite()) {
+            return Err(FitError::BadTerms(format!("sample {i} is {}", record.y[i])));
+        }
+        let mut ctx = Context {
+            tau0,
+            segments: record.segments.clone(),
+            temp_avar: None,
+            tau_min: tau0,
+            tau_max: tau0,
+        };
+        if let Some(t) = record.temp {
+            if t.len() != record.y.len() {
+                return Err(FitError::BadTerms(
+                    "the temperature column is not aligned with the data".into(),
+                ));
+            }
+            let longest = record.segments.iter().map(|s| s.1).max().unwrap_or(0);
+            let mut v = Vec::new();
+            let mut m = 1u64;
+            while 2 * m < longest {
+                if let Some(a) = oavar(t, &record.segments, m) {
+                    v.push((m, a));
+                }
+                m *= 2;
+            }
+            // A constant temperature column carries no information.
+            if v.iter().any(|p| p.1 > 0.0) {
+                ctx.temp_avar = Some(v);
+            }
+        }
+        set_range(&mut ctx, &record.points);
+        let meas = Measurement::new(record.points.clone(), ctx, Weighting::Model);
+        let longest = record.segments.iter().map(|s| s.1).max().unwrap_or(0);
+        let base = (longest / 8192).max(1);
+        let temp = if meas.ctx.temp_avar.is_some() {
+            record.temp
+        } else {
+            None
+        };
+        let blocks = Blocks::new(record.y, temp, &record.segments, base, tau0);
+        let lsb = lattice(record.y);
+        // Spectral lines from the longest segment.
+        let (mut off, mut best) = (0usize, (0usize, 0usize));
+        for &(_, len) in &record.segments {
+            if len as usize > best.1 {
+                best = (off, len as usize);
+            }
+            off += len as usize;
+        }
+        let seg_y = &record.y[best.0..best.0 + best.1];
+        let lines = welch(seg_y, 1.0 / tau0, default_segment(seg_y.len()))
+            .map(|p| find_lines(&p))
+            .unwrap_or_default();
+        let periodogram_df = 1.0 / (tau0 * seg_y.len().next_power_of_two() as f64);
+        Ok(NoiseLab {
+            record,
+            meas,
+            blocks,
+            lsb,
+            lines,
+            periodogram_df,
+        })
+    }
+
+    fn longest_segment(&self) -> &[f64] {
+        let (mut off, mut best) = (0usize, (0usize, 0usize));
+        for &(_, len) in &self.record.segments {
+            if len as usize > best.1 {
+                best = (off, len as usize);
+            }
+            off += len as usize;
+        }
+        &self.record.y[best.0..best.0 + best.1]
+    }
+
+    /// The default model: the five terms of eqs. 10–14 (Jaime et al.), plus the data's
+    /// resolution when its values sit on a lattice (a known white floor, no free parameter).
+    pub fn default_specs(&self) -> Vec<TermSpec> {
+        let mut v: Vec<TermSpec> = DEFAULT_TERMS.iter().cloned().map(TermSpec::new).collect();
+        if let Some(s) = self.resolution_spec() {
+            v.push(s);
+        }
+        v
+    }
+
+    fn resolution_spec(&self) -> Option<TermSpec> {
+        let lsb = self.lsb?;
+        Some(TermSpec {
+            known: Some(Known {
+                coef: lsb * lsb,
+                coef_sigma: 0.0,
+                sign: 1.0,
+            }),
+            ..TermSpec::new(Effect::Resolution)
+        })
+    }
+
+    /// The time-domain signal of a term, if it has one.
+    fn signal_of(&self, s: &TermSpec) -> Option<Signal> {
+        let tau0 = self.record.tau0;
+        match s.effect {
+            Effect::RateRamp => Some(Signal::Ramp),
+            Effect::BiasStep => s.theta.as_ref().map(|t| Signal::Step { at: t[0] / tau0 }),
+            Effect::Temperature => {
+                if self.meas.ctx.temp_avar.is_some() {
+                    Some(Signal::Temperature)
+                } else {
+                    s.theta
+                        .as_ref()
+                        .map(|t| Signal::WarmUp { kappa: t[0] / tau0 })
+                }
+            }
+            _ => None,
+        }
+    }
+
+    /// Fit a model: time-domain terms are estimated on the record with the current noise model
+    /// and enter the Allan fit as known terms; two rounds let the noise model settle.
+    pub fn fit(&self, specs: &[TermSpec]) -> Result<Model, FitError> {
+        let mut specs = specs.to_vec();
+        let td: Vec<usize> = (0..specs.len())
+            .filter(|&k| matches!(specs[k].effect, Effect::BiasStep | Effect::Temperature))
+            .collect();
+        let mut fit = if td.is_empty() {
+            fit_model(&self.meas, &specs)?
+        } else {
+            let noise: Vec<TermSpec> = specs
+                .iter()
+                .filter(|s| !matches!(s.effect, Effect::BiasStep | Effect::Temperature))
+                .cloned()
+                .collect();
+            let mut f = fit_model(&self.meas, &noise)?;
+            for _ in 0..3 {
+                let comps = f.components();
+                let sig_idx: Vec<usize> = (0..specs.len())
+                    .filter(|&k| self.signal_of(&specs[k]).is_some())
+                    .collect();
+                let signals: Vec<Signal> = sig_idx
+                    .iter()
+                    .map(|&k| self.signal_of(&specs[k]).expect("signal"))
+                    .collect();
+                let est = nonstat::estimate(&nonstat::gls_scale(&self.blocks), &comps, &signals);
+                for (e, &k) in est.iter().zip(&sig_idx) {
+                    if td.contains(&k) {
+                        let v = if e.value.is_finite() { e.value } else { 0.0 };
+                        specs[k].known = Some(Known {
+                            coef: v * v,
+                            coef_sigma: 2.0 * v.abs() * e.sigma,
+                            sign: v.signum(),
+                        });
+                    }
+                }
+                f = fit_model(&self.meas, &specs)?;
+            }
+            f
+        };
+        // time-domain σ of the known amplitudes, as amplitude σ: keep coef_sigma = 2|v|σ_v
+        for (t, s) in fit.terms.iter_mut().zip(&specs) {
+            if let Some(k) = s.known {
+                t.coef_sigma = k.coef_sigma;
+                t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
+            }
+        }
+        let assessment = assess(&fit);
+        let findings = self.findings(&specs, &fit);
+        let adequate = assessment.adequate && findings.is_empty();
+        let neg2ll = crate::assess::neg2_loglik(&fit);
+        let signals: Vec<Signal> = specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let neg2ll_time = nonstat::neg2_loglik(
+            &nonstat::gls_scale(&self.blocks),
+            &fit.components(),
+            &signals,
+        );
+        Ok(Model {
+            specs,
+            fit,
+            assessment,
+            findings,
+            adequate,
+            neg2ll,
+            neg2ll_time,
+        })
+    }
+
+    /// The record's non-stationarity that the model does not account for.
+    pub fn findings(&self, specs: &[TermSpec], fit: &Fit) -> Vec<Finding> {
+        let comps = fit.components();
+        if comps.is_empty() {
+            return Vec::new();
+        }
+        let signals: Vec<Signal> = specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let mut out = Vec::new();
+        let segs = &self.record.segments;
+        for st in nonstat::find_steps(&self.blocks, &comps, &signals, Some((self.record.y, segs))) {
+            let t = st.at as f64 * self.record.tau0;
+            out.push(Finding {
+                effect: Effect::BiasStep,
+                spec: TermSpec {
+                    theta: Some(vec![t]),
+                    theta_fixed: true,
+                    theta_sigma: Some(vec![st.scale as f64 * self.record.tau0 / 2.0]),
+                    ..TermSpec::new(Effect::BiasStep)
+                },
+                p_value: st.p_value,
+                text: format!(
+                    "a bias step of {:+.4e} ± {:.1e} at t ≈ {} (change-point test on the time \
+                     series, likelihood ratio {:.0}, p = {:.1e} after the search over positions \
+                     and scales)",
+                    st.size,
+                    st.sigma,
+                    fmt_s(t),
+                    st.lr,
+                    st.p_value
+                ),
+            });
+        }
+        let has_temp = specs.iter().any(|s| s.effect == Effect::Temperature);
+        if !has_temp {
+            let gls = nonstat::gls_scale(&self.blocks);
+            if self.meas.ctx.temp_avar.is_some() {
+                let mut sig = signals.clone();
+                sig.push(Signal::Temperature);
+                let est = nonstat::estimate(&gls, &comps, &sig);
+                let e = est.last().expect("temperature");
+                let p = chi2_sf(e.lr, 1.0);
+                if p < P_SIGNAL {
+                    out.push(Finding {
+                        effect: Effect::Temperature,
+                        spec: TermSpec::new(Effect::Temperature),
+                        p_value: p,
+                        text: format!(
+                            "the bias follows the temperature column: {:+.4e} ± {:.1e} per °C \
+                             (GLS on the time series with the noise model's covariance, \
+                             likelihood ratio {:.1}, p = {:.1e})",
+                            e.value, e.sigma, e.lr, p
+                        ),
+                    });
+                }
+            } else {
+                // warm-up: an exponential beyond what the model's signals (a ramp) explain
+                let record = self.record.y.len() as f64 * self.record.tau0;
+                let mut best: Option<(f64, nonstat::Estimate)> = None;
+                let grid = 24;
+                for i in 0..grid {
+                    let tw = record / 300.0 * (900.0f64).powf(i as f64 / (grid - 1) as f64);
+                    let mut sig = signals.clone();
+                    sig.push(Signal::WarmUp {
+                        kappa: tw / self.record.tau0,
+                    });
+                    let est = nonstat::estimate(&gls, &comps, &sig);
+                    let e = est.last().expect("warm-up").clone();
+                    if e.lr.is_finite() && best.as_ref().is_none_or(|b| e.lr > b.1.lr) {
+                        best = Some((tw, e));
+                    }
+                }
+                if let Some((tw, e)) = best {
+                    let p = (chi2_sf(e.lr, 1.0) * grid as f64).min(1.0);
+                    if p < P_SIGNAL {
+                        out.push(Finding {
+                            effect: Effect::Temperature,
+                            spec: TermSpec {
+                                theta: Some(vec![tw]),
+                                theta_fixed: true,
+                                ..TermSpec::new(Effect::Temperature)
+                            },
+                            p_value: p,
+                            text: format!(
+                                "a warm-up transient: the bias approaches its final value \
+                                 exponentially, amplitude {:+.4e} ± {:.1e}, time constant ≈ {} \
+                                 (no temperature column; likelihood ratio {:.1}, p = {:.1e} after \
+                                 the search over time constants)",
+                                e.value,
+                                e.sigma,
+                                fmt_s(tw),
+                                e.lr,
+                                p
+                            ),
+                        });
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn summary_of(&self, m: &Model) -> Summary {
+        Summary {
+            chi2_dof: m.fit.chi2_dof(),
+            rms_residual: m.assessment.rms_log_residual,
+            rms_unit: String::new(),
+            adequate: m.adequate,
+            params: m.fit.n_params(),
+        }
+    }
+
+    /// AIC: −2 log-likelihood of the points ([`crate::assess::neg2_loglik`]) + 2p.
+    fn criterion(m: &Model) -> f64 {
+        m.neg2ll + 2.0 * m.fit.n_params() as f64
+    }
+
+    fn spectral_blocked(&self) -> bool {
+        self.record.timing.is_some_and(|t| t.irregular())
+    }
+
+    /// Candidate edits of a model, refitted and tested, best first.
+    pub fn candidate_edits(&self, cur: &Model) -> Result<Vec<Candidate<Effect, Model>>, FitError> {
+        let mut out: Vec<Candidate<Effect, Model>> = Vec::new();
+        let have: Vec<Effect> = cur.specs.iter().map(|s| s.effect.clone()).collect();
+        // 1. non-stationarity findings first
+        for f in &cur.findings {
+            let mut specs = cur.specs.clone();
+            specs.push(f.spec.clone());
+            let mut edits: Vec<(Vec<TermSpec>, Edit<Effect>)> = vec![(
+                specs.clone(),
+                Edit {
+                    add: vec![f.effect.clone()],
+                    remove: vec![],
+                },
+            )];
+            // a physical cause found in the time domain replaces the ramp that stood in for it
+            if f.effect == Effect::Temperature && have.contains(&Effect::RateRamp) {
+                let s2: Vec<TermSpec> = specs
+                    .iter()
+                    .filter(|s| s.effect != Effect::RateRamp)
+                    .cloned()
+                    .collect();
+                edits.push((
+                    s2,
+                    Edit {
+                        add: vec![f.effect.clone()],
+                        remove: vec![Effect::RateRamp],
+                    },
+                ));
+            }
+            let mut best: Option<Candidate<Effect, Model>> = None;
+            for (specs, edit) in edits {
+                let Ok(m) = self.fit(&specs) else { continue };
+                let c = self.candidate(cur, m, edit, f.p_value, true, f.text.clone());
+                // prefer the replacement when it explains the data as well (fewer terms)
+                if best.as_ref().is_none_or(|b| {
+                    Self::criterion(&c.model) <= Self::criterion(&b.model) + 2.0
+                        && c.model.findings.len() <= b.model.findings.len()
+                }) {
+                    best = Some(c);
+                }
+            }
+            if let Some(b) = best {
+                out.push(b);
+            }
+        }
+        if !out.is_empty() {
+            return Ok(out);
+        }
+        // 2. Allan-curve candidates
+        let mut tries: Vec<(Vec<TermSpec>, Edit<Effect>, String)> = Vec::new();
+        let add = |e: Effect,
+                   spec: TermSpec,
+                   why: String,
+                   tries: &mut Vec<(Vec<TermSpec>, Edit<Effect>, String)>| {
+            let mut s = cur.specs.clone();
+            s.push(spec);
+            tries.push((
+                s,
+                Edit {
+                    add: vec![e],
+                    remove: vec![],
+                },
+                why,
+            ));
+        };
+        for e in [
+            Effect::Quantization,
+            Effect::White,
+            Effect::Flicker,
+            Effect::RateRandomWalk,
+            Effect::RateRamp,
+        ] {
+            if !have.contains(&e) {
+                add(e.clone(), TermSpec::new(e), String::new(), &mut tries);
+            }
+        }
+        if !have.contains(&Effect::Resolution) {
+            if let Some(s) = self.resolution_spec() {
+                add(
+                    Effect::Resolution,
+                    s,
+                    format!(
+                        "the values sit on a lattice of {:.4e}",
+                        self.lsb.unwrap_or(0.0)
+                    ),
+                    &mut tries,
+                );
+            }
+        }
+        let blocked = self.spectral_blocked();
+        if !blocked {
+            let n_markov = have.iter().filter(|e| **e == Effect::Markov).count();
+            if n_markov < 3 {
+                add(
+                    Effect::Markov,
+                    TermSpec::new(Effect::Markov),
+                    String::new(),
+                    &mut tries,
+                );
+            }
+            // the strongest spectral line not yet in the model
+            let fitted: Vec<f64> = cur
+                .fit
+                .terms
+                .iter()
+                .filter(|t| t.effect == Effect::Sinusoid)
+                .filter_map(|t| t.theta0())
+                .collect();
+            let df_w = self.periodogram_df;
+            if let Some(l) = self.lines.iter().find(|l| {
+                !fitted
+                    .iter()
+                    .any(|&f| (f - l.freq_hz).abs() < 4.0 * df_w.max(1e-12) + 0.02 * f)
+            }) {
+                // the whole-record periodogram pins the frequency
+                let y = self.longest_segment();
+                let fs = 1.0 / self.record.tau0;
+                let (f, sf) = match line_near(y, fs, l.freq_hz, 0.05) {
+                    Some(t) if t.p_value < P_CANDIDATE => (t.freq_hz, self.periodogram_df / 2.0),
+                    _ => (l.freq_hz, self.periodogram_df * 8.0),
+                };
+                add(
+                    Effect::Sinusoid,
+                    TermSpec {
+                        theta: Some(vec![f]),
+                        theta_fixed: true,
+                        theta_sigma: Some(vec![sf]),
+                        ..TermSpec::new(Effect::Sinusoid)
+                    },
+                    format!(
+                        "the spectrum has a line at {:.4} Hz, {:.0}× the local background \
+                         (threshold {:.1}×)",
+                        l.freq_hz, l.ratio, l.threshold
+                    ),
+                    &mut tries,
+                );
+            }
+            for e in [
+                Effect::Lowpass,
+                Effect::Lowpass2,
+                Effect::Boxcar,
+                Effect::Bartlett,
+            ] {
+                if have.contains(&e) {
+                    continue;
+                }
+                let mut s: Vec<TermSpec> = cur
+                    .specs
+                    .iter()
+                    .filter(|s| s.effect != Effect::White)
+                    .cloned()
+                    .collect();
+                s.push(TermSpec::new(e.clone()));
+                let remove = if have.contains(&Effect::White) {
+                    vec![Effect::White]
+                } else {
+                    vec![]
+                };
+                tries.push((
+                    s,
+                    Edit {
+                        add: vec![e],
+                        remove,
+                    },
+                    String::new(),
+                ));
+            }
+            for u in &self.record.user_effects {
+                if !have.contains(u) {
+                    add(
+                        u.clone(),
+                        TermSpec::new(u.clone()),
+                        String::new(),
+                        &mut tries,
+                    );
+                }
+            }
+        }
+        let cur_crit = Self::criterion(cur);
+        let line_explains = |c: &Candidate<Effect, Model>| {
+            c.edit.add.contains(&Effect::Sinusoid) && c.p_value < P_CANDIDATE
+        };
+        let mut cands: Vec<Candidate<Effect, Model>> = Vec::new();
+        for (specs, edit, why) in tries {
+            let Ok(m) = self.fit(&specs) else { continue };
+            let extra = m.fit.n_params() as i64 - cur.fit.n_params() as i64;
+            // two likelihood-ratio tests on the same data, Bonferroni-combined: the Allan points
+            // (every τ) and the block differences in the time domain (long τ)
+            let s = m.fit.chi2_dof().max(1.0);
+            let lr_p = |delta: f64| {
+                if extra > 0 {
+                    chi2_sf(delta.max(0.0) / s, extra as f64)
+                } else if delta > 0.0 {
+                    0.0
+                } else {
+                    1.0
+                }
+            };
+            let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(cur.neg2ll_time - m.neg2ll_time)))
+                .min(1.0);
+            let mut c = self.candidate(cur, m, edit, p, false, why);
+            let added_present = c.edit.add.iter().all(|e| {
+                c.model
+                    .fit
+                    .terms
+                    .iter()
+                    .any(|t| t.effect == *e && t.coef > 0.0)
+            });
+            let better = Self::criterion(&c.model) < cur_crit;
+            c.admissible = p < P_CANDIDATE && added_present && better;
+            if !c.admissible {
+                c.reason = if !added_present {
+                    format!("{}the refit puts its amplitude at zero", prefix(&c.reason))
+                } else if p >= P_CANDIDATE {
+                    format!("{}not significant (p = {:.1e})", prefix(&c.reason), p)
+                } else {
+                    format!(
+                        "{}it does not lower χ² + 2p (over-fitting)",
+                        prefix(&c.reason)
+                    )
+                };
+            }
+            cands.push(c);
+        }
+        // A narrow line in the periodogram is direct evidence: when the sinusoid at that line
+        // explains the misfit, the smooth-spectrum shapes (Markov, filters) that would absorb it
+        // are not named in its place; it comes first.
+        if cands.iter().any(|c| line_explains(c) && c.admissible) {
+            for c in &mut cands {
+                let smooth = c.edit.add.iter().any(|e| {
+                    *e == Effect::Markov || e.replaces_white() || matches!(e, Effect::User(_))
+                });
+                if smooth && c.admissible {
+                    c.admissible = false;
+                    c.reason =
+                        "a spectral line explains the misfit; the sinusoid is named first".into();
+                }
+            }
+        }
+        cands.sort_by(|a, b| {
+            b.admissible
+                .cmp(&a.admissible)
+                .then(line_explains(b).cmp(&line_explains(a)))
+                .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
+        });
+        out.extend(cands);
+        Ok(out)
+    }
+
+    fn candidate(
+        &self,
+        cur: &Model,
+        m: Model,
+        edit: Edit<Effect>,
+        p: f64,
+        td: bool,
+        why: String,
+    ) -> Candidate<Effect, Model> {
+        let reading = edit
+            .add
+            .iter()
+            .map(|e| reading(&m.fit, e))
+            .collect::<Vec<_>>()
+            .join("; ");
+        Candidate {
+            summary: self.summary_of(&m),
+            delta: cur.neg2ll - m.neg2ll,
+            extra_params: m.fit.n_params() as i64 - cur.fit.n_params() as i64,
+            p_value: p,
+            admissible: td,
+            reason: why,
+            reading,
+            edit,
+            model: m,
+        }
+    }
+}
+
+fn prefix(s: &str) -> String {
+    if s.is_empty() {
+        String::new()
+    } else {
+        format!("{s}; ")
+    }
+}
+
+/// The physical reading of an effect as fitted.
+pub fn reading(fit: &Fit, e: &Effect) -> String {
+    let Some(t) = fit.terms.iter().rev().find(|t| t.effect == *e) else {
+        return String::new();
+    };
+    let th = t.theta0().unwrap_or(f64::NAN);
+    let two_pi = 2.0 * std::f64::consts::PI;
+    match e {
+        Effect::Markov => format!(
+            "correlated noise with τ_c = {} (peak of σ at τ ≈ {}); as a low-pass on white noise it \
+             would be a corner at {:.3} Hz",
+            fmt_s(th),
+            fmt_s(1.89 * th),
+            1.0 / (two_pi * th)
+        ),
+        Effect::Sinusoid => format!(
+            "a sinusoid of {:.3e} at {:.4} Hz (period {}); σ has nulls at τ = k/f",
+            t.amplitude(),
+            th,
+            fmt_s(1.0 / th)
+        ),
+        Effect::Lowpass | Effect::Lowpass2 => {
+            let dlpf = [
+                (188.0, 1),
+                (98.0, 2),
+                (42.0, 3),
+                (20.0, 4),
+                (10.0, 5),
+                (5.0, 6),
+            ]
+            .iter()
+            .find(|(bw, _)| (th / bw - 1.0).abs() < 0.25)
+            .map(|(bw, cfg)| {
+                format!(" — close to the MPU-6050's DLPF_CFG = {cfg} ({bw} Hz gyro bandwidth)")
+            })
+            .unwrap_or_default();
+            format!(
+                "the sensor's own {}low-pass filter at f_c = {:.3} Hz on its white noise{dlpf}",
+                if *e == Effect::Lowpass2 {
+                    "two-pole "
+                } else {
+                    ""
+                },
+                th
+            )
+        }
+        Effect::Boxcar | Effect::Bartlett => format!(
+            "a {} decimation filter {:.2} samples long ({})",
+            if *e == Effect::Boxcar {
+                "moving-average"
+            } else {
+                "triangular"
+            },
+            th,
+            fmt_s(th * fit.tau0)
+        ),
+        Effect::BiasStep => format!(
+            "a bias step of {:+.4e} at t = {} — a non-stationarity of this record, not noise",
+            t.amplitude(),
+            fmt_s(th)
+        ),
+        Effect::Temperature => {
+            if fit.ctx.temp_avar.is_some() {
+                format!(
+                    "the bias follows the temperature with {:+.4e} per °C",
+                    t.amplitude()
+                )
+            } else {
+                format!(
+                    "a warm-up transient of {:+.4e} with time constant {}",
+                    t.amplitude(),
+                    fmt_s(th)
+                )
+            }
+        }
+        Effect::Resolution => format!("rounding to the data's LSB of {:.4e}", t.amplitude()),
+        e => format!("{} = {:.4e}", e.amp_name(), t.amplitude()),
+    }
+}
+
+impl model_lab::Lab for NoiseLab<'_> {
+    type Effect = Effect;
+    type Model = Model;
+    type Error = FitError;
+
+    fn summary(&self, m: &Model) -> Summary {
+        self.summary_of(m)
+    }
+
+    fn candidates(&self, m: &Model) -> Result<Vec<Candidate<Effect, Model>>, FitError> {
+        self.candidate_edits(m)
+    }
+}
+
+/// The τ range where a term shows: the points where its share of the model variance is at least
+/// half its largest share.
+pub fn tau_range(fit: &Fit, k: usize) -> Option<(f64, f64)> {
+    let share: Vec<f64> = fit
+        .term_avar(k)
+        .iter()
+        .zip(&fit.model_avar)
+        .map(|(a, m)| if *m > 0.0 { a / m } else { 0.0 })
+        .collect();
+    let max = share.iter().copied().fold(0.0, f64::max);
+    if !(max > 0.0) {
+        return None;
+    }
+    let idx: Vec<usize> = (0..share.len())
+        .filter(|&j| share[j] >= 0.5 * max)
+        .collect();
+    Some((fit.points[*idx.first()?].tau, fit.points[*idx.last()?].tau))
+}
+
+/// The union of failing (or else outside) τ ranges of an assessment.
+pub fn misfit_range(a: &Assessment) -> Option<(f64, f64)> {
+    let rs: &[TauRange] = if a.failing.is_empty() {
+        &a.outside
+    } else {
+        &a.failing
+    };
+    if rs.is_empty() {
+        return None;
+    }
+    Some((
+        rs.iter().map(|r| r.lo).fold(f64::INFINITY, f64::min),
+        rs.iter().map(|r| r.hi).fold(0.0, f64::max),
+    ))
+}

@@ -1,0 +1,267 @@
+//! Second-order structure of a rate process: V(k), the variance of the sum of k consecutive
+//! samples.
+//!
+//! Every Allan-type statistic of a rate record is a sum of squared second differences of the
+//! partial sums P(n) = Σ_{i<n} y_i, and for a process with stationary increments
+//! Cov(Σ_a w_a P(i + a), Σ_b w_b P(j + b)) = −½ Σ_a Σ_b w_a w_b V(|j + b − i − a|) whenever Σ w = 0
+//! (the structure-function identity; e.g. Percival & Walden, *Wavelet Methods for Time Series
+//! Analysis*, §7.6, for the Haar wavelet variance, which is half the Allan variance). So V(k)
+//! gives both the expected overlapping Allan variance,
+//! σ²(m) = (4V(m) − V(2m)) / (2m²),
+//! and the covariance of any two Allan estimates ([`crate::cov`]). V may be a *generalised*
+//! structure function: adding a + b·k² changes no second difference, which is what lets
+//! flicker (V ∝ −k² ln k) and rate random walk (V ∝ k − k³) be written in closed form.
+//!
+//! For a stationary process with autocovariance R(k), V(k) = Σ_{|j|<k} (k − |j|) R(j)
+//! ([`RTable`] computes it for any decaying R).
+use std::sync::Arc;
+
+/// V(k) of one unit-coefficient stochastic component (the model multiplies it by c ≥ 0).
+#[derive(Debug, Clone)]
+pub enum Structure {
+    /// White rate samples of unit variance per sample: V(k) = k.
+    Linear,
+    /// Differences of white phase of unit variance, y_i = e_{i+1} − e_i: V(k) = 2 for k ≥ 1.
+    PhaseWhite,
+    /// Flicker rate noise: V(k) = −k² ln k / π, which makes σ²(m) = (2 ln 2/π) for every m.
+    Flicker,
+    /// Rate random walk with unit increment variance per sample: V(k) = (k − k³)/6,
+    /// σ²(m) = m/3 + 1/(6m) (the exact sampled form).
+    Cubic,
+    /// First-order Gauss–Markov (AR(1)) of unit variance and lag-one correlation φ:
+    /// V(k) = k(1+φ)/(1−φ) − 2φ(1 − φ^k)/(1−φ)².
+    Ar1 { phi: f64 },
+    /// Any stationary process with a decaying autocovariance, tabulated.
+    Table(Arc<RTable>),
+}
+
+impl Structure {
+    /// V(k) for real k ≥ 0 (the closed forms are smooth in k; tables interpolate linearly).
+    pub fn v(&self, k: f64) -> f64 {
+        let k = k.abs();
+        if k == 0.0 {
+            return 0.0;
+        }
+        match self {
+            Structure::Linear => k,
+            Structure::PhaseWhite => {
+                if k >= 1.0 {
+                    2.0
+                } else {
+                    2.0 * k
+                }
+            }
+            Structure::Flicker => -k * k * k.ln() / std::f64::consts::PI,
+            Structure::Cubic => (k - k * k * k) / 6.0,
+            Structure::Ar1 { phi } => ar1_v(*phi, k),
+            Structure::Table(t) => t.v(k),
+        }
+    }
+
+    /// Expected overlapping Allan variance at m samples for a unit coefficient.
+    pub fn avar(&self, m: f64) -> f64 {
+        (4.0 * self.v(m) - self.v(2.0 * m)) / (2.0 * m * m)
+    }
+
+    /// An identity for caching: equal keys mean equal structure functions.
+    pub fn key(&self) -> (u8, u64) {
+        match self {
+            Structure::Linear => (0, 0),
+            Structure::PhaseWhite => (1, 0),
+            Structure::Flicker => (2, 0),
+            Structure::Cubic => (3, 0),
+            Structure::Ar1 { phi } => (4, phi.to_bits()),
+            Structure::Table(t) => (5, t.id),
+        }
+    }
+
+    /// The lag (in samples) beyond which this structure adds nothing to a second-difference
+    /// covariance other than what a power law gives: the decay length of a Markov or tabulated
+    /// autocovariance, 0 otherwise.
+    pub fn memory(&self) -> f64 {
+        match self {
+            Structure::Ar1 { phi } if *phi > 0.0 && *phi < 1.0 => 20.0 / -phi.ln(),
+            Structure::Table(t) => t.len() as f64,
+            _ => 0.0,
+        }
+    }
+}
+
+/// V(k) of a unit-variance AR(1), written with `expm1` so that φ near 1 keeps its digits.
+fn ar1_v(phi: f64, k: f64) -> f64 {
+    if !(phi > 0.0) {
+        return k;
+    }
+    if phi >= 1.0 {
+        return k * k;
+    }
+    let beta = -phi.ln(); // τ0/τ_c
+    let a = -(-beta).exp_m1(); // 1 − φ
+    let x = beta * k;
+    if x < 1e-4 {
+        // nearly fully correlated over k samples: the series in β to second order,
+        // V = k² − β(k³ − k)/3 + β²k²(k² − 1)/12 (relative error O(x²) in the Allan variance)
+        return k * k - beta * (k * k * k - k) / 3.0 + beta * beta * k * k * (k * k - 1.0) / 12.0;
+    }
+    let b = -(-x).exp_m1(); // 1 − φ^k
+    (k * (2.0 - a) * a - 2.0 * (1.0 - a) * b) / (a * a)
+}
+
+/// A tabulated autocovariance R(0..=K) of a stationary process, with the prefix sums that give
+/// V(k) exactly for every k: V(k) = k·R(0) + 2 Σ_{j=1}^{k−1} (k − j) R(j). R(j) is taken as 0 for
+/// j > K, so the table must extend until R has decayed (callers cut it below 1e-12 of R(0)).
+#[derive(Debug, Clone)]
+pub struct RTable {
+    /// A hash of the values (FNV-1a), the table's identity for caching.
+    pub id: u64,
+    r0: f64,
+    /// C0[k] = Σ_{j=1}^{k} R(j), C1[k] = Σ_{j=1}^{k} j·R(j), for k = 0..=K.
+    c0: Vec<f64>,
+    c1: Vec<f64>,
+}
+
+impl RTable {
+    /// Build from R(0), R(1), … (at least one value).
+    pub fn new(r: &[f64]) -> RTable {
+        let mut c0 = Vec::with_capacity(r.len());
+        let mut c1 = Vec::with_capacity(r.len());
+        let (mut s0, mut s1) = (0.0, 0.0);
+        c0.push(0.0);
+        c1.push(0.0);
+        for (j, &v) in r.iter().enumerate().skip(1) {
+            s0 += v;
+            s1 += j as f64 * v;
+            c0.push(s0);
+            c1.push(s1);
+        }
+        let mut id: u64 = 0xcbf2_9ce4_8422_2325;
+        for v in r {
+            for b in v.to_bits().to_le_bytes() {
+                id = (id ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+            }
+        }
+        RTable {
+            id,
+            r0: r.first().copied().unwrap_or(0.0),
+            c0,
+            c1,
+        }
+    }
+
+    /// Build by evaluating `r` at k = 0, 1, … until |R| stays below `rel`·|R(0)| for 16
+    /// consecutive lags, or `max_len` lags (an error when R has not decayed by then).
+    pub fn from_fn(
+        mut r: impl FnMut(usize) -> f64,
+        rel: f64,
+        max_len: usize,
+    ) -> Result<RTable, String> {
+        let r0 = r(0);
+        if !r0.is_finite() {
+            return Err(format!("R(0) = {r0} is not finite"));
+        }
+        let mut vals = vec![r0];
+        let mut quiet = 0;
+        let mut k = 1;
+        while quiet < 16 {
+            if k > max_len {
+                return Err(format!(
+                    "the autocovariance has not decayed below {rel:e}·R(0) after {max_len} lags \
+                     (R({max_len}) = {:e}, R(0) = {r0:e}); give a decaying R(k)",
+                    vals[max_len]
+                ));
+            }
+            let v = r(k);
+            if !v.is_finite() {
+                return Err(format!("R({k}) = {v} is not finite"));
+            }
+            quiet = if v.abs() <= rel * r0.abs() {
+                quiet + 1
+            } else {
+                0
+            };
+            vals.push(v);
+            k += 1;
+        }
+        vals.truncate(vals.len() - 16);
+        Ok(RTable::new(&vals))
+    }
+
+    /// Number of tabulated lags beyond 0.
+    pub fn len(&self) -> usize {
+        self.c0.len() - 1
+    }
+
+    /// Whether only R(0) is tabulated (white).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn v_int(&self, k: usize) -> f64 {
+        if k == 0 {
+            return 0.0;
+        }
+        let i = (k - 1).min(self.len());
+        k as f64 * self.r0 + 2.0 * (k as f64 * self.c0[i] - self.c1[i])
+    }
+
+    /// V(k), linearly interpolated between integers.
+    pub fn v(&self, k: f64) -> f64 {
+        let lo = k.floor();
+        let f = k - lo;
+        let a = self.v_int(lo as usize);
+        if f == 0.0 {
+            a
+        } else {
+            a + f * (self.v_int(lo as usize + 1) - a)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn direct_v(r: impl Fn(usize) -> f64, k: usize) -> f64 {
+        let mut s = k as f64 * r(0);
+        for j in 1..k {
+            s += 2.0 * (k - j) as f64 * r(j);
+        }
+        s
+    }
+
+    #[test]
+    fn closed_forms_give_the_textbook_allan_variances() {
+        for m in [1.0, 2.0, 7.0, 64.0, 1e6] {
+            assert!((Structure::Linear.avar(m) - 1.0 / m).abs() < 1e-12 / m);
+            assert!((Structure::PhaseWhite.avar(m) - 3.0 / (m * m)).abs() < 1e-12 / (m * m));
+            let fl = 2.0 * std::f64::consts::LN_2 / std::f64::consts::PI;
+            assert!((Structure::Flicker.avar(m) - fl).abs() < 1e-9 * fl, "m {m}");
+            let rrw = m / 3.0 + 1.0 / (6.0 * m);
+            assert!((Structure::Cubic.avar(m) - rrw).abs() < 1e-9 * rrw, "m {m}");
+        }
+    }
+
+    #[test]
+    fn ar1_matches_its_autocovariance_sum() {
+        for phi in [0.01f64, 0.5, 0.97, 0.999_99] {
+            let s = Structure::Ar1 { phi };
+            for k in [1usize, 2, 3, 10, 100, 2000] {
+                let d = direct_v(|j| phi.powi(j as i32), k);
+                let v = s.v(k as f64);
+                assert!((v - d).abs() <= 1e-9 * d.abs(), "φ {phi} k {k}: {v} vs {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn table_matches_direct_sums_and_continues_linearly() {
+        let r = |j: usize| (-(j as f64) / 3.0).exp() * (1.0 + 0.1 * j as f64);
+        let t = RTable::from_fn(r, 1e-14, 100_000).unwrap();
+        for k in [1usize, 2, 5, 17, 150, 5000] {
+            let d = direct_v(r, k);
+            assert!((t.v(k as f64) - d).abs() < 1e-9 * d, "k {k}");
+        }
+        let never = RTable::from_fn(|_| 1.0, 1e-12, 1000);
+        assert!(never.unwrap_err().contains("not decayed"));
+    }
+}
