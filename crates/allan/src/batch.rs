@@ -276,6 +276,52 @@ pub fn deviation_from_phase(
     deviation_of_phase(&xs, tau0, stat, taus)
 }
 
+/// The deviation `stat` of a record cut by gaps into `segments` of rate samples (every `tau0`
+/// s), as the device's engine computes it: no difference spans a gap. For every m the squared
+/// differences inside each segment are summed and divided by the total number of terms; the
+/// noise exponent is identified on the longest segment; the EDF of a row is the sum of the
+/// segments' Greenhall EDFs (the segments are independent records). A single segment gives
+/// exactly [`deviation`]. Segments shorter than 3 samples contribute nothing. TOTDEV, whose
+/// reflected extension is defined for one record, is refused for more than one segment.
+pub fn deviation_segments(
+    segments: &[&[f64]],
+    tau0: f64,
+    stat: Stat,
+    taus: &TauSet,
+) -> Result<Vec<Row>, AllanError> {
+    if !(tau0 > 0.0 && tau0.is_finite()) {
+        return Err(AllanError::BadTau0(tau0));
+    }
+    if let [one] = segments {
+        return deviation(one, tau0, stat, taus);
+    }
+    let mut offset = 0;
+    for s in segments {
+        if let Some(i) = s.iter().position(|v| !v.is_finite()) {
+            return Err(AllanError::NotFinite { index: offset + i });
+        }
+        offset += s.len();
+    }
+    let used: Vec<&[f64]> = segments.iter().copied().filter(|s| s.len() >= 3).collect();
+    if used.is_empty() {
+        return Err(AllanError::TooShort {
+            samples: segments.iter().map(|s| s.len()).max().unwrap_or(0),
+            needed: 3,
+        });
+    }
+    if stat == Stat::Totdev && used.len() > 1 {
+        return Err(AllanError::Unsupported(
+            "totdev reflects one uninterrupted record; the data have gaps",
+        ));
+    }
+    let phases = used
+        .iter()
+        .map(|s| phase_from_rate_checked(s))
+        .collect::<Result<Vec<_>, _>>()?;
+    let refs: Vec<&[f64]> = phases.iter().map(Vec::as_slice).collect();
+    deviation_of_phases(&refs, tau0, stat, taus)
+}
+
 /// A unit of work of [`deviation_of_phase`], in the order handed to the cores (costliest first).
 enum Job {
     /// Fused overlapping sums (and identification sums) of group `group` over start indices
@@ -315,16 +361,23 @@ fn deviation_of_phase(
     stat: Stat,
     taus: &TauSet,
 ) -> Result<Vec<Row>, AllanError> {
-    let np = x.len() as u64;
-    let ms: Vec<u64> = taus
-        .ms(largest_m(stat, np))?
-        .into_iter()
-        .filter(|&m| stat_norm(x.len(), m as usize, stat).0 >= 2)
-        .collect();
+    deviation_of_phases(&[x], tau0, stat, taus)
+}
+
+/// The sums of one phase record at the averaging factors `ms` (each with at least one term in
+/// it), with the per-τ noise identification on the record.
+struct PhaseSums {
+    /// Σ of the statistic's squared differences, per m.
+    sums: Vec<f64>,
+    /// What identification found, per m.
+    idents: Vec<Ident>,
+}
+
+/// [`PhaseSums`] of the phase `x`: overlapping sums in fused passes over groups of m, each
+/// split by start index over the cores, carrying the identification sums of the short τ; the
+/// other statistics one m at a time. Identification of the rest is O(N/m) per m.
+fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
     let d = stat.difference_order();
-    // Overlapping sums: fused passes over groups of m, each split by start index over the
-    // cores, carrying the identification sums of the short τ; the other statistics one m at a
-    // time. Identification of the rest is O(N/m) per m.
     let fused = matches!(stat, Stat::Oadev | Stat::Ohdev);
     let groups: Vec<&[u64]> = if fused {
         ms.chunks(FUSED_MAX).collect()
@@ -403,10 +456,64 @@ fn deviation_of_phase(
             *id = Ident::Alpha(noise_id::acf_alpha_from_sums(x, m, d, &avg[row]));
         }
     }
+    PhaseSums { sums, idents }
+}
+
+/// The rows of `stat` over phase records separated by gaps (`phases`, in rate × samples): the
+/// sums of every record added, the terms counted per record, the noise identified on the
+/// longest record and the EDF summed over the records (module docs of [`deviation_segments`]).
+fn deviation_of_phases(
+    phases: &[&[f64]],
+    tau0: f64,
+    stat: Stat,
+    taus: &TauSet,
+) -> Result<Vec<Row>, AllanError> {
+    let longest = phases
+        .iter()
+        .enumerate()
+        .max_by_key(|(i, x)| (x.len(), usize::MAX - i))
+        .map_or(0, |(i, _)| i);
+    let np_max = phases.get(longest).map_or(0, |x| x.len()) as u64;
+    let terms = |m: u64| -> u64 {
+        phases
+            .iter()
+            .map(|x| stat_norm(x.len(), m as usize, stat).0)
+            .sum()
+    };
+    let ms: Vec<u64> = taus
+        .ms(largest_m(stat, np_max))?
+        .into_iter()
+        .filter(|&m| terms(m) >= 2)
+        .collect();
+    let mut sums = vec![0.0f64; ms.len()];
+    let mut long: Option<PhaseSums> = None;
+    for (k, x) in phases.iter().enumerate() {
+        // The m with a term in this record: a prefix of the ascending ms.
+        let own = ms
+            .iter()
+            .take_while(|&&m| stat_norm(x.len(), m as usize, stat).0 >= 1)
+            .count();
+        if own == 0 {
+            continue;
+        }
+        let ps = phase_sums(x, &ms[..own], stat);
+        for (t, v) in sums.iter_mut().zip(&ps.sums) {
+            *t += v;
+        }
+        if k == longest {
+            long = Some(ps);
+        }
+    }
+    let Some(long) = long.filter(|_| !ms.is_empty()) else {
+        return Ok(Vec::new());
+    };
+    let x = phases[longest];
+    let d = stat.difference_order();
     let mut rows = Vec::with_capacity(ms.len());
     let mut ceiling = None;
     for (row, &m) in ms.iter().enumerate() {
-        let (n, denom) = stat_norm(x.len(), m as usize, stat);
+        let denom = stat_norm(x.len(), m as usize, stat).1;
+        let n = terms(m);
         let sum = sums[row];
         let mf = m as f64;
         let mut dev = (sum / (denom * n as f64)).sqrt();
@@ -414,15 +521,15 @@ fn deviation_of_phase(
         if stat == Stat::Tdev {
             dev *= tau / 3f64.sqrt();
         }
-        let identified = match idents[row] {
+        let identified = match long.idents[row] {
             Ident::Alpha(a) => a,
-            Ident::Fused => unreachable!("resolved above"),
+            Ident::Fused => unreachable!("resolved in phase_sums"),
             // Either answer is capped by a ceiling of 1 or less: R(n) would change nothing.
             Ident::Pm if m == 1 || ceiling.is_some_and(|c| c <= 1) => Some(2),
             Ident::Pm => {
                 let m = m as usize;
                 let (sa, na) = if stat == Stat::Oadev {
-                    (sum, n)
+                    (long.sums[row], stat_norm(x.len(), m, stat).0)
                 } else {
                     diff_sum(x, m, 2, 1)
                 };
@@ -436,7 +543,14 @@ fn deviation_of_phase(
             identified.map(|a| a.clamp(2 - 2 * d as i32, 2)),
             &mut ceiling,
         );
-        let edf = edf_for(stat, alpha, mf, np as f64);
+        // Records are independent: their degrees of freedom add.
+        let edf: f64 = phases
+            .iter()
+            .filter(|p| stat_norm(p.len(), m as usize, stat).0 >= 1)
+            .map(|p| edf_for(stat, alpha, mf, p.len() as f64))
+            .filter(|e| e.is_finite())
+            .sum();
+        let edf = if edf > 0.0 { edf } else { f64::NAN };
         let (lo, hi) = bounds(dev, edf);
         rows.push(Row {
             tau,

@@ -41,7 +41,7 @@ mod test_rng {
 pub use stream::{DeviceEngine, Engine, LevelSums, MagEngine};
 
 #[cfg(feature = "std")]
-pub use batch::{deviation, stride_sums, Estimator, Row, Stat, TauSet};
+pub use batch::{deviation, deviation_segments, stride_sums, Estimator, Row, Stat, TauSet};
 
 /// Errors of the batch estimators. Each names what was wrong and where.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +62,8 @@ pub enum AllanError {
     BadTau0(f64),
     /// A tau-set parameter is invalid (e.g. 0 points per octave, m = 0 in a list).
     BadTauSet(&'static str),
+    /// The statistic is not defined for this input (why).
+    Unsupported(&'static str),
 }
 
 impl core::fmt::Display for AllanError {
@@ -73,6 +75,7 @@ impl core::fmt::Display for AllanError {
             AllanError::NotFinite { index } => write!(f, "sample {index} is not a finite number"),
             AllanError::BadTau0(t) => write!(f, "sample period {t} s is not positive and finite"),
             AllanError::BadTauSet(why) => write!(f, "invalid tau set: {why}"),
+            AllanError::Unsupported(why) => write!(f, "not computable: {why}"),
         }
     }
 }
