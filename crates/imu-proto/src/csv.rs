@@ -554,8 +554,8 @@ pub struct Timing {
     pub jittered: usize,
     /// RMS of (spacing − period) over the spacings that are neither duplicates nor gaps, s.
     pub jitter_rms_s: f64,
-    /// Spacings shorter than half a period (duplicates excluded).
-    pub short: usize,
+    /// Spacings off the sample clock (see [`Clock::off_clock`]).
+    pub off_clock: usize,
     /// The gaps, in order.
     pub gaps: Vec<Gap>,
     /// Total time missing in the gaps, s.
@@ -632,8 +632,9 @@ pub struct Clock {
     pub period_s: f64,
     /// The stamps are bursty (see [`Regularity::Bursty`]).
     pub bursty: bool,
-    /// Spacings shorter than half a period (duplicates excluded).
-    pub short: usize,
+    /// Spacings off the clock: shorter than half a period (duplicates excluded), or over
+    /// [`GAP_FACTOR`] periods without being a whole number of periods nor a reported gap.
+    pub off_clock: usize,
 }
 
 /// Read the sample clock from stamps `t` and, when the file has one, its `gap_before` column:
@@ -687,7 +688,7 @@ pub fn read_clock(t: &[f64], gap_before: Option<&[f64]>) -> Result<Clock, Timing
         p95_dt_s: p95,
         period_s: period,
         bursty: (short + off_grid) as f64 > BURSTY_FRACTION * dts.len() as f64,
-        short,
+        off_clock: short + off_grid,
     })
 }
 
@@ -823,7 +824,7 @@ impl TimingScan {
             } else {
                 0.0
             },
-            short: self.clock.short,
+            off_clock: self.clock.off_clock,
             missing_s: gaps.iter().map(|g| g.missing_s).sum(),
             largest_gap_s: gaps.iter().map(|g| g.missing_s).fold(0.0, f64::max),
             gaps,
@@ -883,11 +884,13 @@ impl Timing {
         match self.regularity {
             Regularity::Bursty => {
                 s += &format!(
-                    "BURSTY stamps ({} spacings under half the mean period, the long ones no \
-                     whole number of periods): they are read times of buffered data, not a \
-                     sample clock, so the samples are taken as uniformly spaced at the mean \
-                     period {} ({} Hz) and any effect at the burst rates may be the timing's",
-                    self.short,
+                    "BURSTY stamps ({} of {} spacings fit no sample clock: shorter than half the \
+                     median spacing, or long without being a whole number of them): they are \
+                     read times of buffered data, not a sample clock, so the samples are taken as \
+                     uniformly spaced at the mean period {} ({} Hz) and any effect at the burst \
+                     rates may be the timing's",
+                    self.off_clock,
+                    self.rows - 1,
                     ms(self.period_s),
                     sig3(self.rate_hz())
                 );

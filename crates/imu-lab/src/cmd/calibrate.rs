@@ -854,6 +854,7 @@ mod tests {
             input: InputArgs {
                 file: file.to_path_buf(),
                 rate: Some(50.0),
+                ignore_time: false,
                 skip_lines: 0,
                 scale: None,
                 unit: None,

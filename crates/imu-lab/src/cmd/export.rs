@@ -2,7 +2,7 @@
 //! conversions written beside each number.
 use std::path::PathBuf;
 
-use allan::{deviation, Stat, TauSet};
+use allan::{deviation_segments, Stat, TauSet};
 use anyhow::{anyhow, bail, Context, Result};
 use noise_model::{assess, fit_with_data, practical, Effect, Fit, Point, DEFAULT_TERMS};
 
@@ -61,12 +61,13 @@ struct Axis {
 
 fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
     let rec = input::load(input, &[column])?;
-    let unit = input::unit_of(input, column)?;
-    let y = &rec
+    let series = rec
         .column(column)
-        .ok_or_else(|| anyhow!("column {column:?} missing"))?
-        .values;
-    let rows = deviation(y, 1.0 / rec.rate_hz, Stat::Oadev, &TauSet::Octave)
+        .ok_or_else(|| anyhow!("column {column:?} missing"))?;
+    let unit = series.unit.clone();
+    let y = &series.values;
+    let segments = rec.segments_of(column).unwrap_or_default();
+    let rows = deviation_segments(&segments, 1.0 / rec.rate_hz, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{}: column {column:?}", input.file.display()))?;
     let (pts, _) = Point::from_rows(&rows);
     let f: Fit = fit_with_data(

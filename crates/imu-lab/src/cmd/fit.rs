@@ -2,7 +2,7 @@
 //! the missing effect, and show the step when the user adds it (issue 3 §2–§8).
 use std::path::PathBuf;
 
-use allan::{deviation, Stat, TauSet};
+use allan::{deviation_segments, Stat, TauSet};
 use anyhow::{anyhow, bail, Context, Result};
 use noise_model::{
     assess, diagnose, fit_with_data, practical, step, Assessment, Diagnosis, Effect, Fit, Point,
@@ -225,7 +225,8 @@ pub fn run(args: Args) -> Result<()> {
     let unit = series.unit.clone();
     let y = &series.values;
     let tau0 = 1.0 / rec.rate_hz;
-    let rows = deviation(y, tau0, Stat::Oadev, &TauSet::Octave)
+    let segments = rec.segments_of(&args.column).unwrap_or_default();
+    let rows = deviation_segments(&segments, tau0, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{shown}: column {:?}", args.column))?;
     let (points, skipped) = Point::from_rows(&rows);
 
@@ -525,6 +526,7 @@ mod tests {
                 "/../allan/tests/data/mpu6050_static_449s.csv"
             )),
             rate: Some(100.0),
+            ignore_time: false,
             skip_lines: 4,
             scale: Some(0.0076336),
             unit: Some("deg/s".into()),
@@ -537,7 +539,7 @@ mod tests {
     #[test]
     fn real_static_recording_is_white_noise_dominated_and_adequate() {
         let (y, rate) = static_gz();
-        let rows = deviation(&y, 1.0 / rate, Stat::Oadev, &TauSet::Octave).unwrap();
+        let rows = allan::deviation(&y, 1.0 / rate, Stat::Oadev, &TauSet::Octave).unwrap();
         let (pts, _) = Point::from_rows(&rows);
         let st = stage(&pts, 1.0 / rate, &DEFAULT_TERMS, &y, rate).unwrap();
         assert!(st.assessment.adequate, "{}", st.diagnosis.explanation);

@@ -8,7 +8,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use imu_sim::{write_csv, SimConfig, SimEffect};
 use serde::Serialize;
 
-use crate::input::contract_unit;
+use imu_proto::csv::unit as contract_unit;
 
 /// Arguments of `imu-lab simulate`. Parameters are in the canonical units of the noise model,
 /// with u the columns' contract unit (deg/s for gx gy gz, m/s² for ax ay az).
