@@ -157,3 +157,29 @@ fn control_ideal_gyro_is_adequate_without_effects() {
         );
     }
 }
+
+/// The reported residual is what the reported parameters give, move by move, and every fitted
+/// parameter has a positive uncertainty.
+#[test]
+fn residual_recomputes_and_parameters_have_uncertainties() {
+    let p = problem(9, [1.02, 0.99, 1.01], [0.5, -0.3, 0.4, 0.2, -0.6, 0.3]);
+    let r = analyse(&p, &[Effect::Scale, Effect::Misalignment]).unwrap();
+    let f = &r.fitted;
+    let s: Vec<f64> = p
+        .moves
+        .iter()
+        .zip(f.used.chunks(2))
+        .filter(|(_, u)| u[0])
+        .flat_map(|(mv, _)| p.residual_of(&f.params, mv))
+        .map(|v| v * v)
+        .collect();
+    let rms = (s.iter().sum::<f64>() / s.len() as f64).sqrt();
+    assert!((rms / f.rms() - 1.0).abs() < 1e-9, "{rms} vs {}", f.rms());
+    let sg = &f.sigma;
+    assert!(sg.scale.unwrap().iter().all(|v| *v > 0.0 && v.is_finite()));
+    assert!(sg
+        .gyro_misalignment_deg
+        .unwrap()
+        .iter()
+        .all(|v| *v > 0.0 && v.is_finite()));
+}

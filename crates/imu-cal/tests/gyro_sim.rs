@@ -106,3 +106,41 @@ fn seed_gyro_bias_worked_example() {
     }
     assert!(r.diagnosis.adequate, "{}", r.diagnosis.explanation);
 }
+
+/// A constant gyro column (a stuck sensor, or the wrong column) is a clear refusal naming the
+/// axis and the value, not a verdict built on a zero noise floor.
+#[test]
+fn constant_column_is_refused_by_name() {
+    let x: Vec<f64> = (0..5000).map(|i| (i % 7) as f64 * 0.01).collect();
+    let c = vec![12.5; 5000];
+    let e = GyroProblem::new([&x, &c, &x], None, 50)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("gyro axis y is constant (all 5000 samples are 12.5 deg/s)"),
+        "{e}"
+    );
+}
+
+/// The reported residual is what the reported parameters give; bias and temperature
+/// coefficient have positive uncertainties of the size the block scatter implies.
+#[test]
+fn residual_recomputes_and_parameters_have_uncertainties() {
+    let (g, t) = recording(77, [0.004, -0.003, 0.002]);
+    let p = GyroProblem::new([&g[0], &g[1], &g[2]], Some(&t), 50).unwrap();
+    let r = analyse(&p, &[Effect::Bias, Effect::Temperature]).unwrap();
+    let f = &r.fitted;
+    let nb = p.blocks[0].len();
+    let s: f64 = (0..3)
+        .flat_map(|j| (0..nb).map(move |i| (j, i)))
+        .map(|(j, i)| p.residual(&f.params, j, i).powi(2))
+        .sum();
+    assert!(((s / (3 * nb) as f64).sqrt() / f.rms() - 1.0).abs() < 1e-9);
+    // Block means scatter by 0.05/√2400 ≈ 0.001 deg/s: the bias to ≈ 0.00015 deg/s.
+    for v in f.sigma.bias.unwrap() {
+        assert!((5e-5..5e-4).contains(&v), "{v}");
+    }
+    for v in f.sigma.temp_coeff.unwrap() {
+        assert!(v > 0.0 && v < 5e-4, "{v}");
+    }
+}

@@ -389,7 +389,7 @@ pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
 
 /// Six significant digits without trailing zeros.
 fn short(x: f64) -> String {
-    let s = crate::report::sig(x, 6);
+    let s = crate::render::sig(x, 6);
     if s.contains('.') && !s.contains('e') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {

@@ -5,7 +5,7 @@ use imu_proto::csv::{self as contract, Timing, TimingScan, GAP_BEFORE, TIME};
 use serde::Serialize;
 
 use crate::input::{self, InputArgs};
-use crate::report;
+use crate::render;
 
 /// Arguments of `imu-lab adev`.
 #[derive(clap::Args, Debug)]
@@ -85,7 +85,7 @@ pub fn table(
             "{}: no averaging time of --taus fits the record: its longest segment has {longest} \
              samples ({} s) and {} needs at least two terms at each τ",
             input.file.display(),
-            report::sig(longest as f64 / rec.rate_hz, 4),
+            render::sig(longest as f64 / rec.rate_hz, 4),
             stat.name()
         );
     }

@@ -7,7 +7,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use noise_model::{assess, fit_with_data, practical, Effect, Fit, Point, DEFAULT_TERMS};
 
 use crate::input::{self, InputArgs};
-use crate::report::sig;
+use crate::render::sig;
 
 /// Arguments of `imu-lab export`.
 #[derive(clap::Args, Debug)]

@@ -12,7 +12,7 @@ use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::input::{self, InputArgs};
-use crate::{plot, report};
+use crate::render::{allan as plot, noise as report};
 
 /// Arguments of `imu-lab fit`.
 #[derive(clap::Args, Debug)]
