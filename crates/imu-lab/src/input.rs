@@ -114,8 +114,9 @@ pub fn scale_of(args: &InputArgs) -> Result<f64> {
     let (lo, hi) = SCALE_RANGE;
     if !(scale.is_finite() && (lo..=hi).contains(&scale.abs())) {
         bail!(
-            "--scale {scale}: a count must be worth between {lo:e} and {hi:e} units (e.g. \
-             0.0076336 deg/s per LSB)"
+            "--scale {}: a count must be worth between {lo:e} and {hi:e} units (e.g. \
+             0.0076336 deg/s per LSB)",
+            num(scale)
         );
     }
     Ok(scale)
@@ -125,8 +126,9 @@ pub fn scale_of(args: &InputArgs) -> Result<f64> {
 pub fn check_rate(rate: f64, what: &str) -> Result<f64> {
     if !(rate.is_finite() && (RATE_MIN_HZ..=RATE_MAX_HZ).contains(&rate)) {
         bail!(
-            "{what} {rate} Hz: a sample rate must be between {RATE_MIN_HZ:e} Hz and \
-             {RATE_MAX_HZ:e} Hz"
+            "{what} {} Hz: a sample rate must be between {RATE_MIN_HZ:e} Hz and \
+             {RATE_MAX_HZ:e} Hz",
+            num(rate)
         );
     }
     Ok(rate)
@@ -368,9 +370,10 @@ pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
         };
         if let Some((i, v)) = values.iter().enumerate().find(|(_, v)| v.abs() > VALUE_MAX) {
             bail!(
-                "{shown}: column {name:?}, data row {}: {v:e} {unit} after --scale {scale}: \
-                 no sensor reads that much; check --scale",
-                i + 1
+                "{shown}: column {name:?}, data row {}: {v:e} {unit} after --scale {}: no \
+                 sensor reads that much; check --scale",
+                i + 1,
+                num(scale)
             );
         }
         columns.push(Series {
@@ -385,6 +388,15 @@ pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
         timing,
         segments,
     })
+}
+
+/// A number as typed: plain for everyday magnitudes, scientific for huge or tiny ones.
+pub fn num(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e7).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
 }
 
 /// Six significant digits without trailing zeros.
