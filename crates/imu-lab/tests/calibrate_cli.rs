@@ -22,10 +22,22 @@ fn multipose() -> String {
 }
 
 /// The tilt sphere in µT: its gauss columns renamed onto the contract and scaled by 100.
-const SPHERE: [&str; 4] = ["--rename", "t_s=t,mx_gauss=mx,my_gauss=my,mz_gauss=mz", "--scale", "100"];
+const SPHERE: [&str; 4] = [
+    "--rename",
+    "t_s=t,mx_gauss=mx,my_gauss=my,mz_gauss=mz",
+    "--scale",
+    "100",
+];
 
 /// The multi-pose run in m/s² (±2 g: 9.80665/16384 m/s² per LSB).
-const POSES: [&str; 6] = ["--skip-lines", "4", "--rate", "100", "--scale", "0.000598550"];
+const POSES: [&str; 6] = [
+    "--skip-lines",
+    "4",
+    "--rate",
+    "100",
+    "--scale",
+    "0.000598550",
+];
 
 fn json(out: &std::process::Output) -> Value {
     serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
@@ -114,7 +126,10 @@ fn one_wild_sample_is_named_as_an_outlier() {
     let rms = v["residual_rms"].as_f64().unwrap();
     assert!((0.40..0.48).contains(&rms), "rms {rms}");
     let d = v["diagnosis"]["explanation"].as_str().unwrap();
-    assert!(d.contains("1 samples beyond 6σ excluded as outliers"), "{d}");
+    assert!(
+        d.contains("1 samples beyond 6σ excluded as outliers"),
+        "{d}"
+    );
 }
 
 #[test]
@@ -126,7 +141,10 @@ fn ten_poses_cannot_judge_nine_parameters() {
     let text = String::from_utf8_lossy(&run_ok(&a).stdout).to_string();
     assert!(text.contains("verdict: UNDERDETERMINED"), "{text}");
     assert!(!text.contains("ADEQUATE\n"), "{text}");
-    assert!(text.contains("misalignment     = [") && text.contains(" ± "), "{text}");
+    assert!(
+        text.contains("misalignment     = [") && text.contains(" ± "),
+        "{text}"
+    );
     a.push("--json");
     let v = json(&run_ok(&a));
     assert_eq!(v["diagnosis"]["underdetermined"], true);
@@ -176,7 +194,10 @@ fn raw_accelerometer_counts_stay_counts() {
     fails_with(&a, &["raw counts (LSB)", "--g 16384"]);
     a.extend(["--g", "16384"]);
     let text = String::from_utf8_lossy(&run_ok(&a).stdout).to_string();
-    assert!(text.contains("offset           = [") && text.contains("] LSB"), "{text}");
+    assert!(
+        text.contains("offset           = [") && text.contains("] LSB"),
+        "{text}"
+    );
     assert!(!text.contains("m/s²"), "{text}");
     // The calibration file holds m/s²: counts cannot go there.
     let dir = tempfile::tempdir().unwrap();

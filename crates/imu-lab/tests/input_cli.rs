@@ -39,7 +39,10 @@ fn fails_with(args: &[&str], needles: &[&str]) -> String {
         assert!(err.contains(n), "{args:?}: {n:?} not in {err}");
     }
     assert!(!err.contains("NaN") && !err.contains("panicked"), "{err}");
-    assert!(start.elapsed() < Duration::from_secs(30), "{args:?} took too long");
+    assert!(
+        start.elapsed() < Duration::from_secs(30),
+        "{args:?} took too long"
+    );
     err
 }
 
@@ -68,7 +71,9 @@ fn a_rate_that_disagrees_with_t_is_refused() {
         );
     }
     // Within 1 % it is the user's nominal rate; with --ignore-time any rate is taken as said.
-    let v = json(&run_ok(["adev", f, "--column", "gz", "--rate", "100.4", "--json"]));
+    let v = json(&run_ok([
+        "adev", f, "--column", "gz", "--rate", "100.4", "--json",
+    ]));
     assert_eq!(v["rate_hz"], 100.4);
     let v = json(&run_ok([
         "adev",
@@ -87,7 +92,13 @@ fn a_rate_that_disagrees_with_t_is_refused() {
 fn a_long_gap_splits_the_record_and_the_rate_stays() {
     let dir = tempfile::tempdir().unwrap();
     // 50 s of data at 100 Hz with a 1000 s hole in the middle.
-    let f = clock_file(dir.path(), "gap.csv", 5000, |i| if i >= 2500 { 1000.0 } else { 0.0 });
+    let f = clock_file(dir.path(), "gap.csv", 5000, |i| {
+        if i >= 2500 {
+            1000.0
+        } else {
+            0.0
+        }
+    });
     let f = f.to_str().unwrap();
     let out = run_ok(["adev", f, "--column", "gz", "--unit", "deg/s", "--json"]);
     let v = json(&out);
@@ -99,17 +110,29 @@ fn a_long_gap_splits_the_record_and_the_rate_stays() {
     // have 4999).
     assert_eq!(v["adev"][0]["n"], 4998);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("1 gap(s)") && err.contains("2 segments"), "{err}");
+    assert!(
+        err.contains("1 gap(s)") && err.contains("2 segments"),
+        "{err}"
+    );
     // fit names the data's own length, 50 s, not the 1050 s span.
     let out = run_ok(["fit", f, "--column", "gz", "--unit", "deg/s"]);
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("5000 samples at 100.000 Hz (50.0 s)"), "{text}");
+    assert!(
+        text.contains("5000 samples at 100.000 Hz (50.0 s)"),
+        "{text}"
+    );
 }
 
 #[test]
 fn a_short_gap_leaves_every_tau_exact() {
     let dir = tempfile::tempdir().unwrap();
-    let f = clock_file(dir.path(), "g.csv", 4000, |i| if i >= 1000 { 0.49 } else { 0.0 });
+    let f = clock_file(dir.path(), "g.csv", 4000, |i| {
+        if i >= 1000 {
+            0.49
+        } else {
+            0.0
+        }
+    });
     let v = json(&run_ok([
         "adev",
         f.to_str().unwrap(),
@@ -161,11 +184,23 @@ fn a_recorded_gap_round_trips() {
         }
         let p = dir.path().join(format!("rec{with_column}.csv"));
         std::fs::write(&p, s).unwrap();
-        let v = json(&run_ok(["adev", p.to_str().unwrap(), "--column", "gx", "--json"]));
-        assert!((v["rate_hz"].as_f64().unwrap() - 1000.0).abs() < 1e-6, "{v}");
+        let v = json(&run_ok([
+            "adev",
+            p.to_str().unwrap(),
+            "--column",
+            "gx",
+            "--json",
+        ]));
+        assert!(
+            (v["rate_hz"].as_f64().unwrap() - 1000.0).abs() < 1e-6,
+            "{v}"
+        );
         assert_eq!(v["unit"], "deg/s");
         let tm = &v["timing"];
-        assert_eq!((tm["gaps"].as_u64(), tm["missing_samples"].as_u64()), (Some(1), Some(32)));
+        assert_eq!(
+            (tm["gaps"].as_u64(), tm["missing_samples"].as_u64()),
+            (Some(1), Some(32))
+        );
         assert_eq!(tm["gap_list"][0]["row"], 1700);
         assert_eq!(tm["gap_list"][0]["reported"], with_column);
         assert_eq!(tm["regularity"], "regular");
@@ -227,7 +262,10 @@ fn raw_counts_are_labelled_in_counts() {
     let v = json(&run_ok(a.iter().chain(&["--json"])));
     assert_eq!(v["unit"], "LSB");
     let text = String::from_utf8_lossy(&run_ok(a).stdout).to_string();
-    assert!(text.contains("gz [LSB]") && !text.contains("deg/s"), "{text}");
+    assert!(
+        text.contains("gz [LSB]") && !text.contains("deg/s"),
+        "{text}"
+    );
     // The same file with --scale: deg/s (the contract's unit for gz).
     let v = json(&run_ok(["adev", f.as_str()].iter().chain(&raw).chain(&[
         "--scale",
