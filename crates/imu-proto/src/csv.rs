@@ -749,7 +749,7 @@ impl TimingScan {
         self.prev = t;
         let p = self.clock.period_s;
         let gap = if gap_before > 0.0 {
-            self.reported += gap_before as u64;
+            self.reported = self.reported.saturating_add(gap_before as u64);
             Some(Gap {
                 row,
                 missing_samples: gap_before as u64,
@@ -866,7 +866,9 @@ impl Timing {
 
     /// Samples missing in all gaps.
     pub fn missing_samples(&self) -> u64 {
-        self.gaps.iter().map(|g| g.missing_samples).sum()
+        self.gaps
+            .iter()
+            .fold(0u64, |a, g| a.saturating_add(g.missing_samples))
     }
 
     /// One paragraph for people: the period, the spacings, the gaps, duplicates and jitter,
@@ -1187,6 +1189,15 @@ mod tests {
         assert!((tm.median_dt_s - 0.0009).abs() < 1e-9);
         assert!((tm.rate_hz() - (t.len() - 1) as f64 / (t[t.len() - 1] - t[0])).abs() < 1e-9);
         assert!(tm.describe().contains("BURSTY"));
+    }
+
+    #[test]
+    fn absurd_gaps_saturate_instead_of_overflowing() {
+        // Found by fuzzing: a stamp of 3e31 s after 1 ms spacings is a gap of more samples
+        // than a u64 holds.
+        let tm = timing(&[0.0, 0.001, 0.002, 0.003, 3e31, 6e31], None).unwrap();
+        assert_eq!(tm.gaps.len(), 2);
+        assert_eq!(tm.missing_samples(), u64::MAX);
     }
 
     #[test]
