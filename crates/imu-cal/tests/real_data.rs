@@ -5,28 +5,25 @@ use imu_cal::lab::{analyse, Effect};
 use imu_cal::mag::MagProblem;
 use nalgebra::Vector3;
 
-/// Read numeric CSV columns after `skip` metadata lines and a header.
+/// Read every column of a recording (after `skip` metadata lines) with the contract's reader.
 fn read_csv(path: &str, skip: usize) -> (Vec<String>, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(format!("{}/tests/data/{path}", env!("CARGO_MANIFEST_DIR")))
-        .expect("test data");
-    let mut lines = text.lines().skip(skip);
-    let header: Vec<String> = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
+    let full = format!("{}/tests/data/{path}", env!("CARGO_MANIFEST_DIR"));
+    let file = std::fs::File::open(&full).expect("test data");
+    let opts = imu_proto::csv::ReadOptions {
+        skip_lines: skip,
+        renames: vec![],
+    };
+    let mut r = imu_proto::csv::Reader::new(file, &full, &opts).unwrap();
+    let header: Vec<String> = r.header().iter().map(|c| c.name.clone()).collect();
+    let names: Vec<&str> = header.iter().map(String::as_str).collect();
+    // The file's own columns, in its order (no `t` or `gap_before` of the contract among them).
+    let got = r.select(&names, &[]).unwrap();
+    assert_eq!(got, header);
     let mut cols = vec![Vec::new(); header.len()];
-    for (i, l) in lines.enumerate() {
-        if l.trim().is_empty() {
-            continue;
-        }
-        for (k, f) in l.split(',').enumerate() {
-            cols[k].push(
-                f.trim()
-                    .parse::<f64>()
-                    .unwrap_or_else(|_| panic!("line {i} field {k}")),
-            );
+    let mut row = vec![0.0; header.len()];
+    while r.next_row(&mut row).unwrap() {
+        for (c, v) in cols.iter_mut().zip(&row) {
+            c.push(*v);
         }
     }
     (header, cols)
