@@ -2,7 +2,7 @@
 //!
 //! Input is rate samples `y_i` (deg/s, m/s², …) taken every `τ0`. Following AllanTools
 //! (`frequency2phase`), the mean rate is removed and the phase is the cumulative sum with a
-//! leading zero, `x[0] = 0, x[k] = Σ_{i<k} (y_i − ȳ)` (seed eq. 8). Working in units of
+//! leading zero, `x[0] = 0, x[k] = Σ_{i<k} (y_i − ȳ)` (Jaime et al., eq. 8). Working in units of
 //! "rate × samples" makes `τ0` cancel from every deviation except TDEV, which is a time.
 //! Removing the mean changes none of the difference-based estimators (a constant rate is a
 //! linear phase, annihilated by second and third differences); it only keeps `x` small.
@@ -27,7 +27,7 @@ pub use stream_ref::{stream_rows, stride_sums};
 pub enum Stat {
     /// Allan deviation, non-overlapping (SP 1065 eq. 7–8).
     Adev,
-    /// Overlapping Allan deviation (SP 1065 eq. 11; seed eq. 7).
+    /// Overlapping Allan deviation (SP 1065 eq. 11; Jaime et al., eq. 7).
     Oadev,
     /// Modified Allan deviation (SP 1065 eq. 14).
     Mdev,

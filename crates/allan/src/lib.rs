@@ -8,7 +8,7 @@
 //!   OHDEV, TDEV, TOTDEV) with 68.3 % confidence bounds from Greenhall's EDF, and the host-side
 //!   "stride" estimator that computes exactly what the streaming engine computes.
 //!
-//! All estimators work through the phase `θ`, the integral of the rate (seed eqs. 8–9):
+//! All estimators work through the phase `θ`, the integral of the rate (Jaime et al., eqs. 8–9):
 //! cluster averages are `(θ[k+m] − θ[k])/τ`, so every Allan-type variance is a sum of squared
 //! finite differences of `θ`. References: NIST SP 1065 (Riley, *Handbook of Frequency Stability
 //! Analysis*, 2008) for each estimator, Greenhall & Riley (PTTI 2003) for the EDF; each function
@@ -27,8 +27,8 @@ pub mod noise_id;
 /// Deterministic test input shared by the unit tests: xorshift32 mapped to [−0.5, 0.5).
 #[cfg(all(test, feature = "std"))]
 mod test_rng {
-    pub fn rng(seed: u32) -> impl FnMut() -> f64 {
-        let mut s = seed;
+    pub fn rng(key: u32) -> impl FnMut() -> f64 {
+        let mut s = key;
         move || {
             s ^= s << 13;
             s ^= s >> 17;

@@ -13,8 +13,8 @@ use imu_cal::accel::{detect_static, AccelProblem, StaticDetect, G_STANDARD};
 use imu_cal::lab::{analyse, Effect};
 use nalgebra::{Matrix3, Vector3};
 
-fn problem(seed: u64, mis_deg: [f64; 3]) -> (AccelProblem, usize) {
-    let mut rng = Rng::new(seed);
+fn problem(run: u64, mis_deg: [f64; 3]) -> (AccelProblem, usize) {
+    let mut rng = Rng::new(run);
     let s = Vector3::new(1.02, 0.985, 1.01);
     let al = mis_deg.map(f64::to_radians);
     let t = Matrix3::new(1.0, 0.0, 0.0, al[0], 1.0, 0.0, al[1], al[2], 1.0);
@@ -29,14 +29,14 @@ fn problem(seed: u64, mis_deg: [f64; 3]) -> (AccelProblem, usize) {
 
 #[test]
 fn static_detection_finds_every_pose() {
-    for seed in 1..=4 {
-        let (p, n) = problem(seed, [0.0; 3]);
-        assert_eq!(p.poses.len(), n, "seed {seed}");
+    for run in 1..=4 {
+        let (p, n) = problem(run, [0.0; 3]);
+        assert_eq!(p.poses.len(), n, "run {run}");
         for pose in &p.poses {
             // Each pose holds 300 samples; detection trims at most the window at each end.
             assert!(
                 pose.end - pose.start >= 200,
-                "seed {seed}: short pose {pose:?}"
+                "run {run}: short pose {pose:?}"
             );
         }
     }
@@ -45,18 +45,18 @@ fn static_detection_finds_every_pose() {
 #[test]
 fn hidden_misalignment_is_diagnosed_and_recovered() {
     let truth = [1.5, -1.0, 2.0];
-    for seed in 1..=4 {
-        let (p, _) = problem(seed, truth);
+    for run in 1..=4 {
+        let (p, _) = problem(run, truth);
         let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
         assert!(
             !r.diagnosis.adequate,
-            "seed {seed}: {}",
+            "run {run}: {}",
             r.diagnosis.explanation
         );
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Misalignment),
-            "seed {seed}: {}",
+            "run {run}: {}",
             r.diagnosis.explanation
         );
         let step = r.step.unwrap();
@@ -64,7 +64,7 @@ fn hidden_misalignment_is_diagnosed_and_recovered() {
         let r2 = analyse(&p, &step.model).unwrap();
         assert!(
             r2.diagnosis.adequate,
-            "seed {seed}: {}",
+            "run {run}: {}",
             r2.diagnosis.explanation
         );
         let m = r2.fitted.params.misalignment_deg.unwrap();
@@ -72,39 +72,39 @@ fn hidden_misalignment_is_diagnosed_and_recovered() {
         for k in 0..3 {
             assert!(
                 (m[k] - truth[k]).abs() < 0.1,
-                "seed {seed}: misalignment {m:?}"
+                "run {run}: misalignment {m:?}"
             );
             // The reported uncertainty is the scatter's: the truth within 5σ, σ near 0.01°.
             assert!(
                 (m[k] - truth[k]).abs() < 5.0 * ms[k] && (0.002..0.05).contains(&ms[k]),
-                "seed {seed}: misalignment {m:?} ± {ms:?}"
+                "run {run}: misalignment {m:?} ± {ms:?}"
             );
         }
         let o = r2.fitted.params.offset.unwrap();
         for (k, t) in [0.35, -0.2, 0.5].iter().enumerate() {
-            assert!((o[k] - t).abs() < 0.01, "seed {seed}: offset {o:?}");
+            assert!((o[k] - t).abs() < 0.01, "run {run}: offset {o:?}");
         }
         let s = r2.fitted.params.scale.unwrap();
         for (k, t) in [1.02, 0.985, 1.01].iter().enumerate() {
-            assert!((s[k] - t).abs() < 2e-3, "seed {seed}: scale {s:?}");
+            assert!((s[k] - t).abs() < 2e-3, "run {run}: scale {s:?}");
         }
     }
 }
 
 #[test]
 fn control_without_misalignment_is_adequate() {
-    for seed in 11..=14 {
-        let (p, _) = problem(seed, [0.0; 3]);
+    for run in 11..=14 {
+        let (p, _) = problem(run, [0.0; 3]);
         let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
         assert!(
             r.diagnosis.adequate,
-            "seed {seed}: {}",
+            "run {run}: {}",
             r.diagnosis.explanation
         );
         assert_eq!(r.diagnosis.missing, None);
         // Residual RMS close to the floor: within a factor 1.5 (40 poses: the RMS of 34 d.o.f.
         // scatters by ≈ ±12 %).
-        assert!(r.fitted.rms() < 1.5 * r.expected_rms, "seed {seed}");
+        assert!(r.fitted.rms() < 1.5 * r.expected_rms, "run {run}");
     }
 }
 
@@ -112,14 +112,14 @@ fn control_without_misalignment_is_adequate() {
 fn offset_only_model_misses_scale_or_is_flagged() {
     // Scale errors of 1.5–2 % are far above the noise: the offset-only model must not be
     // adequate, and the diagnosis must name scale (not misalignment, which is absent).
-    for seed in 21..=23 {
-        let (p, _) = problem(seed, [0.0; 3]);
+    for run in 21..=23 {
+        let (p, _) = problem(run, [0.0; 3]);
         let r = analyse(&p, &[Effect::Offset]).unwrap();
         assert!(!r.diagnosis.adequate);
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Scale),
-            "seed {seed}: {}",
+            "run {run}: {}",
             r.diagnosis.explanation
         );
     }

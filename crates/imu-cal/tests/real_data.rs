@@ -163,7 +163,7 @@ fn tilt_sphere_soft_iron() {
     }
 }
 
-/// Gyro on the same multi-pose run. Bias at rest (seed eq. 2) against upstream's bias
+/// Gyro on the same multi-pose run. Bias at rest (Jaime et al., eq. 2) against upstream's bias
 /// (−427.46, 147.95, −80.72 LSB, same sign convention as the raw counts): within 8 LSB
 /// (0.06 deg/s; measured ≤ 4.7 LSB). Scale/misalignment from the rotations: 3 of the 9 moves
 /// saturate the ±250 °/s gyro and are skipped; on the other 6 the integrated turns miss the

@@ -164,7 +164,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let yaml = format!(
         "# Kalibr IMU noise model, written by `imu-lab export kalibr` from {file}\n\
-         # Values are the largest over the axes (conservative), from a weighted fit of the seed's\n\
+         # Values are the largest over the axes (conservative), from a weighted fit of Jaime et al.'s\n\
          # five Allan terms. Kalibr wants CONTINUOUS-time densities (not per-sample σ):\n\
          #   gyroscope_noise_density [rad/s/√Hz]   = N [deg/s·√s] × π/180   (1/√Hz = √s)\n\
          #   gyroscope_random_walk   [rad/s²/√Hz]  = K [deg/s/√s] × π/180\n\
