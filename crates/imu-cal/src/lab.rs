@@ -19,8 +19,9 @@
 //!    covariance `s²·(JᵀJ)⁻¹` (s² = RSS/(N − p)), propagated to the reported form (degrees,
 //!    matrices, ellipse axes) to first order.
 //! 3. **Enough data.** A model with fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom
-//!    per parameter is *underdetermined*: its residual cannot tell an adequate model from an
-//!    overfitted one, so it is never called adequate.
+//!    per parameter is *underdetermined*: a residual at the floor cannot tell an adequate model
+//!    from an overfitted one, so it is never called adequate (a residual far above the floor is
+//!    a failure whatever the degrees of freedom, and is diagnosed as such).
 //! 4. **Adequacy.** The residual variance per degree of freedom, `s² = RSS/(N − p)`, is compared
 //!    with the noise-floor variance `σ²` estimated from the data itself on the same basis (per pose,
 //!    per sample or per block). Under a complete model `s²/σ²` follows F(N − p, ν) (ν = degrees of
@@ -459,9 +460,34 @@ pub struct Candidate {
     pub evidence: Option<String>,
 }
 
+/// The one-word verdict.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The residual is consistent with the noise floor, with enough degrees of freedom to say so.
+    Adequate,
+    /// The residual exceeds the floor.
+    NotAdequate,
+    /// The residual is at the floor, but too few degrees of freedom back it.
+    Underdetermined,
+}
+
+impl Verdict {
+    /// Upper-case word for reports.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Adequate => "ADEQUATE",
+            Verdict::NotAdequate => "NOT ADEQUATE",
+            Verdict::Underdetermined => "UNDERDETERMINED",
+        }
+    }
+}
+
 /// The verdict on a model.
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
+    /// Adequate, not adequate or underdetermined.
+    pub verdict: Verdict,
     /// True when the residual is consistent with the noise floor (never for an underdetermined
     /// model).
     pub adequate: bool,
@@ -726,14 +752,26 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
         )
     };
     let need = (k * (1.0 + DOF_PER_PARAMETER)).ceil();
-    let (missing, explanation, step) = if underdetermined {
+    let thin = if underdetermined {
+        format!(
+            " (and {} residuals for {} parameters leave {} degrees of freedom, fewer than \
+             {DOF_PER_PARAMETER} per parameter)",
+            fitted.n_used(),
+            fitted.n_params,
+            dof.max(0.0)
+        )
+    } else {
+        String::new()
+    };
+    let verdict = format!("{verdict}{thin}");
+    let (missing, explanation, step) = if underdetermined && fits_floor {
         (
             None,
             format!(
-                "underdetermined: {} residuals for {} parameters leave {} degrees of freedom, \
-                 fewer than {DOF_PER_PARAMETER} per parameter, so the residual cannot tell an \
-                 adequate model from an overfitted one ({verdict}). Record at least {need} {} \
-                 to judge this model.",
+                "underdetermined: the residual is at the noise floor, but {} residuals for {} \
+                 parameters leave {} degrees of freedom, fewer than {DOF_PER_PARAMETER} per \
+                 parameter, so it cannot tell an adequate model from an overfitted one \
+                 ({verdict}). Record at least {need} {} to judge this model.",
                 fitted.n_used(),
                 fitted.n_params,
                 dof.max(0.0),
@@ -807,6 +845,13 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
         floor,
         expected_rms,
         diagnosis: Diagnosis {
+            verdict: if adequate {
+                Verdict::Adequate
+            } else if underdetermined && fits_floor {
+                Verdict::Underdetermined
+            } else {
+                Verdict::NotAdequate
+            },
             adequate,
             underdetermined,
             outliers,

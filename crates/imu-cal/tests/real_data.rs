@@ -1,7 +1,7 @@
 //! The real recordings (tests/data, see PROVENANCE.md).
 mod common;
 use imu_cal::accel::{detect_static, AccelProblem, StaticDetect, G_STANDARD};
-use imu_cal::lab::{analyse, Effect};
+use imu_cal::lab::{analyse, Effect, Verdict};
 use imu_cal::mag::MagProblem;
 use nalgebra::Vector3;
 
@@ -58,9 +58,10 @@ fn multipose_accelerometer_vs_upstream() {
     eprintln!("{}", r.diagnosis.explanation);
     assert!(!r.diagnosis.adequate && r.diagnosis.underdetermined);
     assert!(
-        r.diagnosis
-            .explanation
-            .starts_with("underdetermined: 10 residuals for 6 parameters")
+        r.diagnosis.verdict == Verdict::Underdetermined
+            && r.diagnosis
+                .explanation
+                .contains("10 residuals for 6 parameters")
             && r.diagnosis.explanation.contains("at least 24 poses"),
         "{}",
         r.diagnosis.explanation
@@ -69,7 +70,12 @@ fn multipose_accelerometer_vs_upstream() {
     // Residual: 4 mg-level at most (measured 0.0041 m/s²).
     assert!(r.fitted.rms() < 0.01, "rms {}", r.fitted.rms());
     let r9 = analyse(&p, &[Effect::Offset, Effect::Scale, Effect::Misalignment]).unwrap();
-    assert!(!r9.diagnosis.adequate && r9.diagnosis.underdetermined);
+    assert_eq!(r9.diagnosis.verdict, Verdict::Underdetermined);
+    // Offset alone is far off the floor: not adequate (whatever the degrees of freedom), and
+    // scale is named.
+    let r3 = analyse(&p, &[Effect::Offset]).unwrap();
+    assert_eq!(r3.diagnosis.verdict, Verdict::NotAdequate);
+    assert_eq!(r3.diagnosis.missing, Some(Effect::Scale));
     let ms = r9.fitted.sigma.misalignment_deg.unwrap();
     assert!(ms.iter().all(|v| v.is_finite() && *v > 0.0), "{ms:?}");
 

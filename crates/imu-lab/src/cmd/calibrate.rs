@@ -364,6 +364,7 @@ fn load_data(a: &Args, model: &[Effect]) -> Result<Loaded> {
 
 #[derive(Serialize)]
 struct JsonDiagnosis<'a> {
+    verdict: imu_cal::lab::Verdict,
     adequate: bool,
     underdetermined: bool,
     missing: Option<&'static str>,
@@ -433,6 +434,7 @@ fn json_out(l: &Loaded, report: &Report) -> Result<String> {
         },
         notes: &l.notes,
         diagnosis: JsonDiagnosis {
+            verdict: report.diagnosis.verdict,
             adequate: report.diagnosis.adequate,
             underdetermined: report.diagnosis.underdetermined,
             missing: report.diagnosis.missing.map(|e| e.name()),

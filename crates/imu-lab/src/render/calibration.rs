@@ -200,16 +200,7 @@ pub fn text_report(l: &Loaded, r: &Report) -> String {
         r.floor.sigma,
         r.floor.method
     );
-    s += &format!(
-        "verdict: {}\n",
-        if r.diagnosis.adequate {
-            "ADEQUATE"
-        } else if r.diagnosis.underdetermined {
-            "UNDERDETERMINED"
-        } else {
-            "NOT ADEQUATE"
-        }
-    );
+    s += &format!("verdict: {}\n", r.diagnosis.verdict.word());
     if !r.diagnosis.candidates.is_empty() {
         s += "candidates:\n";
         for c in &r.diagnosis.candidates {
