@@ -1,4 +1,4 @@
-//! Writes the benchmark inputs of docs/benchmarks.md, reproducibly (xorshift32, seed fixed):
+//! Writes the benchmark inputs of docs/benchmarks.md, reproducibly (xorshift32 from a fixed start):
 //!
 //! * `gen_rate f64 FILE N` — N little-endian f64 rate samples (white noise plus a slow
 //!   square-wave bias, deg/s-like magnitudes), for `oadev_file` and AllanTools;

@@ -8,7 +8,7 @@
 //!   OHDEV, TDEV, TOTDEV) with 68.3 % confidence bounds from Greenhall's EDF, and the host-side
 //!   "stride" estimator that computes exactly what the streaming engine computes.
 //!
-//! All estimators work through the phase `θ`, the integral of the rate (seed eqs. 8–9):
+//! All estimators work through the phase `θ`, the integral of the rate (Jaime et al., eqs. 8–9):
 //! cluster averages are `(θ[k+m] − θ[k])/τ`, so every Allan-type variance is a sum of squared
 //! finite differences of `θ`. References: NIST SP 1065 (Riley, *Handbook of Frequency Stability
 //! Analysis*, 2008) for each estimator, Greenhall & Riley (PTTI 2003) for the EDF; each function
@@ -27,8 +27,8 @@ pub mod noise_id;
 /// Deterministic test input shared by the unit tests: xorshift32 mapped to [−0.5, 0.5).
 #[cfg(all(test, feature = "std"))]
 mod test_rng {
-    pub fn rng(seed: u32) -> impl FnMut() -> f64 {
-        let mut s = seed;
+    pub fn rng(key: u32) -> impl FnMut() -> f64 {
+        let mut s = key;
         move || {
             s ^= s << 13;
             s ^= s >> 17;
@@ -41,7 +41,7 @@ mod test_rng {
 pub use stream::{DeviceEngine, Engine, LevelSums, MagEngine};
 
 #[cfg(feature = "std")]
-pub use batch::{deviation, stride_sums, Estimator, Row, Stat, TauSet};
+pub use batch::{deviation, deviation_segments, stride_sums, Estimator, Row, Stat, TauSet};
 
 /// Errors of the batch estimators. Each names what was wrong and where.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,6 +62,8 @@ pub enum AllanError {
     BadTau0(f64),
     /// A tau-set parameter is invalid (e.g. 0 points per octave, m = 0 in a list).
     BadTauSet(&'static str),
+    /// The statistic is not defined for this input (why).
+    Unsupported(&'static str),
 }
 
 impl core::fmt::Display for AllanError {
@@ -73,6 +75,7 @@ impl core::fmt::Display for AllanError {
             AllanError::NotFinite { index } => write!(f, "sample {index} is not a finite number"),
             AllanError::BadTau0(t) => write!(f, "sample period {t} s is not positive and finite"),
             AllanError::BadTauSet(why) => write!(f, "invalid tau set: {why}"),
+            AllanError::Unsupported(why) => write!(f, "not computable: {why}"),
         }
     }
 }

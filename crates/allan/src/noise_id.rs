@@ -480,8 +480,8 @@ mod tests {
     use crate::test_rng::rng;
 
     /// Phase of rate samples: offset + trend + white + random walk (weights vary per case).
-    fn phase(n: usize, seed: u32, offset: f64, trend: f64, walk: f64) -> Vec<f64> {
-        let mut u = rng(seed);
+    fn phase(n: usize, key: u32, offset: f64, trend: f64, walk: f64) -> Vec<f64> {
+        let mut u = rng(key);
         let (mut acc, mut w) = (0.0, 0.0);
         let mut x = vec![0.0];
         for i in 0..n {

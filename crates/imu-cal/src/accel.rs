@@ -1,7 +1,7 @@
 //! Accelerometer calibration from static poses.
 //!
-//! Model (seed eq. 1 extended with misalignment, Tedaldi et al. 2014 eq. 9 in lower-triangular
-//! form):
+//! Model (Jaime et al. eq. 1 extended with misalignment, Tedaldi et al. 2014 eq. 9 in
+//! lower-triangular form):
 //!
 //! ```text
 //! a_cal = T · K · (a − o),   K = diag(s_x, s_y, s_z),
@@ -15,11 +15,30 @@
 //! variance over a sliding window of `window_s` seconds, summed over the three axes, is compared
 //! with `k ×` the at-rest variance; runs longer than `min_static_s` are poses. Tedaldi take the
 //! at-rest variance from an initial static period; we take the 10th percentile of all window
-//! variances, which is the at-rest level whenever ≥ 10 % of the recording is static (true of the
-//! seed's "slow turns with pauses" and of any multi-pose run).
-use crate::lab::{CalError, Effect, Fitted, NoiseFloor, Params, Problem};
-use crate::solve::{levenberg_marquardt, mean};
+//! variances, which is the at-rest level whenever ≥ 10 % of the recording is static (true of
+//! the "slow turns with pauses" of Jaime et al. and of any multi-pose run).
+//!
+//! Two poses recorded back to back with no motion between them (concatenated pose files) leave
+//! no window above the threshold to separate them, yet every window straddling the join is
+//! non-static (the jump in the mean is far above the noise). A run of static samples is therefore
+//! split wherever its static windows are not consecutive and the means on the two sides differ
+//! by more than [`JUMP_SIGMAS`] standard errors of their difference; a noise spike, which also
+//! interrupts the windows, leaves the means equal and the pose whole. Samples flagged by the
+//! caller (overflow sentinels) are never static.
+use crate::lab::{params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem};
+use crate::solve::{covariance, levenberg_marquardt, mean, no_parameters};
 use nalgebra::{DVector, Matrix3, Vector3};
+
+fn names(model: &[Effect]) -> String {
+    if model.is_empty() {
+        "(no correction)".into()
+    } else {
+        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
+    }
+}
+
+/// A jump in the mean larger than this many standard errors splits a static run in two.
+pub const JUMP_SIGMAS: f64 = 8.0;
 
 /// Standard gravity (m/s²), the default g.
 pub const G_STANDARD: f64 = 9.80665;
@@ -88,6 +107,17 @@ pub fn detect_static(
     rate_hz: f64,
     cfg: StaticDetect,
 ) -> Result<Vec<Pose>, CalError> {
+    detect_static_masked(a, rate_hz, cfg, &[])
+}
+
+/// As [`detect_static`], never counting a sample with `flagged[i]` as static (`flagged` may be
+/// empty: nothing flagged).
+pub fn detect_static_masked(
+    a: [&[f64]; 3],
+    rate_hz: f64,
+    cfg: StaticDetect,
+    flagged: &[bool],
+) -> Result<Vec<Pose>, CalError> {
     let n = a[0].len();
     if a[1].len() != n || a[2].len() != n {
         return Err(CalError::Input(
@@ -107,6 +137,24 @@ pub fn detect_static(
             "sample rate {rate_hz} Hz is not positive"
         )));
     }
+    let positive = |v: f64| v > 0.0 && v.is_finite();
+    let valid = positive(cfg.window_s)
+        && positive(cfg.k)
+        && cfg.min_static_s >= 0.0
+        && cfg.min_static_s.is_finite();
+    if !valid {
+        return Err(CalError::Input(format!(
+            "static detection needs a positive window, threshold and minimum pose length (got \
+             {} s, k = {}, {} s)",
+            cfg.window_s, cfg.k, cfg.min_static_s
+        )));
+    }
+    if !flagged.is_empty() && flagged.len() != n {
+        return Err(CalError::Input(
+            "the flags of excluded samples do not match the recording".into(),
+        ));
+    }
+    let flag = |i: usize| flagged.get(i).copied().unwrap_or(false);
     let w = ((cfg.window_s * rate_hz).round() as usize).max(3);
     if n < 2 * w {
         return Err(CalError::Input(format!(
@@ -134,17 +182,31 @@ pub fn detect_static(
     sorted.sort_by(|x, y| x.total_cmp(y));
     let rest = sorted[sorted.len() / 10].max(1e-300);
     let thr = cfg.k * rest;
+    // Windows holding a flagged sample are never static.
+    let mut flagged_in = vec![false; var.len()];
+    if !flagged.is_empty() {
+        let mut count = (0..w).filter(|&j| flag(j)).count();
+        for (i, f) in flagged_in.iter_mut().enumerate() {
+            *f = count > 0;
+            if i + w < n {
+                count = count + flag(i + w) as usize - flag(i) as usize;
+            }
+        }
+    }
+    let static_window = |i: usize| var[i] <= thr && !flagged_in[i];
     // A sample is static when a window that contains it entirely is static; we mark the window
     // starting at i static and its samples [i, i + w) static.
     let mut stat = vec![false; n];
-    for (i, &v) in var.iter().enumerate() {
-        if v <= thr {
+    for i in 0..var.len() {
+        if static_window(i) {
             for s in &mut stat[i..i + w] {
                 *s = true;
             }
         }
     }
     let min_len = ((cfg.min_static_s * rate_hz).round() as usize).max(4);
+    // Noise variance of one sample summed over the axes, at rest (the window variance's level).
+    let rest_var = rest * w as f64 / (w as f64 - 1.0);
     let mut poses = Vec::new();
     let mut i = 0;
     while i < n {
@@ -156,11 +218,58 @@ pub fn detect_static(
         while i < n && stat[i] {
             i += 1;
         }
-        if i - s >= min_len {
-            poses.push(Pose::from_samples(a, s, i));
+        // Split the run [s, i) at jumps in the mean: where consecutive static windows are
+        // separated by non-static ones and the means on either side differ.
+        let mut cuts = vec![s];
+        let mut last_start: Option<usize> = None;
+        for j in s..(i.saturating_sub(w) + 1).min(var.len()) {
+            if !static_window(j) {
+                continue;
+            }
+            if let Some(prev) = last_start {
+                if j > prev + 1 {
+                    let lo = *cuts.last().expect("run start");
+                    let hi = (prev + w).min(i);
+                    let next_end = next_break(j, i, w, &static_window);
+                    if jump(a, lo, hi, j, next_end, rest_var) {
+                        cuts.push(j);
+                    }
+                }
+            }
+            last_start = Some(j);
+        }
+        cuts.push(i);
+        for c in cuts.windows(2) {
+            // A cut at j leaves the samples [prev + w, j) of the straddling windows to neither
+            // side only when they are non-static; here [c0, c1) are all static samples.
+            if c[1] - c[0] >= min_len {
+                poses.push(Pose::from_samples(a, c[0], c[1]));
+            }
         }
     }
     Ok(poses)
+}
+
+/// End of the run of consecutive static windows starting at window `j` (its last sample + 1).
+fn next_break(j: usize, end: usize, w: usize, static_window: &dyn Fn(usize) -> bool) -> usize {
+    let mut k = j;
+    while k + 1 + w <= end && static_window(k + 1) {
+        k += 1;
+    }
+    (k + w).min(end)
+}
+
+/// Whether the mean over [a0, a1) and the mean over [b0, b1) differ by more than
+/// [`JUMP_SIGMAS`] standard errors (white noise of `rest_var` per sample, summed over the axes).
+fn jump(a: [&[f64]; 3], a0: usize, a1: usize, b0: usize, b1: usize, rest_var: f64) -> bool {
+    if a1 <= a0 || b1 <= b0 {
+        return false;
+    }
+    let d2: f64 = (0..3)
+        .map(|k| (mean(&a[k][a0..a1]) - mean(&a[k][b0..b1])).powi(2))
+        .sum();
+    let se2 = rest_var * (1.0 / (a1 - a0) as f64 + 1.0 / (b1 - b0) as f64);
+    d2 > JUMP_SIGMAS * JUMP_SIGMAS * se2
 }
 
 /// The accelerometer problem: poses and g.
@@ -168,8 +277,10 @@ pub fn detect_static(
 pub struct AccelProblem {
     /// The static poses.
     pub poses: Vec<Pose>,
-    /// Gravity (m/s² or the input unit).
+    /// Gravity, in the data's unit.
     pub g: f64,
+    /// The data's unit (m/s² for the contract; LSB for raw counts).
+    pub unit: String,
 }
 
 const EFFECTS: [Effect; 3] = [Effect::Offset, Effect::Scale, Effect::Misalignment];
@@ -195,6 +306,29 @@ fn unpack(model: &[Effect], x: &DVector<f64>) -> (Matrix3<f64>, Vector3<f64>, [f
 }
 
 impl AccelProblem {
+    /// Poses and gravity in m/s².
+    pub fn new(poses: Vec<Pose>, g: f64) -> AccelProblem {
+        AccelProblem {
+            poses,
+            g,
+            unit: "m/s²".into(),
+        }
+    }
+
+    /// Poses and gravity in another unit (e.g. LSB: g = 16384 for a ±2 g MPU-6050).
+    pub fn with_unit(poses: Vec<Pose>, g: f64, unit: &str) -> AccelProblem {
+        AccelProblem {
+            poses,
+            g,
+            unit: unit.into(),
+        }
+    }
+
+    /// The lab residual of one pose mean under `params`: `|T·K·(ā − o)| − g`.
+    pub fn residual(params: &Params, g: f64, mean: [f64; 3]) -> f64 {
+        Vector3::from(Self::correct(params, mean)).norm() - g
+    }
+
     /// Correct one sample with fitted params (`a_cal = T·K·(a − o)`).
     pub fn correct(params: &Params, a: [f64; 3]) -> [f64; 3] {
         let m = correction_matrix(params);
@@ -219,8 +353,8 @@ impl Problem for AccelProblem {
     fn sensor(&self) -> &'static str {
         "accel"
     }
-    fn unit(&self) -> &'static str {
-        "m/s²"
+    fn unit(&self) -> &str {
+        &self.unit
     }
     fn effects(&self) -> &'static [Effect] {
         &EFFECTS
@@ -229,7 +363,7 @@ impl Problem for AccelProblem {
         self.poses.len()
     }
 
-    fn identifiable(&self, model: &[Effect], e: Effect) -> Result<(), String> {
+    fn identifiable(&self, model: &[Effect], _e: Effect) -> Result<(), String> {
         let p = 3 * (model.len() + 1);
         if self.poses.len() <= p {
             return Err(format!(
@@ -237,17 +371,28 @@ impl Problem for AccelProblem {
                 self.poses.len()
             ));
         }
-        let _ = e;
         Ok(())
     }
 
-    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+    fn fit_items(&self, model: &[Effect], keep: &[bool]) -> Result<Fitted, CalError> {
         let p = 3 * model.len();
-        if self.poses.len() <= p.max(1) {
+        let used: Vec<usize> = (0..self.poses.len()).filter(|&i| keep[i]).collect();
+        if used.len() <= p.max(1) {
             return Err(CalError::Fit(format!(
-                "{} static poses found; the model {:?} needs more than {p}",
+                "{} static poses found{}; the model {:?} needs more than {p}",
                 self.poses.len(),
+                if used.len() < self.poses.len() {
+                    format!(" ({} after excluding outliers)", used.len())
+                } else {
+                    String::new()
+                },
                 model.iter().map(|e| e.name()).collect::<Vec<_>>()
+            )));
+        }
+        if !(self.g > 0.0 && self.g.is_finite()) {
+            return Err(CalError::Input(format!(
+                "gravity {} {} is not a positive number",
+                self.g, self.unit
             )));
         }
         let mut x0 = Vec::new();
@@ -261,36 +406,50 @@ impl Problem for AccelProblem {
             }
         }
         let g = self.g;
-        let means: Vec<Vector3<f64>> = self.poses.iter().map(|p| Vector3::from(p.mean)).collect();
+        let means: Vec<Vector3<f64>> = used
+            .iter()
+            .map(|&i| Vector3::from(self.poses[i].mean))
+            .collect();
         let res = |x: &DVector<f64>| {
             let (tk, o, _, _) = unpack(model, x);
             DVector::from_iterator(means.len(), means.iter().map(|a| (tk * (a - o)).norm() - g))
         };
         let fit = if p == 0 {
-            let r = res(&DVector::zeros(0));
-            crate::solve::LmFit {
-                rss: r.norm_squared(),
-                x: DVector::zeros(0),
-                r,
-                iterations: 0,
-            }
+            no_parameters(res)
         } else {
-            levenberg_marquardt(DVector::from_vec(x0), res, 200)
+            levenberg_marquardt(
+                DVector::from_vec(x0),
+                res,
+                200,
+                &format!("accelerometer {}", names(model)),
+            )?
         };
-        let (_, o, s, al) = unpack(model, &fit.x);
-        let params = Params {
-            offset: model.contains(&Effect::Offset).then_some([o.x, o.y, o.z]),
-            scale: model.contains(&Effect::Scale).then_some(s),
-            misalignment_deg: model
-                .contains(&Effect::Misalignment)
-                .then_some(al.map(f64::to_degrees)),
-            g: Some(g),
-            ..Params::default()
+        let to_params = |x: &DVector<f64>| {
+            let (_, o, s, al) = unpack(model, x);
+            Params {
+                offset: model.contains(&Effect::Offset).then_some([o.x, o.y, o.z]),
+                scale: model.contains(&Effect::Scale).then_some(s),
+                misalignment_deg: model
+                    .contains(&Effect::Misalignment)
+                    .then_some(al.map(f64::to_degrees)),
+                g: Some(g),
+                ..Params::default()
+            }
         };
+        let params = to_params(&fit.x);
+        let cov = covariance(&fit.jacobian, fit.rss, (used.len() - p) as f64);
+        let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
+        let residuals: Vec<f64> = self
+            .poses
+            .iter()
+            .map(|pose| Self::residual(&params, g, pose.mean))
+            .collect();
         Ok(Fitted {
             model: model.to_vec(),
             params,
-            residuals: fit.r.iter().copied().collect(),
+            sigma,
+            residuals,
+            used: keep.to_vec(),
             n_params: p,
         })
     }

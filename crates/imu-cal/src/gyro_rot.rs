@@ -9,11 +9,13 @@
 //! residual_k = the two components of R_kᵀ·u_k orthogonal to u_{k+1}   (deg)
 //! ```
 //!
-//! b is the mean gyro rate over the middle half of every static pose (seed eq. 2), removed first. Six
+//! b is the mean gyro rate over the middle half of every static pose (Jaime et al., eq. 2),
+//! removed first. Six
 //! misalignment angles, not three: the gyro triad is referred to the accelerometer frame, which
 //! fixes all three of its axes (Tedaldi eq. 10). Rotations *about* gravity are invisible to this
-//! residual, so the poses must differ in tilt. Moves where a raw rate reaches `saturation` are
-//! skipped (the integral would be wrong).
+//! residual, so the poses must differ in tilt. Moves where a raw rate reaches `saturation`, or
+//! that hold a sample the caller flags (an overflow sentinel, the first sample after a gap in
+//! the record), are skipped: the integral would be wrong. Rates are in deg/s.
 //!
 //! Noise floor per residual component: σ² = σ_u,k² + σ_u,k+1² + σ_ω²·dt²·n_k, from the half-pose
 //! differences of the gravity direction and the per-sample white noise of the gyro at rest.
@@ -21,8 +23,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::accel::Pose;
-use crate::lab::{CalError, Effect, Fitted, NoiseFloor, Params, Problem};
-use crate::solve::{levenberg_marquardt, mean};
+use crate::lab::{params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem};
+use crate::solve::{covariance, levenberg_marquardt, mean, no_parameters};
 use nalgebra::{DVector, Matrix3, Rotation3, Vector3};
 
 const EFFECTS: [Effect; 2] = [Effect::Scale, Effect::Misalignment];
@@ -58,8 +60,12 @@ pub struct GyroRotProblem {
     pub moves: Vec<Move>,
     /// Moves skipped because the gyro saturated.
     pub skipped_saturated: usize,
+    /// Moves skipped because they hold a flagged sample (sentinel, gap).
+    pub skipped_flagged: usize,
     /// Gyro bias removed (deg/s).
     pub bias: [f64; 3],
+    /// Its standard error (deg/s): white noise at rest over the static samples.
+    pub bias_sigma: [f64; 3],
     /// Sample interval (s).
     pub dt: f64,
 }
@@ -74,7 +80,30 @@ impl GyroRotProblem {
         poses: &[Pose],
         saturation: Option<f64>,
     ) -> Result<Self, CalError> {
+        Self::new_flagged(acc, gyro, rate_hz, poses, saturation, &[])
+    }
+
+    /// As [`GyroRotProblem::new`], skipping the moves that hold a sample with `flagged[i]`
+    /// (`flagged` may be empty).
+    pub fn new_flagged(
+        acc: [&[f64]; 3],
+        gyro: [&[f64]; 3],
+        rate_hz: f64,
+        poses: &[Pose],
+        saturation: Option<f64>,
+        flagged: &[bool],
+    ) -> Result<Self, CalError> {
         let n = acc[0].len();
+        if !flagged.is_empty() && flagged.len() != n {
+            return Err(CalError::Input(
+                "the flags of excluded samples do not match the recording".into(),
+            ));
+        }
+        if !(rate_hz > 0.0 && rate_hz.is_finite()) {
+            return Err(CalError::Input(format!(
+                "sample rate {rate_hz} Hz is not positive"
+            )));
+        }
         if acc.iter().chain(gyro.iter()).any(|c| c.len() != n) {
             return Err(CalError::Input(
                 "accelerometer and gyro columns differ in length".into(),
@@ -136,9 +165,14 @@ impl GyroRotProblem {
         };
         let mut moves = Vec::new();
         let mut skipped = 0;
+        let mut skipped_flagged = 0;
         for w in poses.windows(2) {
             let (a, c) = (&w[0], &w[1]);
             let raw = a.end..c.start;
+            if !flagged.is_empty() && (a.start..c.end).any(|i| flagged[i]) {
+                skipped_flagged += 1;
+                continue;
+            }
             if let Some(sat) = saturation {
                 if raw.clone().any(|i| (0..3).any(|k| gyro[k][i].abs() >= sat)) {
                     skipped += 1;
@@ -157,7 +191,9 @@ impl GyroRotProblem {
         Ok(GyroRotProblem {
             moves,
             skipped_saturated: skipped,
+            skipped_flagged,
             bias: [b.x, b.y, b.z],
+            bias_sigma: [(ss / (3 * cnt) as f64 / cnt as f64).sqrt(); 3],
             dt,
         })
     }
@@ -198,46 +234,72 @@ impl GyroRotProblem {
         let e2 = mv.u1.cross(&e1);
         [e1.dot(&p), e2.dot(&p)]
     }
+
+    /// The lab residual of one move under `params` (deg): the two components, orthogonal to the
+    /// second pose's gravity direction, of the first pose's direction carried by the corrected
+    /// rotation (`ω_cal = T_g·K_g·(ω − b)`, with the bias already removed from the move).
+    pub fn residual_of(&self, params: &Params, mv: &Move) -> [f64; 2] {
+        let c = correction_matrix(
+            params.scale.unwrap_or([1.0; 3]),
+            params.gyro_misalignment_deg.unwrap_or([0.0; 6]),
+        );
+        let m = Matrix3::from_row_slice(&c.concat());
+        self.residual(mv, &m).map(f64::to_degrees)
+    }
 }
 
 impl Problem for GyroRotProblem {
     fn sensor(&self) -> &'static str {
         "gyro"
     }
-    fn unit(&self) -> &'static str {
+    fn unit(&self) -> &str {
         "deg"
     }
     fn effects(&self) -> &'static [Effect] {
         &EFFECTS
     }
     fn n(&self) -> usize {
-        2 * self.moves.len()
+        self.moves.len()
+    }
+    fn residuals_per_item(&self) -> usize {
+        2
     }
     fn basis(&self) -> &'static str {
         "per-move"
     }
+    fn items(&self) -> &'static str {
+        "moves"
+    }
     fn identifiable(&self, model: &[Effect], e: Effect) -> Result<(), String> {
         let p = 3 * model.len() + if e == Effect::Misalignment { 6 } else { 3 };
-        if self.n() <= p {
+        if 2 * self.n() <= p {
             return Err(format!(
                 "{} usable moves give {} residuals, not enough for {p} parameters",
                 self.moves.len(),
-                self.n()
+                2 * self.n()
             ));
         }
         Ok(())
     }
 
-    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+    fn fit_items(&self, model: &[Effect], keep: &[bool]) -> Result<Fitted, CalError> {
         let p = 3 * model.contains(&Effect::Scale) as usize
             + 6 * model.contains(&Effect::Misalignment) as usize;
-        if self.n() <= p {
+        let used: Vec<&Move> = self
+            .moves
+            .iter()
+            .zip(keep)
+            .filter(|(_, k)| **k)
+            .map(|(m, _)| m)
+            .collect();
+        if 2 * used.len() <= p {
             return Err(CalError::Fit(format!(
-                "{} usable moves ({} skipped as saturated) give {} residuals, not enough for {p} \
-                 parameters",
-                self.moves.len(),
+                "{} usable moves ({} skipped as saturated, {} holding flagged samples) give {} \
+                 residuals, not enough for {p} parameters",
+                used.len(),
                 self.skipped_saturated,
-                self.n()
+                self.skipped_flagged,
+                2 * used.len()
             )));
         }
         let mut x0 = Vec::new();
@@ -253,36 +315,53 @@ impl Problem for GyroRotProblem {
         let res = |x: &DVector<f64>| {
             let (m, _, _) = Self::matrix(model, x);
             DVector::from_iterator(
-                self.n(),
-                self.moves
-                    .iter()
+                2 * used.len(),
+                used.iter()
                     .flat_map(|mv| self.residual(mv, &m).map(f64::to_degrees)),
             )
         };
         let fit = if x0.is_empty() {
-            let r = res(&DVector::zeros(0));
-            crate::solve::LmFit {
-                rss: r.norm_squared(),
-                x: DVector::zeros(0),
-                r,
-                iterations: 0,
-            }
+            no_parameters(res)
         } else {
-            levenberg_marquardt(DVector::from_vec(x0), res, 200)
+            levenberg_marquardt(
+                DVector::from_vec(x0),
+                res,
+                200,
+                &format!(
+                    "gyro {} from rotations",
+                    model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
+                ),
+            )?
         };
-        let (_, s, g) = Self::matrix(model, &fit.x);
-        let params = Params {
-            bias: Some(self.bias),
-            scale: model.contains(&Effect::Scale).then_some(s),
-            gyro_misalignment_deg: model
-                .contains(&Effect::Misalignment)
-                .then_some(g.map(|v| v.to_degrees())),
-            ..Params::default()
+        let bias = self.bias;
+        let to_params = |x: &DVector<f64>| {
+            let (_, s, g) = Self::matrix(model, x);
+            Params {
+                bias: Some(bias),
+                scale: model.contains(&Effect::Scale).then_some(s),
+                gyro_misalignment_deg: model
+                    .contains(&Effect::Misalignment)
+                    .then_some(g.map(|v| v.to_degrees())),
+                ..Params::default()
+            }
         };
+        let params = to_params(&fit.x);
+        let cov = covariance(&fit.jacobian, fit.rss, (2 * used.len() - p) as f64);
+        let mut sigma = params_sigma(to_params, &fit.x, cov.as_ref());
+        // The bias comes from the poses at rest: its σ is the white noise over those samples.
+        sigma.bias = Some(self.bias_sigma);
+        let (m, _, _) = Self::matrix(model, &fit.x);
+        let residuals = self
+            .moves
+            .iter()
+            .flat_map(|mv| self.residual(mv, &m).map(f64::to_degrees))
+            .collect();
         Ok(Fitted {
             model: model.to_vec(),
             params,
-            residuals: fit.r.iter().copied().collect(),
+            sigma,
+            residuals,
+            used: keep.iter().flat_map(|k| [*k, *k]).collect(),
             n_params: p,
         })
     }

@@ -1,21 +1,44 @@
 //! The calibration lab: fit a model (a set of named effects), compare its residual with the
 //! noise floor estimated from the same data, and when it is not adequate name the missing effect
-//! by one general rule (issue 4 §2):
+//! by one general rule. Equations of the paper are cited as "Jaime et al.": I. Jaime,
+//! F. Beck Ferrero, M. L. Miretti, E. Bernardi, "Caracterización y calibración de unidades de
+//! medición inercial de bajo costo", UTN Facultad Regional San Francisco.
 //!
-//! 1. **Adequacy.** The residual variance per degree of freedom, `s² = RSS/(N − p)`, is compared
+//! 1. **Robust fit.** Real recordings hold the odd wild sample (a bumped sensor, a corrupted
+//!    read). The loss is Tukey's redescending kind in its hard form, the truncated quadratic
+//!    ρ(r) = min(r², c²) with c = [`OUTLIER_SIGMAS`]·σ̂ (σ̂ = 1.4826·MAD of the residuals, never
+//!    below the noise floor): fitted by iteratively refitting least squares on the items within c
+//!    of the median residual until that set stops changing (at most [`ROBUST_ROUNDS`] rounds).
+//!    Items beyond c are outliers, excluded and named with their count; the parameters, their
+//!    uncertainties, the residual RMS and every test below are those of the least-squares fit of
+//!    the rest, so the reported residual is recomputable from the reported parameters. When
+//!    more than [`MAX_OUTLIER_FRACTION`] of the items lie beyond c they are not outliers but a
+//!    misfit, and nothing is excluded. (Sensor overflow sentinels are removed before, by
+//!    [`crate::sentinel`].)
+//! 2. **Uncertainty.** Every parameter gets a 1σ standard error from the least-squares
+//!    covariance `s²·(JᵀJ)⁻¹` (s² = RSS/(N − p)), propagated to the reported form (degrees,
+//!    matrices, ellipse axes) to first order.
+//! 3. **Enough data.** A model with fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom
+//!    per parameter is *underdetermined*: a residual at the floor cannot tell an adequate model
+//!    from an overfitted one, so it is never called adequate (a residual far above the floor is
+//!    a failure whatever the degrees of freedom, and is diagnosed as such).
+//! 4. **Adequacy.** The residual variance per degree of freedom, `s² = RSS/(N − p)`, is compared
 //!    with the noise-floor variance `σ²` estimated from the data itself on the same basis (per pose,
 //!    per sample or per block). Under a complete model `s²/σ²` follows F(N − p, ν) (ν = degrees of
 //!    freedom of the noise estimate). The model is adequate when the upper-tail probability is
 //!    ≥ [`ALPHA_ADEQUATE`], or when the residual is within [`PRACTICAL_MARGIN`] of the floor
 //!    (with thousands of samples the test alone would flag sub-percent excesses nobody can act on).
-//! 2. **Which effect is missing.** Every effect of the sensor that is not yet in the model and is
-//!    identifiable from this data is added in turn and the model refitted. The nested-model
-//!    F-test (e.g. Seber & Wild, *Nonlinear Regression*, §5.3)
+//!    Data without any noise (a floor of exactly 0) are adequate only for a residual at rounding
+//!    level, and say so.
+//! 5. **Which effect is missing.** Every effect of the sensor that is not yet in the model and is
+//!    identifiable from this data is added in turn and the model refitted on the same items. The
+//!    nested-model F-test (e.g. Seber & Wild, *Nonlinear Regression*, §5.3)
 //!    `F = ((RSS₀ − RSS₁)/Δp) / (RSS₁/(N − p₁))` tells whether the drop is significant for the Δp
 //!    extra parameters (p < [`ALPHA_EFFECT`]); among the significant ones the largest F wins.
 //!
 //! The same rule serves all three sensors; nothing is written for one effect.
-use crate::solve::f_sf;
+pub use crate::error::CalError;
+use crate::solve::{f_sf, mad_sigma, median};
 use serde::Serialize;
 
 /// Significance level of the adequacy test.
@@ -24,8 +47,16 @@ pub const ALPHA_ADEQUATE: f64 = 0.01;
 pub const ALPHA_EFFECT: f64 = 0.001;
 /// Residual RMS within this factor of the floor counts as adequate regardless of the test.
 pub const PRACTICAL_MARGIN: f64 = 1.10;
+/// Residuals beyond this many robust σ are outliers (module docs).
+pub const OUTLIER_SIGMAS: f64 = 6.0;
+/// Most refits of the outlier rejection.
+pub const ROBUST_ROUNDS: usize = 20;
+/// Beyond this fraction of the items, residuals over the cut are a misfit, not outliers.
+pub const MAX_OUTLIER_FRACTION: f64 = 0.1;
+/// Residual degrees of freedom each parameter needs before a model can be judged.
+pub const DOF_PER_PARAMETER: f64 = 3.0;
 
-/// The deterministic error effects the lab knows (issue 4 §1).
+/// The deterministic error effects the lab knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Effect {
@@ -37,11 +68,12 @@ pub enum Effect {
     HardIron,
     SoftIron,
     SoftIron2d,
+    Tilt,
 }
 
 impl Effect {
-    /// All effects, in the issue's order.
-    pub const ALL: [Effect; 8] = [
+    /// All effects.
+    pub const ALL: [Effect; 9] = [
         Effect::Offset,
         Effect::Scale,
         Effect::Misalignment,
@@ -50,6 +82,7 @@ impl Effect {
         Effect::HardIron,
         Effect::SoftIron,
         Effect::SoftIron2d,
+        Effect::Tilt,
     ];
 
     /// The name used on the command line and in JSON.
@@ -63,6 +96,7 @@ impl Effect {
             Effect::HardIron => "hard_iron",
             Effect::SoftIron => "soft_iron",
             Effect::SoftIron2d => "soft_iron_2d",
+            Effect::Tilt => "tilt",
         }
     }
 
@@ -99,44 +133,26 @@ impl Effect {
             Effect::Temperature => "the gyro bias moves with die temperature (thermal stress on the resonator and its electronics), so the residual follows the temperature column",
             Effect::HardIron => "hard iron: permanently magnetised parts on the board add a constant field vector, shifting the sphere of measurements off the origin",
             Effect::SoftIron => "soft iron: magnetically permeable material near the sensor distorts the local field direction-dependently, turning the sphere into a tilted ellipsoid",
-            Effect::SoftIron2d => "soft iron seen in the rotation plane: the circle of planar measurements becomes a tilted ellipse (seed eqs. 4–5)",
+            Effect::SoftIron2d => "soft iron seen in the rotation plane: the circle of planar measurements becomes a tilted ellipse (Jaime et al., eqs. 4–5)",
+            Effect::Tilt => "out-of-plane motion: the turn was not level, so the rotation plane wobbled and part of the vertical field leaked into the horizontal axes; the in-plane magnitude then follows the out-of-plane component while the full 3-D magnitude stays constant (not soft iron: no ellipse explains it)",
         }
     }
 }
 
-/// Errors of the fitting side: what went wrong and where.
-#[derive(Debug, Clone, PartialEq)]
-pub enum CalError {
-    /// Bad or insufficient input data.
-    Input(String),
-    /// The model cannot be fitted from this data.
-    Fit(String),
-}
-
-impl std::fmt::Display for CalError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            CalError::Input(s) => write!(f, "input: {s}"),
-            CalError::Fit(s) => write!(f, "fit: {s}"),
-        }
-    }
-}
-impl std::error::Error for CalError {}
-
-/// The fitted parameters; only the effects in the model are `Some` (JSON schema of issue 4 §3).
-/// Units: the CSV contract's (m/s², deg/s, µT, °C).
+/// The fitted parameters; only the effects in the model are `Some`. Units: the data's (the
+/// contract's m/s², deg/s, µT, °C for files in physical units; LSB for raw counts).
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Params {
-    /// Accelerometer offset (m/s²), subtracted first (seed eq. 1).
+    /// Accelerometer offset (m/s²), subtracted first (Jaime et al., eq. 1).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub offset: Option<[f64; 3]>,
-    /// Accelerometer scale factors (dimensionless, multiply after the offset; seed eq. 1).
+    /// Accelerometer scale factors (dimensionless, multiply after the offset; Jaime et al., eq. 1).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scale: Option<[f64; 3]>,
     /// Non-orthogonality angles (deg): y-from-x, z-from-x, z-from-y of the lower-triangular T.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub misalignment_deg: Option<[f64; 3]>,
-    /// Gyro bias at `temp_ref` (deg/s; seed eq. 2).
+    /// Gyro bias at `temp_ref` (deg/s; Jaime et al., eq. 2).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bias: Option<[f64; 3]>,
     /// Gyro bias temperature coefficient (deg/s per °C).
@@ -148,13 +164,13 @@ pub struct Params {
     /// Gyro non-orthogonality angles (deg) γ₁…γ₆, the off-diagonal of T_g (see `gyro_rot`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gyro_misalignment_deg: Option<[f64; 6]>,
-    /// Magnetometer hard iron (µT; seed eq. 3).
+    /// Magnetometer hard iron (µT; Jaime et al., eq. 3).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hard_iron: Option<[f64; 3]>,
     /// Magnetometer soft-iron correction matrix (dimensionless), applied after the hard iron.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub soft_iron: Option<[[f64; 3]; 3]>,
-    /// The seed's 2-D soft-iron parameters (eqs. 4–5), when that effect is in the model.
+    /// The 2-D soft-iron parameters of Jaime et al. (eqs. 4–5), when that effect is in the model.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub soft_iron_2d: Option<SoftIron2d>,
     /// Field magnitude F (µT), fitted or given.
@@ -165,7 +181,7 @@ pub struct Params {
     pub g: Option<f64>,
 }
 
-/// The seed's ellipse parameters: major axis r, minor q, tilt θ; σ = q/r (eqs. 4–5).
+/// The ellipse parameters of Jaime et al.: major axis r, minor q, tilt θ; σ = q/r (eqs. 4–5).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SoftIron2d {
     /// Semi-major axis r (µT).
@@ -174,8 +190,121 @@ pub struct SoftIron2d {
     pub q: f64,
     /// Tilt θ of the major axis from +X (deg).
     pub theta_deg: f64,
-    /// σ = q/r (seed eq. 5).
+    /// σ = q/r (Jaime et al., eq. 5).
     pub sigma: f64,
+}
+
+impl Params {
+    /// Every number the parameters hold, in a fixed order (the effects present only). With
+    /// [`Params::with_values`] this maps a parameter set to a vector and back, e.g. to propagate
+    /// uncertainties.
+    pub fn values(&self) -> Vec<f64> {
+        let mut v = Vec::new();
+        let mut a3 = |x: &Option<[f64; 3]>| {
+            if let Some(x) = x {
+                v.extend_from_slice(x)
+            }
+        };
+        a3(&self.offset);
+        a3(&self.scale);
+        a3(&self.misalignment_deg);
+        a3(&self.bias);
+        a3(&self.temp_coeff);
+        a3(&self.hard_iron);
+        if let Some(t) = self.temp_ref {
+            v.push(t);
+        }
+        if let Some(g) = &self.gyro_misalignment_deg {
+            v.extend_from_slice(g);
+        }
+        if let Some(m) = &self.soft_iron {
+            v.extend(m.iter().flatten());
+        }
+        if let Some(e) = &self.soft_iron_2d {
+            v.extend_from_slice(&[e.r, e.q, e.theta_deg, e.sigma]);
+        }
+        if let Some(f) = self.field {
+            v.push(f);
+        }
+        if let Some(g) = self.g {
+            v.push(g);
+        }
+        v
+    }
+
+    /// The same effects as `self` holding `v` (in [`Params::values`] order).
+    pub fn with_values(&self, v: &[f64]) -> Params {
+        let mut k = 0;
+        let mut next = || {
+            k += 1;
+            v.get(k - 1).copied().unwrap_or(f64::NAN)
+        };
+        let mut out = self.clone();
+        for x in [
+            &mut out.offset,
+            &mut out.scale,
+            &mut out.misalignment_deg,
+            &mut out.bias,
+            &mut out.temp_coeff,
+            &mut out.hard_iron,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            *x = [next(), next(), next()];
+        }
+        if let Some(t) = &mut out.temp_ref {
+            *t = next();
+        }
+        if let Some(g) = &mut out.gyro_misalignment_deg {
+            *g = std::array::from_fn(|_| next());
+        }
+        if let Some(m) = &mut out.soft_iron {
+            *m = std::array::from_fn(|_| std::array::from_fn(|_| next()));
+        }
+        if let Some(e) = &mut out.soft_iron_2d {
+            *e = SoftIron2d {
+                r: next(),
+                q: next(),
+                theta_deg: next(),
+                sigma: next(),
+            };
+        }
+        if let Some(f) = &mut out.field {
+            *f = next();
+        }
+        if let Some(g) = &mut out.g {
+            *g = next();
+        }
+        out
+    }
+
+    /// The same effects with every value 0 (the uncertainty of given or fixed values).
+    pub fn zeros_like(&self) -> Params {
+        self.with_values(&vec![0.0; self.values().len()])
+    }
+}
+
+/// Standard errors of `params` from a least-squares fit: the covariance of the free vector `x`
+/// (None without residual degrees of freedom: every σ is then NaN) propagated through
+/// `to_params`, which must give the same effects for every `x`.
+pub fn params_sigma<G>(
+    to_params: G,
+    x: &nalgebra::DVector<f64>,
+    cov: Option<&nalgebra::DMatrix<f64>>,
+) -> Params
+where
+    G: Fn(&nalgebra::DVector<f64>) -> Params,
+{
+    let p = to_params(x);
+    match cov {
+        Some(c) if !x.is_empty() => {
+            let s = crate::solve::propagate(|v| to_params(v).values(), x, c);
+            p.with_values(&s)
+        }
+        Some(_) => p.zeros_like(),
+        None => p.with_values(&vec![f64::NAN; p.values().len()]),
+    }
 }
 
 /// One model fitted to one data set.
@@ -185,20 +314,65 @@ pub struct Fitted {
     pub model: Vec<Effect>,
     /// Parameters.
     pub params: Params,
-    /// Residuals on the lab's basis (per pose / per sample / per block), in the sensor unit.
+    /// Their 1σ standard errors, same layout (0 for given values such as g, NaN when the data
+    /// leave no degree of freedom).
+    pub sigma: Params,
+    /// Residuals on the lab's basis (per pose / per sample / per block), in the sensor unit,
+    /// for every item, the excluded ones too (computed from `params`).
     pub residuals: Vec<f64>,
+    /// Which residuals the fit used (false: the item was excluded as an outlier).
+    pub used: Vec<bool>,
     /// Number of free parameters.
     pub n_params: usize,
 }
 
 impl Fitted {
-    /// Residual sum of squares.
-    pub fn rss(&self) -> f64 {
-        self.residuals.iter().map(|r| r * r).sum()
+    /// A fit of every item: `used` all true.
+    pub fn all_used(
+        model: &[Effect],
+        params: Params,
+        sigma: Params,
+        residuals: Vec<f64>,
+        n_params: usize,
+    ) -> Fitted {
+        let used = vec![true; residuals.len()];
+        Fitted {
+            model: model.to_vec(),
+            params,
+            sigma,
+            residuals,
+            used,
+            n_params,
+        }
     }
-    /// Residual RMS.
+
+    /// The residuals the fit used.
+    pub fn used_residuals(&self) -> impl Iterator<Item = f64> + '_ {
+        self.residuals
+            .iter()
+            .zip(&self.used)
+            .filter(|(_, u)| **u)
+            .map(|(r, _)| *r)
+    }
+    /// Number of residuals used.
+    pub fn n_used(&self) -> usize {
+        self.used.iter().filter(|u| **u).count()
+    }
+    /// Residual sum of squares over the residuals used.
+    pub fn rss(&self) -> f64 {
+        self.used_residuals().map(|r| r * r).sum()
+    }
+    /// Residual RMS over the residuals used.
     pub fn rms(&self) -> f64 {
-        crate::solve::rms(&self.residuals)
+        let n = self.n_used();
+        if n == 0 {
+            return f64::NAN;
+        }
+        (self.rss() / n as f64).sqrt()
+    }
+    /// Residual degrees of freedom.
+    pub fn dof(&self) -> f64 {
+        self.n_used() as f64 - self.n_params as f64
     }
 }
 
@@ -214,22 +388,32 @@ pub struct NoiseFloor {
     pub method: &'static str,
 }
 
-/// A calibration problem: one sensor's data prepared on the lab's basis.
+/// A calibration problem: one sensor's data prepared on the lab's basis. The data are cut into
+/// *items* (poses, samples, block means or moves), each giving [`Problem::residuals_per_item`]
+/// residuals, item after item.
 pub trait Problem {
     /// Sensor name ("accel", "gyro", "mag").
     fn sensor(&self) -> &'static str;
     /// Unit of the residuals.
-    fn unit(&self) -> &'static str;
+    fn unit(&self) -> &str;
     /// The sensor's effects.
     fn effects(&self) -> &'static [Effect];
     /// Effects that can be added to `model` with this data, and for the others why not.
     fn identifiable(&self, model: &[Effect], e: Effect) -> Result<(), String>;
-    /// Fit a model.
-    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError>;
+    /// Fit a model to the items with `keep[i]` (one flag per item); residuals for every item.
+    fn fit_items(&self, model: &[Effect], keep: &[bool]) -> Result<Fitted, CalError>;
+    /// Fit a model to every item.
+    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+        self.fit_items(model, &vec![true; self.n()])
+    }
     /// Noise floor on the residuals' basis.
     fn noise_floor(&self) -> NoiseFloor;
-    /// Number of residuals.
+    /// Number of items.
     fn n(&self) -> usize;
+    /// Residuals per item.
+    fn residuals_per_item(&self) -> usize {
+        1
+    }
     /// What one residual is, for the report ("per-pose", "per-sample", …).
     fn basis(&self) -> &'static str {
         match self.sensor() {
@@ -237,6 +421,21 @@ pub trait Problem {
             "mag" => "per-sample",
             _ => "per-block",
         }
+    }
+    /// What one item is, plural ("poses", "samples", …).
+    fn items(&self) -> &'static str {
+        match self.sensor() {
+            "accel" => "poses",
+            "mag" => "samples",
+            _ => "block means",
+        }
+    }
+    /// Evidence outside the residual variance for a candidate effect (e.g. a correlation in the
+    /// time domain), given the fit of the current model: `Ok(text)` supports trying it,
+    /// `Err(text)` says why the data do not show it (it is then not tried); `None` when the
+    /// effect needs none.
+    fn evidence(&self, _fitted: &Fitted, _e: Effect) -> Option<Result<String, String>> {
+        None
     }
 }
 
@@ -256,18 +455,52 @@ pub struct Candidate {
     /// Why it was not tried, if so.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
+    /// Evidence beyond the F-test, in words with numbers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evidence: Option<String>,
+}
+
+/// The one-word verdict.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// The residual is consistent with the noise floor, with enough degrees of freedom to say so.
+    Adequate,
+    /// The residual exceeds the floor.
+    NotAdequate,
+    /// The residual is at the floor, but too few degrees of freedom back it.
+    Underdetermined,
+}
+
+impl Verdict {
+    /// Upper-case word for reports.
+    pub fn word(self) -> &'static str {
+        match self {
+            Verdict::Adequate => "ADEQUATE",
+            Verdict::NotAdequate => "NOT ADEQUATE",
+            Verdict::Underdetermined => "UNDERDETERMINED",
+        }
+    }
 }
 
 /// The verdict on a model.
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
-    /// True when the residual is consistent with the noise floor.
+    /// Adequate, not adequate or underdetermined.
+    pub verdict: Verdict,
+    /// True when the residual is consistent with the noise floor (never for an underdetermined
+    /// model).
     pub adequate: bool,
+    /// Fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom per parameter.
+    pub underdetermined: bool,
+    /// Items excluded as outliers.
+    pub outliers: usize,
     /// The missing effect, if one was found significant.
     pub missing: Option<Effect>,
     /// Evidence and physical explanation, in words with numbers and units.
     pub explanation: String,
-    /// P(residual variance ≥ observed | complete model).
+    /// P(residual variance ≥ observed | complete model); NaN when it cannot be computed (no
+    /// noise in the data, no degree of freedom).
     pub p_value: f64,
     /// Every candidate tried.
     pub candidates: Vec<Candidate>,
@@ -286,6 +519,10 @@ pub struct Step {
     pub residual_rms_after: f64,
     /// Parameters after the step.
     pub params: Params,
+    /// Their standard errors.
+    pub sigma: Params,
+    /// Items excluded as outliers after the step.
+    pub outliers: usize,
 }
 
 /// A lab report: the fit, its residual against the floor, the diagnosis and the next step.
@@ -325,64 +562,146 @@ pub fn normalise_model(p: &dyn Problem, model: &[Effect]) -> Result<Vec<Effect>,
     Ok(m)
 }
 
+fn model_names(model: &[Effect]) -> String {
+    if model.is_empty() {
+        "(no correction)".into()
+    } else {
+        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
+    }
+}
+
+/// Per-item keep flags of a fit (an item is used when all its residuals are).
+fn kept_items(p: &dyn Problem, f: &Fitted) -> Vec<bool> {
+    let k = p.residuals_per_item();
+    f.used.chunks(k).map(|c| c.iter().all(|u| *u)).collect()
+}
+
+/// Fit `model` with the robust loss of the module docs.
+pub fn robust_fit(
+    p: &dyn Problem,
+    model: &[Effect],
+    floor: &NoiseFloor,
+) -> Result<Fitted, CalError> {
+    let n = p.n();
+    let per = p.residuals_per_item();
+    let all = vec![true; n];
+    let first = p.fit_items(model, &all)?;
+    let mut keep = all.clone();
+    let mut fit = first.clone();
+    for _ in 0..ROBUST_ROUNDS {
+        let used: Vec<f64> = fit.used_residuals().collect();
+        let centre = median(&used);
+        let sigma = mad_sigma(&used).max(floor.sigma);
+        if !(sigma > 0.0 && sigma.is_finite() && centre.is_finite()) {
+            return Ok(fit);
+        }
+        let cut = OUTLIER_SIGMAS * sigma;
+        let next: Vec<bool> = fit
+            .residuals
+            .chunks(per)
+            .map(|c| c.iter().all(|r| (r - centre).abs() <= cut))
+            .collect();
+        let out = next.iter().filter(|k| !**k).count();
+        if out as f64 > MAX_OUTLIER_FRACTION * n as f64 {
+            // A misfit, not outliers: the plain fit stands.
+            return Ok(first);
+        }
+        if next == keep {
+            return Ok(fit);
+        }
+        keep = next;
+        fit = p.fit_items(model, &keep)?;
+    }
+    Err(CalError::Fit(format!(
+        "outlier rejection for the {} model {} did not settle in {ROBUST_ROUNDS} refits",
+        p.sensor(),
+        model_names(model)
+    )))
+}
+
 /// Run the lab on a problem and a model (module docs).
 pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
     let model = normalise_model(p, model)?;
-    let fitted = p.fit(&model)?;
     let floor = p.noise_floor();
-    let n = fitted.residuals.len() as f64;
+    let fitted = robust_fit(p, &model, &floor)?;
+    let keep = kept_items(p, &fitted);
+    let outliers = keep.iter().filter(|k| !**k).count();
+    let n = fitted.n_used() as f64;
     let k = fitted.n_params as f64;
-    let dof = (n - k).max(1.0);
-    let expected_rms = floor.sigma * (dof / n).sqrt();
-    let s2 = fitted.rss() / dof;
-    let ratio = s2 / (floor.sigma * floor.sigma);
-    let p_adequate = f_sf(ratio, dof, floor.dof);
+    let dof = n - k;
+    let underdetermined = k > 0.0 && dof < DOF_PER_PARAMETER * k;
+    let dof1 = dof.max(1.0);
+    let expected_rms = floor.sigma * (dof1 / n.max(1.0)).sqrt();
+    let s2 = fitted.rss() / dof1;
     let rms = fitted.rms();
-    // (A noiseless recording, e.g. constant counts, has a zero floor: then only a residual at
-    // rounding level is adequate.)
-    let adequate = p_adequate >= ALPHA_ADEQUATE
-        || rms <= PRACTICAL_MARGIN * expected_rms
-        || (floor.sigma == 0.0 && rms < 1e-9);
     let unit = p.unit();
+    let noiseless = floor.sigma == 0.0;
+    let ratio = if noiseless {
+        f64::NAN
+    } else {
+        s2 / (floor.sigma * floor.sigma)
+    };
+    let p_adequate = if noiseless || dof < 1.0 {
+        f64::NAN
+    } else {
+        f_sf(ratio, dof1, floor.dof)
+    };
+    let fits_floor = if noiseless {
+        rms < 1e-9
+    } else {
+        p_adequate >= ALPHA_ADEQUATE || rms <= PRACTICAL_MARGIN * expected_rms
+    };
+    let adequate = fits_floor && !underdetermined;
 
     let mut candidates = Vec::new();
-    let mut best: Option<(f64, Fitted)> = None;
+    let mut best: Option<(f64, Effect)> = None;
     for &e in p.effects() {
         if model.contains(&e) {
             continue;
         }
+        let skip = |why: String| Candidate {
+            effect: e,
+            residual_rms: None,
+            f: None,
+            p_value: None,
+            extra_params: 0,
+            skipped: Some(why),
+            evidence: None,
+        };
         if let Err(why) = p.identifiable(&model, e) {
-            candidates.push(Candidate {
-                effect: e,
-                residual_rms: None,
-                f: None,
-                p_value: None,
-                extra_params: 0,
-                skipped: Some(why),
-            });
+            candidates.push(skip(why));
             continue;
         }
+        let evidence = match p.evidence(&fitted, e) {
+            Some(Err(why)) => {
+                candidates.push(skip(why));
+                continue;
+            }
+            Some(Ok(text)) => Some(text),
+            None => None,
+        };
         let mut m1 = model.clone();
         m1.push(e);
         m1.sort();
-        let f1 = match p.fit(&m1) {
+        let f1 = match p.fit_items(&m1, &keep) {
             Ok(f) => f,
             Err(err) => {
-                candidates.push(Candidate {
-                    effect: e,
-                    residual_rms: None,
-                    f: None,
-                    p_value: None,
-                    extra_params: 0,
-                    skipped: Some(err.to_string()),
-                });
+                candidates.push(skip(err.to_string()));
                 continue;
             }
         };
         let dp = f1.n_params.saturating_sub(fitted.n_params).max(1) as f64;
-        let dof1 = (n - f1.n_params as f64).max(1.0);
-        let f = ((fitted.rss() - f1.rss()) / dp) / (f1.rss() / dof1).max(1e-300);
-        let pv = f_sf(f, dp, dof1);
+        let dof_1 = f1.dof();
+        if dof_1 < 1.0 {
+            candidates.push(skip(format!(
+                "{} residuals leave no degree of freedom for {} parameters",
+                f1.n_used(),
+                f1.n_params
+            )));
+            continue;
+        }
+        let f = ((fitted.rss() - f1.rss()) / dp) / (f1.rss() / dof_1).max(1e-300);
+        let pv = f_sf(f, dp, dof_1);
         candidates.push(Candidate {
             effect: e,
             residual_rms: Some(f1.rms()),
@@ -390,80 +709,152 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
             p_value: Some(pv),
             extra_params: dp as usize,
             skipped: None,
+            evidence,
         });
-        if pv < ALPHA_EFFECT && best.as_ref().is_none_or(|(bf, _)| f > *bf) {
-            best = Some((f, f1));
+        if pv < ALPHA_EFFECT && best.is_none_or(|(bf, _)| f > bf) {
+            best = Some((f, e));
         }
     }
 
-    let verdict = format!(
-        "residual RMS {rms:.4} {unit} vs noise floor {:.4} {unit} expected for a complete model \
-         ({} {} residuals, {} fitted parameters; noise from {}); P(F ≥ {ratio:.2}) = {p_adequate:.3}",
-        expected_rms,
-        fitted.residuals.len(),
-        p.basis(),
-        fitted.n_params,
-        floor.method
-    );
-    let (missing, explanation, step) =
-        if adequate {
-            (None, format!("adequate: {verdict}."), None)
-        } else if let Some((f, f1)) = best {
-            let e = *f1
-                .model
-                .iter()
-                .find(|e| !model.contains(e))
-                .expect("added effect");
-            let c = candidates
-                .iter()
-                .find(|c| c.effect == e)
-                .expect("candidate");
-            let text = format!(
+    let excluded = if outliers > 0 {
+        format!(
+            "{outliers} {} beyond {OUTLIER_SIGMAS}σ excluded as outliers; ",
+            p.items()
+        )
+    } else {
+        String::new()
+    };
+    let verdict = if noiseless {
+        format!(
+            "{excluded}residual RMS {rms:.4} {unit}, and the data show no noise at all (noise \
+             floor exactly 0 {unit}: every {} residual of a complete model would be 0); {}",
+            p.basis(),
+            if fits_floor {
+                "the model reproduces them exactly".to_string()
+            } else {
+                "so any residual is a misfit".to_string()
+            }
+        )
+    } else {
+        format!(
+            "{excluded}residual RMS {rms:.4} {unit} vs noise floor {:.4} {unit} expected for a \
+             complete model ({} {} residuals, {} fitted parameters; noise from {}); {}",
+            expected_rms,
+            fitted.n_used(),
+            p.basis(),
+            fitted.n_params,
+            floor.method,
+            if p_adequate.is_finite() {
+                format!("P(F ≥ {ratio:.2}) = {p_adequate:.3}")
+            } else {
+                "no degree of freedom left to test".to_string()
+            }
+        )
+    };
+    let need = (k * (1.0 + DOF_PER_PARAMETER)).ceil();
+    let thin = if underdetermined {
+        format!(
+            " (and {} residuals for {} parameters leave {} degrees of freedom, fewer than \
+             {DOF_PER_PARAMETER} per parameter)",
+            fitted.n_used(),
+            fitted.n_params,
+            dof.max(0.0)
+        )
+    } else {
+        String::new()
+    };
+    let verdict = format!("{verdict}{thin}");
+    let (missing, explanation, step) = if underdetermined && fits_floor {
+        (
+            None,
+            format!(
+                "underdetermined: the residual is at the noise floor, but {} residuals for {} \
+                 parameters leave {} degrees of freedom, fewer than {DOF_PER_PARAMETER} per \
+                 parameter, so it cannot tell an adequate model from an overfitted one \
+                 ({verdict}). Record at least {need} {} to judge this model.",
+                fitted.n_used(),
+                fitted.n_params,
+                dof.max(0.0),
+                p.items()
+            ),
+            None,
+        )
+    } else if adequate {
+        (None, format!("adequate: {verdict}."), None)
+    } else if let Some((f, e)) = best {
+        let mut m1 = model.clone();
+        m1.push(e);
+        m1.sort();
+        let f1 = robust_fit(p, &m1, &floor)?;
+        let c = candidates
+            .iter()
+            .find(|c| c.effect == e)
+            .expect("candidate");
+        let text = format!(
             "not adequate: {verdict}. Adding '{}' lowers the residual RMS {rms:.4} → {:.4} {unit} \
              (F = {f:.1} for {} extra parameters, p = {:.2e}), the most significant of the \
-             candidates. Physically: {}.",
+             candidates{}. Physically: {}.",
             e.name(),
-            f1.rms(),
+            c.residual_rms.unwrap_or(f64::NAN),
             c.extra_params,
             c.p_value.unwrap_or(f64::NAN),
+            c.evidence
+                .as_ref()
+                .map_or(String::new(), |ev| format!("; {ev}")),
             e.physics_for(p.sensor())
         );
-            let step = Step {
-                added: e,
-                model: f1.model.clone(),
-                residual_rms_before: rms,
-                residual_rms_after: f1.rms(),
-                params: f1.params.clone(),
-            };
-            (Some(e), text, Some(step))
-        } else {
-            let tried: Vec<String> = candidates
-                .iter()
-                .map(|c| match (&c.skipped, c.p_value) {
-                    (Some(why), _) => format!("{} (not tried: {why})", c.effect.name()),
-                    (None, Some(pv)) => format!("{} (p = {pv:.2e})", c.effect.name()),
-                    _ => c.effect.name().to_string(),
-                })
-                .collect();
-            (
-                None,
-                format!(
+        let out1 = kept_items(p, &f1).iter().filter(|k| !**k).count();
+        let step = Step {
+            added: e,
+            model: f1.model.clone(),
+            residual_rms_before: rms,
+            residual_rms_after: f1.rms(),
+            params: f1.params.clone(),
+            sigma: f1.sigma.clone(),
+            outliers: out1,
+        };
+        (Some(e), text, Some(step))
+    } else {
+        let tried: Vec<String> = candidates
+            .iter()
+            .map(|c| match (&c.skipped, c.p_value) {
+                (Some(why), _) => format!("{} (not tried: {why})", c.effect.name()),
+                (None, Some(pv)) => format!("{} (p = {pv:.2e})", c.effect.name()),
+                _ => c.effect.name().to_string(),
+            })
+            .collect();
+        (
+            None,
+            format!(
                 "not adequate: {verdict}. No effect of the catalogue gives a significant drop{}; \
                  the excess is something the {} models do not contain (nonlinearity, motion \
                  during the poses, time-varying disturbances, timing skew) or a noise floor \
                  underestimated by correlated noise.",
-                if tried.is_empty() { String::new() } else { format!(" ({})", tried.join(", ")) },
+                if tried.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", tried.join(", "))
+                },
                 p.sensor()
             ),
-                None,
-            )
-        };
+            None,
+        )
+    };
     Ok(Report {
         fitted,
         floor,
         expected_rms,
         diagnosis: Diagnosis {
+            verdict: if adequate {
+                Verdict::Adequate
+            } else if underdetermined && fits_floor {
+                Verdict::Underdetermined
+            } else {
+                Verdict::NotAdequate
+            },
             adequate,
+            underdetermined,
+            outliers,
             missing,
             explanation,
             p_value: p_adequate,
@@ -471,4 +862,33 @@ pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
         },
         step,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_values_round_trip() {
+        let p = Params {
+            offset: Some([1.0, 2.0, 3.0]),
+            temp_ref: Some(25.0),
+            soft_iron: Some([[1.0, 0.1, 0.0], [0.1, 0.9, 0.0], [0.0, 0.0, 1.0]]),
+            soft_iron_2d: Some(SoftIron2d {
+                r: 50.0,
+                q: 40.0,
+                theta_deg: 30.0,
+                sigma: 0.8,
+            }),
+            field: Some(45.0),
+            ..Params::default()
+        };
+        let v = p.values();
+        assert_eq!(v.len(), 3 + 1 + 9 + 4 + 1);
+        assert_eq!(p.with_values(&v), p);
+        let z = p.zeros_like();
+        assert!(z.values().iter().all(|x| *x == 0.0));
+        assert_eq!(z.offset, Some([0.0; 3]));
+        assert_eq!(z.scale, None);
+    }
 }

@@ -2,9 +2,9 @@
 //!
 //! Correction `m_cal = S · (m − h)`; the lab residual per sample is `|m_cal| − F`.
 //!
-//! * **hard_iron** (seed eq. 3): `h`, the centre of the sphere (initial value from the linear
-//!   least-squares sphere fit `|m|² = 2h·m + (F² − |h|²)`).
-//! * **soft_iron_2d** (seed eqs. 4–5, exactly): for data rotated in a plane, the ellipse of the
+//! * **hard_iron** (Jaime et al., eq. 3): `h`, the centre of the sphere (initial value from the
+//!   linear least-squares sphere fit `|m|² = 2h·m + (F² − |h|²)`).
+//! * **soft_iron_2d** (Jaime et al., eqs. 4–5, exactly): for data rotated in a plane, the ellipse of the
 //!   in-plane components has semi-major axis r, semi-minor q and tilt θ; the correction rotates by
 //!   `R(θ) = [[cos θ, sin θ], [−sin θ, cos θ]]` (eq. 4) and scales the first axis by `σ = q/r`
 //!   (eq. 5): `S₂ = diag(σ, 1)·R(θ)`; the matrix reported and applied is `R(θ)ᵀ·S₂`, which
@@ -21,16 +21,39 @@
 //! **Planar data.** When the measurements lie in a plane (smallest principal standard deviation
 //! below [`PLANAR_RATIO`] of the largest), the axis closest to the plane normal is not excited:
 //! the problem becomes 2-D on the other two axes (hard iron in-plane only; `F` is the in-plane
-//! field) and only `soft_iron_2d` is identifiable. In 3-D data `soft_iron_2d` is not the answer
-//! and `soft_iron` is used instead (issue 4 §2).
-use crate::lab::{CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d};
-use crate::solve::{levenberg_marquardt, lstsq, mean, sigma_second_diff};
-use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, SymmetricEigen, Vector2, Vector3};
+//! field; the residual is `|(S(m − h))_plane| − F`) and only `soft_iron_2d` is identifiable. In
+//! 3-D data `soft_iron_2d` is not the answer and `soft_iron` is used instead.
+//!
+//! **Tilt (out-of-plane motion).** A hand-held "level" turn wobbles: the rotation plane tilts by
+//! a few degrees, and the vertical field (40 µT at mid latitudes) leaks into the horizontal axes
+//! by `B_z·sin(tilt)`, so the in-plane magnitude varies with the out-of-plane component while
+//! the full magnitude is conserved. The `tilt` effect of planar data takes the out-of-plane axis
+//! back into the magnitude: the residual becomes `|S(m − h)| − F` over all three axes, with the
+//! out-of-plane hard-iron component `h_k` fitted (one more parameter, identifiable through the
+//! wobble itself: `|m_plane − h|² = F² − (m_k − h_k)²` is a straight line in `m_k`, whose fit
+//! gives the starting values). Its evidence in the time domain is the correlation of the
+//! in-plane residual with `m_k`, and the effect is tried only when that correlation is at least
+//! [`TILT_MIN_CORRELATION`]: without the evidence the 3-D magnitude would let a sphere of huge
+//! radius, centred far away, pass through any planar data (a plane is a sphere of infinite
+//! radius) and "explain" an ellipse that is soft iron.
+use crate::lab::{params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d};
+use crate::solve::{
+    covariance, levenberg_marquardt, lstsq, mean, no_parameters, sigma_second_diff, sym_eigen,
+};
+use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector2, Vector3};
 
 /// Ratio of principal standard deviations below which data counts as planar.
 pub const PLANAR_RATIO: f64 = 0.15;
+/// Smallest |correlation| of the in-plane residual with the out-of-plane component for which
+/// `tilt` is tried (module docs).
+pub const TILT_MIN_CORRELATION: f64 = 0.3;
 
-const EFFECTS: [Effect; 3] = [Effect::HardIron, Effect::SoftIron, Effect::SoftIron2d];
+const EFFECTS: [Effect; 4] = [
+    Effect::HardIron,
+    Effect::SoftIron,
+    Effect::SoftIron2d,
+    Effect::Tilt,
+];
 
 /// The magnetometer problem.
 #[derive(Debug, Clone)]
@@ -43,10 +66,12 @@ pub struct MagProblem {
     pub plane: Option<[usize; 2]>,
     /// Principal standard deviations, largest first (µT).
     pub principal_sd: [f64; 3],
+    /// The data's unit (µT for the contract; LSB for raw counts).
+    pub unit: String,
     sigma: f64,
 }
 
-/// Seed-style hard iron: the midpoint of each axis' range over a full rotation.
+/// Hard iron as Jaime et al. estimate it: the midpoint of each axis' range over a full rotation.
 pub fn hard_iron_minmax(m: &[Vector3<f64>]) -> [f64; 3] {
     let mut out = [0.0; 3];
     for (k, o) in out.iter_mut().enumerate() {
@@ -71,7 +96,8 @@ pub fn sphere_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, f64), CalError> {
     Ok((c, r2.sqrt()))
 }
 
-/// Algebraic ellipse fit on 2-D points: (centre, r, q, θ in rad) — seed eqs. 4–5's parameters.
+/// Algebraic ellipse fit on 2-D points: (centre, r, q, θ in rad) — the parameters of
+/// Jaime et al., eqs. 4–5.
 pub fn ellipse_fit(p: &[Vector2<f64>]) -> Result<(Vector2<f64>, f64, f64, f64), CalError> {
     let n = p.len();
     // Centre the data first for conditioning.
@@ -92,7 +118,7 @@ pub fn ellipse_fit(p: &[Vector2<f64>]) -> Result<(Vector2<f64>, f64, f64, f64), 
         * l
         / 2.0;
     let kappa = 1.0 + x0.dot(&(qf * x0));
-    let eig = SymmetricEigen::new(qf / kappa);
+    let eig = sym_eigen(qf / kappa, "ellipse fit")?;
     let (i_min, i_max) = if eig.eigenvalues[0] <= eig.eigenvalues[1] {
         (0, 1)
     } else {
@@ -144,7 +170,7 @@ pub fn ellipsoid_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, Matrix3<f64>),
         * g;
     let kappa = 1.0 + c.dot(&(qf * c));
     let qn = qf / kappa;
-    let eig = SymmetricEigen::new(qn);
+    let eig = sym_eigen(qn, "ellipsoid fit")?;
     if eig.eigenvalues.iter().any(|&l| !(l > 0.0)) {
         return Err(CalError::Fit(
             "the measurements do not form an ellipsoid (rotate the sensor through more orientations)"
@@ -155,10 +181,10 @@ pub fn ellipsoid_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, Matrix3<f64>),
 }
 
 /// Symmetric square root of a positive-definite matrix.
-fn sqrtm(a: &Matrix3<f64>) -> Matrix3<f64> {
-    let e = SymmetricEigen::new(*a);
+fn sqrtm(a: &Matrix3<f64>) -> Result<Matrix3<f64>, CalError> {
+    let e = sym_eigen(*a, "matrix square root")?;
     let d = Matrix3::from_diagonal(&e.eigenvalues.map(|l| l.max(0.0).sqrt()));
-    e.eigenvectors * d * e.eigenvectors.transpose()
+    Ok(e.eigenvectors * d * e.eigenvectors.transpose())
 }
 
 fn sym(x: &[f64]) -> Matrix3<f64> {
@@ -173,6 +199,15 @@ fn s2d(theta: f64, sigma: f64) -> Matrix2<f64> {
 impl MagProblem {
     /// Prepare the data: checks, principal axes, planarity, noise.
     pub fn new(m: Vec<Vector3<f64>>, field: Option<f64>) -> Result<Self, CalError> {
+        Self::with_unit(m, field, "µT")
+    }
+
+    /// As [`MagProblem::new`], for data (and `field`) in `unit`.
+    pub fn with_unit(
+        m: Vec<Vector3<f64>>,
+        field: Option<f64>,
+        unit: &str,
+    ) -> Result<Self, CalError> {
         if m.len() < 20 {
             return Err(CalError::Input(format!(
                 "{} magnetometer samples; at least 20 are needed",
@@ -187,7 +222,7 @@ impl MagProblem {
         if let Some(f) = field {
             if !(f > 0.0 && f.is_finite()) {
                 return Err(CalError::Input(format!(
-                    "field magnitude {f} µT is not positive"
+                    "field magnitude {f} {unit} is not positive"
                 )));
             }
         }
@@ -196,7 +231,7 @@ impl MagProblem {
             .iter()
             .fold(Matrix3::zeros(), |a, v| a + (v - c) * (v - c).transpose())
             / m.len() as f64;
-        let e = SymmetricEigen::new(cov);
+        let e = sym_eigen(cov, "principal axes of the magnetometer data")?;
         let mut idx = [0usize, 1, 2];
         idx.sort_by(|&a, &b| e.eigenvalues[b].total_cmp(&e.eigenvalues[a]));
         let sd = idx.map(|i| e.eigenvalues[i].max(0.0).sqrt());
@@ -235,6 +270,7 @@ impl MagProblem {
             field,
             plane,
             principal_sd: sd,
+            unit: unit.into(),
             sigma: s2.sqrt(),
         })
     }
@@ -249,10 +285,56 @@ impl MagProblem {
         s * (m - h)
     }
 
-    fn fit_planar(&self, model: &[Effect], [i, j]: [usize; 2]) -> Result<Fitted, CalError> {
-        let p: Vec<Vector2<f64>> = self.m.iter().map(|v| Vector2::new(v[i], v[j])).collect();
+    /// The lab residual of sample `m` under `params` fitted with `model` (module docs):
+    /// `|S(m − h)| − F` for 3-D data and for planar data with `tilt`; for planar data without it
+    /// the corrected in-plane magnitude minus the in-plane field `F`.
+    pub fn residual(&self, model: &[Effect], params: &Params, m: Vector3<f64>) -> f64 {
+        let c = Self::correct(params, m);
+        let f = params.field.unwrap_or(0.0);
+        match self.plane {
+            Some([i, j]) if !model.contains(&Effect::Tilt) => {
+                (c[i] * c[i] + c[j] * c[j]).sqrt() - f
+            }
+            _ => c.norm() - f,
+        }
+    }
+
+    /// Correlation of the residuals `fitted` used with the out-of-plane component (planar data).
+    fn out_of_plane_correlation(&self, fitted: &Fitted) -> Option<(f64, usize, usize, f64)> {
+        let [i, j] = self.plane?;
+        let k = 3 - i - j;
+        let (r, z): (Vec<f64>, Vec<f64>) = fitted
+            .residuals
+            .iter()
+            .zip(&fitted.used)
+            .zip(&self.m)
+            .filter(|((_, u), _)| **u)
+            .map(|((r, _), m)| (*r, m[k]))
+            .unzip();
+        let (mr, mz) = (mean(&r), mean(&z));
+        let sxy: f64 = r.iter().zip(&z).map(|(a, b)| (a - mr) * (b - mz)).sum();
+        let sxx: f64 = r.iter().map(|a| (a - mr).powi(2)).sum();
+        let syy: f64 = z.iter().map(|b| (b - mz).powi(2)).sum();
+        let corr = sxy / (sxx * syy).sqrt();
+        corr.is_finite()
+            .then(|| (corr, k, r.len(), (syy / z.len() as f64).sqrt()))
+    }
+
+    fn fit_planar(
+        &self,
+        model: &[Effect],
+        [i, j]: [usize; 2],
+        idx: &[usize],
+    ) -> Result<Fitted, CalError> {
+        let k = 3 - i - j;
+        let p: Vec<Vector2<f64>> = idx
+            .iter()
+            .map(|&s| Vector2::new(self.m[s][i], self.m[s][j]))
+            .collect();
+        let mk: Vec<f64> = idx.iter().map(|&s| self.m[s][k]).collect();
         let has_h = model.contains(&Effect::HardIron);
         let has_2d = model.contains(&Effect::SoftIron2d);
+        let has_tilt = model.contains(&Effect::Tilt);
         let fit_f = self.field.is_none();
         // Initial values.
         let (mut c0, mut th0, mut sg0, mut f0) = (Vector2::zeros(), 0.0, 1.0, 0.0);
@@ -266,14 +348,25 @@ impl MagProblem {
             f0 = q;
         } else if has_h {
             let n = p.len();
-            let a = DMatrix::from_fn(n, 3, |k, l| if l < 2 { 2.0 * p[k][l] } else { 1.0 });
-            let b = DVector::from_fn(n, |k, _| p[k].norm_squared());
+            let a = DMatrix::from_fn(n, 3, |r, l| if l < 2 { 2.0 * p[r][l] } else { 1.0 });
+            let b = DVector::from_fn(n, |r, _| p[r].norm_squared());
             let x = lstsq(a, &b, "circle fit")?;
             c0 = Vector2::new(x[0], x[1]);
             f0 = (x[2] + c0.norm_squared()).max(0.0).sqrt();
         }
         if f0 == 0.0 {
             f0 = p.iter().map(|v| (v - c0).norm()).sum::<f64>() / p.len() as f64;
+        }
+        // Out-of-plane hard iron: |m_plane − c|² + m_k² = (F² − h_k²) + 2·h_k·m_k, a straight
+        // line in m_k (the wobble makes it identifiable).
+        let mut hk0 = 0.0;
+        if has_tilt {
+            let n = p.len();
+            let a = DMatrix::from_fn(n, 2, |r, l| if l == 0 { 2.0 * mk[r] } else { 1.0 });
+            let b = DVector::from_fn(n, |r, _| (p[r] - c0).norm_squared() + mk[r] * mk[r]);
+            let x = lstsq(a, &b, "out-of-plane (tilt) line")?;
+            hk0 = x[0];
+            f0 = (x[1] + hk0 * hk0).max(0.0).sqrt();
         }
         let mut x0 = Vec::new();
         if has_h {
@@ -282,105 +375,147 @@ impl MagProblem {
         if has_2d {
             x0.extend_from_slice(&[th0, sg0]);
         }
+        if has_tilt {
+            x0.push(hk0);
+        }
         if fit_f {
             x0.push(f0);
         }
         let fgiven = self.field.unwrap_or(0.0);
         let unpack = |x: &DVector<f64>| {
-            let mut k = 0;
+            let mut q = 0;
             let c = if has_h {
-                k += 2;
+                q += 2;
                 Vector2::new(x[0], x[1])
             } else {
                 Vector2::zeros()
             };
-            let s = if has_2d {
-                k += 2;
-                s2d(x[k - 2], x[k - 1])
+            let (th, sg) = if has_2d {
+                q += 2;
+                (x[q - 2], x[q - 1])
             } else {
-                Matrix2::identity()
+                (0.0, 1.0)
             };
-            let f = if fit_f { x[k] } else { fgiven };
-            (c, s, f)
+            let hk = if has_tilt {
+                q += 1;
+                x[q - 1]
+            } else {
+                0.0
+            };
+            let f = if fit_f { x[q] } else { fgiven };
+            (c, th, sg, hk, f)
         };
         let res = |x: &DVector<f64>| {
-            let (c, s, f) = unpack(x);
-            DVector::from_iterator(p.len(), p.iter().map(|v| (s * (v - c)).norm() - f))
+            let (c, th, sg, hk, f) = unpack(x);
+            let s = s2d(th, sg);
+            DVector::from_iterator(
+                p.len(),
+                p.iter().zip(&mk).map(|(v, z)| {
+                    let w = s * (v - c);
+                    if has_tilt {
+                        (w.norm_squared() + (z - hk).powi(2)).sqrt() - f
+                    } else {
+                        w.norm() - f
+                    }
+                }),
+            )
         };
         let fit = if x0.is_empty() {
-            let r = res(&DVector::zeros(0));
-            crate::solve::LmFit {
-                rss: r.norm_squared(),
-                x: DVector::zeros(0),
-                r,
-                iterations: 0,
-            }
+            no_parameters(res)
         } else {
-            levenberg_marquardt(DVector::from_vec(x0), res, 300)
+            levenberg_marquardt(
+                DVector::from_vec(x0),
+                res,
+                300,
+                &format!("magnetometer {} (planar data)", names(model)),
+            )?
         };
-        let (c, s_seed, f) = unpack(&fit.x);
-        // The seed stops after eq. 5: diag(σ,1)·R(θ) leaves the frame rotated by θ, which does not
-        // change |m| (nor the seed's Fig. 4 circle) but would turn every heading by θ. The matrix
+        // Jaime et al. stop after eq. 5: diag(σ,1)·R(θ) leaves the frame rotated by θ, which does
+        // not change |m| (nor their Fig. 4 circle) but would turn every heading by θ. The matrix
         // handed to the device rotates back: S = R(θ)ᵀ·diag(σ,1)·R(θ) (symmetric, axes kept).
-        let s = if has_2d {
-            let n = fit.x.len() - fit_f as usize;
-            let (sn, cs) = fit.x[n - 2].sin_cos();
-            Matrix2::new(cs, -sn, sn, cs) * s_seed
-        } else {
-            s_seed
-        };
-        let mut h3 = [0.0; 3];
-        h3[i] = c.x;
-        h3[j] = c.y;
-        let mut s3 = [[0.0; 3]; 3];
-        let k = 3 - i - j;
-        s3[k][k] = 1.0;
-        for (a, &ra) in [i, j].iter().enumerate() {
-            for (b, &cb) in [i, j].iter().enumerate() {
-                s3[ra][cb] = s[(a, b)];
+        let to_params = |x: &DVector<f64>| {
+            let (c, th, sg, hk, f) = unpack(x);
+            let (sn, cs) = th.sin_cos();
+            let s = Matrix2::new(cs, -sn, sn, cs) * s2d(th, sg);
+            let mut h3 = [0.0; 3];
+            h3[i] = c.x;
+            h3[j] = c.y;
+            h3[k] = hk;
+            let mut s3 = [[0.0; 3]; 3];
+            s3[k][k] = 1.0;
+            for (a, &ra) in [i, j].iter().enumerate() {
+                for (b, &cb) in [i, j].iter().enumerate() {
+                    s3[ra][cb] = s[(a, b)];
+                }
             }
-        }
-        let si2d = if has_2d {
-            let n = fit.x.len() - fit_f as usize;
-            let (mut th, sg) = (fit.x[n - 2], fit.x[n - 1]);
-            // Keep θ in (−90°, 90°].
-            th = (th + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI)
+            // Keep θ in (−90°, 90°]; σ = q/r with F = q the corrected radius, so r = q/σ.
+            let th = (th + std::f64::consts::FRAC_PI_2).rem_euclid(std::f64::consts::PI)
                 - std::f64::consts::FRAC_PI_2;
-            // σ = q/r with F = q the corrected radius, so r = q/σ.
-            Some(SoftIron2d {
-                r: f / sg.abs(),
-                q: f,
-                theta_deg: th.to_degrees(),
-                sigma: sg.abs(),
-            })
-        } else {
-            None
+            // In-plane radius: with tilt the in-plane field is what is left of F.
+            let q = if has_tilt {
+                let dz = mean(&mk) - hk;
+                (f * f - dz * dz).max(0.0).sqrt()
+            } else {
+                f
+            };
+            Params {
+                hard_iron: (has_h || has_tilt).then_some(h3),
+                soft_iron: has_2d.then_some(s3),
+                soft_iron_2d: has_2d.then_some(SoftIron2d {
+                    r: q / sg.abs(),
+                    q,
+                    theta_deg: th.to_degrees(),
+                    sigma: sg.abs(),
+                }),
+                field: Some(f),
+                ..Params::default()
+            }
         };
-        let params = Params {
-            hard_iron: has_h.then_some(h3),
-            soft_iron: has_2d.then_some(s3),
-            soft_iron_2d: si2d,
-            field: Some(f),
-            ..Params::default()
-        };
-        Ok(Fitted {
-            model: model.to_vec(),
-            params,
-            residuals: fit.r.iter().copied().collect(),
-            n_params: 2 * has_h as usize + 2 * has_2d as usize + fit_f as usize,
-        })
+        let params = to_params(&fit.x);
+        let np = 2 * has_h as usize + 2 * has_2d as usize + has_tilt as usize + fit_f as usize;
+        let cov = covariance(&fit.jacobian, fit.rss, (idx.len() - np) as f64);
+        let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
+        Ok(self.fitted(model, params, sigma, idx, np))
     }
 
-    fn fit_3d(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+    /// The fit's residuals for every sample, `used` for the samples of `idx`.
+    fn fitted(
+        &self,
+        model: &[Effect],
+        params: Params,
+        sigma: Params,
+        idx: &[usize],
+        n_params: usize,
+    ) -> Fitted {
+        let residuals = self
+            .m
+            .iter()
+            .map(|v| self.residual(model, &params, *v))
+            .collect();
+        let mut used = vec![false; self.m.len()];
+        for &s in idx {
+            used[s] = true;
+        }
+        Fitted {
+            model: model.to_vec(),
+            params,
+            sigma,
+            residuals,
+            used,
+            n_params,
+        }
+    }
+
+    fn fit_3d(&self, model: &[Effect], idx: &[usize]) -> Result<Fitted, CalError> {
         let has_h = model.contains(&Effect::HardIron);
         let has_s = model.contains(&Effect::SoftIron);
         let fit_f = self.field.is_none();
-        let m = &self.m;
+        let m: Vec<Vector3<f64>> = idx.iter().map(|&s| self.m[s]).collect();
         // Initial values.
         let (mut h0, w0, f0);
         if has_s {
-            let (c, qn) = ellipsoid_fit(m)?;
-            let w = sqrtm(&qn); // |w (m − c)| ≈ 1
+            let (c, qn) = ellipsoid_fit(&m)?;
+            let w = sqrtm(&qn)?; // |w (m − c)| ≈ 1
             let fref = match self.field {
                 Some(f) => f,
                 None => w.determinant().powf(-1.0 / 3.0),
@@ -389,7 +524,7 @@ impl MagProblem {
             f0 = fref;
             h0 = if has_h { c } else { Vector3::zeros() };
         } else {
-            let (c, r) = sphere_fit(m)?;
+            let (c, r) = sphere_fit(&m)?;
             h0 = if has_h { c } else { Vector3::zeros() };
             f0 = if has_h {
                 r
@@ -443,44 +578,55 @@ impl MagProblem {
             DVector::from_iterator(m.len(), m.iter().map(|v| (s * (v - h)).norm() - f))
         };
         let fit = if x0.is_empty() {
-            let r = res(&DVector::zeros(0));
-            crate::solve::LmFit {
-                rss: r.norm_squared(),
-                x: DVector::zeros(0),
-                r,
-                iterations: 0,
-            }
+            no_parameters(res)
         } else {
-            levenberg_marquardt(DVector::from_vec(x0), res, 300)
+            levenberg_marquardt(
+                DVector::from_vec(x0),
+                res,
+                300,
+                &format!("magnetometer {}", names(model)),
+            )?
         };
-        let (h, mut s, mut f) = unpack(&fit.x);
-        if has_s && fit_f {
-            let d = s.determinant();
-            if !(d > 0.0) {
-                return Err(CalError::Fit(
-                    "soft-iron fit gave a non-positive determinant".into(),
-                ));
-            }
-            let k = d.cbrt();
-            s /= k;
-            f /= k;
+        if has_s && fit_f && !(unpack(&fit.x).1.determinant() > 0.0) {
+            return Err(CalError::Fit(
+                "soft-iron fit gave a non-positive determinant".into(),
+            ));
         }
-        let params = Params {
-            hard_iron: has_h.then_some([h.x, h.y, h.z]),
-            soft_iron: has_s.then_some([
-                [s[(0, 0)], s[(0, 1)], s[(0, 2)]],
-                [s[(1, 0)], s[(1, 1)], s[(1, 2)]],
-                [s[(2, 0)], s[(2, 1)], s[(2, 2)]],
-            ]),
-            field: Some(f),
-            ..Params::default()
+        let to_params = |x: &DVector<f64>| {
+            let (h, mut s, mut f) = unpack(x);
+            if has_s && fit_f {
+                let k = s.determinant().cbrt();
+                s /= k;
+                f /= k;
+            }
+            Params {
+                hard_iron: has_h.then_some([h.x, h.y, h.z]),
+                soft_iron: has_s.then_some([
+                    [s[(0, 0)], s[(0, 1)], s[(0, 2)]],
+                    [s[(1, 0)], s[(1, 1)], s[(1, 2)]],
+                    [s[(2, 0)], s[(2, 1)], s[(2, 2)]],
+                ]),
+                field: Some(f),
+                ..Params::default()
+            }
         };
-        Ok(Fitted {
-            model: model.to_vec(),
-            params,
-            residuals: fit.r.iter().copied().collect(),
-            n_params: 3 * has_h as usize + 6 * has_s as usize + (fit_f && !has_s) as usize,
-        })
+        let params = to_params(&fit.x);
+        let np = 3 * has_h as usize + 6 * has_s as usize + (fit_f && !has_s) as usize;
+        let cov = covariance(
+            &fit.jacobian,
+            fit.rss,
+            (idx.len() - np.min(idx.len())) as f64,
+        );
+        let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
+        Ok(self.fitted(model, params, sigma, idx, np))
+    }
+}
+
+fn names(model: &[Effect]) -> String {
+    if model.is_empty() {
+        "(no correction)".into()
+    } else {
+        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
     }
 }
 
@@ -488,8 +634,8 @@ impl Problem for MagProblem {
     fn sensor(&self) -> &'static str {
         "mag"
     }
-    fn unit(&self) -> &'static str {
-        "µT"
+    fn unit(&self) -> &str {
+        &self.unit
     }
     fn effects(&self) -> &'static [Effect] {
         &EFFECTS
@@ -500,15 +646,21 @@ impl Problem for MagProblem {
 
     fn identifiable(&self, model: &[Effect], e: Effect) -> Result<(), String> {
         let sd = self.principal_sd;
+        let u = &self.unit;
         match (e, self.plane) {
             (Effect::SoftIron, Some(_)) => Err(format!(
-                "the data are planar (principal s.d. {:.2}/{:.2}/{:.2} µT): a 3-D ellipsoid is \
+                "the data are planar (principal s.d. {:.2}/{:.2}/{:.2} {u}): a 3-D ellipsoid is \
                  not determined; soft_iron_2d describes the plane",
                 sd[0], sd[1], sd[2]
             )),
             (Effect::SoftIron2d, None) => Err(format!(
-                "the data are rotated in 3-D (principal s.d. {:.2}/{:.2}/{:.2} µT): the seed's \
-                 planar ellipse does not apply; soft_iron does",
+                "the data are rotated in 3-D (principal s.d. {:.2}/{:.2}/{:.2} {u}): the planar \
+                 ellipse of Jaime et al. does not apply; soft_iron does",
+                sd[0], sd[1], sd[2]
+            )),
+            (Effect::Tilt, None) => Err(format!(
+                "the data are rotated in 3-D (principal s.d. {:.2}/{:.2}/{:.2} {u}): the full \
+                 magnitude is already fitted, out-of-plane motion is part of the data",
                 sd[0], sd[1], sd[2]
             )),
             (Effect::SoftIron, None) | (Effect::SoftIron2d, Some(_))
@@ -520,7 +672,7 @@ impl Problem for MagProblem {
         }
     }
 
-    fn fit(&self, model: &[Effect]) -> Result<Fitted, CalError> {
+    fn fit_items(&self, model: &[Effect], keep: &[bool]) -> Result<Fitted, CalError> {
         if model.contains(&Effect::SoftIron) && model.contains(&Effect::SoftIron2d) {
             return Err(CalError::Input(
                 "use either soft_iron or soft_iron_2d, not both".into(),
@@ -531,9 +683,16 @@ impl Problem for MagProblem {
                 self.identifiable(&[], e).map_err(CalError::Fit)?;
             }
         }
+        let idx: Vec<usize> = (0..self.m.len()).filter(|&s| keep[s]).collect();
+        if idx.len() < 20 {
+            return Err(CalError::Fit(format!(
+                "{} magnetometer samples left after excluding outliers; at least 20 are needed",
+                idx.len()
+            )));
+        }
         match self.plane {
-            Some(p) => self.fit_planar(model, p),
-            None => self.fit_3d(model),
+            Some(p) => self.fit_planar(model, p, &idx),
+            None => self.fit_3d(model, &idx),
         }
     }
 
@@ -543,6 +702,30 @@ impl Problem for MagProblem {
             dof: (self.m.len() as f64 - 2.0).max(1.0),
             method: "per-axis second differences (MAD)",
         }
+    }
+
+    /// Tilt: the in-plane residual of the current fit against the out-of-plane component.
+    fn evidence(&self, fitted: &Fitted, e: Effect) -> Option<Result<String, String>> {
+        if e != Effect::Tilt {
+            return None;
+        }
+        let (corr, k, n, sd) = self.out_of_plane_correlation(fitted)?;
+        let ax = ["x", "y", "z"][k];
+        let text = format!(
+            "the in-plane residual {} the out-of-plane component m{ax} (correlation {corr:+.3} \
+             over {n} samples; m{ax} varies by {sd:.2} {} s.d.)",
+            if corr.abs() >= TILT_MIN_CORRELATION {
+                "follows"
+            } else {
+                "does not follow"
+            },
+            self.unit
+        );
+        Some(if corr.abs() >= TILT_MIN_CORRELATION {
+            Ok(text)
+        } else {
+            Err(text)
+        })
     }
 }
 

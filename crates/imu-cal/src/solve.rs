@@ -1,6 +1,6 @@
 //! Numerical tools shared by the fits: Levenberg–Marquardt least squares, robust statistics and
 //! the F / χ² tail probabilities of the diagnosis.
-use crate::lab::CalError;
+use crate::error::CalError;
 use nalgebra::{DMatrix, DVector};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
@@ -15,38 +15,80 @@ pub struct LmFit {
     pub rss: f64,
     /// Iterations used.
     pub iterations: usize,
+    /// Jacobian of the residuals at `x` (central differences), for the parameters' covariance.
+    pub jacobian: DMatrix<f64>,
+}
+
+/// Jacobian of `f` at `x` by central differences.
+fn jacobian<F>(f: &F, x: &DVector<f64>, m: usize) -> DMatrix<f64>
+where
+    F: Fn(&DVector<f64>) -> DVector<f64>,
+{
+    let p = x.len();
+    let mut j = DMatrix::<f64>::zeros(m, p);
+    for k in 0..p {
+        let h = 1e-6 * x[k].abs().max(1e-3);
+        let mut xp = x.clone();
+        xp[k] += h;
+        let mut xm = x.clone();
+        xm[k] -= h;
+        let d = (f(&xp) - f(&xm)) / (2.0 * h);
+        j.set_column(k, &d);
+    }
+    j
+}
+
+/// A fit with no free parameter: the residuals of `f` at the empty vector.
+pub fn no_parameters<F>(f: F) -> LmFit
+where
+    F: Fn(&DVector<f64>) -> DVector<f64>,
+{
+    let r = f(&DVector::zeros(0));
+    LmFit {
+        rss: r.norm_squared(),
+        jacobian: DMatrix::zeros(r.len(), 0),
+        x: DVector::zeros(0),
+        r,
+        iterations: 0,
+    }
 }
 
 /// Minimise Σ r_i(x)² by Levenberg–Marquardt (Marquardt 1963, with Nielsen's damping update)
-/// with a central-difference Jacobian. `f` must return the same number of residuals for every
-/// x; non-finite residuals make a step be rejected.
-pub fn levenberg_marquardt<F>(x0: DVector<f64>, f: F, max_iter: usize) -> LmFit
+/// with a central-difference Jacobian, in at most `max_iter` iterations of at most 30 damping
+/// trials each. `f` must return the same number of residuals for every x; non-finite residuals
+/// make a step be rejected. Errors name the routine and `what`: residuals not finite at the
+/// start, or the iteration cap reached while the sum of squares was still falling by more than
+/// 1e-9 of itself per iteration.
+pub fn levenberg_marquardt<F>(
+    x0: DVector<f64>,
+    f: F,
+    max_iter: usize,
+    what: &str,
+) -> Result<LmFit, CalError>
 where
     F: Fn(&DVector<f64>) -> DVector<f64>,
 {
     let mut x = x0;
     let mut r = f(&x);
     let mut rss = r.norm_squared();
+    if !rss.is_finite() {
+        return Err(CalError::Fit(format!(
+            "Levenberg–Marquardt ({what}): the residuals at the starting point are not finite"
+        )));
+    }
     let p = x.len();
     let mut lambda = 1e-3;
     let mut nu = 2.0;
     let mut it = 0;
+    let mut last_rel = f64::INFINITY;
+    let mut converged = false;
     while it < max_iter {
         it += 1;
-        // Jacobian by central differences.
-        let mut j = DMatrix::<f64>::zeros(r.len(), p);
-        for k in 0..p {
-            let h = 1e-6 * x[k].abs().max(1e-3);
-            let mut xp = x.clone();
-            xp[k] += h;
-            let mut xm = x.clone();
-            xm[k] -= h;
-            let d = (f(&xp) - f(&xm)) / (2.0 * h);
-            j.set_column(k, &d);
-        }
+        let j = jacobian(&f, &x, r.len());
         let jtj = j.transpose() * &j;
         let g = j.transpose() * &r;
         if g.amax() < 1e-14 * (1.0 + rss) {
+            converged = true;
             break;
         }
         let mut accepted = false;
@@ -72,29 +114,92 @@ where
                 lambda = (lambda / 3.0).max(1e-12);
                 nu = 2.0;
                 accepted = true;
+                last_rel = rel;
                 if rel < 1e-12 || step.norm() < 1e-12 * (1.0 + x.norm()) {
-                    return LmFit {
-                        x,
-                        r,
-                        rss,
-                        iterations: it,
-                    };
+                    converged = true;
                 }
                 break;
             }
             lambda *= nu;
             nu *= 2.0;
         }
-        if !accepted {
+        // No step lowers the sum of squares: a minimum to working precision.
+        if !accepted || converged {
+            converged = true;
             break;
         }
     }
-    LmFit {
+    if !converged && last_rel > 1e-9 {
+        return Err(CalError::Fit(format!(
+            "Levenberg–Marquardt ({what}) did not converge in {max_iter} iterations (the sum of \
+             squares was still falling by {last_rel:.1e} of itself per iteration)"
+        )));
+    }
+    let jacobian = jacobian(&f, &x, r.len());
+    Ok(LmFit {
         x,
         r,
         rss,
         iterations: it,
+        jacobian,
+    })
+}
+
+/// Covariance of least-squares parameters, `s²·(JᵀJ)⁻¹` with `s² = rss/dof`; `None` when the
+/// problem has no residual degree of freedom or `JᵀJ` is singular.
+pub fn covariance(j: &DMatrix<f64>, rss: f64, dof: f64) -> Option<DMatrix<f64>> {
+    if !(dof >= 1.0) || j.ncols() == 0 {
+        return None;
     }
+    let jtj = j.transpose() * j;
+    let inv = jtj.try_inverse()?;
+    let cov = inv * (rss / dof);
+    cov.iter().all(|v| v.is_finite()).then_some(cov)
+}
+
+/// Standard deviations of `g(x)` for `x` with covariance `cov` (first-order propagation with a
+/// central-difference Jacobian of `g`).
+pub fn propagate<G>(g: G, x: &DVector<f64>, cov: &DMatrix<f64>) -> Vec<f64>
+where
+    G: Fn(&DVector<f64>) -> Vec<f64>,
+{
+    let y = g(x);
+    let gm = |v: &DVector<f64>| DVector::from_vec(g(v));
+    let j = jacobian(&gm, x, y.len());
+    let c = &j * cov * j.transpose();
+    (0..y.len()).map(|i| c[(i, i)].max(0.0).sqrt()).collect()
+}
+
+/// Symmetric eigen-decomposition with an iteration cap (nalgebra's default has none: non-finite
+/// input would spin), an error naming `what` when it does not converge.
+pub fn sym_eigen<D>(
+    m: nalgebra::OMatrix<f64, D, D>,
+    what: &str,
+) -> Result<nalgebra::SymmetricEigen<f64, D>, CalError>
+where
+    D: nalgebra::Dim + nalgebra::DimSub<nalgebra::U1>,
+    nalgebra::DefaultAllocator: nalgebra::allocator::Allocator<D, D>
+        + nalgebra::allocator::Allocator<nalgebra::DimDiff<D, nalgebra::U1>>
+        + nalgebra::allocator::Allocator<D>,
+{
+    if m.iter().any(|v| !v.is_finite()) {
+        return Err(CalError::Fit(format!(
+            "eigen-decomposition ({what}): the matrix is not finite"
+        )));
+    }
+    nalgebra::SymmetricEigen::try_new(m, f64::EPSILON, 1000).ok_or_else(|| {
+        CalError::Fit(format!(
+            "eigen-decomposition ({what}) did not converge in 1000 iterations"
+        ))
+    })
+}
+
+/// Robust σ of a sample: 1.4826 × the median absolute deviation from the median (NaN if
+/// empty).
+pub fn mad_sigma(v: &[f64]) -> f64 {
+    let m = median(v);
+    let dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+    1.4826 * median(&dev)
 }
 
 /// Linear least squares `a·x ≈ b` by SVD, refusing non-finite input and rank-deficient
@@ -193,12 +298,69 @@ mod tests {
                 )
             },
             100,
-        );
+            "test exponential",
+        )
+        .unwrap();
         assert!(
             (fit.x[0] - 2.0).abs() < 1e-8 && (fit.x[1] - 0.5).abs() < 1e-8,
             "{:?}",
             fit.x
         );
+    }
+
+    #[test]
+    fn lm_cap_and_bad_start_are_errors_naming_the_fit() {
+        // Rosenbrock's valley from far away: 2 iterations cannot reach the minimum.
+        let rosen =
+            |x: &DVector<f64>| DVector::from_vec(vec![10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]]);
+        let e = levenberg_marquardt(DVector::from_vec(vec![-1.2, 1.0]), rosen, 2, "valley")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("Levenberg–Marquardt (valley) did not converge in 2"),
+            "{e}"
+        );
+        let fit =
+            levenberg_marquardt(DVector::from_vec(vec![-1.2, 1.0]), rosen, 200, "valley").unwrap();
+        assert!((fit.x[0] - 1.0).abs() < 1e-8 && (fit.x[1] - 1.0).abs() < 1e-8);
+        let e = levenberg_marquardt(
+            DVector::from_vec(vec![1e300]),
+            |x| DVector::from_vec(vec![x[0] * x[0]]),
+            10,
+            "overflow",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("(overflow)") && e.contains("not finite"), "{e}");
+    }
+
+    #[test]
+    fn covariance_of_a_straight_line() {
+        // y = a + b t with unit noise: var(b) = s²/Σ(t − t̄)² for the design below.
+        let t = [0.0, 1.0, 2.0, 3.0, 4.0];
+        let y = [0.1, 0.9, 2.2, 2.8, 4.1];
+        let fit = levenberg_marquardt(
+            DVector::from_vec(vec![0.0, 0.0]),
+            |x| DVector::from_iterator(5, t.iter().zip(&y).map(|(t, y)| x[0] + x[1] * t - y)),
+            50,
+            "line",
+        )
+        .unwrap();
+        let cov = covariance(&fit.jacobian, fit.rss, 3.0).unwrap();
+        let sxx = 10.0;
+        assert!((cov[(1, 1)] - fit.rss / 3.0 / sxx).abs() < 1e-9 * cov[(1, 1)]);
+        // σ of 2b by propagation is twice σ(b).
+        let s = propagate(|x| vec![2.0 * x[1]], &fit.x, &cov);
+        assert!((s[0] - 2.0 * cov[(1, 1)].sqrt()).abs() < 1e-6 * s[0]);
+    }
+
+    #[test]
+    fn eigen_refuses_non_finite_input() {
+        let m = nalgebra::Matrix3::new(1.0, f64::NAN, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        assert!(sym_eigen(m, "test")
+            .unwrap_err()
+            .to_string()
+            .contains("(test)"));
     }
 
     #[test]

@@ -195,7 +195,7 @@ fn range_limits_do_not_overflow() {
     assert_eq!(ran, 64);
 }
 
-/// Parameters with some matrices diagonal (the seed's accelerometer model and a bias-only gyro)
+/// Parameters with some matrices diagonal (Jaime et al.'s accelerometer model and a bias-only gyro)
 /// and some full, so both paths of the firmware's prepared form are exercised.
 fn maybe_diagonal() -> impl Strategy<Value = Params> {
     (params(), any::<bool>()).prop_map(|(mut p, diagonal)| {

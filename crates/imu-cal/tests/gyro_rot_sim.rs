@@ -2,7 +2,7 @@
 //!
 //! Set-up: 30 static poses of 2 s at 100 Hz joined by 1 s turns of 40–120° about random body
 //! axes; accelerometer σ = 0.02 m/s², gyro σ = 0.05 deg/s, bias (−1.6022, 0.2899, 1.8464) deg/s
-//! (the seed's). Per move the gravity direction is known to ≈ 0.02/9.8/√200 rad ≈ 0.01° and the
+//! (Jaime et al.'s). Per move the gravity direction is known to ≈ 0.02/9.8/√200 rad ≈ 0.01° and the
 //! integrated gyro noise is 0.05·0.01·√100 ≈ 0.005°, while a 1 % scale error on a 90° turn is
 //! ≈ 0.9°. Tolerances (≥ 10 standard errors): scale 3e-3, misalignment 0.15°.
 #![allow(clippy::needless_range_loop)]
@@ -15,9 +15,9 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 
 const BIAS: [f64; 3] = [-1.6022, 0.2899, 1.8464];
 
-fn recording(seed: u64, d: Matrix3<f64>) -> ([Vec<f64>; 3], [Vec<f64>; 3]) {
+fn recording(run: u64, d: Matrix3<f64>) -> ([Vec<f64>; 3], [Vec<f64>; 3]) {
     let (sa, sg) = (0.02, 0.05);
-    let mut rng = Rng::new(seed);
+    let mut rng = Rng::new(run);
     let (mut acc, mut gyr): ([Vec<f64>; 3], [Vec<f64>; 3]) = Default::default();
     let g_world = Vector3::new(0.0, 0.0, G_STANDARD);
     let mut r = Rotation3::identity(); // body → world
@@ -51,14 +51,14 @@ fn recording(seed: u64, d: Matrix3<f64>) -> ([Vec<f64>; 3], [Vec<f64>; 3]) {
     (acc, gyr)
 }
 
-fn problem(seed: u64, scale: [f64; 3], mis_deg: [f64; 6]) -> GyroRotProblem {
+fn problem(run: u64, scale: [f64; 3], mis_deg: [f64; 6]) -> GyroRotProblem {
     // Measured ω = D·ω_true with D = (T·K)⁻¹, so the correction T·K is what the fit must find.
     let g = mis_deg.map(f64::to_radians);
     let t = Matrix3::new(1.0, g[0], g[1], g[2], 1.0, g[3], g[4], g[5], 1.0);
     let tk = t * Matrix3::from_diagonal(&Vector3::from(scale));
-    let (acc, gyr) = recording(seed, tk.try_inverse().unwrap());
+    let (acc, gyr) = recording(run, tk.try_inverse().unwrap());
     let poses = detect_static([&acc[0], &acc[1], &acc[2]], 100.0, StaticDetect::default()).unwrap();
-    assert_eq!(poses.len(), 30, "seed {seed}");
+    assert_eq!(poses.len(), 30, "run {run}");
     GyroRotProblem::new(
         [&acc[0], &acc[1], &acc[2]],
         [&gyr[0], &gyr[1], &gyr[2]],
@@ -72,8 +72,8 @@ fn problem(seed: u64, scale: [f64; 3], mis_deg: [f64; 6]) -> GyroRotProblem {
 #[test]
 fn hidden_gyro_scale_is_diagnosed_and_recovered() {
     let s = [1.03, 0.97, 1.02];
-    for seed in 1..=3 {
-        let p = problem(seed, s, [0.0; 6]);
+    for run in 1..=3 {
+        let p = problem(run, s, [0.0; 6]);
         for k in 0..3 {
             assert!((p.bias[k] - BIAS[k]).abs() < 0.01, "bias {:?}", p.bias);
         }
@@ -88,12 +88,12 @@ fn hidden_gyro_scale_is_diagnosed_and_recovered() {
         let r1 = analyse(&p, &[Effect::Scale]).unwrap();
         assert!(
             r1.diagnosis.adequate,
-            "seed {seed}: {}",
+            "run {run}: {}",
             r1.diagnosis.explanation
         );
         let got = r1.fitted.params.scale.unwrap();
         for k in 0..3 {
-            assert!((got[k] - s[k]).abs() < 3e-3, "seed {seed}: scale {got:?}");
+            assert!((got[k] - s[k]).abs() < 3e-3, "run {run}: scale {got:?}");
         }
     }
 }
@@ -102,10 +102,10 @@ fn hidden_gyro_scale_is_diagnosed_and_recovered() {
 fn hidden_gyro_misalignment_is_diagnosed_and_recovered() {
     let s = [1.01, 0.99, 1.0];
     let m = [0.8, -0.5, 0.6, 1.0, -0.7, 0.4];
-    for seed in 11..=13 {
-        let p = problem(seed, s, m);
+    for run in 11..=13 {
+        let p = problem(run, s, m);
         let r = analyse(&p, &[Effect::Scale]).unwrap();
-        assert!(!r.diagnosis.adequate, "seed {seed}");
+        assert!(!r.diagnosis.adequate, "run {run}");
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Misalignment),
@@ -115,28 +115,28 @@ fn hidden_gyro_misalignment_is_diagnosed_and_recovered() {
         let r1 = analyse(&p, &[Effect::Scale, Effect::Misalignment]).unwrap();
         assert!(
             r1.diagnosis.adequate,
-            "seed {seed}: {}",
+            "run {run}: {}",
             r1.diagnosis.explanation
         );
         let got = r1.fitted.params.gyro_misalignment_deg.unwrap();
         for k in 0..6 {
             assert!(
                 (got[k] - m[k]).abs() < 0.15,
-                "seed {seed}: misalignment {got:?}"
+                "run {run}: misalignment {got:?}"
             );
         }
     }
 }
 
 /// The noise floor is estimated from the data (half-pose direction differences + gyro noise at
-/// rest): on ideal data the residual RMS must match it. Over 10 seeds (58 residuals each, RMS
-/// ratio s.d. ≈ 0.09 per seed) the mean ratio must lie in [0.9, 1.2]; measured 1.09 (the
+/// rest): on ideal data the residual RMS must match it. Over 10 runs (58 residuals each, RMS
+/// ratio s.d. ≈ 0.09 per run) the mean ratio must lie in [0.9, 1.2]; measured 1.09 (the
 /// estimator is ≈ 8 % low, well inside the 10 % practical margin of the verdict).
 #[test]
 fn noise_floor_matches_ideal_residual() {
     let ratios: Vec<f64> = (21..=30)
-        .map(|seed| {
-            let p = problem(seed, [1.0; 3], [0.0; 6]);
+        .map(|run| {
+            let p = problem(run, [1.0; 3], [0.0; 6]);
             let r = analyse(&p, &[]).unwrap();
             r.fitted.rms() / r.expected_rms
         })
@@ -147,13 +147,39 @@ fn noise_floor_matches_ideal_residual() {
 
 #[test]
 fn control_ideal_gyro_is_adequate_without_effects() {
-    for seed in 21..=23 {
-        let p = problem(seed, [1.0; 3], [0.0; 6]);
+    for run in 21..=23 {
+        let p = problem(run, [1.0; 3], [0.0; 6]);
         let r = analyse(&p, &[]).unwrap();
         assert!(
             r.diagnosis.adequate,
-            "seed {seed}: {}",
+            "run {run}: {}",
             r.diagnosis.explanation
         );
     }
+}
+
+/// The reported residual is what the reported parameters give, move by move, and every fitted
+/// parameter has a positive uncertainty.
+#[test]
+fn residual_recomputes_and_parameters_have_uncertainties() {
+    let p = problem(9, [1.02, 0.99, 1.01], [0.5, -0.3, 0.4, 0.2, -0.6, 0.3]);
+    let r = analyse(&p, &[Effect::Scale, Effect::Misalignment]).unwrap();
+    let f = &r.fitted;
+    let s: Vec<f64> = p
+        .moves
+        .iter()
+        .zip(f.used.chunks(2))
+        .filter(|(_, u)| u[0])
+        .flat_map(|(mv, _)| p.residual_of(&f.params, mv))
+        .map(|v| v * v)
+        .collect();
+    let rms = (s.iter().sum::<f64>() / s.len() as f64).sqrt();
+    assert!((rms / f.rms() - 1.0).abs() < 1e-9, "{rms} vs {}", f.rms());
+    let sg = &f.sigma;
+    assert!(sg.scale.unwrap().iter().all(|v| *v > 0.0 && v.is_finite()));
+    assert!(sg
+        .gyro_misalignment_deg
+        .unwrap()
+        .iter()
+        .all(|v| *v > 0.0 && v.is_finite()));
 }

@@ -5,8 +5,7 @@ use clap::{Parser, Subcommand};
 mod cmd;
 mod input;
 mod link;
-mod plot;
-mod report;
+mod render;
 
 #[derive(Parser)]
 #[command(

@@ -60,6 +60,8 @@ fn timestamped_recording_with_renamed_columns_derives_the_rate() {
         "gx",
         "--rename",
         "t_s=t,gx_dps=gx",
+        "--unit",
+        "deg/s",
         "--json",
         "--stat",
         "ohdev",
@@ -76,6 +78,18 @@ fn timestamped_recording_with_renamed_columns_derives_the_rate() {
     assert!((rate - expect).abs() < 1e-9, "{rate} vs {expect}");
     assert!((90.0..110.0).contains(&rate));
     assert_eq!(v["unit"], "deg/s");
+    // Host read times of buffered samples: named as such, with the spacings that show it.
+    let tm = &v["timing"];
+    assert_eq!(tm["regularity"], "bursty");
+    assert!(
+        (tm["median_dt_s"].as_f64().unwrap() - 0.000889).abs() < 2e-6,
+        "{tm}"
+    );
+    assert!(
+        (tm["p95_dt_s"].as_f64().unwrap() - 0.0439).abs() < 2e-4,
+        "{tm}"
+    );
+    assert_eq!(tm["gaps"], 0);
     assert!(v["adev"].as_array().unwrap().len() >= 8);
 }
 

@@ -24,6 +24,9 @@
 use serde::{de::DeserializeOwned, Deserialize, Serialize};
 
 mod batch;
+/// The CSV recording contract (columns, units, reading, writing, timing).
+#[cfg(feature = "std")]
+pub mod csv;
 
 pub use heapless::{String, Vec};
 

@@ -9,7 +9,7 @@
 //! "recovered" means physically.
 use allan::{deviation, Stat, TauSet};
 use imu_sim::{SimConfig, SimEffect};
-use noise_model::{walk, Effect, Model, NoiseLab, Point, Record, Stop, TimingSummary, Walk};
+use noise_model::{walk, Effect, Model, NoiseLab, Point, Record, Stop, Timing, Walk};
 
 /// Power-law background of a gyro like the MPU-6050 (deg/s units): Q 2e-4 °, N 5e-3 °/s·√s
 /// (0.3 °/√h), B 3e-3 °/s (11 °/h), K 1e-4 °/s/√s.
@@ -40,12 +40,12 @@ struct Run {
     report: String,
 }
 
-fn run_with(c: &SimConfig, timing: Option<TimingSummary>) -> Run {
+fn run_with(c: &SimConfig, timing: Option<Timing>) -> Run {
     run_full(c, timing).0
 }
 
 /// The walk and the diagnosis of its last model.
-fn run_full(c: &SimConfig, timing: Option<TimingSummary>) -> (Run, noise_model::Diagnosis) {
+fn run_full(c: &SimConfig, timing: Option<Timing>) -> (Run, noise_model::Diagnosis) {
     let (y, temp) = c.generate_with_temp();
     let rows = deviation(&y, c.tau0(), Stat::Oadev, &TauSet::Octave).expect("oadev");
     let (points, _) = Point::from_rows(&rows);
@@ -306,15 +306,15 @@ fn irregular_timestamps_are_named_before_any_spectral_effect() {
         amplitude: 0.01,
         freq_hz: 31.6,
     });
-    let timing = TimingSummary {
-        median_dt: 0.0009,
-        mean_dt: 0.01,
-        p95_dt: 0.044,
-        max_dt: 0.3,
-        duplicates: 0,
-    };
+    // host read times: bursts of four samples 0.9 ms apart every 40 ms (the real MPU-6050 logs
+    // of sensor-fusion have median 0.9 ms, 95th percentile 44 ms)
+    let c = cfg(100.0, 1800.0, 14, e);
+    let t: Vec<f64> = (0..c.n_samples)
+        .map(|i| (i / 4) as f64 * 0.04 + (i % 4) as f64 * 0.0009)
+        .collect();
+    let timing = imu_proto::csv::timing(&t, None).unwrap();
     assert!(timing.irregular());
-    let (r, d) = run_full(&cfg(100.0, 1800.0, 14, e), Some(timing));
+    let (r, d) = run_full(&c, Some(timing));
     for s in &r.walk.steps {
         for e in &s.edit.add {
             assert!(

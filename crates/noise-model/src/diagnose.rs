@@ -163,8 +163,13 @@ pub fn tradeoffs(fit: &Fit) -> Vec<String> {
 /// Diagnose a model: if it is not adequate, try the lab's candidates and name the missing effect.
 pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
     let mut evidence = Vec::new();
-    if let Some(t) = lab.record.timing.filter(|t| t.irregular()) {
-        evidence.push(t.describe());
+    if let Some(t) = lab.record.timing.as_ref().filter(|t| t.irregular()) {
+        evidence.push(format!(
+            "the timestamps are irregular — {}; spectral effects (sinusoids, Markov and filter \
+             shapes) are not named from such data, since bursty reads and a mismatch between the \
+             assumed and the true sample clock bend the short-τ Allan curve by themselves",
+            t.describe()
+        ));
     }
     evidence.extend(m.findings.iter().map(|f| f.text.clone()));
     evidence.extend(residual_evidence(&m.fit, &m.assessment));
@@ -246,7 +251,7 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
             )
         }
         None => {
-            let blocked = lab.record.timing.is_some_and(|t| t.irregular());
+            let blocked = lab.record.timing.as_ref().is_some_and(|t| t.irregular());
             format!(
                 "The model does not describe the measurement (χ²/dof = {:.2}), and no effect of \
                  the vocabulary explains the misfit significantly{}. {}",

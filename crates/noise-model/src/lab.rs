@@ -37,67 +37,9 @@ pub const P_SIGNAL: f64 = 1e-3;
 /// Most steps of a walk.
 pub const MAX_STEPS: usize = 6;
 
-/// What the timestamps say.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TimingSummary {
-    /// Median, mean and 95th-percentile spacing of consecutive stamps [s], largest spacing [s].
-    pub median_dt: f64,
-    pub mean_dt: f64,
-    pub p95_dt: f64,
-    pub max_dt: f64,
-    /// Stamps equal to their predecessor.
-    pub duplicates: usize,
-}
-
-impl TimingSummary {
-    /// From a time column (ascending; gaps already split off by the caller are fine to include).
-    pub fn of(t: &[f64]) -> Option<TimingSummary> {
-        if t.len() < 3 {
-            return None;
-        }
-        let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-        let duplicates = d.iter().filter(|&&x| x == 0.0).count();
-        let mean_dt = (t[t.len() - 1] - t[0]) / d.len() as f64;
-        d.sort_by(f64::total_cmp);
-        let q = |p: f64| d[((d.len() - 1) as f64 * p).round() as usize];
-        Some(TimingSummary {
-            median_dt: q(0.5),
-            mean_dt,
-            p95_dt: q(0.95),
-            max_dt: d[d.len() - 1],
-            duplicates,
-        })
-    }
-
-    /// Stamps that are not sample times: bursts (median spacing well below the mean, or a 95th
-    /// percentile well above it), jitter of more than 10 % of the period, or repeated stamps.
-    pub fn irregular(&self) -> bool {
-        self.duplicates > 0
-            || self.median_dt < 0.8 * self.mean_dt
-            || self.p95_dt > 1.2 * self.mean_dt
-    }
-
-    pub fn describe(&self) -> String {
-        format!(
-            "the timestamps are irregular: median spacing {}, mean {}, 95th percentile {}, largest \
-             {}{} — these are read times (bursts of buffered samples), not sample times. The \
-             samples are taken as uniformly spaced at the mean rate {:.4} Hz; spectral effects \
-             (sinusoids, Markov and filter shapes) are not named from such data, since bursty \
-             reads and a mismatch between the assumed and the true sample clock bend the \
-             short-τ Allan curve by themselves",
-            fmt_s(self.median_dt),
-            fmt_s(self.mean_dt),
-            fmt_s(self.p95_dt),
-            fmt_s(self.max_dt),
-            if self.duplicates > 0 {
-                format!(", {} repeated stamps", self.duplicates)
-            } else {
-                String::new()
-            },
-            1.0 / self.mean_dt
-        )
-    }
-}
+/// What the timestamps say: the CSV contract's timing analysis (median, mean and 95th-percentile
+/// spacing, bursts, jitter, duplicates, gaps).
+pub use imu_proto::csv::Timing;
 
 /// The recording the lab works from.
 #[derive(Debug, Clone)]
@@ -110,8 +52,8 @@ pub struct Record<'a> {
     pub segments: Vec<(u64, u64)>,
     /// The temperature column, aligned with `y` [°C].
     pub temp: Option<&'a [f64]>,
-    /// The timestamps' summary, when the file had them.
-    pub timing: Option<TimingSummary>,
+    /// The timestamps' analysis, when the file had them.
+    pub timing: Option<Timing>,
     /// The Allan points (overlapping ADEV at octave τ over the segments).
     pub points: Vec<Point>,
     /// User-described effects to consider as candidates.
@@ -545,7 +487,7 @@ impl<'a> NoiseLab<'a> {
     }
 
     fn spectral_blocked(&self) -> bool {
-        self.record.timing.is_some_and(|t| t.irregular())
+        self.record.timing.as_ref().is_some_and(|t| t.irregular())
     }
 
     /// Candidate edits of a model, refitted and tested, best first.

@@ -1,13 +1,13 @@
 //! Deterministic simulation helpers for the calibration tests (no external RNG crate: the
-//! sequences are fixed by the seed so every tolerance below is reproducible).
+//! sequences are fixed by their starting key so every tolerance below is reproducible).
 #![allow(dead_code)]
 use nalgebra::{Matrix3, Vector3};
 
 /// SplitMix64 + Box–Muller Gaussian generator.
 pub struct Rng(u64);
 impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0xd1b5_4a32_d192_ed03)
+    pub fn new(key: u64) -> Rng {
+        Rng(key.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ 0xd1b5_4a32_d192_ed03)
     }
     pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);

@@ -2,12 +2,12 @@
 //! conversions written beside each number.
 use std::path::PathBuf;
 
-use allan::{deviation, Stat, TauSet};
+use allan::{deviation_segments, Stat, TauSet};
 use anyhow::{anyhow, bail, Context, Result};
 use noise_model::{practical, Effect, NoiseLab, Point, Record};
 
 use crate::input::{self, InputArgs};
-use crate::report::sig;
+use crate::render::sig;
 
 /// Arguments of `imu-lab export`.
 #[derive(clap::Args, Debug)]
@@ -61,12 +61,13 @@ struct Axis {
 
 fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
     let rec = input::load(input, &[column])?;
-    let unit = input::unit_of(input, column)?;
-    let y = &rec
+    let series = rec
         .column(column)
-        .ok_or_else(|| anyhow!("column {column:?} missing"))?
-        .values;
-    let rows = deviation(y, 1.0 / rec.rate_hz, Stat::Oadev, &TauSet::Octave)
+        .ok_or_else(|| anyhow!("column {column:?} missing"))?;
+    let unit = series.unit.clone();
+    let y = &series.values;
+    let segments = rec.segments_of(column).unwrap_or_default();
+    let rows = deviation_segments(&segments, 1.0 / rec.rate_hz, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{}: column {column:?}", input.file.display()))?;
     let (pts, _) = Point::from_rows(&rows);
     let lab = NoiseLab::new(Record {
@@ -169,7 +170,7 @@ pub fn run(args: Args) -> Result<()> {
     };
     let yaml = format!(
         "# Kalibr IMU noise model, written by `imu-lab export kalibr` from {file}\n\
-         # Values are the largest over the axes (conservative), from a weighted fit of the seed's\n\
+         # Values are the largest over the axes (conservative), from a weighted fit of Jaime et al.'s\n\
          # five Allan terms. Kalibr wants CONTINUOUS-time densities (not per-sample σ):\n\
          #   gyroscope_noise_density [rad/s/√Hz]   = N [deg/s·√s] × π/180   (1/√Hz = √s)\n\
          #   gyroscope_random_walk   [rad/s²/√Hz]  = K [deg/s/√s] × π/180\n\

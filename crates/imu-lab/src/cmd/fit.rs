@@ -4,20 +4,20 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use allan::{deviation, Stat, TauSet};
+use allan::{deviation_segments, Stat, TauSet};
 use anyhow::{anyhow, bail, Context, Result};
 use noise_model::diagnose::tradeoffs;
 use noise_model::lab::{reading, tau_range};
 use noise_model::user::UserEffect;
 use noise_model::{
     diagnose, practical, walk, Diagnosis, Effect, Fit, Model, NoiseLab, Point, Record, Step, Stop,
-    TermSpec, TimingSummary,
+    TermSpec,
 };
 use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::input::{self, InputArgs};
-use crate::{plot, report};
+use crate::render::{allan as plot, noise as report};
 
 /// Arguments of `imu-lab fit`.
 #[derive(clap::Args, Debug)]
@@ -183,7 +183,8 @@ struct JsonTiming {
     median_dt_s: f64,
     mean_dt_s: f64,
     p95_dt_s: f64,
-    max_dt_s: f64,
+    gaps: usize,
+    missing_samples: u64,
     duplicates: usize,
     irregular: bool,
 }
@@ -340,17 +341,18 @@ pub fn run(args: Args) -> Result<()> {
     let unit = series.unit.clone();
     let y = &series.values;
     let temp = rec.column("temp").map(|c| c.values.as_slice());
-    let timing = rec.column("t").and_then(|c| TimingSummary::of(&c.values));
+    let timing = rec.timing.clone();
     let tau0 = 1.0 / rec.rate_hz;
-    let rows = deviation(y, tau0, Stat::Oadev, &TauSet::Octave)
+    let segments = rec.segments_of(&args.column).unwrap_or_default();
+    let rows = deviation_segments(&segments, tau0, Stat::Oadev, &TauSet::Octave)
         .with_context(|| format!("{shown}: column {:?}", args.column))?;
     let (points, skipped) = Point::from_rows(&rows);
     let lab = NoiseLab::new(Record {
         y,
         tau0,
-        segments: vec![(0, y.len() as u64)],
+        segments: input::nominal_segments(&rec),
         temp,
-        timing,
+        timing: timing.clone(),
         points: points.clone(),
         user_effects: user.clone(),
     })
@@ -513,11 +515,12 @@ pub fn run(args: Args) -> Result<()> {
                 .collect(),
             steps: steps.iter().map(json_step).collect(),
             stop: stop.map(|s| s.to_string()),
-            timing: timing.map(|t| JsonTiming {
-                median_dt_s: t.median_dt,
-                mean_dt_s: t.mean_dt,
-                p95_dt_s: t.p95_dt,
-                max_dt_s: t.max_dt,
+            timing: timing.as_ref().map(|t| JsonTiming {
+                median_dt_s: t.median_dt_s,
+                mean_dt_s: t.mean_dt_s,
+                p95_dt_s: t.p95_dt_s,
+                gaps: t.gaps.len(),
+                missing_samples: t.missing_samples(),
                 duplicates: t.duplicates,
                 irregular: t.irregular(),
             }),
@@ -554,7 +557,10 @@ pub fn run(args: Args) -> Result<()> {
             String::new()
         },
     );
-    if let Some(t) = timing.filter(|t| t.irregular()) {
+    if let Some(t) = timing
+        .as_ref()
+        .filter(|t| t.irregular() || !t.gaps.is_empty())
+    {
         println!("Timing: {}.", t.describe());
     }
     if let Some(l) = lab.lsb {
@@ -842,6 +848,7 @@ mod tests {
                 "/../allan/tests/data/mpu6050_static_449s.csv"
             )),
             rate: Some(100.0),
+            ignore_time: false,
             skip_lines: 4,
             scale: Some(0.0076336),
             unit: Some("deg/s".into()),
@@ -854,7 +861,7 @@ mod tests {
     #[test]
     fn real_static_recording_is_white_noise_dominated_and_adequate() {
         let (y, rate) = static_gz();
-        let rows = deviation(&y, 1.0 / rate, Stat::Oadev, &TauSet::Octave).unwrap();
+        let rows = allan::deviation(&y, 1.0 / rate, Stat::Oadev, &TauSet::Octave).unwrap();
         let (pts, _) = Point::from_rows(&rows);
         let lab = NoiseLab::new(Record {
             y: &y,

@@ -5,10 +5,9 @@ use std::io::{BufWriter, Write};
 use std::path::PathBuf;
 
 use anyhow::{anyhow, bail, Context, Result};
-use imu_sim::{write_csv, SimConfig, SimEffect};
+use imu_proto::csv::{self as contract, unit as contract_unit};
+use imu_sim::{SimConfig, SimEffect};
 use serde::Serialize;
-
-use crate::input::contract_unit;
 
 /// Arguments of `imu-lab simulate`. Parameters are in the canonical units of the noise model,
 /// with u the columns' contract unit (deg/s for gx gy gz, m/s² for ax ay az).
@@ -20,7 +19,7 @@ pub struct Args {
     /// Number of samples per column.
     #[arg(long, default_value_t = 1 << 18)]
     pub samples: usize,
-    /// RNG seed (each column uses seed + its index).
+    /// Random-number stream: the same number gives the same data (column k uses this + k).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Columns to generate, comma-separated contract names.
@@ -48,7 +47,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',')]
     pub sinusoid: Vec<f64>,
     /// Pass the white noise through a low-pass filter with this corner [Hz] (the MPU-6050 DLPF;
-    /// the seed used 5 Hz).
+    /// Jaime et al. configured 5 Hz).
     #[arg(long)]
     pub dlpf: Option<f64>,
     /// Order of that filter: 1 (one pole) or 2 (two cascaded poles).
@@ -83,6 +82,24 @@ fn positive(v: Option<f64>, flag: &str) -> Result<Option<f64>> {
         Some(x) if !(x >= 0.0 && x.is_finite()) => bail!("--{flag} {x}: must be ≥ 0"),
         other => Ok(other),
     }
+}
+
+/// The samples as a recording in the contract: `t = i/rate`, then the columns.
+fn write_rows<W: Write>(w: W, rate: f64, names: &[String], data: &[Vec<f64>]) -> Result<()> {
+    let mut cols: Vec<&str> = vec![contract::TIME];
+    cols.extend(names.iter().map(String::as_str));
+    let mut out = contract::Writer::new(w, &cols, contract::WriteOptions::default())?;
+    let n = data.iter().map(Vec::len).min().unwrap_or(0);
+    let mut row = vec![None; cols.len()];
+    for i in 0..n {
+        row[0] = Some(i as f64 / rate);
+        for (k, d) in data.iter().enumerate() {
+            row[k + 1] = Some(d[i]);
+        }
+        out.row(&row)?;
+    }
+    out.finish()?;
+    Ok(())
 }
 
 pub fn run(args: Args) -> Result<()> {
@@ -168,21 +185,16 @@ pub fn run(args: Args) -> Result<()> {
         data.push(cfg.generate());
         cfg0.get_or_insert(cfg);
     }
-    let cols: Vec<(&str, &[f64])> = args
-        .columns
-        .iter()
-        .zip(&data)
-        .map(|(n, v)| (n.as_str(), v.as_slice()))
-        .collect();
     match &args.output {
         Some(p) => {
             let f = File::create(p).with_context(|| format!("creating {}", p.display()))?;
-            write_csv(BufWriter::new(f), args.rate, &cols)
+            write_rows(BufWriter::new(f), args.rate, &args.columns, &data)
                 .with_context(|| format!("writing {}", p.display()))?;
         }
         None => {
             let out = std::io::stdout();
-            write_csv(BufWriter::new(out.lock()), args.rate, &cols).context("writing stdout")?;
+            write_rows(BufWriter::new(out.lock()), args.rate, &args.columns, &data)
+                .context("writing stdout")?;
         }
     }
     if let (Some(p), Some(cfg)) = (&args.theory, cfg0) {
@@ -211,4 +223,41 @@ pub fn run(args: Args) -> Result<()> {
             .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The contract writer gives byte for byte what the simulator's own writer gives (the
+    /// emulator harness reads these files), and the reader reads it back exactly.
+    #[test]
+    fn rows_are_the_simulators_bytes_and_read_back() {
+        let cfg = SimConfig {
+            rate_hz: 1000.0,
+            n_samples: 500,
+            seed: 3,
+            effects: vec![SimEffect::White { n: 0.01 }],
+            lsb: None,
+        };
+        let data = vec![cfg.generate(), cfg.generate()];
+        let names = vec!["gx".to_string(), "gy".to_string()];
+        let mut ours = Vec::new();
+        write_rows(&mut ours, 1000.0, &names, &data).unwrap();
+        let mut theirs = Vec::new();
+        imu_sim::write_csv(&mut theirs, 1000.0, &[("gx", &data[0]), ("gy", &data[1])]).unwrap();
+        assert_eq!(
+            String::from_utf8(ours.clone()).unwrap(),
+            String::from_utf8(theirs).unwrap()
+        );
+        let mut r = contract::Reader::new(ours.as_slice(), "sim", &Default::default()).unwrap();
+        let got = r.select(&["gx", "gy"], &[]).unwrap();
+        assert_eq!(got, ["gx", "gy", "t"]);
+        let mut row = [0.0; 3];
+        for (i, (x, y)) in data[0].iter().zip(&data[1]).enumerate() {
+            assert!(r.next_row(&mut row).unwrap());
+            assert_eq!(row, [*x, *y, i as f64 / 1000.0]);
+        }
+        assert!(!r.next_row(&mut row).unwrap());
+    }
 }

@@ -1,6 +1,7 @@
 //! Hand-written SVG figures for `imu-lab calibrate`: a grid of scatter panels with optional
 //! curves (fitted ellipse, ideal circle). No plotting dependency: the figures are simple and the
 //! output must be byte-stable for the docs.
+use super::esc;
 use std::fmt::Write;
 
 /// One set of points in a panel.
@@ -51,12 +52,6 @@ fn nice_step(range: f64) -> f64 {
     } else {
         10.0
     }
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 fn fmt_tick(v: f64, step: f64) -> String {

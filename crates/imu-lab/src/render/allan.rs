@@ -5,6 +5,8 @@
 // SVG/HTML fragments are raw multi-line strings that end in a newline.
 #![allow(clippy::write_with_newline)]
 
+use super::esc;
+pub use super::svg_to_png;
 use noise_model::{Assessment, Effect, Fit};
 use std::fmt::Write;
 
@@ -33,12 +35,6 @@ fn color(e: &Effect) -> &'static str {
         Effect::Boxcar | Effect::Bartlett => "#3f9f1f",
         Effect::User(_) => "#aa5500",
     }
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 fn tick_label(d: i32) -> String {
@@ -329,38 +325,4 @@ pub fn document(figs: &[String]) -> String {
     }
     s.push_str("</svg>\n");
     s
-}
-
-/// Rasterise an SVG document to PNG at its own size on a white background (resvg; the labels
-/// use the system's fonts, and are left out where the system has none).
-pub fn svg_to_png(svg: &str) -> anyhow::Result<Vec<u8>> {
-    use anyhow::Context;
-    use resvg::{tiny_skia, usvg};
-    let mut opt = usvg::Options::default();
-    let db = opt.fontdb_mut();
-    db.load_system_fonts();
-    // The figures ask for the generic "sans-serif", which fontdb maps to Arial; point it at a
-    // sans face this system has (DejaVu Sans on Debian), else at any face at all.
-    let family = ["DejaVu Sans", "Liberation Sans", "Arial", "Helvetica"]
-        .into_iter()
-        .find(|f| {
-            db.faces()
-                .any(|face| face.families.iter().any(|(n, _)| n == f))
-        })
-        .map(str::to_string)
-        .or_else(|| {
-            db.faces()
-                .next()
-                .and_then(|f| f.families.first().map(|(n, _)| n.clone()))
-        });
-    if let Some(family) = family {
-        db.set_sans_serif_family(family);
-    }
-    let tree = usvg::Tree::from_str(svg, &opt).context("parsing the figure's SVG")?;
-    let size = tree.size().to_int_size();
-    let mut pixmap =
-        tiny_skia::Pixmap::new(size.width(), size.height()).context("the figure has no area")?;
-    pixmap.fill(tiny_skia::Color::WHITE);
-    resvg::render(&tree, tiny_skia::Transform::default(), &mut pixmap.as_mut());
-    pixmap.encode_png().context("encoding the PNG")
 }

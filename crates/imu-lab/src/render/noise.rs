@@ -3,25 +3,10 @@
 // SVG/HTML fragments are raw multi-line strings that end in a newline.
 #![allow(clippy::write_with_newline)]
 
+use super::esc;
+pub use super::sig;
 use noise_model::{Assessment, Diagnosis, Effect, Fit, Step, UnitFamily};
 use std::fmt::Write;
-
-/// `x` with `sig` significant digits, fixed notation for 1e-3 ≤ |x| < 1e5, else scientific.
-pub fn sig(x: f64, sig: usize) -> String {
-    if !x.is_finite() {
-        return "—".into();
-    }
-    if x == 0.0 {
-        return "0".into();
-    }
-    let e = x.abs().log10().floor() as i32;
-    if (-3..5).contains(&e) {
-        let dec = (sig as i32 - 1 - e).max(0) as usize;
-        format!("{:.*}", dec, x)
-    } else {
-        format!("{:.*e}", sig.saturating_sub(1), x)
-    }
-}
 
 fn pm(v: f64, s: f64) -> String {
     if s.is_finite() && s > 0.0 {
@@ -156,12 +141,6 @@ pub fn text_table(rows: &[ParamRow]) -> String {
         s += &line(c);
     }
     s
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 /// The rows as an HTML table.
@@ -357,18 +336,4 @@ section {{ border-top: 2px solid #888; margin-top: 2em; padding-top: 0.5em; }}
         s += "</section>\n";
     }
     s + "</body></html>\n"
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn significant_digits() {
-        assert_eq!(sig(0.009344468, 4), "0.009344");
-        assert_eq!(sig(123.456, 4), "123.5");
-        assert_eq!(sig(4.5e-5, 2), "4.5e-5");
-        assert_eq!(sig(0.0, 3), "0");
-        assert_eq!(sig(f64::NAN, 3), "—");
-    }
 }

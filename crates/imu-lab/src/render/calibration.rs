@@ -1,0 +1,615 @@
+//! The calibration lab for people: the text report (parameters with their uncertainties and
+//! units, what was excluded, the verdict, the candidates, the step), the HTML report, and the
+//! figures (scatter before/after with the fitted ellipse and the circle, residuals against
+//! orientation or temperature).
+use imu_cal::accel::AccelProblem;
+use imu_cal::lab::{analyse, Effect, Params, Report};
+use imu_cal::mag::MagProblem;
+use nalgebra::{Matrix3, Vector3};
+
+use super::esc;
+use super::scatter::{figure, Panel, Series};
+use crate::cmd::calibrate::{Data, Loaded};
+
+/// `v ± s` with `prec` decimals (the σ to two significant digits when it needs more).
+fn pm(v: f64, s: f64, prec: usize) -> String {
+    if s.is_finite() && s > 0.0 {
+        format!("{v:.prec$} ± {}", super::sig(s, 2))
+    } else if s == 0.0 {
+        format!("{v:.prec$}")
+    } else {
+        format!("{v:.prec$} ± ? (no degree of freedom left)")
+    }
+}
+
+fn v3(v: &[f64; 3], s: Option<&[f64; 3]>, prec: usize) -> String {
+    let sg = s.copied().unwrap_or([f64::NAN; 3]);
+    format!(
+        "[{}, {}, {}]",
+        pm(v[0], sg[0], prec),
+        pm(v[1], sg[1], prec),
+        pm(v[2], sg[2], prec)
+    )
+}
+
+/// The parameters with their 1σ uncertainties, one per line, in `unit` (the data's unit).
+pub fn params_text(p: &Params, sg: &Params, unit: &str) -> String {
+    let mut s = String::new();
+    if let Some(v) = &p.offset {
+        s += &format!(
+            "  offset           = {} {unit}\n",
+            v3(v, sg.offset.as_ref(), 5)
+        );
+    }
+    if let Some(v) = &p.scale {
+        s += &format!(
+            "  scale            = {} (dimensionless)\n",
+            v3(v, sg.scale.as_ref(), 6)
+        );
+    }
+    if let Some(v) = &p.misalignment_deg {
+        s += &format!(
+            "  misalignment     = {} deg\n",
+            v3(v, sg.misalignment_deg.as_ref(), 4)
+        );
+    }
+    if let Some(v) = &p.gyro_misalignment_deg {
+        let e = sg.gyro_misalignment_deg.unwrap_or([f64::NAN; 6]);
+        let parts: Vec<String> = (0..6).map(|k| pm(v[k], e[k], 4)).collect();
+        s += &format!("  misalignment     = [{}] deg (γ₁…γ₆)\n", parts.join(", "));
+    }
+    if let Some(g) = p.g {
+        s += &format!("  g                = {g} {unit} (given)\n");
+    }
+    if let Some(v) = &p.bias {
+        s += &format!(
+            "  bias             = {} {unit}\n",
+            v3(v, sg.bias.as_ref(), 5)
+        );
+    }
+    if let Some(v) = &p.temp_coeff {
+        s += &format!(
+            "  temp_coeff       = {} {unit} per °C\n",
+            v3(v, sg.temp_coeff.as_ref(), 6)
+        );
+    }
+    if let Some(t) = p.temp_ref {
+        s += &format!("  temp_ref         = {t:.3} °C (mean of the record)\n");
+    }
+    if let Some(v) = &p.hard_iron {
+        s += &format!(
+            "  hard_iron        = {} {unit}\n",
+            v3(v, sg.hard_iron.as_ref(), 4)
+        );
+    }
+    if let Some(m) = &p.soft_iron {
+        let e = sg.soft_iron.unwrap_or([[f64::NAN; 3]; 3]);
+        s += &format!(
+            "  soft_iron        = [{},\n                      {},\n                      {}] (dimensionless)\n",
+            v3(&m[0], Some(&e[0]), 5),
+            v3(&m[1], Some(&e[1]), 5),
+            v3(&m[2], Some(&e[2]), 5)
+        );
+    }
+    if let Some(e) = &p.soft_iron_2d {
+        let u = sg
+            .soft_iron_2d
+            .map_or([f64::NAN; 4], |u| [u.r, u.q, u.theta_deg, u.sigma]);
+        s += &format!(
+            "  soft_iron_2d     = r {} {unit}, q {} {unit}, θ {} deg, σ = q/r {}\n",
+            pm(e.r, u[0], 4),
+            pm(e.q, u[1], 4),
+            pm(e.theta_deg, u[2], 3),
+            pm(e.sigma, u[3], 5)
+        );
+    }
+    if let Some(f) = p.field {
+        s += &format!(
+            "  field F          = {} {unit}\n",
+            pm(f, sg.field.unwrap_or(f64::NAN), 4)
+        );
+    }
+    s
+}
+
+/// The whole text report.
+pub fn text_report(l: &Loaded, r: &Report) -> String {
+    let data = &l.data;
+    let p = data.problem();
+    let unit = p.unit();
+    let mut s = String::new();
+    let names = |m: &[Effect]| m.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ");
+    match data {
+        Data::Accel(a) => {
+            s += &format!(
+                "calibrate accel: {} static poses found (g = {} {unit})\n",
+                a.poses.len(),
+                a.g
+            )
+        }
+        Data::Gyro(g) => {
+            s += &format!(
+                "calibrate gyro: {} blocks of {} samples{}\n",
+                g.blocks[0].len(),
+                g.block_len,
+                if g.temp.is_some() {
+                    ", with temperature"
+                } else {
+                    ", no temperature column"
+                }
+            )
+        }
+        Data::GyroRot(g) => {
+            s += &format!(
+                "calibrate gyro (scale/misalignment from rotations): {} moves between static \
+                 poses, {} skipped as saturated, {} holding excluded samples; bias removed {} \
+                 deg/s\n",
+                g.moves.len(),
+                g.skipped_saturated,
+                g.skipped_flagged,
+                v3(&g.bias, Some(&g.bias_sigma), 5)
+            )
+        }
+        Data::Mag(m) => {
+            s += &format!(
+                "calibrate mag: {} samples, principal s.d. {:.2}/{:.2}/{:.2} {unit} ({})\n",
+                m.m.len(),
+                m.principal_sd[0],
+                m.principal_sd[1],
+                m.principal_sd[2],
+                match m.plane {
+                    Some([i, j]) => format!(
+                        "planar in the {}{} plane",
+                        ["x", "y", "z"][i],
+                        ["x", "y", "z"][j]
+                    ),
+                    None => "3-D".into(),
+                }
+            )
+        }
+    }
+    if let Some(d) = l.sentinels.describe() {
+        s += &format!("excluded before fitting: {d}\n");
+    }
+    for n in &l.notes {
+        s += &format!("note: {n}\n");
+    }
+    let model = if r.fitted.model.is_empty() {
+        "(none)".to_string()
+    } else {
+        names(&r.fitted.model)
+    };
+    s += &format!(
+        "model: {model}\nparams (± 1σ):\n{}",
+        params_text(&r.fitted.params, &r.fitted.sigma, unit)
+    );
+    s += &format!(
+        "residual RMS {:.5} {unit} over {} residuals{}; noise floor {:.5} {unit} (σ {:.5} {unit} from {})\n",
+        r.fitted.rms(),
+        r.fitted.n_used(),
+        if r.diagnosis.outliers > 0 {
+            format!(
+                " ({} {} beyond 6σ excluded as outliers)",
+                r.diagnosis.outliers,
+                p.items()
+            )
+        } else {
+            String::new()
+        },
+        r.expected_rms,
+        r.floor.sigma,
+        r.floor.method
+    );
+    s += &format!("verdict: {}\n", r.diagnosis.verdict.word());
+    if !r.diagnosis.candidates.is_empty() {
+        s += "candidates:\n";
+        for c in &r.diagnosis.candidates {
+            match (&c.skipped, c.residual_rms, c.f, c.p_value) {
+                (Some(why), ..) => s += &format!("  {:<13} not tried: {why}\n", c.effect.name()),
+                (None, Some(rms), Some(f), Some(pv)) => s += &format!(
+                    "  {:<13} residual RMS {rms:.5} {unit}, F = {f:.2} for {} extra parameters, p = {pv:.3e}{}\n",
+                    c.effect.name(),
+                    c.extra_params,
+                    c.evidence.as_ref().map_or(String::new(), |e| format!("; {e}"))
+                ),
+                _ => {}
+            }
+        }
+    }
+    s += &format!("diagnosis: {}\n", r.diagnosis.explanation);
+    if let Some(st) = &r.step {
+        s += &format!(
+            "step: + {} → model {}: residual RMS {:.5} → {:.5} {unit}\nparams after the step (± 1σ):\n{}",
+            st.added.name(),
+            names(&st.model),
+            st.residual_rms_before,
+            st.residual_rms_after,
+            params_text(&st.params, &st.sigma, unit)
+        );
+    }
+    s
+}
+
+/// A self-contained HTML page: the text report and the figure.
+pub fn html_report(l: &Loaded, r: &Report, svg: &str) -> String {
+    let sensor = l.data.problem().sensor();
+    format!(
+        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>imu-lab calibrate {sensor}</title>\
+         <style>body{{font-family:sans-serif;max-width:1300px;margin:2em auto}}pre{{background:#f6f6f6;padding:1em;white-space:pre-wrap}}</style>\
+         </head><body><h1>Calibration lab: {sensor}</h1><pre>{}</pre>{svg}</body></html>\n",
+        esc(&text_report(l, r))
+    )
+}
+
+/// The model to draw as "after": the step's when a missing effect was found.
+fn after_params(r: &Report) -> (&Params, String) {
+    match &r.step {
+        Some(s) => (
+            &s.params,
+            s.model
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join("+"),
+        ),
+        None => (
+            &r.fitted.params,
+            r.fitted
+                .model
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join("+"),
+        ),
+    }
+}
+
+fn mag_matrix(p: &Params) -> Matrix3<f64> {
+    p.soft_iron
+        .map(|s| Matrix3::from_row_slice(&s.concat()))
+        .unwrap_or_else(Matrix3::identity)
+}
+
+/// Central section of the fitted ellipsoid {m : |S(m − h)| = F} by the plane of axes (i, j)
+/// through h: the radius along a direction d of that plane is F/|S·d|.
+fn section(p: &Params, i: usize, j: usize) -> Vec<(f64, f64)> {
+    let s = mag_matrix(p);
+    let h = p.hard_iron.unwrap_or([0.0; 3]);
+    let f = p.field.unwrap_or(1.0);
+    (0..=180)
+        .map(|k| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / 180.0;
+            let mut d = Vector3::zeros();
+            d[i] = a.cos();
+            d[j] = a.sin();
+            let r = f / (s * d).norm();
+            (h[i] + r * d[i], h[j] + r * d[j])
+        })
+        .collect()
+}
+
+fn circle(r: f64) -> Vec<(f64, f64)> {
+    (0..=180)
+        .map(|k| {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / 180.0;
+            (r * a.cos(), r * a.sin())
+        })
+        .collect()
+}
+
+const AX: [&str; 3] = ["X", "Y", "Z"];
+
+/// Without a step, "after" is the same model as "before": keep one copy of each residual set.
+fn residual_series(r: &Report, before: Series, after: Series) -> Vec<Series> {
+    if r.step.is_some() {
+        vec![before, after]
+    } else {
+        vec![before]
+    }
+}
+
+/// The figure of a run (an SVG document).
+pub fn plot(data: &Data, r: &Report) -> String {
+    let (after, after_name) = after_params(r);
+    let before_name = r
+        .fitted
+        .model
+        .iter()
+        .map(|e| e.name())
+        .collect::<Vec<_>>()
+        .join("+");
+    let before_name = if before_name.is_empty() {
+        "no correction".to_string()
+    } else {
+        before_name
+    };
+    match data {
+        Data::Mag(m) => {
+            let unit = m.unit.as_str();
+            let corr: Vec<Vector3<f64>> =
+                m.m.iter().map(|v| MagProblem::correct(after, *v)).collect();
+            let before_corr: Vec<Vector3<f64>> =
+                m.m.iter()
+                    .map(|v| MagProblem::correct(&r.fitted.params, *v))
+                    .collect();
+            let f = after.field.unwrap_or(1.0);
+            // Planar data are fitted (and so drawn) in their plane; 3-D data in XY and YZ.
+            let pairs: Vec<(usize, usize)> = match m.plane {
+                Some([i, j]) => vec![(i, j)],
+                None => vec![(0, 1), (1, 2)],
+            };
+            let mut panels = Vec::new();
+            for &(i, j) in &pairs {
+                let (ni, nj) = (AX[i].to_lowercase(), AX[j].to_lowercase());
+                panels.push(Panel {
+                    title: format!("{}{} before (raw) with the fitted ellipse", AX[i], AX[j]),
+                    xlabel: format!("m{ni} ({unit})"),
+                    ylabel: format!("m{nj} ({unit})"),
+                    series: vec![
+                        Series {
+                            label: "measured".into(),
+                            color: "#1f77b4",
+                            points: m.m.iter().map(|v| (v[i], v[j])).collect(),
+                            line: false,
+                        },
+                        Series {
+                            label: format!("fitted ({after_name}) section"),
+                            color: "#d62728",
+                            points: section(after, i, j),
+                            line: true,
+                        },
+                    ],
+                    equal: true,
+                });
+                panels.push(Panel {
+                    title: format!("{}{} after ({after_name})", AX[i], AX[j]),
+                    xlabel: format!("m{ni} ({unit})"),
+                    ylabel: format!("m{nj} ({unit})"),
+                    series: vec![
+                        Series {
+                            label: "corrected".into(),
+                            color: "#2ca02c",
+                            points: corr.iter().map(|v| (v[i], v[j])).collect(),
+                            line: false,
+                        },
+                        Series {
+                            label: format!("circle F = {f:.2} {unit}"),
+                            color: "#d62728",
+                            points: circle(f),
+                            line: true,
+                        },
+                    ],
+                    equal: true,
+                });
+            }
+            // Residuals on the lab's basis (the problem's own residual: in-plane magnitude for
+            // planar data, full magnitude in 3-D or with tilt) against the orientation of the
+            // corrected field.
+            type VecFn<'a> = Box<dyn Fn(&Vector3<f64>) -> f64 + 'a>;
+            type Ang<'a> = (&'static str, VecFn<'a>);
+            let angles: Vec<Ang> = match m.plane {
+                Some([i, j]) => vec![(
+                    "in-plane angle",
+                    Box::new(move |v: &Vector3<f64>| v[j].atan2(v[i]).to_degrees()),
+                )],
+                None => vec![
+                    (
+                        "azimuth",
+                        Box::new(|v: &Vector3<f64>| v.y.atan2(v.x).to_degrees()),
+                    ),
+                    (
+                        "elevation",
+                        Box::new(|v: &Vector3<f64>| (v.z / v.norm()).asin().to_degrees()),
+                    ),
+                ],
+            };
+            let after_model = r
+                .step
+                .as_ref()
+                .map_or(r.fitted.model.clone(), |s| s.model.clone());
+            let res_before: Vec<f64> =
+                m.m.iter()
+                    .map(|v| m.residual(&r.fitted.model, &r.fitted.params, *v))
+                    .collect();
+            let res_after: Vec<f64> =
+                m.m.iter()
+                    .map(|v| m.residual(&after_model, after, *v))
+                    .collect();
+            for (name, ang) in &angles {
+                panels.push(Panel {
+                    title: format!("residual |m| − F against {name}"),
+                    xlabel: format!("{name} of the corrected field (deg)"),
+                    ylabel: format!("|m| − F ({unit})"),
+                    series: residual_series(
+                        r,
+                        Series {
+                            label: before_name.clone(),
+                            color: "#ff7f0e",
+                            points: before_corr
+                                .iter()
+                                .zip(&res_before)
+                                .map(|(v, e)| (ang(v), *e))
+                                .collect(),
+                            line: false,
+                        },
+                        Series {
+                            label: after_name.clone(),
+                            color: "#2ca02c",
+                            points: corr
+                                .iter()
+                                .zip(&res_after)
+                                .map(|(v, e)| (ang(v), *e))
+                                .collect(),
+                            line: false,
+                        },
+                    ),
+                    equal: false,
+                });
+            }
+            figure("imu-lab calibrate mag", &panels, 2)
+        }
+        Data::Accel(a) => {
+            let g = a.g;
+            let unit = a.unit.as_str();
+            let raw: Vec<[f64; 3]> = a.poses.iter().map(|p| p.mean).collect();
+            let corr: Vec<[f64; 3]> = raw
+                .iter()
+                .map(|v| AccelProblem::correct(after, *v))
+                .collect();
+            let bef: Vec<[f64; 3]> = raw
+                .iter()
+                .map(|v| AccelProblem::correct(&r.fitted.params, *v))
+                .collect();
+            let mut panels = Vec::new();
+            for (i, j) in [(0, 1), (1, 2)] {
+                panels.push(Panel {
+                    title: format!("{}{} pose means before / after", AX[i], AX[j]),
+                    xlabel: format!("a{} ({unit})", AX[i].to_lowercase()),
+                    ylabel: format!("a{} ({unit})", AX[j].to_lowercase()),
+                    series: vec![
+                        Series {
+                            label: "raw".into(),
+                            color: "#1f77b4",
+                            points: raw.iter().map(|v| (v[i], v[j])).collect(),
+                            line: false,
+                        },
+                        Series {
+                            label: format!("corrected ({after_name})"),
+                            color: "#2ca02c",
+                            points: corr.iter().map(|v| (v[i], v[j])).collect(),
+                            line: false,
+                        },
+                        Series {
+                            label: format!("circle g = {g} {unit}"),
+                            color: "#d62728",
+                            points: circle(g),
+                            line: true,
+                        },
+                    ],
+                    equal: true,
+                });
+            }
+            let el = |v: &[f64; 3]| (v[2] / Vector3::from(*v).norm()).asin().to_degrees();
+            let az = |v: &[f64; 3]| v[1].atan2(v[0]).to_degrees();
+            for (name, ang) in [
+                ("elevation", &el as &dyn Fn(&[f64; 3]) -> f64),
+                ("azimuth", &az),
+            ] {
+                panels.push(Panel {
+                    title: format!("pose residual |a| − g against {name}"),
+                    xlabel: format!("{name} of gravity in the sensor frame (deg)"),
+                    ylabel: format!("|a| − g ({unit})"),
+                    series: residual_series(
+                        r,
+                        Series {
+                            label: before_name.clone(),
+                            color: "#ff7f0e",
+                            points: bef
+                                .iter()
+                                .map(|v| (ang(v), Vector3::from(*v).norm() - g))
+                                .collect(),
+                            line: false,
+                        },
+                        Series {
+                            label: after_name.clone(),
+                            color: "#2ca02c",
+                            points: corr
+                                .iter()
+                                .map(|v| (ang(v), Vector3::from(*v).norm() - g))
+                                .collect(),
+                            line: false,
+                        },
+                    ),
+                    equal: false,
+                });
+            }
+            figure("imu-lab calibrate accel", &panels, 2)
+        }
+        Data::GyroRot(gp) => {
+            // Residual per move (two components, deg) against the turn angle of the move.
+            let angle = |mv: &imu_cal::gyro_rot::Move| mv.u0.angle(&mv.u1).to_degrees();
+            let pts = |res: &[f64]| -> Vec<(f64, f64)> {
+                gp.moves
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(k, mv)| [(angle(mv), res[2 * k]), (angle(mv), res[2 * k + 1])])
+                    .collect()
+            };
+            let after_res = match &r.step {
+                Some(_) => analyse(
+                    gp,
+                    &r.step.as_ref().map(|s| s.model.clone()).unwrap_or_default(),
+                )
+                .map(|x| x.fitted.residuals)
+                .unwrap_or_default(),
+                None => vec![],
+            };
+            let mut series = vec![Series {
+                label: before_name.clone(),
+                color: "#ff7f0e",
+                points: pts(&r.fitted.residuals),
+                line: false,
+            }];
+            if after_res.len() == r.fitted.residuals.len() {
+                series.push(Series {
+                    label: after_name.clone(),
+                    color: "#2ca02c",
+                    points: pts(&after_res),
+                    line: false,
+                });
+            }
+            let panels = vec![Panel {
+                title: "gravity-direction residual per move".into(),
+                xlabel: "tilt change of the move (deg)".into(),
+                ylabel: "residual component (deg)".into(),
+                series,
+                equal: false,
+            }];
+            figure("imu-lab calibrate gyro (rotations)", &panels, 1)
+        }
+        Data::Gyro(gp) => {
+            let nb = gp.blocks[0].len();
+            let t: Vec<f64> = gp
+                .temp
+                .clone()
+                .unwrap_or_else(|| (0..nb).map(|i| i as f64).collect());
+            let xl = if gp.temp.is_some() {
+                "block mean temperature (°C)"
+            } else {
+                "block index (no temperature column)"
+            };
+            let resid = |p: &Params, j: usize| -> Vec<(f64, f64)> {
+                let b = p.bias.map(|b| b[j]).unwrap_or(0.0);
+                let k = p.temp_coeff.map(|k| k[j]).unwrap_or(0.0);
+                let tr = p.temp_ref.unwrap_or(0.0);
+                (0..nb)
+                    .map(|i| (t[i], gp.blocks[j][i] - b - k * (t[i] - tr)))
+                    .collect()
+            };
+            let panels: Vec<Panel> = (0..3)
+                .map(|j| Panel {
+                    title: format!("g{} residual against temperature", AX[j].to_lowercase()),
+                    xlabel: xl.into(),
+                    ylabel: format!("block-mean residual ({})", gp.unit),
+                    series: residual_series(
+                        r,
+                        Series {
+                            label: before_name.clone(),
+                            color: "#ff7f0e",
+                            points: resid(&r.fitted.params, j),
+                            line: false,
+                        },
+                        Series {
+                            label: after_name.clone(),
+                            color: "#2ca02c",
+                            points: resid(after, j),
+                            line: false,
+                        },
+                    ),
+                    equal: false,
+                })
+                .collect();
+            figure("imu-lab calibrate gyro", &panels, 3)
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! `imu-lab calibrate` on real recordings and on what real recordings hold: overflow
+//! sentinels, wild samples, too few poses, a stuck gyro, raw counts, abutting poses, and
+//! options no physics allows. Real data: the HMC5883L tilt sphere and the MPU-6050 multi-pose
+//! run of crates/imu-cal/tests/data (provenance there).
+use std::path::{Path, PathBuf};
+
+use serde_json::Value;
+
+mod common;
+use common::{run, run_ok};
+
+fn data(rel: &str) -> String {
+    format!("{}/../imu-cal/tests/data/{rel}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn tilt_sphere() -> String {
+    data("mpu6050-hmc5883l-tilt-sphere/hmc5883l.csv")
+}
+
+fn multipose() -> String {
+    data("mpu6050-static/multipose_calibration.csv")
+}
+
+/// The tilt sphere in µT: its gauss columns renamed onto the contract and scaled by 100.
+const SPHERE: [&str; 4] = [
+    "--rename",
+    "t_s=t,mx_gauss=mx,my_gauss=my,mz_gauss=mz",
+    "--scale",
+    "100",
+];
+
+/// The multi-pose run in m/s² (±2 g: 9.80665/16384 m/s² per LSB).
+const POSES: [&str; 6] = [
+    "--skip-lines",
+    "4",
+    "--rate",
+    "100",
+    "--scale",
+    "0.000598550",
+];
+
+fn json(out: &std::process::Output) -> Value {
+    serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
+}
+
+/// A copy of the tilt sphere with row `row` (0-based data row) changed by `edit`.
+fn edited_sphere(dir: &Path, row: usize, edit: impl Fn(&mut [String])) -> PathBuf {
+    let text = std::fs::read_to_string(tilt_sphere()).unwrap();
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        if i == row + 1 {
+            let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+            edit(&mut f);
+            out += &f.join(",");
+        } else {
+            out += l;
+        }
+        out.push('\n');
+    }
+    let p = dir.join(format!("sphere_{row}.csv"));
+    std::fs::write(&p, out).unwrap();
+    p
+}
+
+fn fails_with(args: &[&str], needles: &[&str]) {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: {n:?} not in {err}");
+    }
+    assert!(!err.contains("NaN") && !err.contains("inf"), "{err}");
+}
+
+/// Hard iron of the reference set's quick fit: (−0.4, 5.6, −20.6) µT.
+fn hard_iron_is_the_spheres(v: &Value) {
+    let h = &v["params"]["hard_iron"];
+    for (k, t) in [-0.4, 5.6, -20.6].iter().enumerate() {
+        let x = h[k].as_f64().unwrap();
+        assert!((x - t).abs() < 0.5, "hard iron {h}");
+    }
+}
+
+#[test]
+fn one_hmc5883l_overflow_sample_is_excluded_and_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    // −4096 counts at the file's gain of 1090 LSB/G.
+    let p = edited_sphere(dir.path(), 1234, |f| f[3] = "-3.757798".into());
+    let p = p.to_str().unwrap();
+    let mut a = vec!["calibrate", "mag", p];
+    a.extend(SPHERE);
+    a.extend(["--model", "hard_iron,soft_iron", "--json"]);
+    let v = json(&run_ok(&a));
+    assert_eq!(v["excluded"]["sentinels"], 1);
+    assert!(
+        v["excluded"]["sentinel_kinds"][0]
+            .as_str()
+            .unwrap()
+            .contains("HMC5883L overflow"),
+        "{v}"
+    );
+    hard_iron_is_the_spheres(&v);
+    assert!(v["params"]["field"].as_f64().unwrap() < 60.0);
+    let text = String::from_utf8_lossy(&run_ok(&a[..a.len() - 1]).stdout).to_string();
+    assert!(
+        text.contains("excluded before fitting: 1 sample(s) excluded as sensor sentinels"),
+        "{text}"
+    );
+}
+
+#[test]
+fn one_wild_sample_is_named_as_an_outlier() {
+    let dir = tempfile::tempdir().unwrap();
+    // 1.5 G added to mx (a bumped sensor or a corrupted read).
+    let p = edited_sphere(dir.path(), 2000, |f| {
+        f[1] = format!("{}", f[1].parse::<f64>().unwrap() + 1.5)
+    });
+    let p = p.to_str().unwrap();
+    let mut a = vec!["calibrate", "mag", p];
+    a.extend(SPHERE);
+    a.extend(["--model", "hard_iron,soft_iron", "--json"]);
+    let v = json(&run_ok(&a));
+    assert_eq!(v["excluded"]["outliers"], 1, "{v}");
+    hard_iron_is_the_spheres(&v);
+    // The residual is the clean file's 0.44 µT, not 2–5 µT.
+    let rms = v["residual_rms"].as_f64().unwrap();
+    assert!((0.40..0.48).contains(&rms), "rms {rms}");
+    let d = v["diagnosis"]["explanation"].as_str().unwrap();
+    assert!(
+        d.contains("1 samples beyond 6σ excluded as outliers"),
+        "{d}"
+    );
+}
+
+#[test]
+fn ten_poses_cannot_judge_nine_parameters() {
+    let f = multipose();
+    let mut a = vec!["calibrate", "accel", f.as_str()];
+    a.extend(POSES);
+    a.extend(["--model", "offset,scale,misalignment"]);
+    let text = String::from_utf8_lossy(&run_ok(&a).stdout).to_string();
+    assert!(text.contains("verdict: UNDERDETERMINED"), "{text}");
+    assert!(!text.contains("ADEQUATE\n"), "{text}");
+    assert!(
+        text.contains("misalignment     = [") && text.contains(" ± "),
+        "{text}"
+    );
+    a.push("--json");
+    let v = json(&run_ok(&a));
+    assert_eq!(v["diagnosis"]["underdetermined"], true);
+    assert_eq!(v["diagnosis"]["adequate"], false);
+    for k in 0..3 {
+        let s = v["sigma"]["misalignment_deg"][k].as_f64().unwrap();
+        assert!(s > 0.0, "{v}");
+    }
+}
+
+#[test]
+fn a_constant_gyro_column_gets_a_clear_answer() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("stuck.csv");
+    let mut s = String::from("gx,gy,gz\n");
+    for i in 0..5000 {
+        s += &format!("{},0.5,{}\n", (i % 7) as f64 * 0.01, (i % 3) as f64 * 0.02);
+    }
+    std::fs::write(&p, s).unwrap();
+    fails_with(
+        &["calibrate", "gyro", p.to_str().unwrap(), "--rate", "100"],
+        &["gyro axis y is constant", "stuck sensor"],
+    );
+}
+
+#[test]
+fn absurd_gravity_and_field_are_refused() {
+    let f = multipose();
+    let mut a = vec!["calibrate", "accel", f.as_str()];
+    a.extend(POSES);
+    a.extend(["--g", "1e300"]);
+    fails_with(&a, &["--g", "9.76–9.84 m/s²"]);
+    let s = tilt_sphere();
+    let mut a = vec!["calibrate", "mag", s.as_str()];
+    a.extend(SPHERE);
+    a.extend(["--field", "1e300"]);
+    fails_with(&a, &["--field", "22–67 µT"]);
+}
+
+/// Raw counts are fitted in counts and said to be counts; g must then be given in counts.
+#[test]
+fn raw_accelerometer_counts_stay_counts() {
+    let f = multipose();
+    let raw = ["--skip-lines", "4", "--rate", "100"];
+    let mut a = vec!["calibrate", "accel", f.as_str()];
+    a.extend(raw);
+    fails_with(&a, &["raw counts (LSB)", "--g 16384"]);
+    a.extend(["--g", "16384"]);
+    let text = String::from_utf8_lossy(&run_ok(&a).stdout).to_string();
+    assert!(
+        text.contains("offset           = [") && text.contains("] LSB"),
+        "{text}"
+    );
+    assert!(!text.contains("m/s²"), "{text}");
+    // The calibration file holds m/s²: counts cannot go there.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cal.toml");
+    a.extend(["--out", out.to_str().unwrap()]);
+    fails_with(&a, &["holds m/s²", "LSB"]);
+}
+
+/// 24 poses recorded back to back (concatenated pose files, no motion between them) are 24
+/// poses, not one.
+#[test]
+fn abutting_poses_are_separate_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("poses.csv");
+    let mut s = String::from("t,ax,ay,az\n");
+    let mut state = 0x1234_5678u32;
+    let mut noise = || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        (state as f64 / 4_294_967_296.0 - 0.5) * 0.05
+    };
+    let mut i = 0;
+    for k in 0..24 {
+        let (th, ph) = (0.3 + 0.11 * k as f64, 0.7 * k as f64);
+        let g = [
+            9.80665 * th.sin() * ph.cos(),
+            9.80665 * th.sin() * ph.sin(),
+            9.80665 * th.cos(),
+        ];
+        for _ in 0..300 {
+            s += &format!(
+                "{:.2},{:.5},{:.5},{:.5}\n",
+                i as f64 * 0.01,
+                g[0] + noise(),
+                g[1] + noise(),
+                g[2] + noise()
+            );
+            i += 1;
+        }
+    }
+    std::fs::write(&p, s).unwrap();
+    let v = json(&run_ok([
+        "calibrate",
+        "accel",
+        p.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(v["n_residuals"], 24, "{v}");
+}

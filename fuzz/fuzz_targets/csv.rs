@@ -1,0 +1,7 @@
+//! cargo-fuzz target: the csv decoder (crates/imu-lab/tests/fuzz/targets.rs).
+#![no_main]
+#![allow(dead_code)]
+
+include!("../../crates/imu-lab/tests/fuzz/targets.rs");
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| csv_target(data));

@@ -1,0 +1,7 @@
+//! cargo-fuzz target: the payload decoder (crates/imu-lab/tests/fuzz/targets.rs).
+#![no_main]
+#![allow(dead_code)]
+
+include!("../../crates/imu-lab/tests/fuzz/targets.rs");
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| payload_target(data));
