@@ -65,6 +65,7 @@ fn main() {
     let mut samples: Vec<Vec<f64>> = Vec::new();
     let mut ms: Vec<u64> = Vec::new();
     let (mut t_dof, mut fa01, mut fa002, mut fits) = (Vec::new(), 0, 0, 0);
+    let (mut pvals, mut local) = (Vec::new(), 0);
     let t0 = std::time::Instant::now();
     for seed in 0..seeds {
         let c = SimConfig {
@@ -86,6 +87,11 @@ fn main() {
         if let Ok(f) = fit_model(&meas, &specs) {
             fits += 1;
             t_dof.push(f.chi2_dof());
+            let a = assess_at(&f, 0.2);
+            pvals.push(a.p_value);
+            if !a.failing.is_empty() {
+                local += 1;
+            }
             if !assess_at(&f, 0.1).adequate {
                 fa01 += 1;
             }
@@ -144,6 +150,16 @@ fn main() {
         fa01,
         fa01 as f64 / fits as f64,
         fa002
+    );
+    pvals.sort_by(f64::total_cmp);
+    let below = |x: f64| pvals.iter().filter(|&&p| p < x).count();
+    println!(
+        "global p-values: < 0.01: {}, < 0.05: {}, < 0.1: {}, < 0.5: {} of {}; local failures at α = 0.2: {local}",
+        below(0.01),
+        below(0.05),
+        below(0.1),
+        below(0.5),
+        pvals.len()
     );
     println!("{:.1} s", t0.elapsed().as_secs_f64());
 }

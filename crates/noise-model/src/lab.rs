@@ -133,11 +133,12 @@ pub fn lattice(y: &[f64]) -> Option<f64> {
     if !(delta > 0.0) || scale / delta > 1e9 {
         return None;
     }
-    let tol = 1e-6 + 1e-12 * scale / delta;
+    // counts printed with 8–9 significant digits (a scaled column) land within ~1e-5 of an
+    // integer multiple; values off a lattice land anywhere
     d.iter()
         .all(|x| {
             let k = x / delta;
-            (k - k.round()).abs() < tol * k.max(1.0)
+            (k - k.round()).abs() < 1e-3 + 1e-9 * k
         })
         .then_some(delta)
 }
@@ -689,8 +690,8 @@ impl<'a> NoiseLab<'a> {
                     1.0
                 }
             };
-            let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(cur.neg2ll_time - m.neg2ll_time)))
-                .min(1.0);
+            let d_time = self.time_lr(cur, &m, &edit.add);
+            let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(d_time))).min(1.0);
             let mut c = self.candidate(cur, m, edit, p, false, why);
             let added_present = c.edit.add.iter().all(|e| {
                 c.model
@@ -738,6 +739,106 @@ impl<'a> NoiseLab<'a> {
         });
         out.extend(cands);
         Ok(out)
+    }
+
+    /// The time-domain likelihood ratio of a candidate against the current model: the block
+    /// differences' −2ℓ of the current model minus that of the candidate, with the added
+    /// stochastic term's amplitude (and non-linear parameter) re-estimated on the block differences
+    /// themselves (profile likelihood; the other terms stay at their Allan fit). Terms that live
+    /// below the block scale (filters) are left to the Allan points.
+    fn time_lr(&self, cur: &Model, m: &Model, added: &[Effect]) -> f64 {
+        let base = cur.neg2ll_time - m.neg2ll_time;
+        let [e] = added else { return base };
+        let Some(k) = m.fit.terms.iter().rposition(|t| t.effect == *e) else {
+            return base;
+        };
+        let t = &m.fit.terms[k];
+        if e.kind() != crate::effect::Kind::Stochastic || t.known {
+            return base;
+        }
+        let gls = nonstat::gls_scale(&self.blocks);
+        let block_tau = gls.size as f64 * self.record.tau0;
+        if tau_range(&m.fit, k).is_none_or(|(_, hi)| hi < 2.0 * block_tau) {
+            return base;
+        }
+        let signals: Vec<Signal> = m.specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let others: Vec<crate::cov::Component> = m
+            .fit
+            .terms
+            .iter()
+            .enumerate()
+            .filter(|(j, t)| *j != k && t.coef > 0.0)
+            .filter_map(|(_, t)| match t.effect.basis(&t.theta, &m.fit.ctx) {
+                Ok(crate::effect::Basis::Stochastic { structure, factor }) => {
+                    Some(crate::cov::Component { coef: t.coef * factor, structure })
+                }
+                _ => None,
+            })
+            .collect();
+        let eval = |theta: &[f64], c: f64| -> f64 {
+            let Ok(crate::effect::Basis::Stochastic { structure, factor }) =
+                e.basis(theta, &m.fit.ctx)
+            else {
+                return f64::INFINITY;
+            };
+            let mut comps = others.clone();
+            comps.push(crate::cov::Component { coef: c * factor, structure });
+            nonstat::neg2_loglik(&gls, &comps, &signals)
+        };
+        // scale of the coefficient: the Allan estimate, or where the term would equal the model
+        let c0 = if t.coef > 0.0 {
+            t.coef
+        } else {
+            let b = e
+                .basis(&t.theta, &m.fit.ctx)
+                .map(|b| b.avar(gls.size as f64, self.record.tau0))
+                .unwrap_or(0.0);
+            let mv = m.fit.model_avar_at(block_tau);
+            if b > 0.0 && mv > 0.0 {
+                mv / b
+            } else {
+                return base;
+            }
+        };
+        let thetas: Vec<Vec<f64>> = if t.theta.is_empty() {
+            vec![Vec::new()]
+        } else {
+            [0.25, 0.5, 1.0, 2.0, 4.0]
+                .iter()
+                .map(|f| {
+                    let mut th = t.theta.clone();
+                    th[0] *= f;
+                    th
+                })
+                .collect()
+        };
+        let mut best = f64::INFINITY;
+        for th in &thetas {
+            // golden section on ln c over [c0/1e3, c0·1e3]
+            let (mut a, mut b) = ((c0 / 1e3).ln(), (c0 * 1e3).ln());
+            let r = 0.618_033_988_749_895;
+            let mut x1 = b - r * (b - a);
+            let mut x2 = a + r * (b - a);
+            let mut f1 = eval(th, x1.exp());
+            let mut f2 = eval(th, x2.exp());
+            for _ in 0..30 {
+                if f1 < f2 {
+                    b = x2;
+                    x2 = x1;
+                    f2 = f1;
+                    x1 = b - r * (b - a);
+                    f1 = eval(th, x1.exp());
+                } else {
+                    a = x1;
+                    x1 = x2;
+                    f1 = f2;
+                    x2 = a + r * (b - a);
+                    f2 = eval(th, x2.exp());
+                }
+            }
+            best = best.min(f1.min(f2));
+        }
+        base.max(cur.neg2ll_time - best)
     }
 
     fn candidate(

@@ -32,10 +32,21 @@ pub struct Line {
     pub threshold: f64,
 }
 
-/// In-place iterative radix-2 complex FFT (Cooley–Tukey). `re.len()` must be a power of two.
+/// In-place iterative radix-2 complex FFT (Cooley–Tukey, decimation in time), e^{−2πi·jk/n}.
+/// `re.len()` must be a power of two. The twiddle factors come from one table of n/2 values
+/// (each computed directly, not by recurrence, so they keep full precision).
 pub fn fft(re: &mut [f64], im: &mut [f64]) {
     let n = re.len();
     assert!(n.is_power_of_two() && im.len() == n);
+    if n < 2 {
+        return;
+    }
+    let (cos, sin): (Vec<f64>, Vec<f64>) = (0..n / 2)
+        .map(|k| {
+            let (s, c) = (-2.0 * std::f64::consts::PI * k as f64 / n as f64).sin_cos();
+            (c, s)
+        })
+        .unzip();
     let mut j = 0usize;
     for i in 1..n {
         let mut bit = n >> 1;
@@ -51,11 +62,12 @@ pub fn fft(re: &mut [f64], im: &mut [f64]) {
     }
     let mut len = 2;
     while len <= n {
-        let ang = -2.0 * std::f64::consts::PI / len as f64;
+        let step = n / len;
+        let half = len / 2;
         for start in (0..n).step_by(len) {
-            for k in 0..len / 2 {
-                let (s, c) = (ang * k as f64).sin_cos();
-                let (a, b) = (start + k, start + k + len / 2);
+            for k in 0..half {
+                let (c, s) = (cos[k * step], sin[k * step]);
+                let (a, b) = (start + k, start + k + half);
                 let tr = re[b] * c - im[b] * s;
                 let ti = re[b] * s + im[b] * c;
                 re[b] = re[a] - tr;
@@ -79,26 +91,40 @@ pub fn welch(y: &[f64], fs: f64, seg: usize) -> Option<Psd> {
         .collect();
     let sw2: f64 = w.iter().map(|v| v * v).sum();
     let mut acc = vec![0.0; seg / 2 + 1];
-    let mut count = 0usize;
     let step = seg / 2;
-    let mut start = 0;
+    let starts: Vec<usize> = (0..).map(|k| k * step).take_while(|s| s + seg <= y.len()).collect();
+    let count = starts.len();
     let mut re = vec![0.0; seg];
     let mut im = vec![0.0; seg];
-    while start + seg <= y.len() {
+    let fill = |buf: &mut [f64], start: usize| {
         let s = &y[start..start + seg];
         let mean = s.iter().sum::<f64>() / seg as f64;
-        for i in 0..seg {
-            re[i] = (s[i] - mean) * w[i];
-            im[i] = 0.0;
+        for ((b, v), wi) in buf.iter_mut().zip(s).zip(&w) {
+            *b = (v - mean) * wi;
+        }
+    };
+    let norm = fs * sw2;
+    // two real segments per complex FFT: x = a + i·b gives A_k = (X_k + X*_{n−k})/2 and
+    // B_k = (X_k − X*_{n−k})/(2i), so |A_k|² + |B_k|² = (|X_k|² + |X_{n−k}|²)/2
+    for pair in starts.chunks(2) {
+        fill(&mut re, pair[0]);
+        match pair.get(1) {
+            Some(&b) => fill(&mut im, b),
+            None => im.iter_mut().for_each(|v| *v = 0.0),
         }
         fft(&mut re, &mut im);
         for (k, a) in acc.iter_mut().enumerate() {
-            let p = re[k] * re[k] + im[k] * im[k];
+            let nk = (seg - k) % seg;
+            let p = if pair.len() == 2 {
+                (re[k] * re[k] + im[k] * im[k] + re[nk] * re[nk] + im[nk] * im[nk]) / 2.0
+            } else {
+                // A_k = (X_k + X*_{n−k})/2 alone
+                let (ar, ai) = ((re[k] + re[nk]) / 2.0, (im[k] - im[nk]) / 2.0);
+                ar * ar + ai * ai
+            };
             let one_sided = if k == 0 || k == seg / 2 { 1.0 } else { 2.0 };
-            *a += one_sided * p / (fs * sw2);
+            *a += one_sided * p / norm;
         }
-        count += 1;
-        start += step;
     }
     for a in &mut acc {
         *a /= count as f64;
@@ -229,6 +255,36 @@ mod tests {
         fft(&mut re, &mut im);
         assert!((re[5] - 32.0).abs() < 1e-9 && (re[59] - 32.0).abs() < 1e-9);
         assert!(re[4].abs() < 1e-9 && im[5].abs() < 1e-9);
+    }
+
+    #[test]
+    fn welch_matches_a_direct_dft_average() {
+        // 9 half-overlapping segments of 16 (an odd count: the last FFT holds one segment)
+        let y: Vec<f64> = (0..80).map(|i| ((i * 37 % 23) as f64 - 11.0) * 0.1 + (i as f64 * 0.3).sin()).collect();
+        let (seg, fs) = (16usize, 50.0);
+        let p = welch(&y, fs, seg).unwrap();
+        assert_eq!(p.segments, 9);
+        let w: Vec<f64> = (0..seg)
+            .map(|i| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * i as f64 / seg as f64).cos())
+            .collect();
+        let sw2: f64 = w.iter().map(|v| v * v).sum();
+        for k in 0..=seg / 2 {
+            let mut acc = 0.0;
+            for s in 0..9 {
+                let x = &y[s * 8..s * 8 + seg];
+                let mean = x.iter().sum::<f64>() / seg as f64;
+                let (mut re, mut im) = (0.0, 0.0);
+                for (i, v) in x.iter().enumerate() {
+                    let ang = -2.0 * std::f64::consts::PI * (i * k) as f64 / seg as f64;
+                    re += (v - mean) * w[i] * ang.cos();
+                    im += (v - mean) * w[i] * ang.sin();
+                }
+                let one = if k == 0 || k == seg / 2 { 1.0 } else { 2.0 };
+                acc += one * (re * re + im * im) / (fs * sw2);
+            }
+            let want = acc / 9.0;
+            assert!((p.density[k] - want).abs() <= 1e-12 * want.max(1e-12), "bin {k}: {} vs {want}", p.density[k]);
+        }
     }
 
     #[test]

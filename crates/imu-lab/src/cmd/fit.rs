@@ -333,7 +333,7 @@ pub fn run(args: Args) -> Result<()> {
         bail!("--max-steps {}: give 1 to 20", args.max_steps);
     }
     let user = load_user_effects(&args.effects)?;
-    let rec = input::load_with(&args.input, &[&args.column], &["temp", "t"])?;
+    let rec = input::load_with(&args.input, &[&args.column], &["temp"])?;
     let shown = args.input.file.display().to_string();
     let series = rec
         .column(&args.column)
