@@ -23,10 +23,10 @@
 //!
 //! # Time
 //! [`timing`] reads the `t` column as what it is, a list of stamps, and reports how regular it
-//! is ([`Timing`]): the nominal period (median spacing), gaps (spacings over
-//! [`GAP_FACTOR`] periods, or reported by `gap_before`) which split the record into segments no
-//! Allan difference may span, duplicated and jittered stamps, and bursty stamps (host read times
-//! of buffered data, not a sample clock).
+//! is ([`Timing`]): the nominal period (median spacing), gaps (spacings of at least 2.5 periods or
+//! of 2 ± ¼ periods, [`is_gap`], or reported by `gap_before`) which split the record into segments
+//! no Allan difference may span, duplicated and jittered stamps, and bursty stamps (host read
+//! times of buffered data, not a sample clock).
 use std::fmt;
 
 use crate::Channel;
@@ -37,8 +37,8 @@ mod write;
 
 pub use read::{parse_renames, HeaderColumn, ReadOptions, Reader};
 pub use timing::{
-    read_clock, segments_between, timing, Clock, Gap, Regularity, Timing, TimingError, TimingScan,
-    BURSTY_FRACTION, GAP_FACTOR, JITTER_TOLERANCE,
+    is_gap, read_clock, segments_between, timing, Clock, Gap, Regularity, Timing, TimingError,
+    TimingScan, BURSTY_FRACTION, GAP_FACTOR, JITTER_TOLERANCE, ONE_SAMPLE_GAP_TOLERANCE,
 };
 pub use write::{WriteOptions, Writer};
 

@@ -3,8 +3,19 @@
 use std::fmt;
 use std::ops::Range;
 
-/// A spacing longer than this many nominal periods is a gap.
+/// A spacing longer than this many nominal periods may be a gap ([`is_gap`]).
 pub const GAP_FACTOR: f64 = 1.5;
+/// A spacing between [`GAP_FACTOR`] and 2.5 periods is a one-sample gap only within this
+/// fraction of a period of two periods; otherwise it is a late stamp (a device that stamps
+/// bursts shows spacings of 1.6 periods with no sample lost).
+pub const ONE_SAMPLE_GAP_TOLERANCE: f64 = 0.25;
+
+/// Whether a spacing of `k` periods (no gap reported) is a gap: at least 2.5 periods, or
+/// between [`GAP_FACTOR`] and 2.5 periods within [`ONE_SAMPLE_GAP_TOLERANCE`] of 2 (one lost
+/// sample).
+pub fn is_gap(k: f64) -> bool {
+    k >= 2.5 || (k > GAP_FACTOR && (k - 2.0).abs() <= ONE_SAMPLE_GAP_TOLERANCE)
+}
 /// A spacing that differs from the nominal period by more than this fraction (and is not a gap)
 /// is a jittered stamp.
 pub const JITTER_TOLERANCE: f64 = 0.01;
@@ -276,7 +287,7 @@ impl TimingScan {
                 missing_s: gap_before * p,
                 reported: true,
             })
-        } else if !self.clock.bursty && d > GAP_FACTOR * p {
+        } else if !self.clock.bursty && is_gap(d / p) {
             Some(Gap {
                 row,
                 missing_samples: ((d / p).round() as u64).saturating_sub(1).max(1),
@@ -355,7 +366,7 @@ impl TimingScan {
 /// Read a time column (s) and, when the file has one, its `gap_before` column (module docs):
 /// [`read_clock`] over all the stamps, then a [`TimingScan`] of each.
 ///
-/// A spacing over [`GAP_FACTOR`] periods is a gap of `round(spacing/period) − 1` samples; a
+/// A spacing that [`is_gap`] is a gap of `round(spacing/period) − 1` samples; a
 /// positive `gap_before` is a gap the device reported (its count is used as is). Bursty stamps
 /// find no gaps: their period is the record's mean spacing.
 pub fn timing(t: &[f64], gap_before: Option<&[f64]>) -> Result<Timing, TimingError> {
@@ -579,6 +590,25 @@ mod tests {
         let tm = timing(&[0.0, 0.001, 0.002, 0.003, 3e31, 6e31], None).unwrap();
         assert_eq!(tm.gaps.len(), 2);
         assert_eq!(tm.missing_samples(), u64::MAX);
+    }
+
+    #[test]
+    fn a_late_stamp_is_jitter_not_a_gap() {
+        // A device that stamps bursts: now and then a spacing of 1.6 periods, no sample lost
+        // (the emulated board's recordings). Spacings of 2 ± ¼ periods are one lost sample.
+        let mut t = clock(1000, 1000.0);
+        for v in &mut t[300..] {
+            *v += 0.0006;
+        }
+        for v in &mut t[600..] {
+            *v += 0.0011;
+        }
+        let tm = timing(&t, None).unwrap();
+        assert_eq!(tm.gaps.len(), 1, "{:?}", tm.gaps);
+        assert_eq!((tm.gaps[0].row, tm.gaps[0].missing_samples), (600, 1));
+        assert_eq!(tm.jittered, 1);
+        assert_eq!(tm.regularity, Regularity::Jittered);
+        assert!(is_gap(2.6) && is_gap(1e6) && is_gap(1.8) && !is_gap(1.6) && !is_gap(2.3));
     }
 
     #[test]
