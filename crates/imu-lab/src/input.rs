@@ -4,9 +4,9 @@
 //! * **Layout**: the contract (`t`, `gap_before`, `ax ay az` m/s², `gx gy gz` deg/s, `mx my mz`
 //!   µT, `temp` °C). `--skip-lines N` skips metadata lines above the header, `--rename OLD=NEW`
 //!   maps a column onto a contract name.
-//! * **Time is read, not assumed.** With a `t` column the rate is 1/median spacing; gaps (over
-//!   1.5 periods, or reported in `gap_before`) split the record into segments that no Allan
-//!   difference spans; duplicated, jittered and bursty stamps are reported (stderr). `--rate`
+//! * **Time is read, not assumed.** With a `t` column the rate is 1/median spacing; gaps (a
+//!   spacing of 2 ± ¼ or more than 2.5 periods, `imu_proto::csv::is_gap`, or reported in
+//!   `gap_before`) split the record into segments that no Allan difference spans; duplicated, jittered and bursty stamps are reported (stderr). `--rate`
 //!   must agree with `t` within [`RATE_AGREEMENT`] unless `--ignore-time`, which takes the rows
 //!   as consecutive samples at `--rate` and ignores `t`. Rates outside
 //!   [`RATE_MIN_HZ`]…[`RATE_MAX_HZ`] are refused.

@@ -270,12 +270,11 @@ fn mag_matrix(p: &Params) -> Matrix3<f64> {
         .unwrap_or_else(Matrix3::identity)
 }
 
-/// Central section of the fitted ellipsoid {m : |S(m − h)| = F} by the plane of axes (i, j)
-/// through h: the radius along a direction d of that plane is F/|S·d|.
-fn section(p: &Params, i: usize, j: usize) -> Vec<(f64, f64)> {
+/// Central section of the fitted ellipsoid {m : |S(m − h)| = f} by the plane of axes (i, j)
+/// through h: the radius along a direction d of that plane is f/|S·d|.
+fn section(p: &Params, i: usize, j: usize, f: f64) -> Vec<(f64, f64)> {
     let s = mag_matrix(p);
     let h = p.hard_iron.unwrap_or([0.0; 3]);
-    let f = p.field.unwrap_or(1.0);
     (0..=180)
         .map(|k| {
             let a = 2.0 * std::f64::consts::PI * k as f64 / 180.0;
@@ -332,7 +331,21 @@ pub fn plot(data: &Data, r: &Report) -> String {
                 m.m.iter()
                     .map(|v| MagProblem::correct(&r.fitted.params, *v))
                     .collect();
-            let f = after.field.unwrap_or(1.0);
+            // With tilt the fitted F is the full field: the planar views draw the in-plane part
+            // it leaves on average, √(F² − mean out-of-plane²).
+            let after_tilt = r
+                .step
+                .as_ref()
+                .map_or(&r.fitted.model, |s| &s.model)
+                .contains(&Effect::Tilt);
+            let f = match (m.plane, after_tilt) {
+                (Some([i, j]), true) => {
+                    let k = 3 - i - j;
+                    let z2 = corr.iter().map(|v| v[k] * v[k]).sum::<f64>() / corr.len() as f64;
+                    (after.field.unwrap_or(1.0).powi(2) - z2).max(0.0).sqrt()
+                }
+                _ => after.field.unwrap_or(1.0),
+            };
             // Planar data are fitted (and so drawn) in their plane; 3-D data in XY and YZ.
             let pairs: Vec<(usize, usize)> = match m.plane {
                 Some([i, j]) => vec![(i, j)],
@@ -355,7 +368,7 @@ pub fn plot(data: &Data, r: &Report) -> String {
                         Series {
                             label: format!("fitted ({after_name}) section"),
                             color: "#d62728",
-                            points: section(after, i, j),
+                            points: section(after, i, j, f),
                             line: true,
                         },
                     ],
@@ -373,7 +386,11 @@ pub fn plot(data: &Data, r: &Report) -> String {
                             line: false,
                         },
                         Series {
-                            label: format!("circle F = {f:.2} {unit}"),
+                            label: if after_tilt && m.plane.is_some() {
+                                format!("in-plane field {f:.2} {unit}")
+                            } else {
+                                format!("circle F = {f:.2} {unit}")
+                            },
                             color: "#d62728",
                             points: circle(f),
                             line: true,
