@@ -52,3 +52,155 @@ fn plots_in_svg_and_png_and_refuses_other_names() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains(".svg or .png"));
 }
+
+/// Simulated gyro data through a one-pole 5 Hz low-pass (the MPU-6050's DLPF), 30 min at 100 Hz.
+fn dlpf_file(dir: &std::path::Path) -> String {
+    let p = dir.join("dlpf.csv");
+    let p = p.to_str().unwrap().to_string();
+    run_ok([
+        "simulate",
+        "--rate",
+        "100",
+        "--samples",
+        "180000",
+        "--seed",
+        "5",
+        "--quantization",
+        "2e-4",
+        "--white",
+        "5e-3",
+        "--flicker",
+        "3e-3",
+        "--rrw",
+        "1e-4",
+        "--dlpf",
+        "5",
+        "-o",
+        &p,
+    ]);
+    p
+}
+
+#[test]
+fn auto_walk_names_the_filter_and_the_json_reproduces_the_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dlpf_file(dir.path());
+    let out = run_ok(["fit", &f, "--column", "gz", "--auto", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let steps = v["steps"].as_array().unwrap();
+    assert_eq!(
+        steps[0]["added"],
+        serde_json::json!(["lowpass"]),
+        "{steps:?}"
+    );
+    assert_eq!(steps[0]["removed"], serde_json::json!(["white"]));
+    assert_eq!(steps[0]["adequate_before"], false);
+    let last = steps.last().unwrap();
+    assert_eq!(last["adequate_after"], true);
+    assert!(
+        steps[0]["chi2_dof_after"].as_f64().unwrap()
+            < steps[0]["chi2_dof_before"].as_f64().unwrap() / 10.0
+    );
+    assert!(
+        steps[0]["rms_log_residual_after"].as_f64().unwrap()
+            < steps[0]["rms_log_residual_before"].as_f64().unwrap()
+    );
+    assert_eq!(v["stop"], "the model is adequate");
+    assert_eq!(v["diagnosis"]["adequate"], true);
+    // The reported parameters give back the model column, by the textbook formulas (IEEE 952
+    // Annex C for the power laws; the sampled AR(1) for the filtered white noise).
+    let tau0 = 1.0 / v["rate_hz"].as_f64().unwrap();
+    let terms = v["terms"].as_array().unwrap();
+    let param = |e: &str, p: &str| {
+        terms
+            .iter()
+            .find(|t| t["effect"] == e)
+            .map(|t| t["params"][p].as_f64().unwrap())
+    };
+    let fc = param("lowpass", "cutoff_hz").expect("lowpass term");
+    assert!((fc / 5.0 - 1.0).abs() < 0.1, "f_c = {fc}");
+    for pt in v["adev"].as_array().unwrap() {
+        let tau = pt["tau_s"].as_f64().unwrap();
+        let m = tau / tau0;
+        let mut var = 0.0;
+        if let Some(q) = param("quantization", "Q") {
+            var += 3.0 * q * q / (tau * tau);
+        }
+        if let Some(b) = param("flicker", "B") {
+            var += 2.0 * std::f64::consts::LN_2 / std::f64::consts::PI * b * b;
+        }
+        if let Some(k) = param("rate_random_walk", "K") {
+            var += k * k * (tau / 3.0 + tau0 * tau0 / (6.0 * tau));
+        }
+        if let Some(r) = param("rate_ramp", "R") {
+            var += r * r * tau * tau / 2.0;
+        }
+        let n = param("lowpass", "N").unwrap();
+        let phi: f64 = (-2.0 * std::f64::consts::PI * fc * tau0).exp();
+        // AR(1) of variance s2: σ²(m) = s2·[2m(1−φ²)... ] from S(n) = Σ(n−|k|)φ^|k|
+        let s2 = n * n / tau0 * (1.0 - phi) / (1.0 + phi);
+        let s = |k: f64| {
+            k * (1.0 + phi) / (1.0 - phi) - 2.0 * phi * (1.0 - phi.powf(k)) / (1.0 - phi).powi(2)
+        };
+        var += s2 * (4.0 * s(m) - s(2.0 * m)) / (2.0 * m * m);
+        let model = pt["model"].as_f64().unwrap();
+        assert!(
+            (var.sqrt() / model - 1.0).abs() < 1e-6,
+            "τ {tau}: params give {} but model {model}",
+            var.sqrt()
+        );
+    }
+}
+
+#[test]
+fn a_user_effect_file_is_fitted_and_reported_by_its_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dlpf_file(dir.path());
+    let effect = format!(
+        "{}/../../docs/effects/bartlett_decimation.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = run_ok([
+        "fit",
+        &f,
+        "--column",
+        "gz",
+        "--effect",
+        &effect,
+        "--terms",
+        "quantization,bartlett_decimation,flicker,rate_random_walk",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let t = v["terms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["effect"] == "bartlett_decimation")
+        .expect("user term");
+    assert!(
+        t["params"]["N"].as_f64().unwrap() > 0.0 && t["params"]["L"].as_f64().unwrap() >= 1.0,
+        "{t}"
+    );
+    // a broken file is refused with its name and the reason
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        "name = \"x\"\nphysics = \"p\"\namplitude = \"a\"\nautocovariance = \"a * exp(-k)\"\n",
+    )
+    .unwrap();
+    let out = run([
+        "fit",
+        &f,
+        "--column",
+        "gz",
+        "--effect",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.toml") && err.contains("proportional to a²"),
+        "{err}"
+    );
+}

@@ -403,3 +403,90 @@ fn no_spectral_line_in_control_data() {
         assert_eq!(noise_model::find_line(&p), None, "seed {seed}");
     }
 }
+
+#[test]
+fn a_user_described_effect_fits_like_the_builtin() {
+    // a user's file describing the Gauss–Markov term by its autocovariance gives the built-in's
+    // fit; the example file of the docs (a Bartlett decimation filter) gives the built-in
+    // bartlett's
+    use noise_model::user::UserEffect;
+    use noise_model::TermSpec;
+    use std::sync::Arc;
+    let markov = UserEffect::parse(
+        r#"
+name = "my_markov"
+physics = "the Markov term described by hand"
+amplitude = "sigma"
+autocovariance = "sigma^2 * exp(-k * tau0 / tau_c)"
+[parameters.tau_c]
+unit = "s"
+min = 0.01
+max = 200
+"#,
+        "my_markov.toml",
+    )
+    .unwrap();
+    let bart = UserEffect::parse(
+        &std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../docs/effects/bartlett_decimation.toml"
+        ))
+        .unwrap(),
+        "bartlett_decimation.toml",
+    )
+    .unwrap();
+    let mut e = gyro(true);
+    e.push(SimEffect::Markov {
+        sigma: 0.01,
+        tau_c: 2.0,
+    });
+    e.push(SimEffect::Decimated {
+        n: 3e-3,
+        length: 3,
+        bartlett: true,
+    });
+    let c = cfg(100.0, 3600.0, 21, e);
+    let y = c.generate();
+    let rows = deviation(&y, c.tau0(), Stat::Oadev, &TauSet::Octave).unwrap();
+    let (points, _) = Point::from_rows(&rows);
+    let lab = NoiseLab::new(Record {
+        y: &y,
+        tau0: c.tau0(),
+        segments: vec![(0, y.len() as u64)],
+        temp: None,
+        timing: None,
+        points,
+        user_effects: vec![],
+    })
+    .unwrap();
+    let base: Vec<TermSpec> = [
+        Effect::Quantization,
+        Effect::White,
+        Effect::Flicker,
+        Effect::RateRandomWalk,
+    ]
+    .into_iter()
+    .map(TermSpec::new)
+    .collect();
+    let with = |a: Effect, b: Effect| {
+        let mut s = base.clone();
+        s.push(TermSpec::new(a));
+        s.push(TermSpec::new(b));
+        lab.fit(&s).unwrap()
+    };
+    let builtin = with(Effect::Markov, Effect::Bartlett);
+    let user = with(Effect::User(Arc::new(markov)), Effect::User(Arc::new(bart)));
+    for (b, u) in builtin.fit.terms.iter().zip(&user.fit.terms) {
+        for (pb, pu) in b.params().iter().zip(u.params()) {
+            assert!(
+                (pb.value - pu.value).abs() <= 1e-3 * pb.value.abs() + 1e-3 * pb.sigma,
+                "{} {}: built-in {} vs user {}",
+                b.effect,
+                pb.name,
+                pb.value,
+                pu.value
+            );
+        }
+    }
+    assert!((builtin.fit.chi2 - user.fit.chi2).abs() < 1e-3 * builtin.fit.chi2.max(1.0));
+}

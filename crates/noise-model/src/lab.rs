@@ -770,7 +770,10 @@ impl<'a> NoiseLab<'a> {
             .filter(|(j, t)| *j != k && t.coef > 0.0)
             .filter_map(|(_, t)| match t.effect.basis(&t.theta, &m.fit.ctx) {
                 Ok(crate::effect::Basis::Stochastic { structure, factor }) => {
-                    Some(crate::cov::Component { coef: t.coef * factor, structure })
+                    Some(crate::cov::Component {
+                        coef: t.coef * factor,
+                        structure,
+                    })
                 }
                 _ => None,
             })
@@ -782,7 +785,10 @@ impl<'a> NoiseLab<'a> {
                 return f64::INFINITY;
             };
             let mut comps = others.clone();
-            comps.push(crate::cov::Component { coef: c * factor, structure });
+            comps.push(crate::cov::Component {
+                coef: c * factor,
+                structure,
+            });
             nonstat::neg2_loglik(&gls, &comps, &signals)
         };
         // scale of the coefficient: the Allan estimate, or where the term would equal the model

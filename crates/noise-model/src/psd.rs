@@ -92,7 +92,10 @@ pub fn welch(y: &[f64], fs: f64, seg: usize) -> Option<Psd> {
     let sw2: f64 = w.iter().map(|v| v * v).sum();
     let mut acc = vec![0.0; seg / 2 + 1];
     let step = seg / 2;
-    let starts: Vec<usize> = (0..).map(|k| k * step).take_while(|s| s + seg <= y.len()).collect();
+    let starts: Vec<usize> = (0..)
+        .map(|k| k * step)
+        .take_while(|s| s + seg <= y.len())
+        .collect();
     let count = starts.len();
     let mut re = vec![0.0; seg];
     let mut im = vec![0.0; seg];
@@ -260,7 +263,9 @@ mod tests {
     #[test]
     fn welch_matches_a_direct_dft_average() {
         // 9 half-overlapping segments of 16 (an odd count: the last FFT holds one segment)
-        let y: Vec<f64> = (0..80).map(|i| ((i * 37 % 23) as f64 - 11.0) * 0.1 + (i as f64 * 0.3).sin()).collect();
+        let y: Vec<f64> = (0..80)
+            .map(|i| ((i * 37 % 23) as f64 - 11.0) * 0.1 + (i as f64 * 0.3).sin())
+            .collect();
         let (seg, fs) = (16usize, 50.0);
         let p = welch(&y, fs, seg).unwrap();
         assert_eq!(p.segments, 9);
@@ -283,7 +288,11 @@ mod tests {
                 acc += one * (re * re + im * im) / (fs * sw2);
             }
             let want = acc / 9.0;
-            assert!((p.density[k] - want).abs() <= 1e-12 * want.max(1e-12), "bin {k}: {} vs {want}", p.density[k]);
+            assert!(
+                (p.density[k] - want).abs() <= 1e-12 * want.max(1e-12),
+                "bin {k}: {} vs {want}",
+                p.density[k]
+            );
         }
     }
 
