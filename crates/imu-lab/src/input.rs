@@ -219,6 +219,8 @@ pub struct Rows {
     /// `gap_before` when present.
     pub names: Vec<String>,
     progress: indicatif::ProgressBar,
+    /// File size in bytes (0 when unknown).
+    size: u64,
 }
 
 impl Rows {
@@ -275,6 +277,7 @@ pub fn open_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
         reader,
         names,
         progress,
+        size,
     })
 }
 
@@ -339,9 +342,20 @@ pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
     let names = rows.names.clone();
     let mut data: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut buf = vec![0.0; names.len()];
+    // Reserve from the file's size and the first rows' length (2 % margin), so that a long
+    // recording is not held at up to twice its size by Vec doubling.
+    let mut reserved = false;
     while rows.next_into(&mut buf)? {
         for (col, v) in data.iter_mut().zip(&buf) {
             col.push(*v);
+        }
+        if !reserved && data[0].len() == 4096 {
+            reserved = true;
+            let read = rows.reader.byte().max(1);
+            let est = (rows.size as f64 / read as f64 * 4096.0 * 1.02).min(1e10) as usize;
+            for col in &mut data {
+                col.reserve(est.saturating_sub(col.len()));
+            }
         }
     }
     let n = data.first().map_or(0, Vec::len);
@@ -383,11 +397,11 @@ pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
                 "note: {shown}: column {name:?} has {missing} empty fields (missing readings)"
             );
         }
-        let values = if scale == 1.0 || !is_scaled(name) {
-            values
-        } else {
-            values.iter().map(|v| v * scale).collect()
-        };
+        let mut values = values;
+        if scale != 1.0 && is_scaled(name) {
+            values.iter_mut().for_each(|v| *v *= scale);
+        }
+        values.shrink_to_fit();
         if let Some((i, v)) = values.iter().enumerate().find(|(_, v)| v.abs() > VALUE_MAX) {
             bail!(
                 "{shown}: column {name:?}, data row {}: {v:e} {unit} after --scale {}: no \
