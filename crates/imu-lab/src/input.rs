@@ -342,11 +342,15 @@ pub fn load_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result
     let names = rows.names.clone();
     let mut data: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
     let mut buf = vec![0.0; names.len()];
-    // Reserve from the file's size and the first rows' length (2 % margin), so that a long
-    // recording is not held at up to twice its size by Vec doubling.
+    // Reserve from the file's size and the first rows' length (2 % margin), then grow by an
+    // eighth: a long recording is not held at up to twice its size by Vec doubling.
     let mut reserved = false;
     while rows.next_into(&mut buf)? {
         for (col, v) in data.iter_mut().zip(&buf) {
+            if reserved && col.len() == col.capacity() {
+                // later rows are longer (more digits in t): grow by an eighth, not by doubling
+                col.reserve_exact((col.len() / 8).max(4096));
+            }
             col.push(*v);
         }
         if !reserved && data[0].len() == 4096 {
