@@ -688,6 +688,7 @@ fn write_plot(
         vec![plot::figure(
             &last.model.fit,
             &last.model.assessment,
+            last.diagnosis.adequate,
             title,
             unit,
             0.0,
@@ -698,6 +699,7 @@ fn write_plot(
             plot::figure(
                 &first.model.fit,
                 &first.model.assessment,
+                first.diagnosis.adequate,
                 &format!("before: {}", names(&first.model.fit.effects())),
                 unit,
                 0.0,
@@ -705,6 +707,7 @@ fn write_plot(
             plot::figure(
                 &last.model.fit,
                 &last.model.assessment,
+                last.diagnosis.adequate,
                 &format!(
                     "after: {}",
                     steps
@@ -747,6 +750,7 @@ fn write_report(
             plot::document(&[plot::figure(
                 &st.model.fit,
                 &st.model.assessment,
+                st.diagnosis.adequate,
                 &names(&st.model.fit.effects()),
                 unit,
                 0.0,
@@ -754,10 +758,18 @@ fn write_report(
         } else {
             let prev = &stages[i - 1];
             plot::document(&[
-                plot::figure(&prev.model.fit, &prev.model.assessment, "before", unit, 0.0),
+                plot::figure(
+                    &prev.model.fit,
+                    &prev.model.assessment,
+                    prev.diagnosis.adequate,
+                    "before",
+                    unit,
+                    0.0,
+                ),
                 plot::figure(
                     &st.model.fit,
                     &st.model.assessment,
+                    st.diagnosis.adequate,
                     &format!("after: {}", steps[i - 1].edit),
                     unit,
                     plot::W,

@@ -53,6 +53,26 @@ pub struct Args {
     /// Order of that filter: 1 (one pole) or 2 (two cascaded poles).
     #[arg(long, default_value_t = 1)]
     pub dlpf_order: u8,
+    /// Pass the white noise through a decimation filter of this many output samples (boxcar; a
+    /// Bartlett filter with --bartlett) instead.
+    #[arg(long)]
+    pub decimation: Option<usize>,
+    /// Make --decimation a Bartlett (two boxcars in cascade).
+    #[arg(long, requires = "decimation")]
+    pub bartlett: bool,
+    /// A bias step: TIME_S,SIZE (s, u). Repeatable.
+    #[arg(long, value_delimiter = ',')]
+    pub step: Vec<f64>,
+    /// A warm-up transient A·e^(−t/τ): AMPLITUDE,TAU_S (u, s).
+    #[arg(long = "warm-up", value_delimiter = ',')]
+    pub warm_up: Vec<f64>,
+    /// A bias following a warming temperature, written as a `temp` column:
+    /// COEF,START_C,RISE_C,TAU_S (u/°C, °C, °C, s).
+    #[arg(long, value_delimiter = ',')]
+    pub temperature: Vec<f64>,
+    /// Round every sample to this LSB (the part's resolution) [u].
+    #[arg(long)]
+    pub lsb: Option<f64>,
     /// Output CSV (default: stdout).
     #[arg(long, short)]
     pub output: Option<PathBuf>,
@@ -128,10 +148,23 @@ pub fn run(args: Args) -> Result<()> {
                     order: args.dlpf_order,
                 })
             }
-            None => effects.push(SimEffect::White { n }),
+            None => match args.decimation {
+                Some(length) if (1..=4096).contains(&length) => {
+                    effects.push(SimEffect::Decimated {
+                        n,
+                        length,
+                        bartlett: args.bartlett,
+                    })
+                }
+                Some(length) => bail!("--decimation {length}: give 1 to 4096 samples"),
+                None => effects.push(SimEffect::White { n }),
+            },
         }
-    } else if args.dlpf.is_some() {
-        bail!("--dlpf filters the white noise: give --white too");
+    } else if args.dlpf.is_some() || args.decimation.is_some() {
+        bail!("--dlpf and --decimation filter the white noise: give --white too");
+    }
+    if args.dlpf.is_some() && args.decimation.is_some() {
+        bail!("--dlpf and --decimation: give one filter");
     }
     if let Some(b) = positive(args.flicker, "flicker")? {
         effects.push(SimEffect::Flicker { b });
@@ -162,6 +195,51 @@ pub fn run(args: Args) -> Result<()> {
         }
         effects.push(SimEffect::Sinusoid { amplitude, freq_hz });
     }
+    if args.step.len() % 2 != 0 {
+        bail!("--step: expected TIME_S,SIZE pairs, got {:?}", args.step);
+    }
+    let duration = args.samples as f64 / args.rate;
+    for p in args.step.chunks(2) {
+        let (at_s, size) = (p[0], p[1]);
+        if !(at_s > 0.0 && at_s < duration && size.is_finite()) {
+            bail!("--step {at_s},{size}: the instant must lie inside the record (0–{duration} s)");
+        }
+        effects.push(SimEffect::BiasStep { at_s, size });
+    }
+    match args.warm_up[..] {
+        [] => {}
+        [amplitude, tau_s] if amplitude.is_finite() && tau_s > 0.0 && tau_s.is_finite() => {
+            effects.push(SimEffect::WarmUp { amplitude, tau_s })
+        }
+        _ => bail!(
+            "--warm-up: expected AMPLITUDE,TAU_S with τ > 0, got {:?}",
+            args.warm_up
+        ),
+    }
+    match args.temperature[..] {
+        [] => {}
+        [coef, start_c, rise_c, tau_s]
+            if [coef, start_c, rise_c].iter().all(|v| v.is_finite())
+                && tau_s > 0.0
+                && tau_s.is_finite() =>
+        {
+            effects.push(SimEffect::Temperature {
+                coef,
+                start_c,
+                rise_c,
+                tau_s,
+            })
+        }
+        _ => bail!(
+            "--temperature: expected COEF,START_C,RISE_C,TAU_S with τ > 0, got {:?}",
+            args.temperature
+        ),
+    }
+    if let Some(q) = args.lsb {
+        if !(q > 0.0 && q.is_finite()) {
+            bail!("--lsb {q}: must be a positive number in the columns' unit");
+        }
+    }
     if effects.is_empty() {
         bail!("no effect given: use --white, --flicker, --rrw, --ramp, --quantization, --markov or --sinusoid");
     }
@@ -174,26 +252,34 @@ pub fn run(args: Args) -> Result<()> {
     }
     let mut data = Vec::new();
     let mut cfg0 = None;
+    let mut temp = None;
     for (i, _) in args.columns.iter().enumerate() {
         let cfg = SimConfig {
             rate_hz: args.rate,
             n_samples: args.samples,
             seed: args.seed.wrapping_add(i as u64),
             effects: effects.clone(),
-            lsb: None,
+            lsb: args.lsb,
         };
-        data.push(cfg.generate());
+        let (y, t) = cfg.generate_with_temp();
+        data.push(y);
+        temp = temp.or(t);
         cfg0.get_or_insert(cfg);
+    }
+    let mut names = args.columns.clone();
+    if let Some(t) = temp {
+        names.push("temp".into());
+        data.push(t);
     }
     match &args.output {
         Some(p) => {
             let f = File::create(p).with_context(|| format!("creating {}", p.display()))?;
-            write_rows(BufWriter::new(f), args.rate, &args.columns, &data)
+            write_rows(BufWriter::new(f), args.rate, &names, &data)
                 .with_context(|| format!("writing {}", p.display()))?;
         }
         None => {
             let out = std::io::stdout();
-            write_rows(BufWriter::new(out.lock()), args.rate, &args.columns, &data)
+            write_rows(BufWriter::new(out.lock()), args.rate, &names, &data)
                 .context("writing stdout")?;
         }
     }

@@ -47,7 +47,16 @@ fn tick_label(d: i32) -> String {
 }
 
 /// One figure as an SVG fragment (a nested `<svg>` placed at `x0`), with its title.
-pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> String {
+/// `adequate` is the lab's whole verdict (the Allan test, the time-domain checks and the
+/// candidates), printed under the legend.
+pub fn figure(
+    fit: &Fit,
+    a: &Assessment,
+    adequate: bool,
+    title: &str,
+    unit: &str,
+    x0: f64,
+) -> String {
     let pts = &fit.points;
     let mut s = String::new();
     let pw = W - ML - MR;
@@ -121,8 +130,10 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
     );
     // model curves on a fine grid
     let ngrid = 240;
+    // the model exists from one sample period (m = 1) on
     let grid: Vec<f64> = (0..=ngrid)
         .map(|i| 10f64.powf(xd0 as f64 + (xd1 - xd0) as f64 * i as f64 / ngrid as f64))
+        .map(|t| t.max(fit.tau0))
         .collect();
     let path = |vals: &[f64]| {
         let mut d = String::new();
@@ -228,11 +239,7 @@ pub fn figure(fit: &Fit, a: &Assessment, title: &str, unit: &str, x0: f64) -> St
         fit.chi2_dof(),
         ML + pw + 10.0,
         MT + 12.0 + 18.0 * legend.len() as f64 + 28.0,
-        if a.adequate {
-            "adequate"
-        } else {
-            "NOT adequate"
-        }
+        if adequate { "adequate" } else { "NOT adequate" }
     );
     // residual panel
     let y0 = MT + TOP_H + GAP;
