@@ -80,7 +80,7 @@ impl Rng {
     }
 }
 
-/// One simulated effect, parameters in the canonical units of issue 3 (u = channel unit).
+/// One simulated effect, parameters in the noise lab's canonical units (u = channel unit).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SimEffect {
     /// Q [u·s]: white phase error of standard deviation Q.

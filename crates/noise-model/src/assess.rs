@@ -319,7 +319,7 @@ pub fn assess_at(fit: &Fit, alpha: f64) -> Assessment {
         .copied()
         .filter(|r| r.worst_z > threshold)
         .collect();
-    let p_value = chi2_sf(sum_z2, fit.dof as f64);
+    let p_value = chi2_sf(sum_z2, fit.dof);
     let rms_log_residual = (fit
         .points
         .iter()

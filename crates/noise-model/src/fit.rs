@@ -327,8 +327,9 @@ pub struct Fit {
     pub chi2: f64,
     /// The fit's criterion, the generalised χ² rᵀC⁻¹r in variance space, at the optimum.
     pub objective: f64,
-    /// Points minus free parameters (at least 1).
-    pub dof: usize,
+    /// Degrees of freedom of the goodness-of-fit statistic: points minus free parameters, a
+    /// parameter at its bound counting ½ (at least 1).
+    pub dof: f64,
     /// Covariance of the free parameters, in the order of `param_index`.
     pub param_cov: DMatrix<f64>,
     /// (term, 0 = coefficient / i+1 = non-linear parameter i) for each row of `param_cov`.
@@ -344,7 +345,7 @@ impl PartialEq for Fit {
 
 impl Fit {
     pub fn chi2_dof(&self) -> f64 {
-        self.chi2 / self.dof.max(1) as f64
+        self.chi2 / self.dof.max(1.0)
     }
 
     /// Model Allan deviation at any τ, from the reported parameters.
@@ -986,12 +987,16 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
         index.push((k, i + 1));
     }
     let q = cols.len();
-    let free_present = index
+    // A coefficient held at its bound 0 by the constraint counts half: the χ² reduction of a
+    // boundary parameter is 0 or 1 degree of freedom with probability ½ each (the chi-bar-square
+    // mixture; Self & Liang, JASA 1987).
+    let interior = index
         .iter()
         .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
         .count();
-    let dof = points.len().saturating_sub(free_present).max(1);
-    let chi2_dof = chi2 / dof as f64;
+    let boundary = index.len() - interior;
+    let dof = (points.len() as f64 - interior as f64 - 0.5 * boundary as f64).max(1.0);
+    let chi2_dof = chi2 / dof;
     let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
     let d: Vec<f64> = (0..q)
         .map(|a| {

@@ -204,7 +204,7 @@ struct JsonOut<'a> {
     samples: usize,
     terms: Vec<JsonTerm>,
     chi2_dof: f64,
-    dof: usize,
+    dof: f64,
     p_value: f64,
     rms_log_residual: f64,
     correlations: Vec<JsonCorr>,
