@@ -195,7 +195,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         effects.push(SimEffect::Sinusoid { amplitude, freq_hz });
     }
-    if args.step.len() % 2 != 0 {
+    if !args.step.len().is_multiple_of(2) {
         bail!("--step: expected TIME_S,SIZE pairs, got {:?}", args.step);
     }
     let duration = args.samples as f64 / args.rate;
