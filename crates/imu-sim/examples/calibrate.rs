@@ -2,9 +2,8 @@
 //! (control or a hidden effect), the walk on each, and the tally of what was named.
 //! `cargo run --release -p imu-sim --example calibrate --target host-tuple -- CASES LOG2N KIND`
 //! with KIND one of control, markov, sine, dlpf, step.
-use allan::{deviation, Stat, TauSet};
 use imu_sim::{SimConfig, SimEffect};
-use noise_model::{walk, NoiseLab, Point, Record, Stop};
+use noise_model::{walk, NoiseLab, Stop};
 use std::collections::BTreeMap;
 
 fn main() {
@@ -16,11 +15,7 @@ fn main() {
     let mut named: BTreeMap<String, usize> = BTreeMap::new();
     let mut adequate = 0;
     for seed in 0..cases {
-        let mut eff = vec![
-            SimEffect::Quantization { q: 2e-4 },
-            SimEffect::Flicker { b: 3e-3 },
-            SimEffect::RateRandomWalk { k: 1e-4 },
-        ];
+        let mut eff = imu_sim::gyro_background(false);
         match kind.as_str() {
             "markov" => {
                 eff.push(SimEffect::White { n: 5e-3 });
@@ -57,19 +52,8 @@ fn main() {
             effects: eff,
             lsb: None,
         };
-        let y = cfg.generate();
-        let rows = deviation(&y, cfg.tau0(), Stat::Oadev, &TauSet::Octave).unwrap();
-        let (points, _) = Point::from_rows(&rows);
-        let lab = NoiseLab::new(Record {
-            y: &y,
-            tau0: cfg.tau0(),
-            segments: vec![(0, y.len() as u64)],
-            temp: None,
-            timing: None,
-            points,
-            user_effects: vec![],
-        })
-        .unwrap();
+        let a = cfg.analyse();
+        let lab = NoiseLab::new(a.record(None)).unwrap();
         let start = lab.fit(&lab.default_specs()).unwrap();
         let w = walk(&lab, start, 5).unwrap();
         let added: Vec<String> = w.steps.iter().map(|s| s.edit.to_string()).collect();

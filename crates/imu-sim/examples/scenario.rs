@@ -2,19 +2,8 @@
 //! hidden-effect cases of the test suite, for looking at one closely.
 //!
 //! `cargo run --release -p imu-sim --example scenario --target host-tuple -- NAME [SEED]`
-use allan::{deviation, Stat, TauSet};
 use imu_sim::{SimConfig, SimEffect};
-use noise_model::{walk, NoiseLab, Point, Record};
-
-fn gyro(rate: f64) -> Vec<SimEffect> {
-    let _ = rate;
-    vec![
-        SimEffect::Quantization { q: 2e-4 },
-        SimEffect::White { n: 5e-3 },
-        SimEffect::Flicker { b: 3e-3 },
-        SimEffect::RateRandomWalk { k: 1e-4 },
-    ]
-}
+use noise_model::{walk, NoiseLab};
 
 fn scenario(name: &str, seed: u64) -> SimConfig {
     let (rate, secs, extra): (f64, f64, Vec<SimEffect>) = match name {
@@ -98,7 +87,7 @@ fn scenario(name: &str, seed: u64) -> SimConfig {
         "lowpass" => (100.0, 3600.0, vec![]),
         _ => panic!("unknown scenario {name}"),
     };
-    let mut effects = gyro(rate);
+    let mut effects = imu_sim::gyro_background(true);
     match name {
         "bartlett" => {
             effects.retain(|e| !matches!(e, SimEffect::White { .. }));
@@ -134,19 +123,8 @@ fn main() {
     let seed: u64 = a.get(2).and_then(|s| s.parse().ok()).unwrap_or(1);
     let c = scenario(name, seed);
     let t0 = std::time::Instant::now();
-    let (y, temp) = c.generate_with_temp();
-    let rows = deviation(&y, c.tau0(), Stat::Oadev, &TauSet::Octave).unwrap();
-    let (points, _) = Point::from_rows(&rows);
-    let lab = NoiseLab::new(Record {
-        y: &y,
-        tau0: c.tau0(),
-        segments: vec![(0, y.len() as u64)],
-        temp: temp.as_deref(),
-        timing: None,
-        points,
-        user_effects: vec![],
-    })
-    .unwrap();
+    let a = c.analyse();
+    let lab = NoiseLab::new(a.record(None)).unwrap();
     let c_cfg = c.clone();
     let cfg_truth = |c: &SimConfig, m: u64| c.avar(m as usize).sqrt();
     let start = lab.fit(&lab.default_specs()).unwrap();

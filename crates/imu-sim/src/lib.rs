@@ -514,6 +514,61 @@ impl SimConfig {
     }
 }
 
+/// The power-law background of a gyro like the MPU-6050 (deg/s): Q 2e-4 °, N 5e-3 °/s·√s
+/// (0.3 °/√h) when `white`, B 3e-3 °/s (11 °/h), K 1e-4 °/s/√s — the tests' and studies' control.
+pub fn gyro_background(white: bool) -> Vec<SimEffect> {
+    let mut v = vec![
+        SimEffect::Quantization { q: 2e-4 },
+        SimEffect::Flicker { b: 3e-3 },
+        SimEffect::RateRandomWalk { k: 1e-4 },
+    ];
+    if white {
+        v.push(SimEffect::White { n: 5e-3 });
+    }
+    v
+}
+
+/// A simulated record ready for the noise lab: the samples, the temperature column when the
+/// configuration has one, and the octave overlapping Allan points, as `imu-lab fit` computes them.
+#[derive(Debug, Clone)]
+pub struct Analysed {
+    pub tau0: f64,
+    pub y: Vec<f64>,
+    pub temp: Option<Vec<f64>>,
+    pub points: Vec<noise_model::Point>,
+}
+
+impl SimConfig {
+    /// Generate the record and its Allan points.
+    pub fn analyse(&self) -> Analysed {
+        let (y, temp) = self.generate_with_temp();
+        let rows = allan::deviation(&y, self.tau0(), allan::Stat::Oadev, &allan::TauSet::Octave)
+            .expect("a simulated record long enough for one octave");
+        let (points, _) = noise_model::Point::from_rows(&rows);
+        Analysed {
+            tau0: self.tau0(),
+            y,
+            temp,
+            points,
+        }
+    }
+}
+
+impl Analysed {
+    /// The lab's input (one uninterrupted segment), with the timestamps' analysis when given.
+    pub fn record(&self, timing: Option<noise_model::Timing>) -> noise_model::Record<'_> {
+        noise_model::Record {
+            y: &self.y,
+            tau0: self.tau0,
+            segments: vec![(0, self.y.len() as u64)],
+            temp: self.temp.as_deref(),
+            timing,
+            points: self.points.clone(),
+            user_effects: Vec::new(),
+        }
+    }
+}
+
 /// Write columns as CSV in the project's contract: a header row `t,<names…>` and one row per
 /// sample, t = i/rate [s], values in the channel's contract unit (gx gy gz in deg/s, ax ay az in
 /// m/s², mx my mz in µT). Values are written with Rust's shortest round-trip representation.

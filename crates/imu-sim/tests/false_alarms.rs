@@ -8,7 +8,7 @@
 //! docs/noise-model.md (`cargo test --release -p imu-sim --test false_alarms --target host-tuple
 //! -- --ignored`).
 use allan::{deviation, Stat, TauSet};
-use imu_sim::{SimConfig, SimEffect};
+use imu_sim::SimConfig;
 use noise_model::{assess_at, fit_model, Measurement, Point, TermSpec, DEFAULT_TERMS};
 
 /// (false alarms at level α, median χ²/dof) over `seeds` records of `n` samples at 1 kHz.
@@ -20,12 +20,7 @@ fn monte_carlo(n: usize, seeds: u64, alpha: f64, first_seed: u64) -> (usize, f64
             rate_hz: 1000.0,
             n_samples: n,
             seed: first_seed + seed,
-            effects: vec![
-                SimEffect::Quantization { q: 2e-4 },
-                SimEffect::White { n: 5e-3 },
-                SimEffect::Flicker { b: 3e-3 },
-                SimEffect::RateRandomWalk { k: 1e-4 },
-            ],
+            effects: imu_sim::gyro_background(true),
             lsb: None,
         };
         let y = c.generate();

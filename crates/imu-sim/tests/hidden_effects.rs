@@ -9,21 +9,9 @@
 //! "recovered" means physically.
 use allan::{deviation, Stat, TauSet};
 use imu_sim::{SimConfig, SimEffect};
-use noise_model::{walk, Effect, Model, NoiseLab, Point, Record, Stop, Timing, Walk};
+use noise_model::{walk, Effect, Model, NoiseLab, Stop, Timing, Walk};
 
-/// Power-law background of a gyro like the MPU-6050 (deg/s units): Q 2e-4 °, N 5e-3 °/s·√s
-/// (0.3 °/√h), B 3e-3 °/s (11 °/h), K 1e-4 °/s/√s.
-fn gyro(white: bool) -> Vec<SimEffect> {
-    let mut v = vec![
-        SimEffect::Quantization { q: 2e-4 },
-        SimEffect::Flicker { b: 3e-3 },
-        SimEffect::RateRandomWalk { k: 1e-4 },
-    ];
-    if white {
-        v.push(SimEffect::White { n: 5e-3 });
-    }
-    v
-}
+use imu_sim::gyro_background as gyro;
 
 fn cfg(rate: f64, secs: f64, seed: u64, effects: Vec<SimEffect>) -> SimConfig {
     SimConfig {
@@ -46,19 +34,8 @@ fn run_with(c: &SimConfig, timing: Option<Timing>) -> Run {
 
 /// The walk and the diagnosis of its last model.
 fn run_full(c: &SimConfig, timing: Option<Timing>) -> (Run, noise_model::Diagnosis) {
-    let (y, temp) = c.generate_with_temp();
-    let rows = deviation(&y, c.tau0(), Stat::Oadev, &TauSet::Octave).expect("oadev");
-    let (points, _) = Point::from_rows(&rows);
-    let lab = NoiseLab::new(Record {
-        y: &y,
-        tau0: c.tau0(),
-        segments: vec![(0, y.len() as u64)],
-        temp: temp.as_deref(),
-        timing,
-        points,
-        user_effects: vec![],
-    })
-    .expect("lab");
+    let a = c.analyse();
+    let lab = NoiseLab::new(a.record(timing)).expect("lab");
     let start = lab.fit(&lab.default_specs()).expect("fit");
     let w = walk(&lab, start, 5).expect("walk");
     let mut report = format!("seed {} effects {:?}\n", c.seed, c.effects);
@@ -88,6 +65,13 @@ fn run_full(c: &SimConfig, timing: Option<Timing>) -> (Run, noise_model::Diagnos
 
 fn run(c: &SimConfig) -> Run {
     run_with(c, None)
+}
+
+/// The gyro background (with its white noise) plus `extra`, `secs` at 100 Hz.
+fn hidden(extra: SimEffect, secs: f64, seed: u64) -> Run {
+    let mut e = gyro(true);
+    e.push(extra);
+    run(&cfg(100.0, secs, seed, e))
 }
 
 /// `est` within 4σ of `truth` and within `rel` of it.
@@ -165,9 +149,7 @@ fn controls_stay_silent() {
 #[test]
 fn a_bias_step_is_named_and_no_longer_read_as_random_walk() {
     for (seed, size, at) in [(1u64, 0.1, 1800.0), (2, 0.03, 1234.5)] {
-        let mut e = gyro(true);
-        e.push(SimEffect::BiasStep { at_s: at, size });
-        let r = run(&cfg(100.0, 3600.0, seed, e));
+        let r = hidden(SimEffect::BiasStep { at_s: at, size }, 3600.0, seed);
         named(&r, &[Effect::BiasStep], &[]);
         let m = r.walk.last();
         let (s, ss) = param(m, &Effect::BiasStep, 0);
@@ -187,14 +169,16 @@ fn a_bias_step_is_named_and_no_longer_read_as_random_walk() {
 #[test]
 fn a_temperature_driven_bias_is_named_in_place_of_the_ramp() {
     for seed in [3u64, 4] {
-        let mut e = gyro(true);
-        e.push(SimEffect::Temperature {
-            coef: 0.02,
-            start_c: 25.0,
-            rise_c: 15.0,
-            tau_s: 900.0,
-        });
-        let r = run(&cfg(100.0, 3600.0, seed, e));
+        let r = hidden(
+            SimEffect::Temperature {
+                coef: 0.02,
+                start_c: 25.0,
+                rise_c: 15.0,
+                tau_s: 900.0,
+            },
+            3600.0,
+            seed,
+        );
         named(&r, &[Effect::Temperature], &[Effect::RateRamp]);
         let (c, cs) = param(r.walk.last(), &Effect::Temperature, 0);
         check("coefficient", c, cs, 0.02, 0.1, &r.report);
@@ -204,12 +188,14 @@ fn a_temperature_driven_bias_is_named_in_place_of_the_ramp() {
 #[test]
 fn a_warm_up_without_a_temperature_column_is_named() {
     for seed in [5u64, 6] {
-        let mut e = gyro(true);
-        e.push(SimEffect::WarmUp {
-            amplitude: 0.2,
-            tau_s: 600.0,
-        });
-        let r = run(&cfg(100.0, 3600.0, seed, e));
+        let r = hidden(
+            SimEffect::WarmUp {
+                amplitude: 0.2,
+                tau_s: 600.0,
+            },
+            3600.0,
+            seed,
+        );
         let added: Vec<Effect> = r
             .walk
             .steps
@@ -229,12 +215,14 @@ fn a_warm_up_without_a_temperature_column_is_named() {
 fn spectral_lines_are_named_sinusoid_not_markov() {
     // a line just below Nyquist and a slow one: named from the periodogram, f pinned there
     for (seed, amp, f) in [(7u64, 0.01, 49.5), (8, 0.003, 0.1)] {
-        let mut e = gyro(true);
-        e.push(SimEffect::Sinusoid {
-            amplitude: amp,
-            freq_hz: f,
-        });
-        let r = run(&cfg(100.0, 3600.0, seed, e));
+        let r = hidden(
+            SimEffect::Sinusoid {
+                amplitude: amp,
+                freq_hz: f,
+            },
+            3600.0,
+            seed,
+        );
         named(&r, &[Effect::Sinusoid], &[]);
         let m = r.walk.last();
         let (fe, fs) = param(m, &Effect::Sinusoid, 1);
@@ -285,12 +273,14 @@ fn the_sensors_own_filters_are_named() {
 #[test]
 fn correlated_noise_is_named_markov() {
     for seed in [12u64, 13] {
-        let mut e = gyro(true);
-        e.push(SimEffect::Markov {
-            sigma: 0.01,
-            tau_c: 2.0,
-        });
-        let r = run(&cfg(100.0, 3600.0, seed, e));
+        let r = hidden(
+            SimEffect::Markov {
+                sigma: 0.01,
+                tau_c: 2.0,
+            },
+            3600.0,
+            seed,
+        );
         named(&r, &[Effect::Markov], &[]);
         let (tc, s) = param(r.walk.last(), &Effect::Markov, 1);
         check("τ_c", tc, s, 2.0, 0.4, &r.report);
@@ -446,19 +436,8 @@ max = 200
         bartlett: true,
     });
     let c = cfg(100.0, 3600.0, 21, e);
-    let y = c.generate();
-    let rows = deviation(&y, c.tau0(), Stat::Oadev, &TauSet::Octave).unwrap();
-    let (points, _) = Point::from_rows(&rows);
-    let lab = NoiseLab::new(Record {
-        y: &y,
-        tau0: c.tau0(),
-        segments: vec![(0, y.len() as u64)],
-        temp: None,
-        timing: None,
-        points,
-        user_effects: vec![],
-    })
-    .unwrap();
+    let a = c.analyse();
+    let lab = NoiseLab::new(a.record(None)).unwrap();
     let base: Vec<TermSpec> = [
         Effect::Quantization,
         Effect::White,

@@ -188,8 +188,13 @@ pub fn walk<L: Lab>(
 mod tests {
     use super::*;
 
-    /// A toy lab: the measurement needs effects 1 and 2; each present effect lowers χ²/dof.
-    struct Toy;
+    /// A toy lab: the measurement needs effects 1 and 2 and each present one lowers χ²/dof;
+    /// effect 3 is never admissible. With `verdict_passes` the goodness-of-fit verdict says
+    /// adequate whatever is missing (a test with no power against the missing effects).
+    struct Toy {
+        verdict_passes: bool,
+    }
+
     impl Lab for Toy {
         type Effect = u8;
         type Model = Vec<u8>;
@@ -200,11 +205,11 @@ mod tests {
                 chi2_dof: 1.0 + 10.0 * missing as f64,
                 rms_residual: missing as f64,
                 rms_unit: String::new(),
-                adequate: missing == 0,
+                adequate: self.verdict_passes || missing == 0,
                 params: m.len(),
             }
         }
-        fn candidates(&self, m: &Vec<u8>) -> Result<Vec<Candidate<u8, Vec<u8>>>, String> {
+        fn candidates(&self, m: &Vec<u8>) -> Result<Candidates<Self>, String> {
             Ok([3u8, 2, 1]
                 .into_iter()
                 .filter(|e| !m.contains(e))
@@ -232,57 +237,31 @@ mod tests {
 
     #[test]
     fn walks_to_adequate_taking_admissible_candidates_in_order() {
-        let w = walk(&Toy, vec![], 5).unwrap();
+        let lab = Toy {
+            verdict_passes: false,
+        };
+        let w = walk(&lab, vec![], 5).unwrap();
         assert_eq!(w.stop, Stop::Adequate);
         assert_eq!(w.steps.len(), 2);
         assert_eq!(w.steps[0].edit.add, vec![2]);
         assert!(w.steps[0].after.chi2_dof < w.steps[0].before.chi2_dof);
         assert_eq!(w.last(), &vec![2, 1]);
-        let w = walk(&Toy, vec![], 1).unwrap();
+        let w = walk(&lab, vec![], 1).unwrap();
         assert_eq!((w.stop, w.steps.len()), (Stop::StepLimit, 1));
-    }
-
-    /// A lab whose verdict passes but whose candidate is admissible: the walk takes it.
-    struct Improvable;
-    impl Lab for Improvable {
-        type Effect = u8;
-        type Model = Vec<u8>;
-        type Error = String;
-        fn summary(&self, m: &Vec<u8>) -> Summary {
-            Summary {
-                chi2_dof: 1.0,
-                rms_residual: 0.0,
-                rms_unit: String::new(),
-                adequate: true,
-                params: m.len(),
-            }
-        }
-        fn candidates(&self, m: &Vec<u8>) -> Result<Vec<Candidate<u8, Vec<u8>>>, String> {
-            Ok(if m.is_empty() {
-                vec![Candidate {
-                    edit: Edit {
-                        add: vec![7],
-                        remove: vec![],
-                    },
-                    model: vec![7],
-                    summary: self.summary(&vec![7]),
-                    delta: 30.0,
-                    extra_params: 1,
-                    p_value: 1e-7,
-                    admissible: true,
-                    reason: String::new(),
-                    reading: String::new(),
-                }]
-            } else {
-                Vec::new()
-            })
-        }
     }
 
     #[test]
     fn a_passing_verdict_with_an_admissible_candidate_is_improved() {
-        let w = walk(&Improvable, vec![], 5).unwrap();
-        assert_eq!((w.stop, w.steps.len()), (Stop::Adequate, 1));
+        let w = walk(
+            &Toy {
+                verdict_passes: true,
+            },
+            vec![],
+            5,
+        )
+        .unwrap();
+        assert_eq!((w.stop, w.steps.len()), (Stop::Adequate, 2));
         assert!(!w.steps[0].before.adequate && w.steps[0].after.adequate);
+        assert_eq!(w.last(), &vec![2, 1]);
     }
 }

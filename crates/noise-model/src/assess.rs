@@ -16,6 +16,7 @@
 //! The default α is [`ALPHA`]; a Monte Carlo test checks the false-alarm rate against it on
 //! short and day-long records. When only points are known (diagonal weighting), the EDFs are the
 //! points' own and T = Σz²/[`CORRELATION_INFLATION`], an allowance for the unmodelled correlation.
+use crate::cov::correlation_factor;
 use crate::fit::{Fit, Weighting};
 use allan::ci::{chi2_cdf, chi2_sf, norm_ppf as normal_quantile};
 use nalgebra::{DMatrix, DVector};
@@ -105,25 +106,13 @@ pub fn z_score(dev: f64, edf: f64, model_dev: f64) -> f64 {
 
 /// The generalised statistic zᵀ ρ⁻¹ z for z-scores with correlation matrix ρ (from a covariance).
 pub fn correlated_chi2(z: &[f64], cov: &DMatrix<f64>) -> f64 {
-    let n = z.len();
-    let s: Vec<f64> = (0..n).map(|j| cov[(j, j)].max(1e-300).sqrt()).collect();
-    let rho = DMatrix::from_fn(n, n, |a, b| {
-        if a == b {
-            1.0
-        } else {
-            (cov[(a, b)] / (s[a] * s[b])).clamp(-1.0, 1.0)
-        }
-    });
     let zv = DVector::from_column_slice(z);
-    for jitter in [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2] {
-        if let Some(ch) = (&rho + DMatrix::identity(n, n) * jitter).cholesky() {
-            return ch
-                .l()
-                .solve_lower_triangular(&zv)
-                .map_or(f64::NAN, |w| w.norm_squared());
-        }
+    match correlation_factor(cov).1 {
+        Some(l) => l
+            .solve_lower_triangular(&zv)
+            .map_or(f64::NAN, |w| w.norm_squared()),
+        None => zv.norm_squared(),
     }
-    z.iter().map(|v| v * v).sum()
 }
 
 /// −2 log-likelihood of the points under the fit's model: χ²_ν/ν marginals (scaled by the model
@@ -150,28 +139,13 @@ pub fn neg2_loglik(fit: &Fit) -> f64 {
         d += -2.0 * ln_f - 2.0 * nu.ln() + 2.0 * m.ln();
     }
     if fit.weighting == Weighting::Model {
-        let n = z.len();
-        let s: Vec<f64> = (0..n)
-            .map(|j| fit.point_cov[(j, j)].max(1e-300).sqrt())
-            .collect();
-        let rho = DMatrix::from_fn(n, n, |a, b| {
-            if a == b {
-                1.0
-            } else {
-                (fit.point_cov[(a, b)] / (s[a] * s[b])).clamp(-1.0, 1.0)
-            }
-        });
-        for jitter in [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2] {
-            if let Some(ch) = (&rho + DMatrix::identity(n, n) * jitter).cholesky() {
-                let l = ch.l();
-                let ln_det: f64 = (0..n).map(|j| 2.0 * l[(j, j)].ln()).sum();
-                let zv = DVector::from_column_slice(&z);
-                let quad = l
-                    .solve_lower_triangular(&zv)
-                    .map_or(0.0, |w| w.norm_squared());
-                d += quad - zv.norm_squared() + ln_det;
-                break;
-            }
+        if let Some(l) = correlation_factor(&fit.point_cov).1 {
+            let ln_det: f64 = (0..z.len()).map(|j| 2.0 * l[(j, j)].ln()).sum();
+            let zv = DVector::from_column_slice(&z);
+            let quad = l
+                .solve_lower_triangular(&zv)
+                .map_or(0.0, |w| w.norm_squared());
+            d += quad - zv.norm_squared() + ln_det;
         }
     }
     d
@@ -184,19 +158,7 @@ pub fn neg2_loglik(fit: &Fit) -> f64 {
 /// so the verdict is reproducible.
 pub fn max_z_quantile(cov: &DMatrix<f64>, q: f64) -> f64 {
     let n = cov.nrows();
-    let s: Vec<f64> = (0..n).map(|j| cov[(j, j)].max(1e-300).sqrt()).collect();
-    let rho = DMatrix::from_fn(n, n, |a, b| {
-        if a == b {
-            1.0
-        } else {
-            (cov[(a, b)] / (s[a] * s[b])).clamp(-1.0, 1.0)
-        }
-    });
-    let Some(l) = [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2]
-        .iter()
-        .find_map(|j| (&rho + DMatrix::identity(n, n) * *j).cholesky())
-        .map(|c| c.l())
-    else {
+    let Some(l) = correlation_factor(cov).1 else {
         return f64::INFINITY;
     };
     const DRAWS: usize = 20_000;

@@ -491,6 +491,26 @@ pub fn allan_covariance(
     CovCache::new(design.clone()).covariance(stochastic, det)
 }
 
+/// The correlation factor of a covariance matrix: its standard deviations and the lower Cholesky
+/// factor L of its correlation ρ = LLᵀ (a jitter of up to 1e-2 on the diagonal where ρ is not
+/// numerically positive definite; None when even that fails).
+pub fn correlation_factor(cov: &DMatrix<f64>) -> (Vec<f64>, Option<DMatrix<f64>>) {
+    let n = cov.nrows();
+    let s: Vec<f64> = (0..n).map(|j| cov[(j, j)].max(1e-300).sqrt()).collect();
+    let rho = DMatrix::from_fn(n, n, |a, b| {
+        if a == b {
+            1.0
+        } else {
+            (cov[(a, b)] / (s[a] * s[b])).clamp(-1.0, 1.0)
+        }
+    });
+    let l = [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2]
+        .iter()
+        .find_map(|j| (&rho + DMatrix::identity(n, n) * *j).cholesky())
+        .map(|c| c.l());
+    (s, l)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

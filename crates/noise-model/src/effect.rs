@@ -533,13 +533,7 @@ impl Effect {
                 let r = |k: usize| {
                     let x = k as f64 / l;
                     let v = if bartlett {
-                        if x <= 1.0 {
-                            2.0 / 3.0 - x * x + x * x * x / 2.0
-                        } else if x < 2.0 {
-                            (2.0 - x).powi(3) / 6.0
-                        } else {
-                            0.0
-                        }
+                        crate::structure::bspline3(x)
                     } else {
                         (1.0 - x).max(0.0)
                     };

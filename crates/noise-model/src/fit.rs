@@ -461,25 +461,13 @@ impl Whitener {
     }
 
     fn from_cov(c: &DMatrix<f64>) -> Whitener {
-        let n = c.nrows();
-        let s: Vec<f64> = (0..n).map(|j| c[(j, j)].max(1e-300).sqrt()).collect();
-        let rho = DMatrix::from_fn(n, n, |a, b| {
-            if a == b {
-                1.0
-            } else {
-                (c[(a, b)] / (s[a] * s[b])).clamp(-1.0, 1.0)
-            }
-        });
-        for jitter in [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2] {
-            let r = &rho + DMatrix::identity(n, n) * jitter;
-            if let Some(ch) = r.cholesky() {
-                return Whitener {
-                    inv_s: s.iter().map(|v| 1.0 / v).collect(),
-                    l: ch.l(),
-                };
-            }
+        match crate::cov::correlation_factor(c) {
+            (s, Some(l)) => Whitener {
+                inv_s: s.iter().map(|v| 1.0 / v).collect(),
+                l,
+            },
+            (_, None) => Whitener::diagonal(&(0..c.nrows()).map(|j| c[(j, j)]).collect::<Vec<_>>()),
         }
-        Whitener::diagonal(&(0..n).map(|j| c[(j, j)]).collect::<Vec<_>>())
     }
 
     fn apply(&self, v: &[f64]) -> DVector<f64> {
@@ -721,37 +709,19 @@ impl Problem<'_> {
         let gi = best.1;
         let tr = |v: f64| if spec.log { v.ln() } else { v };
         let inv = |v: f64| if spec.log { v.exp() } else { v };
-        let (mut a, mut b) = (
+        let (a, b) = (
             tr(grid[gi.saturating_sub(1)]),
             tr(grid[(gi + 1).min(grid.len() - 1)]),
         );
         let mut best_v = grid[gi];
         let mut best_c = best.0;
         if b > a {
-            let r = 0.618_033_988_749_895;
-            let mut x1 = b - r * (b - a);
-            let mut x2 = a + r * (b - a);
-            let mut f1 = eval(inv(x1), work).unwrap_or(f64::INFINITY);
-            let mut f2 = eval(inv(x2), work).unwrap_or(f64::INFINITY);
-            for _ in 0..GOLDEN_ITERATIONS {
-                if f1 < f2 {
-                    b = x2;
-                    x2 = x1;
-                    f2 = f1;
-                    x1 = b - r * (b - a);
-                    f1 = eval(inv(x1), work).unwrap_or(f64::INFINITY);
-                } else {
-                    a = x1;
-                    x1 = x2;
-                    f1 = f2;
-                    x2 = a + r * (b - a);
-                    f2 = eval(inv(x2), work).unwrap_or(f64::INFINITY);
-                }
-                if (b - a).abs() <= 1e-7 * (a.abs() + b.abs()).max(1e-300) {
-                    break;
-                }
-            }
-            let (xm, fm) = if f1 < f2 { (x1, f1) } else { (x2, f2) };
+            let (xm, fm) = golden_min(
+                |x| eval(inv(x), work).unwrap_or(f64::INFINITY),
+                a,
+                b,
+                GOLDEN_ITERATIONS,
+            );
             if fm < best_c {
                 best_c = fm;
                 best_v = inv(xm);
@@ -759,6 +729,44 @@ impl Problem<'_> {
         }
         eval(best_v, work)?;
         Ok(best_c)
+    }
+}
+
+/// Minimise `f` on [a, b] by golden-section search (at most `iterations` steps, or until the
+/// bracket is 1e-7 of its position): (argmin, min).
+pub fn golden_min(
+    mut f: impl FnMut(f64) -> f64,
+    mut a: f64,
+    mut b: f64,
+    iterations: usize,
+) -> (f64, f64) {
+    let r = 0.618_033_988_749_895;
+    let mut x1 = b - r * (b - a);
+    let mut x2 = a + r * (b - a);
+    let mut f1 = f(x1);
+    let mut f2 = f(x2);
+    for _ in 0..iterations {
+        if f1 < f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - r * (b - a);
+            f1 = f(x1);
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + r * (b - a);
+            f2 = f(x2);
+        }
+        if (b - a).abs() <= 1e-7 * (a.abs() + b.abs()).max(1e-300) {
+            break;
+        }
+    }
+    if f1 < f2 {
+        (x1, f1)
+    } else {
+        (x2, f2)
     }
 }
 

@@ -821,28 +821,9 @@ impl<'a> NoiseLab<'a> {
         let mut best = f64::INFINITY;
         for th in &thetas {
             // golden section on ln c over [c0/1e3, c0·1e3]
-            let (mut a, mut b) = ((c0 / 1e3).ln(), (c0 * 1e3).ln());
-            let r = 0.618_033_988_749_895;
-            let mut x1 = b - r * (b - a);
-            let mut x2 = a + r * (b - a);
-            let mut f1 = eval(th, x1.exp());
-            let mut f2 = eval(th, x2.exp());
-            for _ in 0..30 {
-                if f1 < f2 {
-                    b = x2;
-                    x2 = x1;
-                    f2 = f1;
-                    x1 = b - r * (b - a);
-                    f1 = eval(th, x1.exp());
-                } else {
-                    a = x1;
-                    x1 = x2;
-                    f1 = f2;
-                    x2 = a + r * (b - a);
-                    f2 = eval(th, x2.exp());
-                }
-            }
-            best = best.min(f1.min(f2));
+            let (_, fm) =
+                crate::fit::golden_min(|x| eval(th, x.exp()), (c0 / 1e3).ln(), (c0 * 1e3).ln(), 30);
+            best = best.min(fm);
         }
         base.max(cur.neg2ll_time - best)
     }

@@ -48,3 +48,20 @@ pub use lab::{Model, NoiseLab, Record, Timing};
 pub use model_lab::{walk, Candidate, Edit, Step, Stop, Summary, Walk};
 pub use practical::{recalibration, KalibrImu, Recalibration};
 pub use psd::{find_line, line_near, welch, Line, LineTest, Psd};
+
+/// Deterministic approximately Gaussian noise for the unit tests: the sum of twelve uniforms from
+/// a 64-bit LCG, minus 6 (unit variance).
+#[cfg(test)]
+pub(crate) fn test_noise(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed;
+    move || {
+        let mut u = 0.0;
+        for _ in 0..12 {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            u += (s >> 11) as f64 / (1u64 << 53) as f64;
+        }
+        u - 6.0
+    }
+}

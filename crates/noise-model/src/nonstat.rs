@@ -580,19 +580,7 @@ mod tests {
     use super::*;
     use crate::structure::Structure;
 
-    fn lcg(seed: u64) -> impl FnMut() -> f64 {
-        let mut s = seed;
-        move || {
-            let mut u = 0.0;
-            for _ in 0..12 {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                u += (s >> 11) as f64 / (1u64 << 53) as f64;
-            }
-            u - 6.0
-        }
-    }
+    use crate::test_noise as lcg;
 
     #[test]
     fn whitening_inverts_the_covariance() {

@@ -149,6 +149,23 @@ pub fn default_segment(n: usize) -> usize {
     s
 }
 
+/// Log-log slope of a periodogram between two groups of bins, from the medians of ln P and ln f
+/// on each side (robust against a line between them and against the steep rise near DC).
+fn side_slope(p: &[f64], left: &[usize], right: &[usize]) -> f64 {
+    let med = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let lnp = |s: &[usize]| med(s.iter().map(|&i| p[i].max(1e-300).ln()).collect());
+    let lnf = |s: &[usize]| med(s.iter().map(|&i| (i as f64).ln()).collect());
+    let (fl, fr) = (lnf(left), lnf(right));
+    if fr > fl {
+        (lnp(right) - lnp(left)) / (fr - fl)
+    } else {
+        0.0
+    }
+}
+
 /// The strongest significant line of the PSD, if any (see [`find_lines`]).
 pub fn find_line(psd: &Psd) -> Option<Line> {
     find_lines(psd).into_iter().next()
@@ -186,15 +203,7 @@ pub fn find_lines(psd: &Psd) -> Vec<Line> {
         // against the steep flicker/random-walk rise near DC).
         let lnf = |i: usize| (i as f64).ln();
         let lnp = |i: usize| p[i].max(1e-300).ln();
-        let (pl, pr) = (
-            med(&mut left.iter().map(|&i| lnp(i)).collect()),
-            med(&mut right.iter().map(|&i| lnp(i)).collect()),
-        );
-        let (fl, fr) = (
-            med(&mut left.iter().map(|&i| lnf(i)).collect()),
-            med(&mut right.iter().map(|&i| lnf(i)).collect()),
-        );
-        let slope = if fr > fl { (pr - pl) / (fr - fl) } else { 0.0 };
+        let slope = side_slope(p, &left, &right);
         let mut detr: Vec<f64> = left
             .iter()
             .chain(&right)
@@ -299,18 +308,9 @@ mod tests {
     #[test]
     fn line_found_in_a_noisy_sine() {
         // deterministic pseudo-noise (LCG) plus a sine of amplitude 0.2 at 7.3 Hz, fs = 100 Hz
-        let mut s: u64 = 12345;
+        let mut noise = crate::test_noise(12345);
         let y: Vec<f64> = (0..65536)
-            .map(|i| {
-                let mut u = 0.0;
-                for _ in 0..12 {
-                    s = s
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    u += (s >> 11) as f64 / (1u64 << 53) as f64;
-                }
-                (u - 6.0) + 0.2 * (2.0 * std::f64::consts::PI * 7.3 * i as f64 / 100.0).sin()
-            })
+            .map(|i| noise() + 0.2 * (2.0 * std::f64::consts::PI * 7.3 * i as f64 / 100.0).sin())
             .collect();
         let psd = welch(&y, 100.0, default_segment(y.len())).unwrap();
         let line = find_line(&psd).expect("line");
@@ -379,15 +379,7 @@ pub fn line_near(y: &[f64], fs: f64, f: f64, rel: f64) -> Option<LineTest> {
     let lnf = |i: usize| (i as f64).ln();
     let lnp = |i: usize| p[i].max(1e-300).ln();
     let slope = if left.len() >= 3 && right.len() >= 3 {
-        let (pl, pr) = (
-            med(&mut left.iter().map(|&i| lnp(i)).collect()),
-            med(&mut right.iter().map(|&i| lnp(i)).collect()),
-        );
-        let (fl, fr) = (
-            med(&mut left.iter().map(|&i| lnf(i)).collect()),
-            med(&mut right.iter().map(|&i| lnf(i)).collect()),
-        );
-        (pr - pl) / (fr - fl)
+        side_slope(&p, &left, &right)
     } else {
         0.0
     };

@@ -87,6 +87,19 @@ impl Structure {
     }
 }
 
+/// The cubic B-spline on [−2, 2] (unit area): the autocorrelation of a unit-area triangle of
+/// half-width 1, i.e. of two boxcars in cascade.
+pub fn bspline3(x: f64) -> f64 {
+    let x = x.abs();
+    if x <= 1.0 {
+        2.0 / 3.0 - x * x + x * x * x / 2.0
+    } else if x < 2.0 {
+        (2.0 - x).powi(3) / 6.0
+    } else {
+        0.0
+    }
+}
+
 /// V(k) of a unit-variance AR(1), written with `expm1` so that φ near 1 keeps its digits.
 fn ar1_v(phi: f64, k: f64) -> f64 {
     if !(phi > 0.0) {

@@ -600,16 +600,7 @@ impl Expr {
                         }
                     }
                     Func::Tri => (1.0 - a.abs()).max(0.0),
-                    Func::Bspline3 => {
-                        let x = a.abs();
-                        if x <= 1.0 {
-                            2.0 / 3.0 - x * x + x * x * x / 2.0
-                        } else if x < 2.0 {
-                            (2.0 - x).powi(3) / 6.0
-                        } else {
-                            0.0
-                        }
-                    }
+                    Func::Bspline3 => crate::structure::bspline3(a),
                 }
             }
         }
