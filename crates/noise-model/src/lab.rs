@@ -284,6 +284,37 @@ impl<'a> NoiseLab<'a> {
         })
     }
 
+    /// The record with the model's time-domain signals removed (its bias steps, the temperature
+    /// coefficient times the temperature column, or the warm-up), when it has any: the data whose
+    /// Allan curve the noise terms describe. The ramp stays (its sign is not estimated).
+    pub fn compensated(&self, m: &Model) -> Option<Vec<f64>> {
+        let tau0 = self.record.tau0;
+        let mut y = self.record.y.to_vec();
+        let mut any = false;
+        for t in &m.fit.terms {
+            if !t.known || t.effect == Effect::Resolution {
+                continue;
+            }
+            let a = t.amplitude();
+            // the nominal sample index of every stored sample
+            let mut k = 0usize;
+            for &(start, len) in &self.record.segments {
+                for i in 0..len {
+                    let n = (start + i) as f64;
+                    y[k] -= match (&t.effect, self.record.temp) {
+                        (Effect::BiasStep, _) if n * tau0 >= t.theta[0] - 0.5 * tau0 => a,
+                        (Effect::Temperature, Some(temp)) if t.theta.is_empty() => a * temp[k],
+                        (Effect::Temperature, _) => a * (-n * tau0 / t.theta[0]).exp(),
+                        _ => 0.0,
+                    };
+                    k += 1;
+                }
+            }
+            any = true;
+        }
+        any.then_some(y)
+    }
+
     /// The time-domain signal of a term, if it has one.
     fn signal_of(&self, s: &TermSpec) -> Option<Signal> {
         let tau0 = self.record.tau0;

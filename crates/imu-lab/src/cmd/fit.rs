@@ -108,6 +108,8 @@ fn parse_effects(list: &[String], flag: &str, user: &[Effect]) -> Result<Vec<Eff
 pub struct Stage {
     pub model: Model,
     pub diagnosis: Diagnosis,
+    /// (τ, σ) of the record with the model's time-domain signals removed (empty without any).
+    pub compensated: Vec<(f64, f64)>,
 }
 
 fn names(effects: &[Effect]) -> String {
@@ -170,6 +172,12 @@ struct JsonStep {
 }
 
 #[derive(Serialize)]
+struct JsonTau {
+    tau_s: f64,
+    dev: f64,
+}
+
+#[derive(Serialize)]
 struct JsonRecal {
     tolerance: f64,
     period_s: Option<f64>,
@@ -212,6 +220,8 @@ struct JsonOut<'a> {
     diagnosis: JsonDiag,
     adev: Vec<JsonPoint>,
     steps: Vec<JsonStep>,
+    /// The Allan deviation of the record with the final model's time-domain signals removed.
+    adev_compensated: Vec<JsonTau>,
     stop: Option<String>,
     timing: Option<JsonTiming>,
     resolution_lsb: Option<f64>,
@@ -426,9 +436,20 @@ pub fn run(args: Args) -> Result<()> {
         .into_iter()
         .map(|m| {
             let d = diagnose(&lab, &m).map_err(|e| anyhow!("{e}"))?;
+            let compensated = match lab.compensated(&m) {
+                Some(yc) => {
+                    let segs: Vec<&[f64]> = rec.segments.iter().map(|r| &yc[r.clone()]).collect();
+                    deviation_segments(&segs, tau0, Stat::Oadev, &TauSet::Octave)?
+                        .iter()
+                        .map(|r| (r.tau, r.dev))
+                        .collect()
+                }
+                None => Vec::new(),
+            };
             Ok(Stage {
                 model: m,
                 diagnosis: d,
+                compensated,
             })
         })
         .collect::<Result<_>>()?;
@@ -514,6 +535,11 @@ pub fn run(args: Args) -> Result<()> {
                 })
                 .collect(),
             steps: steps.iter().map(json_step).collect(),
+            adev_compensated: last
+                .compensated
+                .iter()
+                .map(|&(tau_s, dev)| JsonTau { tau_s, dev })
+                .collect(),
             stop: stop.map(|s| s.to_string()),
             timing: timing.as_ref().map(|t| JsonTiming {
                 median_dt_s: t.median_dt_s,
@@ -689,6 +715,7 @@ fn write_plot(
             &last.model.fit,
             &last.model.assessment,
             last.diagnosis.adequate,
+            &last.compensated,
             title,
             unit,
             0.0,
@@ -700,6 +727,7 @@ fn write_plot(
                 &first.model.fit,
                 &first.model.assessment,
                 first.diagnosis.adequate,
+                &first.compensated,
                 &format!("before: {}", names(&first.model.fit.effects())),
                 unit,
                 0.0,
@@ -708,6 +736,7 @@ fn write_plot(
                 &last.model.fit,
                 &last.model.assessment,
                 last.diagnosis.adequate,
+                &last.compensated,
                 &format!(
                     "after: {}",
                     steps
@@ -751,6 +780,7 @@ fn write_report(
                 &st.model.fit,
                 &st.model.assessment,
                 st.diagnosis.adequate,
+                &st.compensated,
                 &names(&st.model.fit.effects()),
                 unit,
                 0.0,
@@ -762,6 +792,7 @@ fn write_report(
                     &prev.model.fit,
                     &prev.model.assessment,
                     prev.diagnosis.adequate,
+                    &prev.compensated,
                     "before",
                     unit,
                     0.0,
@@ -770,6 +801,7 @@ fn write_report(
                     &st.model.fit,
                     &st.model.assessment,
                     st.diagnosis.adequate,
+                    &st.compensated,
                     &format!("after: {}", steps[i - 1].edit),
                     unit,
                     plot::W,

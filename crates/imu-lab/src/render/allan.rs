@@ -48,11 +48,14 @@ fn tick_label(d: i32) -> String {
 
 /// One figure as an SVG fragment (a nested `<svg>` placed at `x0`), with its title.
 /// `adequate` is the lab's whole verdict (the Allan test, the time-domain checks and the
-/// candidates), printed under the legend.
+/// candidates), printed under the legend. `compensated` (τ, σ) is drawn as open diamonds: the
+/// Allan curve of the record with the model's time-domain signals (steps, temperature, warm-up)
+/// removed.
 pub fn figure(
     fit: &Fit,
     a: &Assessment,
     adequate: bool,
+    compensated: &[(f64, f64)],
     title: &str,
     unit: &str,
     x0: f64,
@@ -210,6 +213,21 @@ pub fn figure(
             x + 3.0,
             ylo.min(MT + TOP_H)
         );
+    }
+    for &(t, d) in compensated {
+        let (x, y) = (px(t), py(d));
+        let _ = write!(
+            s,
+            r##"<path d="M{:.1},{y:.1} L{x:.1},{:.1} L{:.1},{y:.1} L{x:.1},{:.1} Z" fill="none" stroke="#2060c0" stroke-width="1.3"/>
+"##,
+            x - 4.0,
+            y - 4.0,
+            x + 4.0,
+            y + 4.0
+        );
+    }
+    if !compensated.is_empty() {
+        legend.insert(0, ("compensated record".into(), "#2060c0".into(), false));
     }
     legend.insert(0, ("measured ± 68.3 %".into(), "#333".into(), false));
     for (i, (name, col, dashed)) in legend.iter().enumerate() {
