@@ -204,3 +204,62 @@ fn a_user_effect_file_is_fitted_and_reported_by_its_name() {
         "{err}"
     );
 }
+
+#[test]
+fn the_temperature_coefficient_is_the_calibration_labs() {
+    // a gyro whose bias follows a warming temperature (0.02 °/s/°C over 15 °C): the noise lab
+    // names `temperature` and its coefficient is the one `calibrate gyro` fits on the same file
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("warm.csv");
+    let f = f.to_str().unwrap();
+    run_ok([
+        "simulate",
+        "--rate",
+        "100",
+        "--samples",
+        "180000",
+        "--seed",
+        "9",
+        "--columns",
+        "gx,gy,gz",
+        "--quantization",
+        "2e-4",
+        "--white",
+        "5e-3",
+        "--flicker",
+        "3e-3",
+        "--rrw",
+        "1e-4",
+        "--temperature",
+        "0.02,25,15,900",
+        "-o",
+        f,
+    ]);
+    let out = run_ok(["fit", f, "--column", "gz", "--auto", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let t = v["terms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["effect"] == "temperature")
+        .expect("temperature named");
+    let (c, s) = (
+        t["params"]["coefficient"].as_f64().unwrap(),
+        t["sigma"]["coefficient"].as_f64().unwrap(),
+    );
+    assert!((c - 0.02).abs() < 4.0 * s, "noise lab: {c} ± {s}");
+    let out = run_ok([
+        "calibrate",
+        "gyro",
+        f,
+        "--model",
+        "bias,temperature",
+        "--json",
+    ]);
+    let cal: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let k = cal["params"]["temp_coeff"][2].as_f64().unwrap();
+    assert!(
+        (k - c).abs() < 3.0 * s,
+        "calibration lab {k} vs noise lab {c} ± {s}"
+    );
+}
