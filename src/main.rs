@@ -6,7 +6,7 @@
 //! * `imu_task`     — MPU-6050 FIFO bursts every 10 ms, right after every second magnetometer
 //!   tick, fault handling;
 //! * `mag_task`     — QMC5883L at 200 Hz, following the sensor's own phase, fault handling;
-//! * `process_task` — the pipeline and host requests (`pico_imu::device::Device`), calibration
+//! * `process_task` — the pipeline and host requests (`pico_imu_core::device::Device`), calibration
 //!   storage (the only flash writer);
 //! * `tick_task`    — the 100 ms housekeeping tick (status, tables);
 //! * `usb_task`, `usb_tx_task`, `usb_rx_task` — embassy-usb device, frames out, frames in.
@@ -42,9 +42,9 @@ use embassy_usb::UsbDevice;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::Address;
 use imu_proto::{DecodeError, FrameReader, HostFrame};
-use pico_imu::device::{Device, SensorMsg, MAG_PERIOD_US};
-use pico_imu::outbox::FrameSink;
-use pico_imu::sensors::{self, ImuService, MagService, Slots};
+use pico_imu_core::device::{Device, SensorMsg, MAG_PERIOD_US};
+use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::sensors::{self, ImuService, MagService, Slots};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -331,7 +331,7 @@ async fn wait_running(
     true
 }
 
-/// MPU-6050: FIFO bursts every 10 ms (`pico_imu::sensors::ImuService`), after every second
+/// MPU-6050: FIFO bursts every 10 ms (`pico_imu_core::sensors::ImuService`), after every second
 /// magnetometer tick; a lost sensor is retried with bus recovery and re-initialised.
 #[embassy_executor::task]
 async fn imu_task(
@@ -381,7 +381,7 @@ async fn imu_task(
     }
 }
 
-/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`); every second tick is signalled to
+/// QMC5883L at 200 Hz (`pico_imu_core::sensors::MagService`); every second tick is signalled to
 /// `imu_task`, which places its bursts between them.
 #[embassy_executor::task]
 async fn mag_task(

@@ -1,4 +1,4 @@
-//! The firmware's task logic (`pico_imu::sensors` + `pico_imu::device`) against the
+//! The firmware's task logic (`pico_imu_core::sensors` + `pico_imu_core::device`) against the
 //! register-level MPU-6050 and QMC5883L models on the simulated bus: the very code the embassy
 //! tasks run, ticked on a simulated clock. The Allan tables must equal, bit for bit, a host
 //! `allan::stream::DeviceEngine` fed with the samples the models served, corrected by
@@ -14,9 +14,9 @@ use imu_proto::{
     CalFault, CalSource, Channel, DeviceMsg, Event, FrameReader, GapCause, HostFrame, Reply,
     Request, SampleBatch, Sensor, SensorState, StreamMode, MAX_FRAME,
 };
-use pico_imu::device::{Device, SensorMsg, TABLE_FRAME_ROOM};
-use pico_imu::outbox::FrameSink;
-use pico_imu::sensors::{self, ImuService, MagService, Slots};
+use pico_imu_core::device::{Device, SensorMsg, TABLE_FRAME_ROOM};
+use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::sensors::{self, ImuService, MagService, Slots};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, QmcModel, QmcVariant, SimBus};
 
@@ -276,7 +276,7 @@ fn an_unpaired_imu_sample_waits_for_the_next_burst_and_precedes_a_split() {
     let mut state = 7u32;
     let mut served: Vec<i16> = Vec::new();
     let mut burst = |n: usize, t_us: u64, served: &mut Vec<i16>| {
-        let mut v = imu_proto::Vec::<RawSample, { pico_imu::device::BURST_MAX }>::new();
+        let mut v = imu_proto::Vec::<RawSample, { pico_imu_core::device::BURST_MAX }>::new();
         for _ in 0..n {
             let g = (lcg(&mut state, 300.0)) as i16;
             served.push(g);
@@ -842,7 +842,7 @@ fn a_late_magnetometer_sample_is_a_gap_even_without_the_overwrite_flag() {
 #[test]
 fn the_allan_state_fits_its_32_kib_budget() {
     use allan::stream::MagEngine;
-    let bytes = pico_imu::device::ALLAN_STATE_BYTES;
+    let bytes = pico_imu_core::device::ALLAN_STATE_BYTES;
     // The engines and the IMU sample that waits for its pair (seven i32 inputs and a tag).
     let pending = core::mem::size_of::<Option<([i32; 3], [i32; 3], i32)>>();
     let parts =
@@ -861,7 +861,7 @@ fn imu_stamps_always_increase_even_when_a_burst_is_read_early() {
     let mut dev = Device::new(sensors::scales(), "test");
     let mut sink = Sink::roomy();
     let burst = |n: usize| {
-        let mut v = imu_proto::Vec::<RawSample, { pico_imu::device::BURST_MAX }>::new();
+        let mut v = imu_proto::Vec::<RawSample, { pico_imu_core::device::BURST_MAX }>::new();
         for k in 0..n {
             let _ = v.push(RawSample {
                 accel: [k as i16, 0, 8192],

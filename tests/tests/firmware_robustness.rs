@@ -3,10 +3,10 @@
 //! step by step.
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{Event, FrameReader, HostFrame, Sensor, SensorState, MAX_FRAME};
-use pico_imu::device::{Device, SensorMsg};
-use pico_imu::health::{Health, ERRORS_TO_LOSE, RETRY_FIRST_MS, RETRY_MAX_MS};
-use pico_imu::outbox::FrameSink;
-use pico_imu::sensors;
+use pico_imu_core::device::{Device, SensorMsg};
+use pico_imu_core::health::{Health, ERRORS_TO_LOSE, RETRY_FIRST_MS, RETRY_MAX_MS};
+use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::sensors;
 use proptest::prelude::*;
 
 struct CountSink {
@@ -42,7 +42,7 @@ fn sensor_msg() -> impl Strategy<Value = SensorMsg> {
     prop_oneof![
         (
             any::<u64>(),
-            proptest::collection::vec(raw(), 0..=pico_imu::device::BURST_MAX)
+            proptest::collection::vec(raw(), 0..=pico_imu_core::device::BURST_MAX)
         )
             .prop_map(|(t_us, v)| {
                 SensorMsg::Imu {
