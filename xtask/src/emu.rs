@@ -406,6 +406,25 @@ pub fn e2e(args: &[String]) -> Result<()> {
             ));
         }
     }
+    // Ground truth of the models: slots of each part's sample grid that were never served.
+    let truth = |slots: Vec<(u64, f64)>| -> (u64, f64) {
+        let lost: u64 = slots.windows(2).map(|w| w[1].0 - w[0].0 - 1).sum();
+        (lost, slots.last().map(|s| s.1 * 1e-9).unwrap_or(0.0))
+    };
+    for (name, (lost, until)) in [
+        (
+            "MPU-6050",
+            truth(imu.iter().map(|s| (s.slot, s.t_ns)).collect()),
+        ),
+        (
+            "QMC5883L",
+            truth(mag.iter().map(|s| (s.slot, s.t_ns)).collect()),
+        ),
+    ] {
+        report.push_str(&format!(
+            "\n{name}: {lost} slots of its sample grid never served (model ground truth, up to the last served sample, sampled at {until:.3} s)\n"
+        ));
+    }
     for (spec, at, w) in faults.iter().filter(|f| f.1 + f.2 < measured_s) {
         let after = |t_ns: f64| t_ns * 1e-9 > at + 0.001;
         let resumed = if spec.contains(":qmc") {

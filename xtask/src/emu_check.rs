@@ -10,11 +10,14 @@ use anyhow::{bail, Context, Result};
 use imu_cal::device::Calibration;
 use imu_proto::{AllanTable, Channel};
 
-/// One served MPU-6050 sample set: index k (consecutive while nothing is lost), raw counts,
-/// emulated time it was served.
+/// One served MPU-6050 sample set: index k (consecutive while nothing is lost), its slot on the
+/// part's sample grid (the ground truth of losses, see sim's `SlotGrid`), the instant the part
+/// sampled it, raw counts, emulated time it was served.
 #[derive(Clone, Copy, Debug)]
 pub struct ImuRaw {
     pub k: u64,
+    pub slot: u64,
+    pub t_ns: f64,
     pub accel: [i16; 3],
     pub temp: i16,
     pub gyro: [i16; 3],
@@ -25,15 +28,35 @@ pub struct ImuRaw {
 #[derive(Clone, Copy, Debug)]
 pub struct MagRaw {
     pub k: u64,
+    pub slot: u64,
+    pub t_ns: f64,
     pub mag: [i16; 3],
     pub served_ns: f64,
 }
 
-fn parse_rows(path: &Path, cols: usize) -> Result<Vec<Vec<f64>>> {
+/// The rows of a served-samples CSV as the values of the named columns, in that order.
+fn parse_rows(path: &Path, want: &[&str]) -> Result<Vec<Vec<f64>>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut lines = text.lines().enumerate();
+    let header: Vec<&str> = lines
+        .next()
+        .map(|(_, l)| l.split(',').map(str::trim).collect())
+        .unwrap_or_default();
+    let cols: Vec<usize> = want
+        .iter()
+        .map(|w| {
+            header.iter().position(|h| h == w).with_context(|| {
+                format!(
+                    "{}: no column `{w}` in the header ({})",
+                    path.display(),
+                    header.join(",")
+                )
+            })
+        })
+        .collect::<Result<_>>()?;
     let mut rows = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
+    for (i, line) in lines {
         if line.trim().is_empty() {
             continue;
         }
@@ -42,38 +65,57 @@ fn parse_rows(path: &Path, cols: usize) -> Result<Vec<Vec<f64>>> {
             .map(|s| s.trim().parse::<f64>())
             .collect::<Result<_, _>>()
             .with_context(|| format!("{}:{}: not a number in '{line}'", path.display(), i + 1))?;
-        if f.len() != cols {
+        if f.len() != header.len() {
             bail!(
-                "{}:{}: {} fields, expected {cols}",
+                "{}:{}: {} fields, the header has {}",
                 path.display(),
                 i + 1,
-                f.len()
+                f.len(),
+                header.len()
             );
         }
-        rows.push(f);
+        rows.push(cols.iter().map(|&c| f[c]).collect());
     }
     Ok(rows)
 }
 
 pub fn read_imu(path: &Path) -> Result<Vec<ImuRaw>> {
-    Ok(parse_rows(path, 10)?
+    let cols = [
+        "k",
+        "slot",
+        "t_ns",
+        "ax",
+        "ay",
+        "az",
+        "temp",
+        "gx",
+        "gy",
+        "gz",
+        "served_ns",
+    ];
+    Ok(parse_rows(path, &cols)?
         .into_iter()
         .map(|r| ImuRaw {
             k: r[0] as u64,
-            accel: [r[2] as i16, r[3] as i16, r[4] as i16],
-            temp: r[5] as i16,
-            gyro: [r[6] as i16, r[7] as i16, r[8] as i16],
-            served_ns: r[9],
+            slot: r[1] as u64,
+            t_ns: r[2],
+            accel: [r[3] as i16, r[4] as i16, r[5] as i16],
+            temp: r[6] as i16,
+            gyro: [r[7] as i16, r[8] as i16, r[9] as i16],
+            served_ns: r[10],
         })
         .collect())
 }
 
 pub fn read_mag(path: &Path) -> Result<Vec<MagRaw>> {
-    Ok(parse_rows(path, 7)?
+    let cols = ["k", "slot", "t_ns", "mx", "my", "mz", "served_ns"];
+    Ok(parse_rows(path, &cols)?
         .into_iter()
         .map(|r| MagRaw {
             k: r[0] as u64,
-            mag: [r[2] as i16, r[3] as i16, r[4] as i16],
+            slot: r[1] as u64,
+            t_ns: r[2],
+            mag: [r[3] as i16, r[4] as i16, r[5] as i16],
             served_ns: r[6],
         })
         .collect())
