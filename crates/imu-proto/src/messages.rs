@@ -1,7 +1,7 @@
 //! The messages: what the host asks ([`HostFrame`]) and what the device sends ([`DeviceMsg`]).
 use serde::{Deserialize, Serialize};
 
-use crate::{Channel, Scales, String, Vec};
+use crate::{Channel, Scales, Sensor, String, Vec};
 
 /// Octave levels in a device Allan table (m = 1, 2, 4, … 2^23).
 pub const MAX_LEVELS: usize = 24;
@@ -16,21 +16,26 @@ pub const MAX_CAL_BLOB: usize = 256;
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ImuSample {
-    /// Sample number since boot (or since the last Allan reset); a jump is a gap.
+    /// The sample's slot on the sensor's sample grid since boot: consecutive samples differ by
+    /// one, and a jump of `n + 1` means `n` samples were lost (each loss also comes as an
+    /// [`Event::Gap`] with its cause).
     pub seq: u32,
-    /// Device time of the sample, µs since boot (see docs/firmware.md for how it is assigned).
+    /// When the sensor took the sample, µs since boot, on the sensor's own sample clock
+    /// (docs/firmware.md, "Timestamps").
     pub t_us: u64,
     pub accel: [i32; 3],
     pub gyro: [i32; 3],
-    pub temp: i32,
+    /// Die temperature; `None` when the sample carried none (never a made-up number).
+    pub temp: Option<i32>,
 }
 
 /// One magnetometer sample.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct MagSample {
+    /// Slot on the magnetometer's sample grid (as [`ImuSample::seq`]).
     pub seq: u32,
-    /// Device time of the read, µs since boot.
+    /// When the sensor took the sample, µs since boot (as [`ImuSample::t_us`]).
     pub t_us: u64,
     pub mag: [i32; 3],
 }
@@ -51,9 +56,10 @@ pub struct SampleBatch {
     pub mag: Vec<MagSample, MAX_BATCH_MAG>,
 }
 
-/// One octave level of a device Allan table: the exact integer sums of the streaming engine and
-/// the deviation derived from them (seed eq. 9 with overlapping clusters; IEEE Std 1139-2008).
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+/// One octave level of a device Allan table: the streaming engine's exact integer sums, from
+/// which the host derives the deviation and its bounds (`allan::stream::LevelSums`; overlapping
+/// ADEV `σ² = Σ D2² / (2 n m²)`, NIST SP 1065 eq. 11; bounds from `allan::ci`).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AllanLevel {
     /// Cluster size (samples); τ = m·τ0.
@@ -68,24 +74,24 @@ pub struct AllanLevel {
     pub n3: u64,
     /// Σ (θ[k+3m] − 3θ[k+2m] + 3θ[k+m] − θ[k])².
     pub sum3: u128,
-    /// τ, s.
-    pub tau_s: f32,
-    /// Overlapping Allan deviation in the channel's contract unit.
-    pub dev: f32,
-    /// Equivalent degrees of freedom behind the bounds (Greenhall & Riley 2003).
-    pub edf: f32,
-    /// 68.3 % lower and upper bounds of `dev`, same unit.
-    pub lo: f32,
-    pub hi: f32,
 }
 
-/// The Allan table of one channel.
+/// The Allan table of one channel, as it stood at its round's snapshot.
+///
+/// Every table of one round (a `GetTables` request or a periodic round) was taken at the same
+/// instant: all ten carry the same `snapshot` and `t_us`. A host combining tables checks that
+/// they do.
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct AllanTable {
     pub channel: Channel,
-    /// Sample period, µs.
-    pub tau0_us: u32,
+    /// The round this table belongs to (counts up from 1 since boot).
+    pub snapshot: u32,
+    /// Device time of the round's snapshot, µs since boot.
+    pub t_us: u64,
+    /// The sample period behind τ = m·τ0: the sensor's own period as the device measured it
+    /// (its sample clock), ns.
+    pub tau0_ns: u32,
     /// Contract unit per LSB of the integers the engine ate.
     pub scale: f32,
     /// Samples pushed since the last reset.
@@ -117,14 +123,9 @@ pub enum SensorState {
     Ok,
     /// Not answering; retrying with bus recovery.
     Missing,
-}
-
-/// Which sensor an event is about.
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Sensor {
-    Imu,
-    Mag,
+    /// Answering on the bus but producing no data (data-ready never set, FIFO not growing);
+    /// re-initialised with back-off.
+    Stalled,
 }
 
 /// Where the corrections in use came from.
@@ -135,20 +136,69 @@ pub enum CalSource {
     Identity,
     /// Loaded from flash at boot or written there on request.
     Flash,
-    /// Set by the host, not (yet) persisted.
+    /// Set by the host, not persisted (lost at reset).
     Host,
 }
 
-/// Why the stored calibration was not used.
+/// Which sensor's correction a [`CalProblem`] is about.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalSensor {
+    Accel,
+    Gyro,
+    Mag,
+}
+
+/// Which plausibility check a correction failed (`imu_cal::device::plausible` has the bounds).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalCheck {
+    /// A scale factor (singular value of the correction matrix) outside [0.5, 2].
+    Scale,
+    /// An axis turned by more than 10° (or flipped).
+    Misalignment,
+    /// The soft-iron matrix's condition number is over 3.
+    Condition,
+    /// The matrix is singular (a zero scale).
+    Singular,
+    /// The gyro bias is over a quarter of full scale.
+    Bias,
+    /// The hard iron (or accelerometer offset) is beyond the sensor's range.
+    Offset,
+    /// A non-positive or non-finite LSB factor (calibration file).
+    LsbFactor,
+}
+
+/// Why a calibration was refused, by the device or by the host (the same checks).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalProblem {
+    /// Not a calibration blob: length, magic, CRC or payload.
+    Corrupt,
+    /// Another blob format version.
+    Version(u16),
+    /// A coefficient outside the fixed-point range.
+    OutOfRange,
+    /// Physically implausible.
+    Implausible {
+        sensor: CalSensor,
+        check: CalCheck,
+        axis: u8,
+    },
+    /// Fitted for other full-scale ranges than the firmware uses.
+    OtherRanges,
+    /// Fitted for another sensor part than the one found.
+    OtherPart,
+}
+
+/// Why the stored calibration is not in use.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum CalFault {
-    /// The record failed its checksum or could not be parsed.
-    Corrupt,
-    /// The record has another format version (carried).
-    OldVersion(u8),
     /// The flash could not be read or written.
     Flash,
+    /// The stored record was refused.
+    Rejected(CalProblem),
 }
 
 /// Calibration state.
@@ -167,11 +217,18 @@ pub struct Status {
     pub uptime_us: u64,
     /// IMU samples read from the FIFO.
     pub samples_taken: u64,
-    /// IMU samples lost (FIFO overflows, sensor outages, full internal queues).
+    /// IMU samples lost: slots of the IMU's sample grid between delivered samples (FIFO
+    /// contents discarded, outages, stalls, bursts abandoned on a bus fault, pauses). The sum of
+    /// the `lost` of every IMU [`Event::Gap`].
     pub samples_dropped: u64,
+    /// Magnetometer samples read.
     pub mag_samples: u64,
+    /// Magnetometer samples lost (overwritten before they were read, outages, stalls).
+    pub mag_dropped: u64,
     pub fifo_overflows: u32,
     pub i2c_errors: u32,
+    /// Transfers that lost arbitration (SDA held) or hung until the deadline.
+    pub bus_faults: u32,
     pub bus_recoveries: u32,
     /// Host frames rejected (corrupt, unknown, oversized).
     pub frames_rejected: u32,
@@ -179,10 +236,13 @@ pub struct Status {
     pub frames_unsent: u32,
     /// CPU busy time over the last status interval, ‰.
     pub cpu_load_permille: u16,
-    /// Latest die temperature, m°C.
-    pub temp_milli_c: i32,
+    /// Latest die temperature, m°C (`None` before the first sample that carried one).
+    pub temp_milli_c: Option<i32>,
     pub imu: SensorState,
     pub mag: SensorState,
+    /// The sensors' sample periods as their sample clocks measure them, ns (0: not yet).
+    pub imu_period_ns: u32,
+    pub mag_period_ns: u32,
     pub cal: CalStatus,
     pub mode: StreamMode,
 }
@@ -203,46 +263,73 @@ pub struct Identity {
     pub allan_levels_mag: u8,
 }
 
+/// What kind of bus fault ended a transfer.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BusFault {
+    /// The START lost arbitration: a slave holds SDA low.
+    ArbitrationLost,
+    /// The transfer did not finish before its deadline (a hung START or a stretched clock).
+    Timeout,
+}
+
 /// An asynchronous event worth a line in the host's log.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Event {
-    SensorLost {
-        sensor: Sensor,
-        t_us: u64,
-    },
+    /// The sensor stopped answering for longer than the retries cover.
+    SensorLost { sensor: Sensor, t_us: u64 },
+    /// The sensor delivers samples again after a loss or a stall.
     SensorBack {
         sensor: Sensor,
         t_us: u64,
         down_us: u64,
     },
-    FifoOverflow {
+    /// The sensor answers but has produced no sample since `since_us` (data-ready never set,
+    /// FIFO count not growing).
+    SensorStalled {
+        sensor: Sensor,
         t_us: u64,
-        lost: u32,
+        since_us: u64,
     },
-    /// The sensor's Allan engines were split: no difference straddles the position `at`, the
-    /// number of samples pushed into each of its engines (since boot or the last Allan reset)
-    /// before the split. A host that replays the same samples applies the same splits and gets
-    /// the same sums, bit for bit.
+    /// A transfer ended by a bus fault; the bus is recovered (9 SCL pulses and a STOP) before
+    /// the next one.
+    BusFault { t_us: u64, fault: BusFault },
+    /// A bus recovery ran: `pulses` SCL pulses were clocked; SDA was free at the end or not.
+    BusRecovered {
+        t_us: u64,
+        pulses: u8,
+        sda_released: bool,
+    },
+    /// The sensor's series has a discontinuity before the next sample: `lost` samples of its
+    /// grid (maybe 0) did not reach the host, for `cause`. The Allan engines were split there:
+    /// no difference straddles the position `at`, the number of samples pushed into each of the
+    /// sensor's engines (since boot or the last Allan reset) before the split. A host that
+    /// replays the same samples applies the same splits and gets the same sums, bit for bit.
     Gap {
         sensor: Sensor,
         at: u64,
         cause: GapCause,
+        lost: u32,
+        /// Device time of the first sample after the gap (its stamp), µs.
+        t_us: u64,
     },
 }
 
-/// Why the device split a sensor's series (see [`Event::Gap`]).
+/// Why samples were lost or a series split (see [`Event::Gap`]).
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum GapCause {
-    /// The MPU-6050 FIFO overflowed and was reset.
+    /// The MPU-6050 FIFO overflowed; its contents were discarded by a reset.
     FifoOverflow,
-    /// The sensor stopped answering (or failed a transfer).
+    /// The sensor stopped answering (or lost its configuration and was re-initialised).
     SensorFault,
-    /// The QMC5883L overwrote an unread sample (DOR).
+    /// A bus fault (arbitration lost, a hung transfer) cost samples.
+    BusFault,
+    /// The sensor produced no data for a while.
+    Stalled,
+    /// The magnetometer overwrote samples that were not read in time.
     Overwritten,
-    /// The magnetometer read came more than 1.5 periods after the previous one.
-    Late,
     /// Sampling paused (a flash write).
     Paused,
 }
@@ -267,7 +354,8 @@ pub enum Request {
         status_ms: u32,
         tables_ms: u32,
     },
-    /// Send all tables now.
+    /// Take a snapshot of every channel's table now and send them (answered by
+    /// [`Reply::Tables`]); a round in progress is abandoned.
     GetTables,
 }
 
@@ -283,8 +371,8 @@ pub struct HostFrame {
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ErrorCode {
-    /// The calibration blob did not decode (bad CRC, version or size).
-    BadCalibration,
+    /// The calibration was refused, with the reason.
+    BadCalibration(CalProblem),
     /// The flash write failed.
     FlashWrite,
     /// The device cannot take this request now.
@@ -303,6 +391,10 @@ pub enum Reply {
         status: CalStatus,
     },
     Error(ErrorCode),
+    /// `GetTables` started a round: ten `Table` frames with this `snapshot` follow.
+    Tables {
+        snapshot: u32,
+    },
 }
 
 /// Device → host message.

@@ -3,15 +3,37 @@
 //! register-level chip models. The firmware's tasks (`src/main.rs`) only move bytes between the
 //! hardware and these types.
 //!
-//! * [`outbox`]: frames queued whole or dropped and counted, never blocking the sampler;
-//! * [`health`]: the sensor fault state machine (lost, retry with bus recovery, back);
-//! * [`device`]: per-sample pipeline (corrections → Allan → batch) and host request handling;
-//! * [`sensors`]: the sensor tasks' tick (init, FIFO drain, overflow, loss and retry);
-//! * [`stage`]: cycle markers for the emulator's budget.
-#![no_std]
+//! By job:
+//! * sensors: [`imu`] and [`mag`], the sensor tasks' ticks (initialisation, draining, faults,
+//!   losses), with [`health`] (the fault state machine), [`clock`] (the sample clocks: the one
+//!   owner of timestamps) and [`bus`] (what a bus must tell them);
+//! * samples: [`pipeline`] (corrections → Allan engines → batches, losses and splits) over
+//!   [`engines`];
+//! * host requests: [`requests`];
+//! * tables: [`tables`] (rounds of snapshots, spaced out);
+//! * [`device`] ties them together for the processing task; [`outbox`] queues frames whole or
+//!   drops and counts them; [`stage`] marks the budget stages for the emulator; [`config`]
+//!   holds the sensors' configuration; [`msg`] the messages between the tasks.
+//!
+//! `replay` (feature `std`) replays served samples through the same corrections and engines,
+//! for the host tests and the emulator's end-to-end check.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#[cfg(feature = "std")]
+extern crate std;
 
+pub mod bus;
+pub mod clock;
+pub mod config;
 pub mod device;
+pub mod engines;
 pub mod health;
+pub mod imu;
+pub mod mag;
+pub mod msg;
 pub mod outbox;
-pub mod sensors;
+pub mod pipeline;
+#[cfg(feature = "std")]
+pub mod replay;
+pub mod requests;
 pub mod stage;
+pub mod tables;
