@@ -2,6 +2,11 @@
 //! async HAL driver), with bus recovery: while the mutex is held, the I2C block is released,
 //! nine SCL pulses and a STOP are clocked on GP5/GP4 through SIO
 //! (`imu_drivers::recovery::recover_bus`, UM10204 §3.1.16), and the block is re-created.
+//!
+//! Each sensor's handle ([`BusDevice`]) records when its last transfer started
+//! (`pico_imu_core::bus::TransferTime`), the reference of the sample clocks' observations, and
+//! reports a transfer abandoned at its deadline as [`BusError::Timeout`] (a bus error), apart
+//! from what the controller reports.
 use core::future::Future;
 use core::pin::Pin;
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -19,20 +24,29 @@ use embassy_time::{Duration, Instant};
 use embedded_hal_async::i2c::{ErrorType, I2c as AsyncI2c, Operation};
 
 use crate::i2c_dma::I2cDma;
-use crate::Irqs;
+use pico_imu_core::bus::TransferTime;
+use pico_imu_core::clock::{fine, Fine};
 
 /// Half an SCL period of the recovery clock, µs (≈ 100 kHz, slow enough for any slave).
 const RECOVERY_HALF_PERIOD_US: u32 = 5;
 /// Longest a transaction may take before it is abandoned: the longest one (a FIFO chunk of
-/// 32 × 14 bytes) needs ≈ 11 ms at 400 kHz. A slave holding SDA low can otherwise stall a
+/// 16 × 14 bytes) needs ≈ 5.7 ms at 400 kHz. A slave holding SDA low can otherwise stall a
 /// transfer for ever; after a timeout the controller is re-created before the next use.
 const TRANSACTION_TIMEOUT_MS: u64 = 25;
 
 pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 
+/// Makes a new I2C0 controller on GP5/GP4 (main.rs owns the interrupt bindings it needs).
+///
+/// # Safety
+///
+/// Steals I2C0, GP4 and GP5: call only while no other driver of them exists.
+pub type MakeI2c = unsafe fn(i2c::Config) -> I2c<'static, I2C0, i2c::Async>;
+
 /// The I2C0 controller, absent only during a recovery.
 pub struct Bus {
     i2c: Option<I2c<'static, I2C0, i2c::Async>>,
+    make: MakeI2c,
     /// DMA-driven register reads (`crate::i2c_dma`), on the same controller.
     dma: I2cDma,
     config: i2c::Config,
@@ -41,9 +55,12 @@ pub struct Bus {
 }
 
 impl Bus {
-    pub fn new(i2c: I2c<'static, I2C0, i2c::Async>, dma: I2cDma, config: i2c::Config) -> Self {
+    pub fn new(make: MakeI2c, dma: I2cDma, config: i2c::Config) -> Self {
+        // SAFETY: the bus is made once, at boot, before anything else drives I2C0 or its pins.
+        let i2c = unsafe { make(config) };
         Self {
             i2c: Some(i2c),
+            make,
             dma,
             config,
             wedged: false,
@@ -56,14 +73,14 @@ impl Bus {
         // SAFETY: the only owner of these peripherals was the I2c just dropped (or the GPIO
         // drivers of a recovery, dropped too); the bus mutex, held by our caller, keeps every
         // other user out until the new controller is stored.
-        let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
-        self.i2c = Some(I2c::new_async(p, scl, sda, Irqs, self.config));
+        self.i2c = Some(unsafe { (self.make)(self.config) });
         self.dma.forget();
         self.wedged = false;
     }
 
-    /// Clock a stuck slave free and re-create the controller; returns the recoveries done (1).
-    pub fn recover(&mut self) -> u32 {
+    /// Clock a stuck slave free and re-create the controller; returns the SCL pulses clocked
+    /// and whether SDA was free at the end.
+    pub fn recover(&mut self) -> (u8, bool) {
         // Drop the driver first: from here on nothing else uses I2C0, GP4 or GP5.
         self.i2c = None;
         // SAFETY: the only owner of these peripherals was the I2c just dropped, and the bus
@@ -73,38 +90,74 @@ impl Bus {
         let mut sda = OutputOpenDrain::new(sda, Level::High);
         scl.set_pullup(true);
         sda.set_pullup(true);
-        match imu_drivers::recovery::recover_bus(
+        let result = match imu_drivers::recovery::recover_bus(
             &mut scl,
             &mut sda,
             &mut embassy_time::Delay,
             RECOVERY_HALF_PERIOD_US,
         ) {
-            Ok(r) => defmt::info!(
-                "i2c: bus recovery, {} pulses, SDA released: {}",
-                r.pulses,
-                r.sda_released
-            ),
-            Err(_) => defmt::warn!("i2c: bus recovery pin error"),
-        }
+            Ok(r) => {
+                defmt::info!(
+                    "i2c: bus recovery, {} pulses, SDA released: {}",
+                    r.pulses,
+                    r.sda_released
+                );
+                (r.pulses, r.sda_released)
+            }
+            Err(_) => {
+                defmt::warn!("i2c: bus recovery pin error");
+                (0, false)
+            }
+        };
         drop((scl, sda));
         self.reset_controller();
-        1
+        result
     }
 }
 
 /// One sensor's handle on the shared bus.
 pub struct BusDevice {
     bus: &'static SharedBus,
+    /// Start of the last transfer through this handle, µs.
+    last_start_us: u64,
 }
 
 impl BusDevice {
     pub fn new(bus: &'static SharedBus) -> Self {
-        Self { bus }
+        Self {
+            bus,
+            last_start_us: 0,
+        }
+    }
+}
+
+/// What a transfer on the shared bus can end with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum BusError {
+    /// The controller's report (NACK, lost arbitration, …).
+    Hal(i2c::Error),
+    /// Abandoned at its deadline ([`TRANSACTION_TIMEOUT_MS`]).
+    Timeout,
+}
+
+impl embedded_hal_async::i2c::Error for BusError {
+    fn kind(&self) -> embedded_hal_async::i2c::ErrorKind {
+        match self {
+            BusError::Hal(e) => e.kind(),
+            // A transfer that did not finish: the bus is at fault (pico_imu_core::bus::Failure).
+            BusError::Timeout => embedded_hal_async::i2c::ErrorKind::Bus,
+        }
     }
 }
 
 impl ErrorType for BusDevice {
-    type Error = i2c::Error;
+    type Error = BusError;
+}
+
+impl TransferTime for BusDevice {
+    fn last_start(&self) -> Fine {
+        fine(self.last_start_us)
+    }
 }
 
 impl AsyncI2c for BusDevice {
@@ -120,29 +173,46 @@ impl AsyncI2c for BusDevice {
             bus.reset_controller();
         }
         let Some(i2c) = bus.i2c.as_mut() else {
-            return Err(i2c::Error::Abort(AbortReason::Other(0)));
+            return Err(BusError::Hal(i2c::Error::Abort(AbortReason::Other(0))));
         };
-        let deadline = Instant::now() + Duration::from_millis(TRANSACTION_TIMEOUT_MS);
+        let now = Instant::now();
+        let deadline = now + Duration::from_millis(TRANSACTION_TIMEOUT_MS);
         // Register reads (the drivers' `write_read` and plain reads) go through DMA: one wake-up
         // per transfer. Anything else (register writes) takes embassy's interrupt path.
         let result = match operations {
             [Operation::Write(w), Operation::Read(r)] if I2cDma::fits(w, r) => {
-                let transfer = core::pin::pin!(bus.dma.write_read(address, w, r));
-                Deadline::new(deadline, transfer).await
+                // SAFETY: the transfer is pinned on this future's stack and driven here to its
+                // end or dropped by `Deadline` (which aborts the channels) before this future
+                // returns; the sensor tasks await this future to completion, never leak it.
+                let r = {
+                    let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, w, r) });
+                    Deadline::new(deadline, transfer).await
+                };
+                self.last_start_us = bus.dma.last_start_us();
+                r
             }
             [Operation::Read(r)] if I2cDma::fits(&[], r) => {
-                let transfer = core::pin::pin!(bus.dma.write_read(address, &[], r));
-                Deadline::new(deadline, transfer).await
+                // SAFETY: as above.
+                let r = {
+                    let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, &[], r) });
+                    Deadline::new(deadline, transfer).await
+                };
+                self.last_start_us = bus.dma.last_start_us();
+                r
             }
             _ => {
+                self.last_start_us = now.as_micros();
                 let transfer = core::pin::pin!(i2c.transaction(address, operations));
                 Deadline::new(deadline, transfer).await
             }
         };
-        result.unwrap_or_else(|| {
-            bus.wedged = true;
-            Err(i2c::Error::Abort(AbortReason::Other(u32::MAX)))
-        })
+        match result {
+            Some(r) => r.map_err(BusError::Hal),
+            None => {
+                bus.wedged = true;
+                Err(BusError::Timeout)
+            }
+        }
     }
 }
 

@@ -11,8 +11,9 @@
 //! bound next to embassy's I2C handler). The controller's STOP after the last byte (one SCL
 //! period) is not waited for: `settle` checks for its STOP_DET before the next transaction of
 //! either path. Both channels are aborted whenever a transfer ends early, including when its
-//! future is dropped (the transaction timeout in `bus.rs`), so the RX channel never writes into
-//! a buffer that is gone.
+//! future is dropped (the transaction deadline in `bus.rs`), so the RX channel never writes into
+//! a buffer that is gone — provided the future is dropped or completed, never leaked: hence
+//! [`I2cDma::write_read`] is `unsafe`, with that as its contract.
 use core::future::poll_fn;
 use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
 use core::task::Poll;
@@ -90,6 +91,9 @@ pub struct I2cDma {
     last_stop: usize,
     /// A transfer ended (or was NACKed) and its STOP may still be on the bus.
     stop_pending: bool,
+    /// When the last transfer started: the µs timer read just before the I2C DMA requests were
+    /// turned on (the first command reaches the controller at once), with interrupts off.
+    last_start_us: u64,
 }
 
 /// What ended a transfer.
@@ -116,7 +120,13 @@ impl I2cDma {
             cmds: [CMD_READ; MAX_WRITE + MAX_READ],
             last_stop: MAX_WRITE,
             stop_pending: false,
+            last_start_us: 0,
         }
+    }
+
+    /// When the last transfer started, µs since boot.
+    pub fn last_start_us(&self) -> u64 {
+        self.last_start_us
     }
 
     /// Wait (spinning, at most `STOP_WAIT_US`) for the STOP that ended the last DMA transfer, so
@@ -153,7 +163,14 @@ impl I2cDma {
 
     /// Write `write` (may be empty) to `address`, then read `read.len()` bytes (repeated start
     /// after a write), then STOP. `fits(write, read)` must hold (else `Err(InvalidReadBufferLength)`).
-    pub async fn write_read(
+    ///
+    /// # Safety
+    ///
+    /// The RX channel writes into `read` while the transfer runs, beyond the borrow checker's
+    /// sight: the returned future must be polled to completion or dropped (dropping it aborts
+    /// both channels first), never leaked (`mem::forget`, a leaked `Box`), before `read` is used
+    /// or freed.
+    pub async unsafe fn write_read(
         &mut self,
         address: u8,
         write: &[u8],
@@ -219,10 +236,15 @@ impl I2cDma {
             w.set_en(true);
         });
         compiler_fence(Ordering::SeqCst);
-        // DREQs on: the TX channel starts feeding commands.
-        i2c.ic_dma_cr().write(|w| {
-            w.set_tdmae(true);
-            w.set_rdmae(true);
+        // DREQs on: the TX channel starts feeding commands, and the START follows. The time is
+        // taken with interrupts off, so that nothing comes between it and the start.
+        self.last_start_us = cortex_m::interrupt::free(|_| {
+            let t = Instant::now().as_micros();
+            i2c.ic_dma_cr().write(|w| {
+                w.set_tdmae(true);
+                w.set_rdmae(true);
+            });
+            t
         });
 
         let ending = wait_end(rx).await;

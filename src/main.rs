@@ -6,7 +6,7 @@
 //! * `imu_task`     — MPU-6050 FIFO bursts every 10 ms, right after every second magnetometer
 //!   tick, fault handling;
 //! * `mag_task`     — QMC5883L at 200 Hz, following the sensor's own phase, fault handling;
-//! * `process_task` — the pipeline and host requests (`pico_imu::device::Device`), calibration
+//! * `process_task` — the pipeline and host requests (`pico_imu_core::device::Device`), calibration
 //!   storage (the only flash writer);
 //! * `tick_task`    — the 100 ms housekeeping tick (status, tables);
 //! * `usb_task`, `usb_tx_task`, `usb_rx_task` — embassy-usb device, frames out, frames in.
@@ -41,10 +41,14 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::UsbDevice;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::Address;
-use imu_proto::{DecodeError, FrameReader, HostFrame};
-use pico_imu::device::{Device, SensorMsg, MAG_PERIOD_US};
-use pico_imu::outbox::FrameSink;
-use pico_imu::sensors::{self, ImuService, MagService, Slots};
+use imu_proto::{DecodeError, FrameReader, HostFrame, MAG_PERIOD_US};
+use pico_imu_core::clock::BusTiming;
+use pico_imu_core::config;
+use pico_imu_core::device::Device;
+use pico_imu_core::imu::ImuService;
+use pico_imu_core::mag::{MagService, Slots};
+use pico_imu_core::msg::{self, SensorMsg};
+use pico_imu_core::outbox::FrameSink;
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -59,6 +63,19 @@ bind_interrupts!(struct Irqs {
 
 /// I2C0 clock: 400 kHz fast mode (both sensors support it).
 const I2C_HZ: u32 = 400_000;
+
+/// I2C0 on GP5 (SCL) / GP4 (SDA), async, with this file's interrupt bindings: at boot and
+/// whenever the bus re-creates its controller (`bus::MakeI2c`).
+///
+/// # Safety
+///
+/// Steals I2C0, GP4 and GP5: only while nothing else drives them.
+unsafe fn make_i2c(config: i2c::Config) -> I2c<'static, I2C0, i2c::Async> {
+    use embassy_rp::peripherals::{PIN_4, PIN_5};
+    // SAFETY: the caller guarantees no other driver of these exists.
+    let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
+    I2c::new_async(p, scl, sda, Irqs, config)
+}
 /// The IMU FIFO is drained every 10 ms (≈ 10 frames of 14 bytes, ≈ 3.3 ms of bus time at
 /// 400 kHz; the 1024-byte FIFO holds 73 ms): each burst costs a FIFO-count read, a data read and
 /// a round of task wake-ups whatever its length, and 10 ms instead of 5 ms saved ≈ 750 cycles
@@ -70,7 +87,7 @@ const I2C_HZ: u32 = 400_000;
 /// FIFO's 73 ms. (A short fallback costs a spurious wake-up per burst: a timer that lost the
 /// race stays in embassy's timer queue and wakes the task when it expires.)
 const IMU_FALLBACK_US: u64 = 50_000;
-/// Until the magnetometer service knows the sensor's phase (at boot, after a fault), its ticks
+/// Until the magnetometer service knows the sensor's phase (at boot, while it is out), its ticks
 /// come on a 5 ms grid, 2.75 ms past whole multiples.
 const MAG_SLOT_OFFSET_US: u64 = IMU_SLOT_OFFSET_US + MAG_PERIOD_US / 2;
 /// Timer slots sit 250 µs off whole milliseconds. On silicon this changes nothing; in rp2040js
@@ -87,9 +104,9 @@ type OutWriter = pipe::Writer<'static, NoopRawMutex, OUT_PIPE>;
 type OutReader = pipe::Reader<'static, NoopRawMutex, OUT_PIPE>;
 /// One sensor task's messages of one tick, filled in place by the task and read in place by
 /// the processing task (no copies of the 150-byte messages through a queue).
-type SensorChannel = zerocopy_channel::Channel<'static, NoopRawMutex, sensors::Out>;
-type SensorTx = zerocopy_channel::Sender<'static, NoopRawMutex, sensors::Out>;
-type SensorRx = zerocopy_channel::Receiver<'static, NoopRawMutex, sensors::Out>;
+type SensorChannel = zerocopy_channel::Channel<'static, NoopRawMutex, msg::Out>;
+type SensorTx = zerocopy_channel::Sender<'static, NoopRawMutex, msg::Out>;
+type SensorRx = zerocopy_channel::Receiver<'static, NoopRawMutex, msg::Out>;
 /// Ticks in flight per sensor task.
 const SENSOR_SLOTS: usize = 2;
 type HostChannel = Channel<NoopRawMutex, HostIn, 4>;
@@ -144,8 +161,8 @@ impl FrameSink for PipeSink {
 }
 
 static OUT: StaticCell<OutPipe> = StaticCell::new();
-static IMU_SLOTS: StaticCell<[sensors::Out; SENSOR_SLOTS]> = StaticCell::new();
-static MAG_SLOTS: StaticCell<[sensors::Out; SENSOR_SLOTS]> = StaticCell::new();
+static IMU_SLOTS: StaticCell<[msg::Out; SENSOR_SLOTS]> = StaticCell::new();
+static MAG_SLOTS: StaticCell<[msg::Out; SENSOR_SLOTS]> = StaticCell::new();
 static IMU_CH: StaticCell<SensorChannel> = StaticCell::new();
 static MAG_CH: StaticCell<SensorChannel> = StaticCell::new();
 static HOST: StaticCell<HostChannel> = StaticCell::new();
@@ -188,19 +205,21 @@ async fn main(spawner: Spawner) {
     // --- I2C0 on GP4 (SDA) / GP5 (SCL), 400 kHz --------------------------------------------
     let mut i2c_config = i2c::Config::default();
     i2c_config.frequency = I2C_HZ;
-    let i2c = I2c::new_async(p.I2C0, p.PIN_5, p.PIN_4, Irqs, i2c_config);
+    // The bus re-creates the controller from the stolen peripherals (`make_i2c`): these are
+    // not used again.
+    let _ = (p.I2C0, p.PIN_4, p.PIN_5);
     bus::init_deadline_alarm(Irqs);
     let dma = i2c_dma::I2cDma::new(p.DMA_CH0, p.DMA_CH1, Irqs);
-    let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(i2c, dma, i2c_config)));
+    let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(make_i2c, dma, i2c_config)));
 
     // --- channels ---------------------------------------------------------------------------
     let (out_rx, out_tx) = OUT.init(Pipe::new()).split();
     let out_queued: &'static OutQueued = OUT_QUEUED.init(blocking_mutex::Mutex::new(Cell::new(0)));
     let imu_ch = IMU_CH.init(SensorChannel::new(
-        IMU_SLOTS.init([const { sensors::Out::new() }; SENSOR_SLOTS]),
+        IMU_SLOTS.init([const { msg::Out::new() }; SENSOR_SLOTS]),
     ));
     let mag_ch = MAG_CH.init(SensorChannel::new(
-        MAG_SLOTS.init([const { sensors::Out::new() }; SENSOR_SLOTS]),
+        MAG_SLOTS.init([const { msg::Out::new() }; SENSOR_SLOTS]),
     ));
     let (imu_tx, imu_rx) = imu_ch.split();
     let (mag_tx, mag_rx) = mag_ch.split();
@@ -213,7 +232,7 @@ async fn main(spawner: Spawner) {
     // --- calibration from flash -------------------------------------------------------------
     let mut store = storage::Store::new(p.FLASH);
     let device = DEVICE.init(Device::new(
-        sensors::scales(),
+        config::scales(),
         concat!("pico-imu ", env!("CARGO_PKG_VERSION")),
     ));
     let mut blob = [0u8; imu_proto::MAX_CAL_BLOB];
@@ -331,8 +350,18 @@ async fn wait_running(
     true
 }
 
-/// MPU-6050: FIFO bursts every 10 ms (`pico_imu::sensors::ImuService`), after every second
-/// magnetometer tick; a lost sensor is retried with bus recovery and re-initialised.
+/// Run a bus recovery for a sensor service that asks for one, and report it.
+async fn recover_bus(bus: &'static SharedBus, msgs: &mut msg::Out) {
+    let (pulses, sda_released) = bus.lock().await.recover();
+    let _ = msgs.push(SensorMsg::BusRecovered {
+        t_us: now_us(),
+        pulses,
+        sda_released,
+    });
+}
+
+/// MPU-6050: FIFO bursts every 10 ms (`pico_imu_core::imu::ImuService`), after every second
+/// magnetometer tick; faults are retried with bus recovery.
 #[embassy_executor::task]
 async fn imu_task(
     bus: &'static SharedBus,
@@ -342,7 +371,7 @@ async fn imu_task(
 ) -> ! {
     let mut run = run.receiver().expect("watch receiver for imu_task");
     let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
-    let mut svc = ImuService::new();
+    let mut svc = ImuService::new(BusTiming::from_hz(I2C_HZ));
     let mut last_us = now_us();
     let mut was = svc.state();
     loop {
@@ -355,24 +384,18 @@ async fn imu_task(
         let msgs = out.send().await;
         msgs.clear();
         if wait_running(&mut run).await {
-            svc.resume(&mut imu, now_us(), msgs).await;
+            svc.resume(&mut imu, &mut embassy_time::Delay, &now_us, msgs)
+                .await;
         } else {
-            let recoveries = if svc.wants_recovery(now_us()) {
-                bus.lock().await.recover()
-            } else {
-                0
-            };
-            svc.tick(
-                &mut imu,
-                &mut embassy_time::Delay,
-                &now_us,
-                recoveries,
-                msgs,
-            )
-            .await;
+            if svc.wants_recovery(now_us()) {
+                recover_bus(bus, msgs).await;
+                svc.recovered();
+            }
+            svc.tick(&mut imu, &mut embassy_time::Delay, &now_us, msgs)
+                .await;
         }
         if svc.state() != was {
-            info!("imu: {} -> {}", was, svc.state());
+            warn!("imu: {} -> {}", was, svc.state());
             was = svc.state();
         }
         if !msgs.is_empty() {
@@ -381,8 +404,8 @@ async fn imu_task(
     }
 }
 
-/// QMC5883L at 200 Hz (`pico_imu::sensors::MagService`); every second tick is signalled to
-/// `imu_task`, which places its bursts between them.
+/// QMC5883L at 200 Hz (`pico_imu_core::mag::MagService`), at the instants its sample clock
+/// predicts; every second tick is signalled to `imu_task`, which places its bursts between them.
 #[embassy_executor::task]
 async fn mag_task(
     bus: &'static SharedBus,
@@ -392,43 +415,35 @@ async fn mag_task(
 ) -> ! {
     let mut run = run.receiver().expect("watch receiver for mag_task");
     let mut mag = Qmc5883::new(BusDevice::new(bus));
-    let mut svc = MagService::new();
+    let mut svc = MagService::new(BusTiming::from_hz(I2C_HZ));
     let mut slots = Slots::new(MAG_PERIOD_US, MAG_SLOT_OFFSET_US);
     let mut ticks = 0u32;
     let mut fresh = true;
     let mut was = svc.state();
     loop {
-        // The service follows the sensor's own phase once it has seen a sample.
         let at = match svc.next_poll_us() {
             Some(t) => Instant::from_micros(t),
             None => Instant::from_micros(slots.next_after(now_us())),
         };
         Timer::at(at).await;
-        // Two ticks' messages share a slot (a tick adds at most two), so the processing task
-        // wakes once per 10 ms for the magnetometer: the slot stays ours until `send_done`.
+        // Two ticks' messages share a slot, so the processing task wakes once per 10 ms for the
+        // magnetometer: the slot stays ours until `send_done`.
         let msgs = out.send().await;
         if fresh {
             msgs.clear();
         }
         if wait_running(&mut run).await {
-            let _ = msgs.push(SensorMsg::Resumed { t_us: now_us() });
+            svc.resume();
         } else {
-            let recoveries = if svc.wants_recovery(now_us()) {
-                bus.lock().await.recover()
-            } else {
-                0
-            };
-            svc.tick(
-                &mut mag,
-                &mut embassy_time::Delay,
-                &now_us,
-                recoveries,
-                msgs,
-            )
-            .await;
+            if svc.wants_recovery(now_us()) {
+                recover_bus(bus, msgs).await;
+                svc.recovered();
+            }
+            svc.tick(&mut mag, &mut embassy_time::Delay, &now_us, msgs)
+                .await;
         }
         if svc.state() != was {
-            info!("mag: {} -> {}", was, svc.state());
+            warn!("mag: {} -> {}", was, svc.state());
             was = svc.state();
         }
         // The bus is free until the next tick: every second tick (reading or not, so bursts
@@ -438,7 +453,7 @@ async fn mag_task(
         if second {
             mag_read.signal(());
         }
-        fresh = !msgs.is_empty() && (second || msgs.len() + 2 > msgs.capacity());
+        fresh = !msgs.is_empty() && (second || msgs.len() + 3 > msgs.capacity());
         if fresh {
             out.send_done();
         }
@@ -471,12 +486,9 @@ async fn process_task(
     let mut last_status = Instant::now();
     let mut last_tables = Instant::now();
     let mut cpu = cpu::Meter::new();
-    let mut log: Option<(imu_proto::AllanTable, usize)> = None;
     loop {
-        // Table work (≈ 0.7 ms of CPU a step) runs right after a magnetometer reading, so it
-        // cannot hold up the next one: a read delayed between its status and data transfers
-        // can miss a sample the chip overwrote in between, unseen (DOR is cleared by the data
-        // read). Without a working magnetometer it runs on the 100 ms tick instead.
+        // A table frame (its encoding) runs right after a magnetometer reading, so it cannot
+        // hold up the next one. Without a working magnetometer it runs on the 100 ms tick.
         let mut table_turn = false;
         // The host arm only waits for readiness: selecting on `receive()` would return the
         // ≈ 300-byte `HostIn` through the select's output, copied on every wake-up (≈ 190
@@ -533,8 +545,8 @@ async fn process_task(
                     device.send_status(now.as_micros(), load, &mut sink);
                     let st = device.status(now.as_micros(), load);
                     info!(
-                        "status: {} samples, {} dropped, {} overflows, {} I2C errors, cpu {}‰, imu {}, mag {}",
-                        st.samples_taken, st.samples_dropped, st.fifo_overflows, st.i2c_errors, load, st.imu, st.mag
+                        "status: {} samples, {} lost, {} overflows, {} I2C errors, cpu {}‰, imu {} ({} ns), mag {} ({} ns, {} lost)",
+                        st.samples_taken, st.samples_dropped, st.fifo_overflows, st.i2c_errors, load, st.imu, st.imu_period_ns, st.mag, st.mag_period_ns, st.mag_dropped
                     );
                 }
                 let tables_ms = u64::from(device.tables_interval_ms());
@@ -543,42 +555,21 @@ async fn process_task(
                     && !device.tables_pending()
                 {
                     last_tables = now;
-                    device.start_tables();
+                    let round = device.start_tables(now.as_micros());
+                    info!(
+                        "tables: round {} (snapshot at {} µs)",
+                        round,
+                        now.as_micros()
+                    );
                 }
             }
         }
         if !table_turn {
             continue;
         }
-        // Tables go out a few rows per turn, as the USB pipe drains.
-        if let Some(t) = device.tables_step(&mut sink) {
-            log = Some((t, 0));
-        }
-        // The defmt log of a table (≈ 70 µs a row) also goes a few rows per turn.
-        if let Some((t, next)) = log.as_mut() {
-            *next = log_rows(t, *next, 4);
-            if *next >= t.levels.len() {
-                log = None;
-            }
+        // One table frame per turn at most, spaced out (`pico_imu_core::tables`).
+        if let Some(ch) = device.tables_step(now_us(), &mut sink) {
+            info!("table {} sent", ch.name());
         }
     }
-}
-
-/// The Allan tables over defmt, so a probe user sees them without the host tool: rows
-/// `from .. from + n` of `t`; returns the next row to log.
-fn log_rows(t: &imu_proto::AllanTable, from: usize, n: usize) -> usize {
-    let ch = t.channel;
-    for l in t.levels.iter().skip(from).take(n) {
-        info!(
-            "adev {} tau={}s dev={} [{}, {}] {} n={}",
-            ch.name(),
-            l.tau_s,
-            l.dev,
-            l.lo,
-            l.hi,
-            ch.unit(),
-            l.n2
-        );
-    }
-    from + n
 }

@@ -11,21 +11,24 @@
 
 import { parseArgs } from 'node:util';
 import { writeFileSync } from 'node:fs';
-import { Session, parseFault, parseDuration } from './session.js';
+import { Session, parseFault, parseDuration, parseClock } from './session.js';
 import { loadStreamCsv, generateStream, streamToCsv } from './stream.js';
 import { benchReport } from './bench.js';
 import { profile } from './profile.js';
 
 const usage = `usage:
   pico-imu-sim run --elf FW.elf [--seconds S] [--stream S.csv | --seed N] [--port P | --port-file F]
-                   [--warmup S] [--exit-on-disconnect] [--fault SPEC]... [--instant-i2c] [--served DIR] [--summary F.json]
+                   [--warmup S] [--exit-on-disconnect] [--fault SPEC]... [--clock mpu:-1.3%,qmc:-1.3%]
+                   [--instant-i2c] [--served DIR] [--summary F.json]
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--report F.md] [--json F.json]
   pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact]
                    (PC samples by function; callers of leaf functions matching RE; memcpy/memset
                    calls by caller; --exact: every instruction's cycles by function per sample set)
-fault SPEC: nack:mpu@5s:3 | vanish:qmc@10s:2s | stuck@20s | overflow@30s:120ms`;
+fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:1s | stall:qmc@0s
+            | stuck@20s | stuck@20s:50ms | hang@20s:50ms | overflow@30s:120ms
+--clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)`;
 
 function fail(msg, code = 2) {
   process.stderr.write(`pico-imu-sim: ${msg}\n`);
@@ -47,8 +50,9 @@ async function cmdRun(v) {
   const seconds = Number(v.seconds ?? 10);
   const warmup = v.warmup ? parseDuration(v.warmup) : 0;
   const faults = (v.fault ?? []).map(parseFault);
+  const clock = parseClock(v.clock);
   const stream = streamFrom(v, seconds);
-  const s = new Session({ elf: v.elf, stream, faults, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
+  const s = new Session({ elf: v.elf, stream, faults, clock, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
   if (!s.decoder.available) process.stderr.write('pico-imu-sim: defmt-print not found (cargo install defmt-print): RTT kept raw\n');
   const stopAt = seconds * 1e9;
   let stop = null;
@@ -114,6 +118,7 @@ async function main() {
         'port-file': { type: 'string' },
         warmup: { type: 'string' },
         fault: { type: 'string', multiple: true },
+        clock: { type: 'string' },
         'instant-i2c': { type: 'boolean' },
         'exit-on-disconnect': { type: 'boolean' },
         served: { type: 'string' },

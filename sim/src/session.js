@@ -23,29 +23,57 @@ export function parseDuration(s) {
 }
 
 /**
- * Fault spec grammar (one per --fault):
+ * Fault spec grammar (one per --fault); <time> and <dur> like 3s, 150ms:
  *   nack:<mpu|qmc>@<time>[:<count>]   NACK the next <count> (default 1) address phases
+ *   nack:<mpu|qmc>@<time>:<dur>       NACK every address phase for <dur>
  *   vanish:<mpu|qmc>@<time>[:<dur>]   the sensor is unpowered for <dur> (default 2s)
- *   stuck@<time>                      a slave holds SDA low until 9 SCL pulses are clocked
+ *   stall:<mpu|qmc>@<time>[:<dur>]    the sensor answers but produces no data for <dur>
+ *                                     (DATA_RDY / DRDY never set, FIFO not growing); no <dur>:
+ *                                     for ever
+ *   stuck@<time>[:<dur>]              a slave holds SDA low: every START loses arbitration;
+ *                                     released by 9 SCL pulses, or (with <dur>) after <dur>
+ *   hang@<time>:<dur>                 SDA held low for <dur> and a START waits for the bus
+ *                                     (the transfer hangs) instead of losing arbitration
  *   overflow@<time>[:<dur>]           the CPU stalls <dur> (default 120ms) so the FIFO overflows
  */
 export function parseFault(spec) {
-  const m = /^(nack|vanish|stuck|overflow)(?::(mpu|qmc))?@([^:]+)(?::(.+))?$/.exec(spec.trim());
-  if (!m) throw new Error(`bad fault '${spec}' (expected e.g. nack:mpu@5s:3, vanish:qmc@10s:2s, stuck@20s, overflow@30s)`);
+  const m = /^(nack|vanish|stall|stuck|hang|overflow)(?::(mpu|qmc))?@([^:]+)(?::(.+))?$/.exec(spec.trim());
+  if (!m) throw new Error(`bad fault '${spec}' (expected e.g. nack:mpu@5s:3, nack:mpu@5s:30ms, vanish:qmc@10s:2s, stall:qmc@3s:1s, stuck@20s, hang@20s:50ms, overflow@30s)`);
   const [, kind, target, at, arg] = m;
-  if ((kind === 'nack' || kind === 'vanish') && !target) throw new Error(`fault '${spec}': say which sensor (mpu or qmc)`);
-  return {
-    kind,
-    target: target ?? null,
-    at: parseDuration(at),
-    count: kind === 'nack' ? Number(arg ?? 1) : undefined,
-    duration: kind === 'vanish' ? parseDuration(arg ?? '2s') : kind === 'overflow' ? parseDuration(arg ?? '120ms') : undefined,
-    spec,
-  };
+  const perSensor = ['nack', 'vanish', 'stall'].includes(kind);
+  if (perSensor && !target) throw new Error(`fault '${spec}': say which sensor (mpu or qmc)`);
+  if (!perSensor && target) throw new Error(`fault '${spec}': ${kind} is a bus or CPU fault, not a sensor's`);
+  if (kind === 'hang' && arg === undefined) throw new Error(`fault '${spec}': say how long SDA is held (e.g. hang@3s:50ms)`);
+  const f = { kind, target: target ?? null, at: parseDuration(at), count: undefined, duration: undefined, spec };
+  if (kind === 'nack') {
+    if (arg !== undefined && /[a-zµ]/.test(arg)) f.duration = parseDuration(arg);
+    else f.count = Number(arg ?? 1);
+    if (f.count !== undefined && !(Number.isInteger(f.count) && f.count > 0)) throw new Error(`fault '${spec}': NACK count must be a positive integer`);
+  } else if (kind === 'vanish') f.duration = parseDuration(arg ?? '2s');
+  else if (kind === 'overflow') f.duration = parseDuration(arg ?? '120ms');
+  else if (arg !== undefined) f.duration = parseDuration(arg);
+  return f;
+}
+
+/**
+ * `--clock mpu:-1.3%,qmc:+0.5%`: each part's oscillator error (its rate relative to nominal;
+ * −1.3 % = a clock 1.3 % slow). Returns { mpu, qmc } as fractions.
+ */
+export function parseClock(spec) {
+  const out = { mpu: 0, qmc: 0 };
+  if (!spec) return out;
+  for (const part of spec.split(',')) {
+    const m = /^(mpu|qmc):([+-]?[0-9]*\.?[0-9]+)%$/.exec(part.trim());
+    if (!m) throw new Error(`bad clock '${part}' (expected e.g. mpu:-1.3%)`);
+    const v = Number(m[2]) / 100;
+    if (!(Math.abs(v) < 0.2)) throw new Error(`clock '${part}': an error of ${m[2]} % is not a crystal or RC oscillator's`);
+    out[m[1]] = v;
+  }
+  return out;
 }
 
 export class Session {
-  constructor({ elf, stream, instantI2c = false, faults = [], echoLog = false, markerSymbol } = {}) {
+  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, echoLog = false, markerSymbol } = {}) {
     this.logLines = [];
     this.decoder = new DefmtDecoder(elf, {
       onLine: (l) => {
@@ -55,8 +83,8 @@ export class Session {
     });
     this.emu = new Emulator({ elf, markerSymbol, onRtt: (b) => this.decoder.push(b) });
     this.bus = new I2cBus(this.emu.mcu, { index: 0, sda: 4, scl: 5, instant: instantI2c });
-    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream));
-    this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream));
+    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu }));
+    this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream, { clockError: clock.qmc }));
     this.usb = new CdcHost(this.emu);
     this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0 };
     this.client = null;
@@ -68,6 +96,7 @@ export class Session {
         this.usbStats.droppedToHost += buf.length;
       }
     };
+    this.clock = clock;
     this.faults = faults.map((f) => ({ ...f, fired: null }));
     for (const f of this.faults) this.scheduleFault(f);
   }
@@ -80,13 +109,20 @@ export class Session {
       const addr = f.target === 'mpu' ? MPU_ADDR : QMC_ADDR;
       switch (f.kind) {
         case 'nack':
-          this.bus.injectNacks(addr, f.count);
+          if (f.duration !== undefined) this.bus.injectNackWindow(addr, f.duration);
+          else this.bus.injectNacks(addr, f.count);
           break;
         case 'vanish':
           dev.vanish(emu.clock.nanos, emu.clock.nanos + f.duration);
           break;
+        case 'stall':
+          dev.stall(emu.clock.nanos, f.duration === undefined ? Infinity : emu.clock.nanos + f.duration);
+          break;
         case 'stuck':
-          this.bus.injectStuckBus();
+          this.bus.injectStuckBus({ nanos: f.duration ?? null });
+          break;
+        case 'hang':
+          this.bus.injectStuckBus({ nanos: f.duration, hang: true });
           break;
         case 'overflow':
           emu.stallCpu(f.duration);
@@ -165,6 +201,7 @@ export class Session {
       usb: { ...this.usbStats, enumerated: this.usb.connected, out_packets: e.usbOut.deliveries },
       flash: e.stats,
       faults: this.faults.map((f) => ({ spec: f.spec, fired_s: f.fired === null ? null : f.fired / 1e9 })),
+      clock: this.clock,
       marks: marks ? { cycles: Object.fromEntries(marks.cycles), entries: Object.fromEntries(marks.entries) } : null,
       diagnostics: e.diagnostics.slice(0, 20),
     };

@@ -4,7 +4,12 @@
 
 import { readFileSync } from 'node:fs';
 
-export const COLUMNS = ['t', 'ax', 'ay', 'az', 'gx', 'gy', 'gz', 'mx', 'my', 'mz', 'temp'];
+/**
+ * The contract facts (CSV columns and units, sensor rates), written by the imu-proto crate
+ * (`imu_proto::contract_json`) and kept equal to it by that crate's test `contract.rs`.
+ */
+export const CONTRACT = JSON.parse(readFileSync(new URL('./contract.json', import.meta.url), 'utf8'));
+export const COLUMNS = CONTRACT.columns.map((c) => c.name);
 /**
  * Values of columns a stream file leaves out (e.g. `imu-lab simulate --columns gx,gy,gz`):
  * the board lying still and level — gravity on +z (9.80665 m/s²), no rotation, a mid-latitude
@@ -142,7 +147,7 @@ export function gaussian(rand) {
 export function generateStream({
   seed = 1,
   seconds = 10,
-  rate = 1000,
+  rate = CONTRACT.sensors.imu.rate_hz,
   gyroWhite = 0.005, // deg/s/√Hz
   gyroRrw = 0.0005, // deg/s/√s
   accelWhite = 0.002, // m/s²/√Hz

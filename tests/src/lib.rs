@@ -47,6 +47,10 @@ pub struct World {
     pub transactions: u64,
     /// Bytes moved over the bus (address bytes excluded).
     pub bytes: u64,
+    /// Start of the last transaction, ns.
+    pub last_start_ns: u64,
+    /// Every address phase to this address is NACKed until this time, ns.
+    pub nack_until: Option<(u8, u64)>,
 }
 
 impl World {
@@ -131,6 +135,7 @@ impl SimBus {
         let mut w = self.world.borrow_mut();
         w.transactions += 1;
         let now = w.now_ns;
+        w.last_start_ns = now;
         w.advance_to(now);
         let moved: usize = ops
             .iter()
@@ -141,6 +146,11 @@ impl SimBus {
             .sum();
         w.bytes += moved as u64;
         let nack = Err(SimError::Nack(NoAcknowledgeSource::Address));
+        if w.nack_until
+            .is_some_and(|(a, until)| a == address && now < until)
+        {
+            return nack;
+        }
         if let Some(m) = w.mpu.as_mut().filter(|m| m.address == address) {
             return m.transaction(now, ops);
         }
@@ -175,6 +185,14 @@ fn hmc_transaction(ops: &mut [Operation<'_>]) -> Result<(), SimError> {
         }
     }
     Ok(())
+}
+
+/// The start of the last transaction, as the firmware's bus reports it.
+impl pico_imu_core::bus::TransferTime for SimBus {
+    fn last_start(&self) -> pico_imu_core::clock::Fine {
+        let ns = self.world.borrow().last_start_ns;
+        (u128::from(ns) * u128::from(pico_imu_core::clock::US) / 1000) as u64
+    }
 }
 
 impl ErrorType for SimBus {

@@ -60,6 +60,12 @@ pub struct Mpu6050Model {
     pub accel_self_test_lsb: [f64; 3],
     /// When false the chip NACKs everything (vanished sensor).
     pub present: bool,
+    /// The oscillator's relative rate error (−0.013: 1.3 % slow).
+    pub clock_error: f64,
+    /// No sample is produced in `[from, until)` ns (a stalled part); its clock runs on.
+    pub stall: Option<(u64, u64)>,
+    /// Every sample produced: when (ns) and its outputs (ax ay az temp gx gy gz).
+    pub log: Vec<(u64, [i16; 7])>,
     regs: [u8; 128],
     fifo: VecDeque<u8>,
     ptr: u8,
@@ -106,6 +112,9 @@ impl Mpu6050Model {
             gyro_self_test_lsb: [0.0; 3],
             accel_self_test_lsb: [0.0; 3],
             present: true,
+            clock_error: 0.0,
+            stall: None,
+            log: Vec::new(),
             regs: [0; 128],
             fifo: VecDeque::new(),
             ptr: 0,
@@ -159,11 +168,23 @@ impl Mpu6050Model {
         self.regs[PWR_MGMT_1 as usize] & 0x40 != 0
     }
 
-    /// Sample period, ns (RM 4.2).
+    /// Sample period, ns (RM 4.2), on the part's own oscillator (`clock_error`).
     pub fn sample_period_ns(&self) -> u64 {
         let dlpf = self.regs[CONFIG] & 0x07;
         let gyro_rate: u64 = if dlpf == 0 || dlpf == 7 { 8000 } else { 1000 };
-        1_000_000_000 * (1 + self.regs[SMPLRT_DIV] as u64) / gyro_rate
+        let nominal = 1_000_000_000 * (1 + self.regs[SMPLRT_DIV] as u64) / gyro_rate;
+        (nominal as f64 / (1.0 + self.clock_error)).round() as u64
+    }
+
+    /// The ground truth of losses: each produced sample's slot on the part's grid,
+    /// `round((t − t₀) / T)`, with its time.
+    pub fn slots(&self) -> Vec<(u64, u64)> {
+        let p = self.sample_period_ns() as f64;
+        let t0 = self.log.first().map_or(0, |s| s.0) as f64;
+        self.log
+            .iter()
+            .map(|(t, _)| (((*t as f64 - t0) / p).round() as u64, *t))
+            .collect()
     }
 
     /// Produce every sample due up to `now_ns`.
@@ -175,7 +196,9 @@ impl Mpu6050Model {
         let period = self.sample_period_ns();
         let mut next = self.next_sample_ns.unwrap_or(now_ns + period);
         while next <= now_ns {
-            self.produce_sample();
+            if !self.stall.is_some_and(|(a, b)| next >= a && next < b) {
+                self.produce_sample(next);
+            }
             next += period;
         }
         self.next_sample_ns = Some(next);
@@ -190,7 +213,7 @@ impl Mpu6050Model {
         }
     }
 
-    fn produce_sample(&mut self) {
+    fn produce_sample(&mut self, t_ns: u64) {
         let m = (self.motion)(self.samples);
         self.samples += 1;
         let afs = (self.regs[ACCEL_CONFIG] >> 3) & 3;
@@ -215,6 +238,7 @@ impl Mpu6050Model {
         }
         let (t_sens, t_off) = self.temp_scale();
         out[3] = sat((m.temp_c - t_off) * t_sens);
+        self.log.push((t_ns, out));
         for (k, v) in out.iter().enumerate() {
             let [h, l] = v.to_be_bytes();
             self.regs[0x3B + 2 * k] = h;

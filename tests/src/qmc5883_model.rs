@@ -38,6 +38,12 @@ pub struct QmcModel {
     pub chip_id: u8,
     /// When false the chip NACKs everything.
     pub present: bool,
+    /// The oscillator's relative rate error (−0.013: 1.3 % slow).
+    pub clock_error: f64,
+    /// No measurement completes in `[from, until)` ns (DRDY never set); the clock runs on.
+    pub stall: Option<(u64, u64)>,
+    /// Every measurement: when (ns) and its outputs (x y z).
+    pub log: Vec<(u64, [i16; 3])>,
     regs: [u8; 0x30],
     ptr: u8,
     next_ns: Option<u64>,
@@ -59,6 +65,9 @@ impl QmcModel {
                 QmcVariant::P => 0x80,
             },
             present: true,
+            clock_error: 0.0,
+            stall: None,
+            log: Vec::new(),
             regs: [0; 0x30],
             ptr: 0,
             next_ns: None,
@@ -112,7 +121,7 @@ impl QmcModel {
     /// Measurement period, ns.
     pub fn period_ns(&self) -> u64 {
         let hz = [10u64, 50, 100, 200][((self.ctrl1() >> 2) & 3) as usize];
-        1_000_000_000 / hz
+        ((1_000_000_000 / hz) as f64 / (1.0 + self.clock_error)).round() as u64
     }
 
     /// (LSB per gauss, full scale in gauss) of the configured range.
@@ -140,25 +149,40 @@ impl QmcModel {
         let period = self.period_ns();
         let mut next = self.next_ns.unwrap_or(now_ns + period);
         while next <= now_ns {
-            self.measure();
+            if !self.stall.is_some_and(|(a, b)| next >= a && next < b) {
+                self.measure(next);
+            }
             next += period;
         }
         self.next_ns = Some(next);
     }
 
-    fn measure(&mut self) {
+    /// The ground truth of losses: each measurement's slot on the part's grid.
+    pub fn slots(&self) -> Vec<(u64, u64)> {
+        let p = self.period_ns() as f64;
+        let t0 = self.log.first().map_or(0, |s| s.0) as f64;
+        self.log
+            .iter()
+            .map(|(t, _)| (((*t as f64 - t0) / p).round() as u64, *t))
+            .collect()
+    }
+
+    fn measure(&mut self, t_ns: u64) {
         let f = (self.field)(self.measurements);
         self.measurements += 1;
         let (lsb, fs) = self.range();
         let base = *self.data_regs().start() as usize;
         let mut over = false;
+        let mut xyz = [0i16; 3];
         for (i, &g) in f.iter().enumerate() {
             over |= g.abs() > fs;
             let raw = (g * lsb).round().clamp(-32768.0, 32767.0) as i16;
+            xyz[i] = raw;
             let [lo, hi] = raw.to_le_bytes();
             self.regs[base + 2 * i] = lo;
             self.regs[base + 2 * i + 1] = hi;
         }
+        self.log.push((t_ns, xyz));
         let st = self.status_reg();
         let mut s = self.regs[st];
         if s & 0x01 != 0 && self.variant == QmcVariant::L {

@@ -1,22 +1,25 @@
-//! The firmware's task logic (`pico_imu::sensors` + `pico_imu::device`) against the
-//! register-level MPU-6050 and QMC5883L models on the simulated bus: the very code the embassy
-//! tasks run, ticked on a simulated clock. The Allan tables must equal, bit for bit, a host
-//! `allan::stream::DeviceEngine` fed with the samples the models served, corrected by
-//! `imu_cal::device` on the host.
-use std::cell::RefCell;
-use std::rc::Rc;
+//! The firmware's task logic (`pico_imu_core::{imu, mag, device}`) against the register-level
+//! MPU-6050 and QMC5883L models on the simulated bus: the very code the embassy tasks run,
+//! ticked on a simulated clock. The models log every sample they produce, so what the device
+//! says (slots, stamps, losses, tables) is checked against their ground truth.
+use std::collections::BTreeSet;
 
-use allan::stream::{DeviceEngine, LevelSums};
 use embassy_futures::block_on;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::{Address, RawSample};
 use imu_proto::{
-    CalFault, CalSource, Channel, DeviceMsg, Event, FrameReader, GapCause, HostFrame, Reply,
-    Request, SampleBatch, Sensor, SensorState, StreamMode, MAX_FRAME,
+    CalFault, CalProblem, CalSource, Channel, DeviceMsg, Event, FrameReader, GapCause, HostFrame,
+    Reply, Request, SampleBatch, Sensor, SensorState, StreamMode, MAX_FRAME,
 };
-use pico_imu::device::{Device, SensorMsg, TABLE_FRAME_ROOM};
-use pico_imu::outbox::FrameSink;
-use pico_imu::sensors::{self, ImuService, MagService, Slots};
+use pico_imu_core::clock::{BusTiming, Stamps, US};
+use pico_imu_core::config;
+use pico_imu_core::device::Device;
+use pico_imu_core::imu::{count_may_be_stale, ImuService};
+use pico_imu_core::mag::{MagService, Slots};
+use pico_imu_core::msg::{self, SensorMsg, BURST_MAX};
+use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::replay;
+use pico_imu_core::tables::{TABLE_FRAME_ROOM, TABLE_SPACING_US};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, QmcModel, QmcVariant, SimBus};
 
@@ -33,12 +36,7 @@ impl FrameSink for Sink {
     fn put(&mut self, f: &[u8]) {
         assert!(f.len() <= self.room, "put beyond room");
         // Frames are queued in whole words (zero-padded) so the device's copies are word copies.
-        assert_eq!(
-            f.len() % 4,
-            0,
-            "frame of {} bytes not padded to a word",
-            f.len()
-        );
+        assert_eq!(f.len() % 4, 0, "frame of {} bytes not padded", f.len());
         self.bytes.extend_from_slice(f);
     }
 }
@@ -63,22 +61,6 @@ impl Sink {
 fn lcg(state: &mut u32, amp: f64) -> f64 {
     *state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
     (f64::from(*state >> 8) / f64::from(1u32 << 24) - 0.5) * 2.0 * amp
-}
-
-/// The board: both sensors on one simulated bus, the two services and the device.
-struct Rig {
-    bus: SimBus,
-    imu: Mpu6050<SimBus>,
-    mag: Qmc5883<SimBus>,
-    imu_svc: ImuService,
-    mag_svc: MagService,
-    dev: Device,
-    sink: Sink,
-    /// Every IMU / magnetometer sample handed to the device, in order.
-    served_imu: Rc<RefCell<Vec<RawSample>>>,
-    /// (reading, DOR flag: a sample was overwritten before it, a gap).
-    served_mag: Vec<([i16; 3], bool)>,
-    t_ms: u64,
 }
 
 fn noisy_mpu() -> Mpu6050Model {
@@ -113,77 +95,126 @@ fn noisy_qmc() -> QmcModel {
     q
 }
 
+/// A sample the device was handed, as the sensor task read it.
+#[derive(Clone, Copy, Debug)]
+struct Delivered {
+    k: u32,
+    t_us: u64,
+    raw: RawSample,
+}
+
+/// The board: both sensors on one simulated bus, the two services and the device, run on the
+/// tasks' schedule (the magnetometer at the instants its service asks for, the IMU every 10 ms).
+struct Rig {
+    bus: SimBus,
+    imu: Mpu6050<SimBus>,
+    mag: Qmc5883<SimBus>,
+    imu_svc: ImuService,
+    mag_svc: MagService,
+    slots: Slots,
+    next_imu_us: u64,
+    dev: Device,
+    sink: Sink,
+    /// Every IMU sample handed to the device, in order.
+    imu_out: Vec<Delivered>,
+    /// Every magnetometer reading handed to the device: (slot, reading).
+    mag_out: Vec<(u32, [i16; 3])>,
+}
+
 impl Rig {
     fn new() -> Rig {
-        let bus = SimBus::new().with_mpu(noisy_mpu()).with_mag(noisy_qmc());
+        Rig::with(noisy_mpu(), noisy_qmc())
+    }
+
+    fn with(mpu: Mpu6050Model, qmc: QmcModel) -> Rig {
+        let bus = SimBus::new().with_mpu(mpu).with_mag(qmc);
         Rig {
             imu: Mpu6050::new(bus.clone(), Address::Ad0Low),
             mag: Qmc5883::new(bus.clone()),
             bus,
-            imu_svc: ImuService::new(),
-            mag_svc: MagService::new(),
-            dev: Device::new(sensors::scales(), "test"),
+            imu_svc: ImuService::new(BusTiming::from_hz(0)),
+            mag_svc: MagService::new(BusTiming::from_hz(0)),
+            slots: Slots::new(5000, 2750),
+            next_imu_us: 10_000,
+            dev: Device::new(config::scales(), "test"),
             sink: Sink::roomy(),
-            served_imu: Rc::new(RefCell::new(Vec::new())),
-            served_mag: Vec::new(),
-            t_ms: 0,
+            imu_out: Vec::new(),
+            mag_out: Vec::new(),
         }
     }
 
-    fn feed(&mut self, msgs: sensors::Out) {
+    fn now_us(&self) -> u64 {
+        self.bus.now_ns() / 1000
+    }
+
+    fn feed(&mut self, msgs: msg::Out) {
         for m in msgs {
             match &m {
-                SensorMsg::Imu { samples, .. } => {
-                    self.served_imu.borrow_mut().extend_from_slice(samples)
+                SensorMsg::Imu {
+                    stamps, samples, ..
+                } => {
+                    for (i, raw) in samples.iter().enumerate() {
+                        self.imu_out.push(Delivered {
+                            k: stamps.k0 + i as u32,
+                            t_us: stamps.us(i as u32),
+                            raw: *raw,
+                        });
+                    }
                 }
-                SensorMsg::Mag { xyz, skipped, .. } => self.served_mag.push((*xyz, *skipped)),
+                SensorMsg::Mag { stamps, xyz, .. } => self.mag_out.push((stamps.k0, *xyz)),
                 _ => {}
             }
             self.dev.on_sensor(&m, &mut self.sink);
         }
     }
 
-    /// Run `ms` milliseconds of the tasks' schedule: IMU every 10 ms, magnetometer every 5 ms.
+    /// Run `ms` milliseconds of the tasks' schedule.
     fn run(&mut self, ms: u64) {
-        for _ in 0..ms {
-            self.bus.advance_us(1000);
-            self.t_ms += 1;
+        let end = self.now_us() + ms * 1000;
+        loop {
+            let now = self.now_us();
+            let t_mag = match self.mag_svc.next_poll_us() {
+                Some(t) => t.max(now),
+                None => self.slots.next_after(now),
+            };
+            let t = t_mag.min(self.next_imu_us);
+            if t >= end {
+                let d = end.saturating_sub(self.now_us());
+                self.bus.advance_us(d);
+                return;
+            }
+            self.bus.advance_us(t.saturating_sub(now));
             let bus = self.bus.clone();
-            let now = move || bus.now_ns() / 1000;
-            if self.t_ms.is_multiple_of(5) {
-                let mut out = sensors::Out::new();
-                block_on(self.mag_svc.tick(
-                    &mut self.mag,
-                    &mut self.bus.delay(),
-                    &now,
-                    0,
-                    &mut out,
-                ));
-                self.feed(out);
+            let clock = move || bus.now_ns() / 1000;
+            let mut out = msg::Out::new();
+            if t == t_mag {
+                if self.mag_svc.wants_recovery(t) {
+                    self.mag_svc.recovered();
+                }
+                block_on(
+                    self.mag_svc
+                        .tick(&mut self.mag, &mut self.bus.delay(), &clock, &mut out),
+                );
+            } else {
+                self.next_imu_us += 10_000;
+                if self.imu_svc.wants_recovery(t) {
+                    self.imu_svc.recovered();
+                }
+                block_on(
+                    self.imu_svc
+                        .tick(&mut self.imu, &mut self.bus.delay(), &clock, &mut out),
+                );
             }
-            if self.t_ms.is_multiple_of(10) {
-                let mut out = sensors::Out::new();
-                block_on(self.imu_svc.tick(
-                    &mut self.imu,
-                    &mut self.bus.delay(),
-                    &now,
-                    0,
-                    &mut out,
-                ));
-                self.feed(out);
-            }
+            self.feed(out);
         }
     }
 
     fn request(&mut self, req: Request) -> Reply {
+        let now = self.now_us();
         let persist = self
             .dev
-            .handle(HostFrame { id: 42, req }, 0, 0, &mut self.sink);
+            .handle(HostFrame { id: 42, req }, now, 0, &mut self.sink);
         assert!(persist.is_none(), "unexpected persist request");
-        self.last_reply()
-    }
-
-    fn last_reply(&mut self) -> Reply {
         self.sink
             .messages()
             .into_iter()
@@ -194,16 +225,25 @@ impl Rig {
             })
             .expect("a reply to request 42")
     }
-}
 
-fn host_engine(values: impl IntoIterator<Item = i32>) -> DeviceEngine {
-    let mut e = DeviceEngine::new();
-    for v in values {
-        e.push(v);
+    fn events(&mut self) -> Vec<Event> {
+        self.sink
+            .messages()
+            .into_iter()
+            .filter_map(|m| match m {
+                DeviceMsg::Event(e) => Some(e),
+                _ => None,
+            })
+            .collect()
     }
-    e
+
+    fn table(&mut self, ch: Channel) -> imu_proto::AllanTable {
+        let now = self.now_us();
+        self.dev.table(ch, now)
+    }
 }
 
+/// Sums of a table, level by level.
 fn sums(t: &imu_proto::AllanTable) -> Vec<(u32, u32, u64, u128, u64, u128)> {
     t.levels
         .iter()
@@ -211,72 +251,153 @@ fn sums(t: &imu_proto::AllanTable) -> Vec<(u32, u32, u64, u128, u64, u128)> {
         .collect()
 }
 
-fn engine_sums(e: &DeviceEngine) -> Vec<(u32, u32, u64, u128, u64, u128)> {
-    e.levels()
-        .filter(|l: &LevelSums| l.n2 > 0)
-        .map(|l| (l.m, l.stride, l.n2, l.sum2, l.n3, l.sum3))
+/// The delivered IMU samples replayed through the host replay with `splits`.
+fn replay_imu(
+    d: &[Delivered],
+    ch: Channel,
+    pushed: u64,
+    splits: &BTreeSet<u64>,
+    cal: &imu_cal::device::Calibration,
+) -> replay::Replay {
+    replay::replay::<allan::DeviceEngine, _>(
+        d,
+        pushed,
+        |x| u64::from(x.k),
+        |x| {
+            let i = replay::imu_inputs(cal, x.raw.accel, x.raw.gyro, x.raw.temp);
+            replay::channel_input(ch, Some(&i), None).unwrap_or(0)
+        },
+        splits,
+    )
+}
+
+fn gap_positions(events: &[Event], sensor: Sensor) -> BTreeSet<u64> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Gap { sensor: s, at, .. } if *s == sensor => Some(*at),
+            _ => None,
+        })
         .collect()
 }
 
+/// Σ lost of the sensor's Gap events.
+fn lost(events: &[Event], sensor: Sensor) -> u64 {
+    events
+        .iter()
+        .map(|e| match e {
+            Event::Gap {
+                sensor: s, lost, ..
+            } if *s == sensor => u64::from(*lost),
+            _ => 0,
+        })
+        .sum()
+}
+
+/// The model's slots of the delivered samples' neighbours: Σ of the jumps between delivered
+/// slots, i.e. the ground truth of what was lost between the first and the last delivered.
+fn truth_lost(slots: &[(u64, u64)], delivered_t_ns: &[u64]) -> u64 {
+    let by_t: std::collections::BTreeMap<u64, u64> = slots.iter().map(|(s, t)| (*t, *s)).collect();
+    let s: Vec<u64> = delivered_t_ns.iter().map(|t| by_t[t]).collect();
+    s.windows(2).map(|w| w[1] - w[0] - 1).sum()
+}
+
 #[test]
-fn device_tables_equal_the_host_engine_on_the_served_samples_bit_for_bit() {
+fn device_tables_equal_the_host_replay_of_the_delivered_samples_bit_for_bit() {
     let mut rig = Rig::new();
     rig.run(3000);
-    let served = rig.served_imu.borrow().clone();
-    // The IMU engines take samples in pairs: with no gap, an odd last sample still waits for
-    // its pair, so exactly the even part of what was served has been pushed.
-    let pushed = served.len() & !1;
-    assert_eq!(rig.dev.table(Channel::Gz).pushed, pushed as u64);
-    let served_pushed = &served[..pushed];
-    // 3 s at 1 kHz less the 100 ms reset wait of init and the last partial burst.
+    let t = rig.table(Channel::Gz);
+    // The IMU engines take samples in pairs: with no gap, an odd last sample waits for its
+    // pair, so exactly the even part of what was delivered has been pushed.
+    assert_eq!(t.pushed, rig.imu_out.len() as u64 & !1);
     assert!(
-        served.len() > 2800,
-        "only {} IMU samples served",
-        served.len()
+        rig.imu_out.len() > 2800,
+        "{} IMU samples",
+        rig.imu_out.len()
     );
-    assert!(
-        rig.served_mag.len() > 550,
-        "only {} magnetometer samples",
-        rig.served_mag.len()
-    );
+    assert!(rig.mag_out.len() > 550, "{} readings", rig.mag_out.len());
     let cal = imu_cal::device::Calibration::identity();
-    for (k, ch) in [Channel::Gx, Channel::Gy, Channel::Gz]
-        .into_iter()
-        .enumerate()
-    {
-        let host = host_engine(
-            served_pushed
-                .iter()
-                .map(|s| cal.apply_gyro(s.gyro, s.temp.unwrap())[k]),
-        );
-        assert_eq!(sums(&rig.dev.table(ch)), engine_sums(&host), "{ch:?}");
+    let none = BTreeSet::new();
+    for ch in [
+        Channel::Ax,
+        Channel::Az,
+        Channel::Gx,
+        Channel::Gz,
+        Channel::Temp,
+    ] {
+        let t = rig.table(ch);
+        let r = replay_imu(&rig.imu_out, ch, t.pushed, &none, &cal);
+        let c = replay::compare(&t, &r);
+        assert!(c.mismatches.is_empty(), "{ch:?}: {:?}", c.mismatches);
+        assert!(c.levels_compared >= 10);
     }
-    let host = host_engine(served_pushed.iter().map(|s| cal.apply_accel(s.accel)[2]));
-    assert_eq!(sums(&rig.dev.table(Channel::Az)), engine_sums(&host));
-    let host = host_engine(served_pushed.iter().map(|s| i32::from(s.temp.unwrap())));
-    assert_eq!(sums(&rig.dev.table(Channel::Temp)), engine_sums(&host));
-    // The magnetometer engine marks a gap where the chip reported an overwritten sample.
-    let mut host = DeviceEngine::new();
-    for (m, skipped) in &rig.served_mag {
-        if *skipped {
-            host.gap();
+    let t = rig.table(Channel::My);
+    let r = replay::replay::<allan::MagEngine, _>(
+        &rig.mag_out,
+        t.pushed,
+        |x| u64::from(x.0),
+        |x| cal.apply_mag(x.1)[1],
+        &none,
+    );
+    let c = replay::compare(&t, &r);
+    assert!(c.mismatches.is_empty(), "{:?}", c.mismatches);
+    assert_eq!(t.gaps, 0);
+}
+
+/// The samples' slots are the models' grid positions, their stamps the instants the models
+/// sampled them (the simulated bus takes no time: the latch is the transfer's start), and the
+/// measured periods those of the parts' clocks, here 1.3 % slow.
+#[test]
+fn slots_and_stamps_follow_the_parts_own_clocks() {
+    let mut mpu = noisy_mpu();
+    mpu.clock_error = -0.013;
+    let mut qmc = noisy_qmc();
+    qmc.clock_error = -0.013;
+    let mut rig = Rig::with(mpu, qmc);
+    rig.run(12_000);
+    let truth = rig.bus.mpu(|m| m.slots());
+    let log = rig.bus.mpu(|m| m.log.clone());
+    let mut errs = Vec::new();
+    for d in &rig.imu_out {
+        let (slot, t_ns) = truth[d.k as usize];
+        assert_eq!(slot, u64::from(d.k), "grid position");
+        let raw = log[d.k as usize].1;
+        assert_eq!(d.raw.accel, [raw[0], raw[1], raw[2]], "slot {}", d.k);
+        if t_ns > 5_000_000_000 {
+            errs.push(d.t_us as f64 - t_ns as f64 * 1e-3);
         }
-        host.push(cal.apply_mag(*m)[1]);
     }
-    assert_eq!(sums(&rig.dev.table(Channel::My)), engine_sums(&host));
-    assert_eq!(rig.dev.table(Channel::Gz).gaps, 0);
+    let worst = errs.iter().fold(0.0f64, |a, e| a.max(e.abs()));
+    assert!(worst < 10.0, "IMU stamps off by up to {worst} µs after 5 s");
+    let st = rig.dev.status(0, 0);
+    assert!(
+        st.imu_period_ns.abs_diff(1_013_171) <= 1,
+        "{}",
+        st.imu_period_ns
+    );
+    assert!(
+        st.mag_period_ns.abs_diff(5_065_856) <= 5,
+        "{}",
+        st.mag_period_ns
+    );
+    // The magnetometer: every reading is the model's measurement of the same slot.
+    let mlog = rig.bus.mag(|q| q.log.clone());
+    for (k, xyz) in &rig.mag_out {
+        assert_eq!(mlog[*k as usize].1, *xyz, "slot {k}");
+    }
+    assert_eq!((st.samples_dropped, st.mag_dropped), (0, 0));
 }
 
 /// The IMU engines take samples in pairs: the odd one out of a burst waits for the next burst,
 /// is left out of `pushed` meanwhile, and is pushed before a split (it came before the gap).
 #[test]
 fn an_unpaired_imu_sample_waits_for_the_next_burst_and_precedes_a_split() {
-    let mut dev = Device::new(sensors::scales(), "test");
+    let mut dev = Device::new(config::scales(), "test");
     let mut sink = Sink::roomy();
     let mut state = 7u32;
     let mut served: Vec<i16> = Vec::new();
-    let mut burst = |n: usize, t_us: u64, served: &mut Vec<i16>| {
-        let mut v = imu_proto::Vec::<RawSample, { pico_imu::device::BURST_MAX }>::new();
+    let mut burst = |k0: u32, n: usize, after, served: &mut Vec<i16>| {
+        let mut v = imu_proto::Vec::<RawSample, BURST_MAX>::new();
         for _ in 0..n {
             let g = (lcg(&mut state, 300.0)) as i16;
             served.push(g);
@@ -286,64 +407,70 @@ fn an_unpaired_imu_sample_waits_for_the_next_burst_and_precedes_a_split() {
                 gyro: [0, 0, g],
             });
         }
-        SensorMsg::Imu { t_us, samples: v }
+        SensorMsg::Imu {
+            stamps: Stamps {
+                k0,
+                t0: u64::from(k0) * 1000 * US,
+                period: 1000 * US,
+            },
+            samples: v,
+            after,
+        }
     };
     let replay = |parts: &[&[i16]]| {
-        let mut e = DeviceEngine::new();
+        let mut e = allan::DeviceEngine::new();
         for (k, part) in parts.iter().enumerate() {
             if k > 0 {
                 e.gap();
             }
             part.iter().for_each(|&g| e.push(i32::from(g)));
         }
-        e
+        e.levels()
+            .filter(|l| l.n2 > 0)
+            .map(|l| (l.m, l.stride, l.n2, l.sum2, l.n3, l.sum3))
+            .collect::<Vec<_>>()
     };
-    // 5 + 6 + 8 samples: 4, then 10, then 18 pushed (the 5th waited for the second burst's
-    // first, the 19th waits still).
-    let mut t_us = 10_000;
+    // 5 + 6 + 8 samples: 4, then 10, then 18 pushed.
+    let mut k = 0;
     for (n, pushed) in [(5, 4), (6, 10), (8, 18)] {
-        let msg = burst(n, t_us, &mut served);
+        let msg = burst(k, n, None, &mut served);
+        k += n as u32;
         dev.on_sensor(&msg, &mut sink);
-        t_us += 10_000;
-        assert_eq!(dev.table(Channel::Gz).pushed, pushed, "after {n} more");
+        assert_eq!(dev.table(Channel::Gz, 0).pushed, pushed, "after {n} more");
     }
-    assert_eq!(served.len(), 19);
-    assert_eq!(
-        sums(&dev.table(Channel::Gz)),
-        engine_sums(&replay(&[&served[..18]]))
-    );
-    // An overflow splits the series after all 19, the waiting one included.
-    dev.on_sensor(&SensorMsg::ImuOverflow { t_us, lost: 50 }, &mut sink);
-    let t = dev.table(Channel::Gz);
-    assert_eq!((t.pushed, t.gaps), (19, 1));
-    let gaps: Vec<u64> = sink
+    assert_eq!(sums(&dev.table(Channel::Gz, 0)), replay(&[&served[..18]]));
+    // 50 slots later: a loss of 50, split after all 19 (the waiting one included).
+    let msg = burst(k + 50, 8, Some(GapCause::FifoOverflow), &mut served);
+    dev.on_sensor(&msg, &mut sink);
+    let t = dev.table(Channel::Gz, 0);
+    assert_eq!((t.pushed, t.gaps), (27, 1));
+    let events: Vec<Event> = sink
         .messages()
         .into_iter()
         .filter_map(|m| match m {
-            DeviceMsg::Event(Event::Gap {
-                sensor: Sensor::Imu,
-                at,
-                ..
-            }) => Some(at),
+            DeviceMsg::Event(e) => Some(e),
             _ => None,
         })
         .collect();
-    assert_eq!(gaps, vec![19]);
-    let msg = burst(8, t_us + 60_000, &mut served);
-    dev.on_sensor(&msg, &mut sink);
     assert_eq!(
-        sums(&dev.table(Channel::Gz)),
-        engine_sums(&replay(&[&served[..19], &served[19..]]))
+        events,
+        vec![Event::Gap {
+            sensor: Sensor::Imu,
+            at: 19,
+            cause: GapCause::FifoOverflow,
+            lost: 50,
+            t_us: u64::from(k + 50) * 1000,
+        }]
     );
-    assert_eq!(dev.table(Channel::Gz).pushed, 27);
+    assert_eq!(sums(&t), replay(&[&served[..19], &served[19..]]));
+    assert_eq!(dev.status(0, 0).samples_dropped, 50);
 }
 
 #[test]
-fn every_served_sample_reaches_the_host_once_in_order() {
+fn every_delivered_sample_reaches_the_host_once_in_order() {
     let mut rig = Rig::new();
     rig.run(2000);
     rig.dev.flush(&mut rig.sink);
-    let served = rig.served_imu.borrow().clone();
     let batches: Vec<SampleBatch> = rig
         .sink
         .messages()
@@ -354,233 +481,179 @@ fn every_served_sample_reaches_the_host_once_in_order() {
         })
         .collect();
     let imu: Vec<_> = batches.iter().flat_map(|b| b.imu.iter().copied()).collect();
-    assert_eq!(imu.len(), served.len());
-    for (k, (s, raw)) in imu.iter().zip(&served).enumerate() {
-        assert_eq!(s.seq, k as u32, "sequence numbers are contiguous");
+    assert_eq!(imu.len(), rig.imu_out.len());
+    for (s, d) in imu.iter().zip(&rig.imu_out) {
+        assert_eq!(s.seq, d.k, "the slot on the grid");
+        assert_eq!(s.t_us, d.t_us);
         // Identity calibration: the corrected counts are the raw counts.
-        assert_eq!(s.gyro, raw.gyro.map(i32::from));
-        assert_eq!(s.accel, raw.accel.map(i32::from));
+        assert_eq!(s.gyro, d.raw.gyro.map(i32::from));
+        assert_eq!(s.temp, d.raw.temp.map(i32::from));
     }
-    // Timestamps advance by the 1 ms sample period, across bursts too (each tick's bursts are
-    // stamped back from the read that emptied the FIFO; the simulated bus takes no time, so the
-    // spacing is exact here).
-    let worst = imu
-        .windows(2)
-        .map(|w| w[1].t_us.abs_diff(w[0].t_us + 1000))
-        .max()
-        .unwrap();
-    assert_eq!(worst, 0, "timestamp spacing off by up to {worst} µs");
+    assert!(imu.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+    assert!(imu.windows(2).all(|w| w[1].t_us > w[0].t_us));
     let st = rig.dev.status(0, 0);
     assert_eq!(
         (st.samples_taken, st.samples_dropped, st.fifo_overflows),
-        (served.len() as u64, 0, 0)
+        (imu.len() as u64, 0, 0)
     );
     assert_eq!((st.imu, st.mag), (SensorState::Ok, SensorState::Ok));
+    assert!(st
+        .temp_milli_c
+        .is_some_and(|t| (29_000..31_000).contains(&t)));
 }
 
+/// A CPU held up for 150 ms: the FIFO overflows; the device restarts it at a known slot and
+/// counts exactly the samples that never reached it.
 #[test]
-fn an_uploaded_calibration_is_applied_to_samples_and_tables() {
+fn a_fifo_overflow_is_counted_exactly_and_marked_as_a_gap() {
     let mut rig = Rig::new();
-    let file = imu_cal::file::CalFile::from_toml(
-        "version = 1
-[accel]
-lsb_per_unit = 835.3
-offset = [0.0, 0.0, 0.0]
-scale = [1.0, 1.0, 1.0]
-misalignment_deg = [0.0, 0.0, 0.0]
-[gyro]
-lsb_per_unit = 131.0
-bias = [0.5, -0.2, 0.0]
-temp_coeff = [0.01, 0.0, 0.0]
-temp_ref = 25.0
-temp_lsb_per_c = 340.0
-temp_offset_c = 36.53
-[mag]
-lsb_per_unit = 120.0
-hard_iron = [0.0, 0.0, 0.0]
-soft_iron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-",
-    )
-    .expect("calibration file parses");
-    let cal = file.to_device().expect("representable on the device");
-    let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
-    let blob = imu_cal::device::encode_blob(&cal, &mut buf)
-        .unwrap()
-        .to_vec();
-    let reply = rig.request(Request::SetCalibration {
-        blob: imu_proto::Vec::from_slice(&blob).unwrap(),
-        persist: false,
-    });
-    assert_eq!(reply, Reply::Ok);
-    assert_eq!(rig.dev.cal_status().source, CalSource::Host);
-    rig.run(1500);
-    let served = rig.served_imu.borrow().clone();
-    let host = host_engine(
-        served
-            .iter()
-            .map(|s| cal.apply_gyro(s.gyro, s.temp.unwrap())[0]),
-    );
-    assert_eq!(sums(&rig.dev.table(Channel::Gx)), engine_sums(&host));
-    // The 0.5 deg/s bias (65.5 LSB) is gone from gx: the model's mean rate is 0.5 deg/s.
-    rig.dev.flush(&mut rig.sink);
-    let gx: Vec<f64> = rig
-        .sink
-        .messages()
-        .into_iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Samples(b) = m {
-                Some(b)
-            } else {
-                None
-            }
-        })
-        .flat_map(|b| {
-            b.imu
-                .iter()
-                .map(|s| f64::from(s.gyro[0]))
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    let mean_dps = gx.iter().sum::<f64>() / gx.len() as f64 / 131.0;
-    // 30 °C vs T_ref 25 °C adds 0.05 deg/s of temperature term; noise ±0.3 deg/s uniform over
-    // ~1400 samples gives a standard error of ≈ 0.005 deg/s: allow 0.1 deg/s.
-    assert!(
-        mean_dps.abs() < 0.1,
-        "mean gx after correction {mean_dps} deg/s"
-    );
-    // Read back: the blob the device holds is the one uploaded.
-    match rig.request(Request::GetCalibration) {
-        Reply::Calibration { blob: got, status } => {
-            assert_eq!(got.as_slice(), blob.as_slice());
-            assert_eq!(status.source, CalSource::Host);
-        }
-        other => panic!("{other:?}"),
-    }
-}
-
-#[test]
-fn a_fifo_overflow_is_counted_and_marked_as_a_gap() {
-    let mut rig = Rig::new();
-    rig.run(1000);
-    let before = rig.served_imu.borrow().len();
-    // Stall 150 ms without servicing: the 73-frame FIFO overflows.
+    rig.run(3000);
+    let before = rig.imu_out.len();
     rig.bus.advance_us(150_000);
+    rig.next_imu_us = rig.now_us();
     rig.run(500);
+    let ev = rig.events();
     let st = rig.dev.status(0, 0);
     assert_eq!(st.fifo_overflows, 1);
-    // ≈150 − 73 frames lost, estimated from the elapsed time (±10 for the burst phase).
-    assert!(
-        (60..=100).contains(&st.samples_dropped),
-        "dropped {}",
-        st.samples_dropped
-    );
-    let t = rig.dev.table(Channel::Gz);
-    assert_eq!(t.gaps, 1);
-    // The host engine with a gap at the same place gives the same sums: no difference
-    // straddles the overflow.
-    let served = rig.served_imu.borrow().clone();
-    let mut host = DeviceEngine::new();
-    for (i, s) in served.iter().enumerate() {
-        if i == before {
-            host.gap();
-        }
-        host.push(i32::from(s.gyro[2]));
-    }
-    assert_eq!(sums(&t), engine_sums(&host));
-    let events: Vec<Event> = rig
-        .sink
-        .messages()
-        .into_iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Event(e) = m {
-                Some(e)
-            } else {
-                None
-            }
-        })
-        .collect();
-    assert!(
-        events
-            .iter()
-            .any(|e| matches!(e, Event::FifoOverflow { .. })),
-        "{events:?}"
-    );
-    // The split is reported where it was made, in samples pushed: a host replay needs nothing
-    // else to mirror it.
-    let imu_splits: Vec<(u64, GapCause)> = events
-        .iter()
-        .filter_map(|e| match e {
-            Event::Gap {
-                sensor: Sensor::Imu,
-                at,
-                cause,
-            } => Some((*at, *cause)),
-            _ => None,
-        })
-        .collect();
+    let truth = rig.bus.mpu(|m| m.slots());
+    let times: Vec<u64> = rig.imu_out.iter().map(|d| truth[d.k as usize].1).collect();
+    let truly = truth_lost(&truth, &times);
+    assert!(truly > 140, "{truly}");
+    assert_eq!(st.samples_dropped, truly);
+    assert_eq!(lost(&ev, Sensor::Imu), truly);
     assert_eq!(
-        imu_splits,
-        vec![(before as u64, GapCause::FifoOverflow)],
-        "{events:?}"
+        gap_positions(&ev, Sensor::Imu),
+        BTreeSet::from([before as u64])
     );
+    assert!(ev.iter().any(|e| matches!(
+        e,
+        Event::Gap {
+            cause: GapCause::FifoOverflow,
+            ..
+        }
+    )));
+    // No Allan difference straddles the overflow: the replay split there agrees.
+    let t = rig.table(Channel::Gz);
+    let r = replay_imu(
+        &rig.imu_out,
+        Channel::Gz,
+        t.pushed,
+        &gap_positions(&ev, Sensor::Imu),
+        &imu_cal::device::Calibration::identity(),
+    );
+    assert!(replay::compare(&t, &r).mismatches.is_empty());
 }
 
+/// NACKs for 50 ms: the transfers are retried on the next ticks; the FIFO holds 73 ms, so not a
+/// sample is lost and the sensor is never declared lost.
 #[test]
-fn a_vanished_sensor_is_reported_retried_and_resumed_without_reset() {
+fn a_nack_burst_shorter_than_the_fifo_costs_nothing() {
     let mut rig = Rig::new();
-    rig.run(500);
-    let taken_before = rig.dev.status(0, 0).samples_taken;
-    rig.bus.mpu(|m| m.present = false);
-    rig.run(2000);
-    assert_eq!(rig.dev.status(0, 0).imu, SensorState::Missing);
-    // Power comes back: the chip restarts from its power-on state (asleep, FIFO off).
-    rig.bus.with_world(|w| w.mpu = Some(noisy_mpu()));
     rig.run(1000);
+    let until = rig.bus.now_ns() + 50_000_000;
+    rig.bus.with_world(|w| w.nack_until = Some((0x68, until)));
+    rig.run(1000);
+    let ev = rig.events();
     let st = rig.dev.status(0, 0);
+    assert!(st.i2c_errors >= 4, "{}", st.i2c_errors);
+    assert_eq!(st.samples_dropped, 0);
     assert_eq!(st.imu, SensorState::Ok);
     assert!(
-        st.samples_taken > taken_before + 500,
-        "sampling resumed: {}",
-        st.samples_taken
+        !ev.iter().any(|e| matches!(e, Event::SensorLost { .. })),
+        "{ev:?}"
     );
-    assert!(st.i2c_errors >= 3);
-    let events: Vec<Event> = rig
-        .sink
-        .messages()
-        .into_iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Event(e) = m {
-                Some(e)
-            } else {
-                None
-            }
-        })
-        .collect();
-    let lost = events.iter().find(|e| {
-        matches!(
-            e,
-            Event::SensorLost {
-                sensor: Sensor::Imu,
-                ..
-            }
-        )
-    });
-    let back = events.iter().find_map(|e| match e {
+    assert!(rig.imu_out.windows(2).all(|w| w[1].k == w[0].k + 1));
+}
+
+/// Unpowered for 200 ms: lost after the retries, back from its power-on state (asleep,
+/// configuration gone) and re-initialised in step with its old grid: the slots and the loss
+/// count match the model's, and the grid continues.
+#[test]
+fn a_power_cycled_sensor_is_reinitialised_on_its_old_grid_and_the_loss_counted() {
+    let mut rig = Rig::new();
+    rig.run(1000);
+    rig.bus.mpu(|m| m.present = false);
+    rig.run(200);
+    // Power comes back: the chip restarts from its power-on state; keep its sample log.
+    let log = rig.bus.mpu(|m| std::mem::take(&mut m.log));
+    let mut fresh = noisy_mpu();
+    fresh.log = log;
+    rig.bus.with_world(|w| w.mpu = Some(fresh));
+    rig.run(1500);
+    let ev = rig.events();
+    let st = rig.dev.status(0, 0);
+    assert_eq!(st.imu, SensorState::Ok);
+    assert!(ev.iter().any(|e| matches!(
+        e,
+        Event::SensorLost {
+            sensor: Sensor::Imu,
+            ..
+        }
+    )));
+    assert!(ev.iter().any(|e| matches!(
+        e,
         Event::SensorBack {
             sensor: Sensor::Imu,
-            down_us,
             ..
-        } => Some(*down_us),
+        }
+    )));
+    let truth = rig.bus.mpu(|m| m.slots());
+    let times: Vec<u64> = rig
+        .imu_out
+        .iter()
+        .map(|d| truth.iter().find(|(s, _)| *s == u64::from(d.k)).unwrap().1)
+        .collect();
+    let truly = truth_lost(&truth, &times);
+    assert!(truly > 250, "{truly}");
+    assert_eq!(st.samples_dropped, truly);
+    // The values of each delivered slot are the model's: the re-initialised part is on the
+    // old grid.
+    let log = rig.bus.mpu(|m| m.log.clone());
+    for d in rig.imu_out.iter().step_by(97) {
+        let i = truth
+            .iter()
+            .position(|(s, _)| *s == u64::from(d.k))
+            .unwrap();
+        assert_eq!(d.raw.gyro, [log[i].1[4], log[i].1[5], log[i].1[6]]);
+    }
+}
+
+/// A part that answers but stops producing: named within 50 ms, re-initialised with back-off,
+/// its recovery reported, the stalled slots counted.
+#[test]
+fn a_stalled_sensor_is_named_within_50_ms_and_its_recovery_reported() {
+    let mut rig = Rig::new();
+    rig.run(2000);
+    let from = rig.bus.now_ns();
+    rig.bus.mag(|q| q.stall = Some((from, from + 300_000_000)));
+    rig.run(1000);
+    let ev = rig.events();
+    let stalled = ev.iter().find_map(|e| match e {
+        Event::SensorStalled {
+            sensor: Sensor::Mag,
+            t_us,
+            ..
+        } => Some(*t_us),
         _ => None,
     });
-    assert!(lost.is_some(), "{events:?}");
-    // Down about 2 s (+ up to one retry interval, 400 ms, + the 100 ms reset wait).
-    let down = back.expect("SensorBack event");
-    assert!((1_900_000..=2_600_000).contains(&down), "down {down} µs");
-    assert_eq!(st.samples_dropped, down / 1000);
-    // The engines kept their sums (no reset) and marked the outage as a gap.
-    assert_eq!(rig.dev.table(Channel::Ax).gaps, 1);
-    assert_eq!(rig.dev.table(Channel::Ax).pushed, st.samples_taken);
+    let at = stalled.expect("SensorStalled");
+    assert!(
+        at * 1000 - from <= 50_000_000,
+        "named {} ms after",
+        (at * 1000 - from) / 1_000_000
+    );
+    assert!(ev.iter().any(|e| matches!(
+        e,
+        Event::SensorBack {
+            sensor: Sensor::Mag,
+            ..
+        }
+    )));
+    let st = rig.dev.status(0, 0);
+    assert_eq!(st.mag, SensorState::Ok);
+    // ≈ 60 slots of 5 ms in the 300 ms stall, counted from the slots.
+    assert!((58..=62).contains(&st.mag_dropped), "{}", st.mag_dropped);
+    assert_eq!(lost(&ev, Sensor::Mag), st.mag_dropped);
 }
 
 #[test]
@@ -591,14 +664,14 @@ fn a_missing_magnetometer_at_boot_is_reported_and_found_later() {
     assert_eq!(rig.dev.status(0, 0).mag, SensorState::Missing);
     assert_eq!(rig.dev.status(0, 0).imu, SensorState::Ok);
     rig.bus.mag(|q| q.present = true);
-    rig.run(600);
+    rig.run(800);
     assert_eq!(rig.dev.status(0, 0).mag, SensorState::Ok);
     assert!(rig.dev.status(0, 0).mag_samples > 50);
 }
 
 #[test]
 fn persisting_a_calibration_waits_for_the_flash_write() {
-    let mut dev = Device::new(sensors::scales(), "test");
+    let mut dev = Device::new(config::scales(), "test");
     let mut sink = Sink::roomy();
     let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
     let blob = imu_cal::device::encode_blob(&imu_cal::device::Calibration::identity(), &mut buf)
@@ -635,7 +708,7 @@ fn persisting_a_calibration_waits_for_the_flash_write() {
 
 #[test]
 fn a_bad_stored_or_uploaded_calibration_leaves_identity_in_use() {
-    let mut dev = Device::new(sensors::scales(), "test");
+    let mut dev = Device::new(config::scales(), "test");
     let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
     let good = imu_cal::device::encode_blob(&imu_cal::device::Calibration::identity(), &mut buf)
         .unwrap()
@@ -645,11 +718,17 @@ fn a_bad_stored_or_uploaded_calibration_leaves_identity_in_use() {
     corrupt[last] ^= 0x55;
     dev.load_stored(Some(&corrupt));
     assert_eq!(dev.cal_status().source, CalSource::Identity);
-    assert_eq!(dev.cal_status().fault, Some(CalFault::Corrupt));
+    assert_eq!(
+        dev.cal_status().fault,
+        Some(CalFault::Rejected(CalProblem::Corrupt))
+    );
     let mut old = good.clone();
     old[4] = 0; // format version 0 (little-endian u16 at offset 4)
     dev.load_stored(Some(&old));
-    assert_eq!(dev.cal_status().fault, Some(CalFault::OldVersion(0)));
+    assert_eq!(
+        dev.cal_status().fault,
+        Some(CalFault::Rejected(CalProblem::Version(0)))
+    );
     let mut sink = Sink::roomy();
     let req = Request::SetCalibration {
         blob: imu_proto::Vec::from_slice(&corrupt).unwrap(),
@@ -664,7 +743,7 @@ fn a_bad_stored_or_uploaded_calibration_leaves_identity_in_use() {
         sink.messages(),
         vec![DeviceMsg::Reply {
             id: 1,
-            reply: Reply::Error(imu_proto::ErrorCode::BadCalibration)
+            reply: Reply::Error(imu_proto::ErrorCode::BadCalibration(CalProblem::Corrupt))
         }]
     );
 }
@@ -679,12 +758,9 @@ fn raw_mode_streams_counts_and_off_mode_streams_nothing() {
         .sink
         .messages()
         .into_iter()
-        .filter_map(|m| {
-            if let DeviceMsg::Samples(b) = m {
-                Some(b)
-            } else {
-                None
-            }
+        .filter_map(|m| match m {
+            DeviceMsg::Samples(b) => Some(b),
+            _ => None,
         })
         .collect();
     assert!(!raw.is_empty() && raw.iter().all(|b| !b.calibrated));
@@ -700,315 +776,80 @@ fn raw_mode_streams_counts_and_off_mode_streams_nothing() {
     assert!(rig.dev.status(0, 0).samples_taken > 400);
 }
 
+/// `GetTables` takes one snapshot of all ten engines: its tables carry the round and the
+/// instant, and samples that arrive while they are sent change none of them. The frames are
+/// spaced out, wait for room, and are never dropped.
 #[test]
-fn a_full_queue_drops_and_counts_frames_and_tables_wait_for_room() {
-    let mut rig = Rig::new();
-    rig.sink.room = 100; // smaller than a sample batch frame
-    rig.run(500);
-    let st = rig.dev.status(0, 0);
-    // One batch frame per MAX_BATCH_IMU samples (1 ms each), all dropped.
-    let batches = 500 / imu_proto::MAX_BATCH_IMU as u32;
-    assert!(
-        st.frames_unsent >= batches - 1,
-        "unsent {}",
-        st.frames_unsent
-    );
-    // Small event frames fit; no sample batch does.
-    assert!(!rig
-        .sink
-        .messages()
-        .iter()
-        .any(|m| matches!(m, DeviceMsg::Samples(_))));
-    rig.dev.start_tables();
-    for _ in 0..50 {
-        assert!(
-            rig.dev.tables_step(&mut rig.sink).is_none(),
-            "no table without room"
-        );
-    }
-    assert!(rig.dev.tables_pending());
-    rig.sink.room = TABLE_FRAME_ROOM;
-    let mut sent = Vec::new();
-    let mut steps = 0;
-    while rig.dev.tables_pending() && steps < 1000 {
-        steps += 1;
-        if let Some(t) = rig.dev.tables_step(&mut rig.sink) {
-            // Built a few rows per step, the table equals the one computed at once.
-            assert_eq!(t, rig.dev.table(t.channel));
-            sent.push(t.channel);
-        }
-    }
-    assert_eq!(sent, Channel::ALL.to_vec());
-    // 500 ms of data: 9 levels (IMU) or 6 (magnetometer) at ROWS_PER_STEP = 2 a step, plus the
-    // 50 rows done while waiting for room; never a whole table in one step.
-    assert!(steps >= 10, "{steps} steps");
-}
-
-#[test]
-fn a_table_is_a_snapshot_even_when_samples_arrive_while_it_is_built() {
+fn get_tables_answers_one_snapshot_spaced_out_and_waiting_for_room() {
     let mut rig = Rig::new();
     rig.run(2000);
-    rig.dev.start_tables();
-    let want = rig.dev.table(Channel::Ax);
-    assert!(rig.dev.tables_step(&mut rig.sink).is_none()); // the first rows only
-    rig.run(20); // more samples arrive
-    let mut got = None;
-    for _ in 0..20 {
-        if let Some(t) = rig.dev.tables_step(&mut rig.sink) {
-            got = Some(t);
-            break;
-        }
-    }
-    assert_eq!(got.expect("the ax table"), want);
-}
-
-#[test]
-fn table_rows_carry_consistent_deviations_and_bounds() {
-    let mut rig = Rig::new();
-    rig.run(3000);
-    let t = rig.dev.table(Channel::Gx);
-    assert_eq!(t.tau0_us, 1000);
-    for l in &t.levels {
-        // The row's deviation is the one its sums give (σ² = Σ D2² / (2 n m²)), to f32.
-        let s = LevelSums {
-            m: l.m,
-            stride: l.stride,
-            n2: l.n2,
-            sum2: l.sum2,
-            n3: l.n3,
-            sum3: l.sum3,
-        };
-        let dev = s.oadev(f64::from(t.scale)).unwrap();
-        assert!((f64::from(l.dev) - dev).abs() <= 1e-6 * dev, "m = {}", l.m);
-        assert!(
-            l.lo < l.dev && l.dev < l.hi,
-            "m = {}: {} ∉ ({}, {})",
-            l.m,
-            l.dev,
-            l.lo,
-            l.hi
-        );
-        assert!((f64::from(l.tau_s) / (f64::from(l.m) * 1e-3) - 1.0).abs() < 1e-6);
-        // f32 τ
-    }
-    // White noise (uniform ±0.3 deg/s, σ = 0.173 deg/s, quantised at 1/131 deg/s): ADEV at
-    // τ0 is σ (seed eq. 7 for white noise): 0.173 deg/s within 5 %.
-    let d0 = f64::from(t.levels[0].dev);
-    assert!(
-        (d0 - 0.3 / 3f64.sqrt()).abs() < 0.05 * 0.173,
-        "ADEV(τ0) = {d0} deg/s"
-    );
-}
-
-#[test]
-fn after_a_magnetometer_loss_sampling_resumes_at_the_full_rate() {
-    let mut rig = Rig::new();
-    rig.run(1000);
-    rig.bus.mag(|q| q.present = false);
-    rig.run(30);
-    rig.bus.mag(|q| q.present = true);
-    rig.run(500);
-    let before = rig.dev.status(0, 0).mag_samples;
-    rig.run(1000);
-    let per_s = rig.dev.status(0, 0).mag_samples - before;
-    eprintln!("{per_s} magnetometer samples in the second after recovery");
-    // 200 Hz: 200 ± 1 (tick phase) samples in one second.
-    assert!(
-        (199..=201).contains(&per_s),
-        "{per_s} samples/s after recovery"
-    );
-}
-
-#[test]
-fn a_late_magnetometer_sample_is_a_gap_even_without_the_overwrite_flag() {
-    let mut dev = Device::new(sensors::scales(), "test");
-    let mut sink = Sink::roomy();
-    let mut t = 1_000;
-    for k in 0..20u64 {
-        // Regular reads 5 ms apart with 0–2 ms of jitter, then one 10 ms hole at k = 10.
-        t += if k == 10 { 10_000 } else { 5_000 };
-        let jitter = (k * 700) % 2000;
-        let msg = SensorMsg::Mag {
-            t_us: t + jitter,
-            xyz: [k as i16, 0, 0],
-            skipped: false,
-        };
-        dev.on_sensor(&msg, &mut sink);
-    }
-    assert_eq!(dev.table(Channel::Mx).gaps, 1);
-    assert_eq!(dev.table(Channel::Mx).pushed, 20);
-}
-
-#[test]
-fn the_allan_state_fits_its_32_kib_budget() {
-    use allan::stream::MagEngine;
-    let bytes = pico_imu::device::ALLAN_STATE_BYTES;
-    // The engines and the IMU sample that waits for its pair (seven i32 inputs and a tag).
-    let pending = core::mem::size_of::<Option<([i32; 3], [i32; 3], i32)>>();
-    let parts =
-        7 * core::mem::size_of::<DeviceEngine>() + 3 * core::mem::size_of::<MagEngine>() + pending;
-    println!(
-        "Allan state: {bytes} B (7 × {} B at 1 kHz + 3 × {} B for the magnetometer + {pending} B)",
-        core::mem::size_of::<DeviceEngine>(),
-        core::mem::size_of::<MagEngine>()
-    );
-    assert_eq!(bytes, parts);
-    assert!(bytes <= 32 * 1024, "{bytes} B");
-}
-
-#[test]
-fn imu_stamps_always_increase_even_when_a_burst_is_read_early() {
-    let mut dev = Device::new(sensors::scales(), "test");
-    let mut sink = Sink::roomy();
-    let burst = |n: usize| {
-        let mut v = imu_proto::Vec::<RawSample, { pico_imu::device::BURST_MAX }>::new();
-        for k in 0..n {
-            let _ = v.push(RawSample {
-                accel: [k as i16, 0, 8192],
-                temp: Some(100),
-                gyro: [0, 0, k as i16],
-            });
-        }
-        v
+    let want: Vec<_> = Channel::ALL.iter().map(|c| rig.table(*c)).collect();
+    let Reply::Tables { snapshot } = rig.request(Request::GetTables) else {
+        panic!("GetTables")
     };
-    // Burst 1 read at 10 ms: 6, 7, 8, 9, 10 ms. Burst 2 read at 13.9 ms, i.e. 1.1 ms earlier
-    // than its 5 samples allow: nominally 9.9, 10.9, 11.9, 12.9, 13.9 ms.
-    for t_us in [10_000, 13_900] {
-        dev.on_sensor(
-            &SensorMsg::Imu {
-                t_us,
-                samples: burst(5),
-            },
-            &mut sink,
-        );
-    }
-    dev.flush(&mut sink);
-    let stamps: Vec<u64> = sink
-        .messages()
-        .into_iter()
-        .filter_map(|m| match m {
-            DeviceMsg::Samples(b) => Some(b.imu.iter().map(|s| s.t_us).collect::<Vec<_>>()),
-            _ => None,
-        })
-        .flatten()
-        .collect();
-    assert_eq!(
-        stamps,
-        vec![6_000, 7_000, 8_000, 9_000, 10_000, 10_001, 10_900, 11_900, 12_900, 13_900]
-    );
-}
-
-/// Drives the magnetometer service for `ticks` ticks, either at the times it asks for
-/// (`follow`) or on a fixed 5 ms grid; returns (readings, status polls, sensor measurements).
-fn mag_poll_run(follow: bool, ticks: usize) -> (u64, u64, u64) {
-    let bus = SimBus::new().with_mag(noisy_qmc());
-    let mut mag = Qmc5883::new(bus.clone());
-    let mut svc = MagService::new();
-    let clock = bus.clone();
-    let now = move || clock.now_ns() / 1000;
-    let mut readings = 0;
-    let mut next_grid = 5_000;
-    for _ in 0..ticks {
-        let at = match (follow, svc.next_poll_us()) {
-            (true, Some(t)) => t,
-            _ => next_grid,
-        };
-        while next_grid <= at {
-            next_grid += 5_000;
+    let mut got = Vec::new();
+    let mut now = rig.now_us();
+    rig.sink.room = 100;
+    assert!(rig.dev.tables_step(now, &mut rig.sink).is_none(), "no room");
+    rig.sink.room = TABLE_FRAME_ROOM;
+    while rig.dev.tables_pending() {
+        rig.run(10); // samples keep arriving
+        now = rig.now_us();
+        if rig.dev.tables_step(now, &mut rig.sink).is_some() {
+            let again = rig.dev.tables_step(now, &mut rig.sink);
+            assert!(again.is_none(), "two tables within {TABLE_SPACING_US} µs");
         }
-        bus.advance_us(at.saturating_sub(now()));
-        let mut out = sensors::Out::new();
-        block_on(svc.tick(&mut mag, &mut bus.delay(), &now, 0, &mut out));
-        for m in &out {
-            if let SensorMsg::Mag { skipped, .. } = m {
-                assert!(!skipped, "a sample was overwritten");
-                readings += 1;
+        for m in rig.sink.messages() {
+            if let DeviceMsg::Table(t) = m {
+                got.push(t);
             }
         }
     }
-    let (polls, made) = bus.mag(|q| (q.status_reads, q.measurements));
-    (readings, polls, made)
-}
-
-#[test]
-fn the_magnetometer_poll_follows_the_sensor_phase() {
-    // Initialised on the 5 ms grid, the sensor's samples land about 1 ms after each grid tick
-    // (soft reset and configuration time), so on the grid every reading needs re-polls.
-    let (grid_reads, grid_polls, grid_made) = mag_poll_run(false, 400);
-    eprintln!("grid: {grid_reads} readings, {grid_polls} status polls, {grid_made} measurements");
-    assert!(
-        grid_polls >= 3 * grid_reads,
-        "the scenario has a phase to find"
-    );
-    // Following the phase: after the first reading, one poll per reading plus one creep
-    // re-poll every 25 readings; still every sample read.
-    let (reads, polls, made) = mag_poll_run(true, 400);
-    eprintln!("following: {reads} readings, {polls} status polls, {made} measurements");
-    assert!(reads + 2 >= made, "{reads} readings of {made} measurements");
-    assert!(
-        polls * 100 <= reads * 110,
-        "{polls} status polls for {reads} readings"
-    );
-}
-
-/// The sensor tasks' slots: the incremental step (one addition) must give exactly what the
-/// division gives, for a task that keeps up, one that wakes late inside the next period, and
-/// one that misses whole periods (those slots are skipped, not caught up).
-#[test]
-fn task_slots_match_the_division_and_skip_missed_ones() {
-    let by_division = |now: u64| (now.saturating_sub(250) / 5000 + 1) * 5000 + 250;
-    let mut slots = Slots::new(5000, 250);
-    assert_eq!(slots.next_after(0), 5250);
-    assert_eq!(slots.next_after(5250), 10_250); // woke on time
-    assert_eq!(slots.next_after(10_900), 15_250); // woke 650 µs late
-    assert_eq!(slots.next_after(15_250 + 4_999), 20_250); // 1 µs before the next slot
-    assert_eq!(slots.next_after(20_250 + 12_000), 35_250); // two slots missed: skipped
-    assert_eq!(slots.next_after(35_000), 35_250); // asked before the last slot passed
-    let mut now = 40_250;
-    for step in [1u64, 4_999, 5_000, 7_777, 13, 23_456, 5_001, 0, 9_999] {
-        now += step;
-        assert_eq!(slots.next_after(now), by_division(now), "now = {now} µs");
+    assert_eq!(got.len(), Channel::ALL.len());
+    for (g, w) in got.iter().zip(&want) {
+        assert_eq!(g.snapshot, snapshot);
+        assert_eq!(g.t_us, got[0].t_us);
+        assert_eq!(sums(g), sums(w), "{:?}", g.channel);
+        assert_eq!(g.pushed, w.pushed);
     }
 }
 
 /// A stall between the FIFO-count transfer and the data transfer: the count (taken before it)
 /// cannot show the overflow the stall causes, and the frames read after it would be
-/// misaligned. The tick must see that the count is stale and handle it as an overflow (the
-/// end-to-end test's 120 ms stall once fell exactly there).
+/// misaligned; the count is then treated as stale.
 #[test]
-fn an_overflow_between_the_count_and_the_data_transfers_is_caught() {
+fn a_count_made_stale_by_a_hold_up_is_an_overflow() {
+    assert!(!count_may_be_stale(140, 300, 1024));
+    assert!(count_may_be_stale(140, 80_000, 1024));
+    // Within two frames of the 512-byte FIFO of the 6500 family.
+    assert!(count_may_be_stale(500, 300, 512));
+    assert!(!count_may_be_stale(476, 0, 512));
+}
+
+/// The magnetometer's reads come just after its samples land, one status poll per reading once
+/// the clock has settled.
+#[test]
+fn the_magnetometer_is_polled_once_per_reading_once_settled() {
     let mut rig = Rig::new();
-    rig.run(1000);
-    assert_eq!(rig.dev.status(0, 0).fifo_overflows, 0);
-    // One IMU tick whose third clock read (the one right after the count transfer) comes
-    // 120 ms later: the bus model advances, so the FIFO really overflows in between.
-    rig.bus.advance_us(2000);
-    let calls = std::cell::Cell::new(0);
-    let bus = rig.bus.clone();
-    let now = move || {
-        calls.set(calls.get() + 1);
-        if calls.get() == 3 {
-            bus.advance_us(120_000);
-        }
-        bus.now_ns() / 1000
-    };
-    let mut out = sensors::Out::new();
-    block_on(
-        rig.imu_svc
-            .tick(&mut rig.imu, &mut rig.bus.delay(), &now, 0, &mut out),
-    );
-    assert!(
-        out.iter()
-            .any(|m| matches!(m, SensorMsg::ImuOverflow { lost, .. } if *lost >= 40)),
-        "no overflow reported: {out:?}"
-    );
-    assert!(
-        !out.iter().any(|m| matches!(m, SensorMsg::Imu { .. })),
-        "frames read after a stale count: {out:?}"
-    );
-    rig.feed(out);
-    rig.run(200);
-    let st = rig.dev.status(0, 0);
-    assert_eq!(st.fifo_overflows, 1);
-    assert_eq!(rig.dev.table(Channel::Gz).gaps, 1);
+    rig.run(3000);
+    let polls0 = rig.bus.mag(|q| q.status_reads);
+    let n0 = rig.mag_out.len();
+    rig.run(2000);
+    let polls = rig.bus.mag(|q| q.status_reads) - polls0;
+    let n = (rig.mag_out.len() - n0) as u64;
+    assert!(n >= 398, "{n} readings in 2 s");
+    assert!(polls <= n + n / 10, "{polls} status polls for {n} readings");
+}
+
+/// The tasks' fallback slots: the incremental step (one addition) gives exactly what the
+/// division gives, and missed slots are skipped, not caught up.
+#[test]
+fn task_slots_match_the_division_and_skip_missed_ones() {
+    let div = |now: u64| (now.saturating_sub(250) / 5000 + 1) * 5000 + 250;
+    let mut s = Slots::new(5000, 250);
+    let mut now = 0;
+    for step in [1000, 4000, 5000, 4999, 1, 12_345, 5000, 60_000, 3] {
+        now += step;
+        assert_eq!(s.next_after(now), div(now), "at {now}");
+    }
 }

@@ -2,11 +2,13 @@
 //! host frames (decoded or not) and random sensor data, and the fault state machine is checked
 //! step by step.
 use imu_drivers::mpu6050::RawSample;
-use imu_proto::{Event, FrameReader, HostFrame, Sensor, SensorState, MAX_FRAME};
-use pico_imu::device::{Device, SensorMsg};
-use pico_imu::health::{Health, ERRORS_TO_LOSE, RETRY_FIRST_MS, RETRY_MAX_MS};
-use pico_imu::outbox::FrameSink;
-use pico_imu::sensors;
+use imu_proto::{Event, FrameReader, GapCause, HostFrame, Sensor, SensorState, MAX_FRAME};
+use pico_imu_core::clock::{Stamps, US};
+use pico_imu_core::config;
+use pico_imu_core::device::Device;
+use pico_imu_core::health::{Health, LOSE_AFTER_US, RETRY_FIRST_MS, RETRY_MAX_MS, STALL_AFTER_US};
+use pico_imu_core::msg::{Report, SensorMsg, BURST_MAX};
+use pico_imu_core::outbox::FrameSink;
 use proptest::prelude::*;
 
 struct CountSink {
@@ -38,22 +40,60 @@ fn raw() -> impl Strategy<Value = RawSample> {
         .prop_map(|(accel, temp, gyro)| RawSample { accel, temp, gyro })
 }
 
+fn cause() -> impl Strategy<Value = Option<GapCause>> {
+    proptest::option::of(prop_oneof![
+        Just(GapCause::FifoOverflow),
+        Just(GapCause::SensorFault),
+        Just(GapCause::BusFault),
+        Just(GapCause::Stalled),
+        Just(GapCause::Overwritten),
+        Just(GapCause::Paused),
+    ])
+}
+
+fn stamps() -> impl Strategy<Value = Stamps> {
+    (any::<u32>(), any::<u64>(), 0u64..(10_000 * US)).prop_map(|(k0, t0, period)| Stamps {
+        k0,
+        t0: t0 >> 1,
+        period,
+    })
+}
+
 fn sensor_msg() -> impl Strategy<Value = SensorMsg> {
     prop_oneof![
         (
-            any::<u64>(),
-            proptest::collection::vec(raw(), 0..=pico_imu::device::BURST_MAX)
+            stamps(),
+            proptest::collection::vec(raw(), 0..=BURST_MAX),
+            cause()
         )
-            .prop_map(|(t_us, v)| {
-                SensorMsg::Imu {
-                    t_us,
-                    samples: imu_proto::Vec::from_slice(&v).unwrap(),
-                }
+            .prop_map(|(stamps, v, after)| SensorMsg::Imu {
+                stamps,
+                samples: imu_proto::Vec::from_slice(&v).unwrap(),
+                after,
             }),
-        (any::<u64>(), any::<u32>()).prop_map(|(t_us, lost)| SensorMsg::ImuOverflow { t_us, lost }),
-        (any::<u64>(), any::<[i16; 3]>(), any::<bool>())
-            .prop_map(|(t_us, xyz, skipped)| SensorMsg::Mag { t_us, xyz, skipped }),
-        any::<u64>().prop_map(|t_us| SensorMsg::Resumed { t_us }),
+        (stamps(), any::<[i16; 3]>(), cause()).prop_map(|(stamps, xyz, after)| SensorMsg::Mag {
+            stamps,
+            xyz,
+            after
+        }),
+        (any::<u32>(), any::<u32>(), any::<bool>()).prop_map(|(e, b, imu)| {
+            SensorMsg::Report(Report {
+                sensor: if imu { Sensor::Imu } else { Sensor::Mag },
+                state: SensorState::Stalled,
+                i2c_errors: e,
+                bus_faults: b,
+                fifo_overflows: e,
+                period_ns: b,
+                event: None,
+            })
+        }),
+        (any::<u64>(), any::<u8>(), any::<bool>()).prop_map(|(t_us, pulses, sda_released)| {
+            SensorMsg::BusRecovered {
+                t_us,
+                pulses,
+                sda_released,
+            }
+        }),
     ]
 }
 
@@ -93,7 +133,7 @@ proptest! {
     /// (a persisted calibration after its write) and never panics.
     #[test]
     fn any_request_sequence_is_answered(reqs in proptest::collection::vec(request(), 1..30)) {
-        let mut dev = Device::new(sensors::scales(), "test");
+        let mut dev = Device::new(config::scales(), "test");
         let mut sink = CountSink { frames: 0, room: 1 << 20 };
         for (i, req) in reqs.into_iter().enumerate() {
             let before = sink.frames;
@@ -109,7 +149,7 @@ proptest! {
     /// decoded request is answered, nothing panics.
     #[test]
     fn random_host_bytes_never_panic_the_device(bytes in proptest::collection::vec(any::<u8>(), 0..2048)) {
-        let mut dev = Device::new(sensors::scales(), "test");
+        let mut dev = Device::new(config::scales(), "test");
         let mut sink = CountSink { frames: 0, room: 1 << 20 };
         let mut rd = FrameReader::<512>::new();
         let mut handled = 0;
@@ -135,74 +175,105 @@ proptest! {
     fn random_sensor_data_never_panics_the_pipeline(
         msgs in proptest::collection::vec(sensor_msg(), 0..40), room in prop_oneof![Just(0usize), Just(1usize << 20)]
     ) {
-        let mut dev = Device::new(sensors::scales(), "test");
+        let mut dev = Device::new(config::scales(), "test");
         let mut sink = CountSink { frames: 0, room };
         for m in &msgs {
             dev.on_sensor(m, &mut sink);
         }
         dev.flush(&mut sink);
-        dev.start_tables();
-        for _ in 0..10 {
-            dev.tables_step(&mut sink);
+        dev.start_tables(0);
+        for i in 0..12u64 {
+            dev.tables_step(i * 100_000, &mut sink);
         }
-        let _ = dev.status(u64::MAX, 1000);
+        let st = dev.status(u64::MAX, 1000);
+        // The counters are the sums of what was reported, never wrapped.
+        prop_assert!(st.samples_taken <= 40 * BURST_MAX as u64);
         for ch in imu_proto::Channel::ALL {
-            let t = dev.table(ch);
-            for l in &t.levels {
-                prop_assert!(l.dev.is_finite() && l.lo.is_finite() && l.hi.is_finite(), "{:?}", l);
-            }
+            let t = dev.table(ch, 0);
+            prop_assert!(t.levels.iter().all(|l| l.n2 > 0));
         }
     }
 }
 
+/// Failures for less than LOSE_AFTER_US are retried, not a loss; longer ones are, and the
+/// retries back off from 50 ms to 400 ms; delivering again reports the time out.
 #[test]
-fn a_sensor_is_lost_after_three_consecutive_errors_and_back_on_the_first_success() {
+fn a_sensor_is_lost_only_after_failing_for_a_while_and_back_when_it_delivers() {
     let mut h = Health::new(Sensor::Imu);
-    assert_eq!(h.ok(1_000), None);
+    assert_eq!(h.delivering(1_000), None);
     assert_eq!(h.state(), SensorState::Ok);
-    // Two errors and a success: a glitch, not a loss.
-    assert_eq!(h.error(2_000), None);
-    assert_eq!(h.error(3_000), None);
-    assert_eq!(h.ok(4_000), None);
-    for k in 0..ERRORS_TO_LOSE - 1 {
-        assert_eq!(h.error(5_000 + u64::from(k)), None);
-    }
+    // Failures for 90 ms and a success: a glitch, not a loss.
+    assert_eq!(h.failed(2_000), None);
+    assert_eq!(h.failed(92_000), None);
+    h.answered();
+    assert_eq!(h.failed(100_000), None);
+    assert_eq!(h.failed(100_000 + LOSE_AFTER_US - 1), None);
+    let t0 = 100_000 + LOSE_AFTER_US;
     assert_eq!(
-        h.error(10_000),
+        h.failed(t0),
         Some(Event::SensorLost {
             sensor: Sensor::Imu,
-            t_us: 10_000
+            t_us: t0
         })
     );
     assert_eq!(h.state(), SensorState::Missing);
     // First retry after 50 ms, then 100, 200, 400, 400 ms (capped).
-    assert!(!h.retry_due(10_000 + RETRY_FIRST_MS * 1000 - 1));
-    assert!(h.retry_due(10_000 + RETRY_FIRST_MS * 1000));
-    let mut t = 10_000 + RETRY_FIRST_MS * 1000;
+    assert!(!h.retry_due(t0 + RETRY_FIRST_MS * 1000 - 1));
+    let mut t = t0 + RETRY_FIRST_MS * 1000;
     let mut waits = Vec::new();
     for _ in 0..4 {
-        assert_eq!(h.error(t), None, "a failed retry is not a new loss");
-        let w = h.retry_in_us(t);
-        waits.push(w / 1000);
-        t += w;
+        assert!(h.retry_due(t));
+        h.retried(t);
+        assert_eq!(h.failed(t), None, "a failed retry is not a new loss");
+        let mut w = 1;
+        while !h.retry_due(t + w * 1000) {
+            w += 1;
+        }
+        waits.push(w);
+        t += w * 1000;
     }
     assert_eq!(waits, vec![100, 200, RETRY_MAX_MS, RETRY_MAX_MS]);
+    // Answering is not yet delivering: the state changes with the first sample.
+    h.answered();
+    assert_eq!(h.state(), SensorState::Missing);
     assert_eq!(
-        h.ok(t),
+        h.delivering(t),
         Some(Event::SensorBack {
             sensor: Sensor::Imu,
             t_us: t,
-            down_us: t - 10_000
+            down_us: t - 100_000
         })
     );
     assert_eq!(h.state(), SensorState::Ok);
+}
+
+#[test]
+fn a_stall_is_reported_once_and_its_end_as_a_return() {
+    let mut h = Health::new(Sensor::Mag);
+    h.delivering(1_000);
+    let t = 1_000 + STALL_AFTER_US;
+    assert_eq!(
+        h.stalled(t, 1_000),
+        Some(Event::SensorStalled {
+            sensor: Sensor::Mag,
+            t_us: t,
+            since_us: 1_000
+        })
+    );
+    assert_eq!(h.stalled(t + 5_000, 1_000), None);
+    assert_eq!(h.state(), SensorState::Stalled);
+    assert!(h.retry_due(t + RETRY_FIRST_MS * 1000));
+    assert!(matches!(
+        h.delivering(t + 300_000),
+        Some(Event::SensorBack { down_us, .. }) if down_us == t + 300_000 - 1_000
+    ));
 }
 
 #[test]
 fn a_sensor_absent_at_boot_is_lost_on_its_first_failure() {
     let mut h = Health::new(Sensor::Mag);
     assert_eq!(
-        h.error(7),
+        h.failed(7),
         Some(Event::SensorLost {
             sensor: Sensor::Mag,
             t_us: 7

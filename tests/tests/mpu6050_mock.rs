@@ -14,20 +14,21 @@ use imu_drivers::{asynch, blocking};
 
 const A: u8 = 0x68;
 
-/// Seed init on a chip answering `who`: RM 4.28 reset, CLKSEL=1, burst 0x19..0x1C
-/// (SMPLRT_DIV 0, DLPF_CFG 6, FS_SEL 0 → 0x00, AFS_SEL 1 → 0x08), INT_PIN_CFG 0,
-/// INT_ENABLE DATA_RDY|FIFO_OFLOW = 0x11, FIFO reset, FIFO_EN accel+XYZ gyro = 0x78, FIFO on.
+/// Default init on a chip answering `who`: RM 4.28 reset (the part is then asleep), burst
+/// 0x19..0x1C (SMPLRT_DIV 0, DLPF_CFG 6, FS_SEL 0 → 0x00, AFS_SEL 1 → 0x08), INT_PIN_CFG 0,
+/// INT_ENABLE DATA_RDY|FIFO_OFLOW = 0x11, FIFO reset, FIFO_EN accel+XYZ gyro = 0x78, FIFO on,
+/// and last the wake-up CLKSEL=1 (the sample clock starts with it).
 fn seed_init(who: u8, burst: Vec<u8>) -> Vec<T> {
     vec![
         T::write_read(A, vec![0x75], vec![who]),
         T::write(A, vec![0x6B, 0x80]),
-        T::write(A, vec![0x6B, 0x01]),
         T::write(A, burst),
         T::write(A, vec![0x37, 0x00]),
         T::write(A, vec![0x38, 0x11]),
         T::write(A, vec![0x6A, 0x04]),
         T::write(A, vec![0x23, 0x78]),
         T::write(A, vec![0x6A, 0x40]),
+        T::write(A, vec![0x6B, 0x01]),
     ]
 }
 
@@ -144,7 +145,7 @@ fn nack_midway_through_init_is_reported() {
     let exp = [
         T::write_read(A, vec![0x75], vec![0x68]),
         T::write(A, vec![0x6B, 0x80]),
-        T::write(A, vec![0x6B, 0x01]).with_error(nack),
+        T::write(A, seed_burst_6050()).with_error(nack),
     ];
     let e = both(
         &exp,
@@ -182,13 +183,13 @@ fn custom_config_bytes() {
     let exp = [
         T::write_read(A + 1, vec![0x75], vec![0x68]),
         T::write(A + 1, vec![0x6B, 0x80]),
-        T::write(A + 1, vec![0x6B, 0x01]),
         T::write(A + 1, vec![0x19, 0x07, 0x00, 0x18, 0x18]),
         T::write(A + 1, vec![0x37, 0xF0]),
         T::write(A + 1, vec![0x38, 0x10]),
         T::write(A + 1, vec![0x6A, 0x04]),
         T::write(A + 1, vec![0x23, 0xF8]),
         T::write(A + 1, vec![0x6A, 0x40]),
+        T::write(A + 1, vec![0x6B, 0x01]),
     ];
     let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0High);
     d.init(&mut NoopDelay, &cfg).unwrap();
@@ -204,12 +205,12 @@ fn fifo_off_config_disables_fifo() {
     let exp = [
         T::write_read(A, vec![0x75], vec![0x68]),
         T::write(A, vec![0x6B, 0x80]),
-        T::write(A, vec![0x6B, 0x01]),
         T::write(A, seed_burst_6050()),
         T::write(A, vec![0x37, 0x00]),
         T::write(A, vec![0x38, 0x01]),
         T::write(A, vec![0x23, 0x00]),
         T::write(A, vec![0x6A, 0x00]),
+        T::write(A, vec![0x6B, 0x01]),
     ];
     let mut d = blocking::Mpu6050::new(Mock::new(&exp), Address::Ad0Low);
     d.init(&mut NoopDelay, &cfg).unwrap();
@@ -408,7 +409,7 @@ fn fifo_with_temperature_frames() {
         ..Config::default()
     };
     let mut exp = seed_init(0x68, seed_burst_6050());
-    exp[7] = T::write(A, vec![0x23, 0xF8]);
+    exp[6] = T::write(A, vec![0x23, 0xF8]);
     let frame: Vec<u8> = [1i16, 2, 3, -100, 4, 5, 6]
         .iter()
         .flat_map(|v| v.to_be_bytes())

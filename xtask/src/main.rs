@@ -5,6 +5,7 @@ use std::process::Command;
 
 use anyhow::{bail, Context, Result};
 
+mod e2e;
 mod emu;
 mod emu_check;
 mod emu_link;
@@ -21,12 +22,12 @@ fn main() -> Result<()> {
         .unwrap_or(("help", &[]));
     match cmd {
         "test" => test(rest),
-        "e2e" => emu::e2e(rest),
+        "e2e" => e2e::e2e(rest),
         "bench-emu" => emu::bench(rest),
         "demo" => emu::demo(rest),
         "firmware" => firmware::main(rest),
         "help" | "--help" | "-h" => {
-            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e     end-to-end test on the emulated board (60 s emulated)\n  bench-emu  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
+            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e [--scenario faults|boot-stall|sine]  end-to-end test on the emulated board\n  bench-emu  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
             Ok(())
         }
         other => bail!("unknown xtask command `{other}` (try `cargo xtask help`)"),
@@ -68,12 +69,9 @@ fn test(extra: &[String]) -> Result<()> {
     c.args(extra);
     run(&mut c)?;
     if emu::node_available() {
-        emu::e2e(&[])?;
-        // The same run with a slow sine on the x gyro: small enough for the Thumb fast path
-        // (|z| < 2^10), large enough for 64-bit squares at τ ≥ 128 ms, so the device's
-        // hand-written squares are compared with the host's too (allan/src/stream/thumb.rs).
-        let sine = ["--sine", "3,3", "--out", "e2e-sine"].map(String::from);
-        emu::e2e(&sine)?;
+        for scenario in ["faults", "boot-stall", "sine"] {
+            e2e::e2e(&["--scenario".to_string(), scenario.to_string()])?;
+        }
         emu::harness_tests()
     } else {
         eprintln!(

@@ -610,6 +610,13 @@ impl Prepared {
         [axis(0), axis(1), axis(2)]
     }
 
+    /// [`Self::apply_gyro`] with the temperature if known; without one, the reference
+    /// temperature (no temperature term).
+    #[inline]
+    pub fn apply_gyro_opt(&self, raw: [i16; 3], temp_raw: Option<i16>) -> [i32; 3] {
+        self.apply_gyro(raw, temp_raw.unwrap_or(self.t_ref))
+    }
+
     /// [`Calibration::apply_mag`].
     #[inline]
     pub fn apply_mag(&self, raw: [i16; 3]) -> [i32; 3] {

@@ -53,6 +53,11 @@ macro_rules! drivers {
                 self.i2c
             }
 
+            /// The bus, e.g. to ask it when its last transfer started.
+            pub fn bus(&self) -> &I2C {
+                &self.i2c
+            }
+
             /// Chip identified by the last `init`/`probe`.
             pub fn chip(&self) -> Option<ChipId> {
                 self.chip
@@ -94,14 +99,27 @@ macro_rules! drivers {
                 Ok(chip)
             }
 
-            /// Identify, reset and configure the chip (sequence and values: docs/drivers.md):
-            /// 1. WHO_AM_I check; 2. PWR_MGMT_1 = DEVICE_RESET, wait 100 ms;
-            /// 3. PWR_MGMT_1 = 0x01 (awake, PLL with gyro X reference);
-            /// 4. one burst SMPLRT_DIV, CONFIG, GYRO_CONFIG, ACCEL_CONFIG (+ ACCEL_CONFIG2 on
-            ///    6500-family clones); 5. INT_PIN_CFG, INT_ENABLE;
-            /// 6. FIFO: USER_CTRL = FIFO_RESET, FIFO_EN = frame mask, USER_CTRL = FIFO_EN
-            ///    (or FIFO_EN = 0 and USER_CTRL = 0 when the FIFO is off).
+            /// Identify, reset and configure the chip, then start sampling ([`Self::prepare`],
+            /// then [`Self::start`]).
             pub $($async)? fn init<D: $Delay>(
+                &mut self,
+                delay: &mut D,
+                config: &Config,
+            ) -> Result<ChipId, MpuError<I2C>> {
+                let chip = self.prepare(delay, config) $(.$await)? ?;
+                self.start() $(.$await)? ?;
+                Ok(chip)
+            }
+
+            /// Identify, reset and configure the chip, leaving it asleep (sequence and values:
+            /// docs/drivers.md): 1. WHO_AM_I check; 2. PWR_MGMT_1 = DEVICE_RESET, wait 100 ms
+            /// (the part is then asleep, RM 4.28); 3. one burst SMPLRT_DIV, CONFIG, GYRO_CONFIG,
+            /// ACCEL_CONFIG (+ ACCEL_CONFIG2 on 6500-family clones); 4. INT_PIN_CFG,
+            /// INT_ENABLE; 5. FIFO: USER_CTRL = FIFO_RESET, FIFO_EN = frame mask,
+            /// USER_CTRL = FIFO_EN (or FIFO_EN = 0 and USER_CTRL = 0 when the FIFO is off).
+            /// Nothing is sampled until [`Self::start`], so a caller can choose when the part's
+            /// sample clock starts, and every sample from the first goes into the FIFO.
+            pub $($async)? fn prepare<D: $Delay>(
                 &mut self,
                 delay: &mut D,
                 config: &Config,
@@ -109,7 +127,6 @@ macro_rules! drivers {
                 let chip = self.probe() $(.$await)? ?;
                 self.write_reg(mr::PWR_MGMT_1, mb::DEVICE_RESET) $(.$await)? ?;
                 delay.delay_ms(m::RESET_DELAY_MS) $(.$await)?;
-                self.write_reg(mr::PWR_MGMT_1, mb::CLKSEL_PLL_GYRO_X) $(.$await)? ?;
                 let (burst, len) = config.config_burst(chip);
                 self.i2c.write(self.address, &burst[..len]) $(.$await)? ?;
                 self.write_reg(mr::INT_PIN_CFG, config.interrupt.pin_cfg_bits()) $(.$await)? ?;
@@ -127,6 +144,35 @@ macro_rules! drivers {
                     }
                 }
                 Ok(chip)
+            }
+
+            /// Wake the chip: PWR_MGMT_1 = 0x01 (awake, PLL with gyro X reference). Its sample
+            /// clock starts with this write; the first sample follows one sample period later.
+            pub $($async)? fn start(&mut self) -> Result<(), MpuError<I2C>> {
+                self.write_reg(mr::PWR_MGMT_1, mb::CLKSEL_PLL_GYRO_X) $(.$await)?
+            }
+
+            /// Whether the chip still holds what [`Self::init`] configured (read back:
+            /// SMPLRT_DIV..ACCEL_CONFIG, FIFO_EN, USER_CTRL and PWR_MGMT_1). A part that lost
+            /// power, or was reset, reads back its defaults (asleep) and needs a new `init`;
+            /// one that only stopped answering for a while does not.
+            pub $($async)? fn config_intact(&mut self) -> Result<bool, MpuError<I2C>> {
+                let chip = self.chip.ok_or(m::Error::NotConfigured)?;
+                let (burst, _) = self.config.config_burst(chip);
+                let mut b = [0u8; 4];
+                self.read_regs(mr::SMPLRT_DIV, &mut b) $(.$await)? ?;
+                let mut fifo_en = [0u8; 1];
+                self.read_regs(mr::FIFO_EN, &mut fifo_en) $(.$await)? ?;
+                let mut ctrl = [0u8; 2];
+                self.read_regs(mr::USER_CTRL, &mut ctrl) $(.$await)? ?;
+                let (want_fifo, want_user) = match self.config.fifo {
+                    Some(frame) => (frame.fifo_en_bits(), mb::USER_FIFO_EN),
+                    None => (0, 0),
+                };
+                Ok(b == [burst[1], burst[2], burst[3], burst[4]]
+                    && fifo_en[0] == want_fifo
+                    && ctrl[0] & mb::USER_FIFO_EN == want_user
+                    && ctrl[1] == mb::CLKSEL_PLL_GYRO_X)
             }
 
             /// One 14-byte burst from ACCEL_XOUT_H: accel, temperature and gyro of the same
@@ -221,16 +267,31 @@ macro_rules! drivers {
                 Ok(done)
             }
 
-            /// Empty the FIFO and clear a pending overflow: USER_CTRL = FIFO_RESET (with
-            /// FIFO_EN = 0, as RM 4.27 requires), USER_CTRL = FIFO_EN, then read INT_STATUS.
+            /// Empty the FIFO and clear a pending overflow: [`Self::stop_fifo`],
+            /// [`Self::start_fifo`], then read INT_STATUS.
             pub $($async)? fn reset_fifo(&mut self) -> Result<(), MpuError<I2C>> {
+                self.stop_fifo() $(.$await)? ?;
+                self.start_fifo() $(.$await)? ?;
+                self.int_status() $(.$await)? ?;
+                Ok(())
+            }
+
+            /// Empty the FIFO and stop filling it: USER_CTRL = FIFO_RESET with FIFO_EN = 0 (RM
+            /// 4.27 resets only then). Samples taken until [`Self::start_fifo`] are not kept.
+            pub $($async)? fn stop_fifo(&mut self) -> Result<(), MpuError<I2C>> {
                 if self.config.fifo.is_none() {
                     return Err(m::Error::NotConfigured);
                 }
-                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_RESET) $(.$await)? ?;
-                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_EN) $(.$await)? ?;
-                self.int_status() $(.$await)? ?;
-                Ok(())
+                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_RESET) $(.$await)?
+            }
+
+            /// Fill the FIFO again (USER_CTRL = FIFO_EN): the first frame in it is the first
+            /// sample taken after this write.
+            pub $($async)? fn start_fifo(&mut self) -> Result<(), MpuError<I2C>> {
+                if self.config.fifo.is_none() {
+                    return Err(m::Error::NotConfigured);
+                }
+                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_EN) $(.$await)?
             }
 
             $($async)? fn average<D: $Delay>(&mut self, delay: &mut D) -> Result<([f32; 3], [f32; 3]), MpuError<I2C>> {
@@ -312,6 +373,11 @@ macro_rules! drivers {
                 self.i2c
             }
 
+            /// The bus, e.g. to ask it when its last transfer started.
+            pub fn bus(&self) -> &I2C {
+                &self.i2c
+            }
+
             /// Variant driven.
             pub fn variant(&self) -> Variant {
                 self.variant
@@ -363,11 +429,22 @@ macro_rules! drivers {
                 Ok(b[0])
             }
 
-            /// Check the chip id, soft-reset and configure (values: docs/drivers.md).
-            /// QMC5883L: CONTROL2 = SOFT_RST, wait, SET/RESET period (0x0B), CONTROL2, CONTROL1.
-            /// QMC5883P: CONTROL2 = SOFT_RST, wait, axis sign (0x29 = 0x06), CONTROL2, CONTROL1.
+            /// Check the chip id, soft-reset and configure ([`Self::prepare`], then
+            /// [`Self::start`]; values: docs/drivers.md).
             pub $($async)? fn init<D: $Delay>(&mut self, delay: &mut D, config: &q::Config) -> Result<(), MagError<I2C>> {
+                self.prepare(delay, config) $(.$await)? ?;
+                self.start() $(.$await)?
+            }
+
+            /// Check the chip id, soft-reset and configure everything but CONTROL1 (the part
+            /// then does not measure). QMC5883L: CONTROL2 = SOFT_RST, wait, SET/RESET period
+            /// (0x0B), CONTROL2. QMC5883P: CONTROL2 = SOFT_RST, wait, axis sign (0x29 = 0x06),
+            /// CONTROL2.
+            pub $($async)? fn prepare<D: $Delay>(&mut self, delay: &mut D, config: &q::Config) -> Result<(), MagError<I2C>> {
                 if config.range.lsb_per_gauss(self.variant).is_none() {
+                    return Err(q::Error::InvalidConfig);
+                }
+                if self.variant == Variant::L && config.control1_l().is_none() {
                     return Err(q::Error::InvalidConfig);
                 }
                 let found = self.chip_id() $(.$await)? ?;
@@ -376,23 +453,48 @@ macro_rules! drivers {
                 }
                 match self.variant {
                     Variant::L => {
-                        let c1 = config.control1_l().ok_or(q::Error::InvalidConfig)?;
                         self.write_reg(q::reg_l::CONTROL2, q::bits::SOFT_RST) $(.$await)? ?;
                         delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
                         self.write_reg(q::reg_l::SET_RESET_PERIOD, config.set_reset_period) $(.$await)? ?;
                         self.write_reg(q::reg_l::CONTROL2, config.control2_l()) $(.$await)? ?;
-                        self.write_reg(q::reg_l::CONTROL1, c1) $(.$await)? ?;
                     }
                     Variant::P => {
                         self.write_reg(q::reg_p::CONTROL2, q::bits::SOFT_RST) $(.$await)? ?;
                         delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
                         self.write_reg(q::reg_p::AXIS_SIGN, q::reg_p::AXIS_SIGN_VALUE) $(.$await)? ?;
                         self.write_reg(q::reg_p::CONTROL2, config.control2_p()) $(.$await)? ?;
-                        self.write_reg(q::reg_p::CONTROL1, config.control1_p()) $(.$await)? ?;
                     }
                 }
                 self.config = *config;
                 Ok(())
+            }
+
+            /// Write CONTROL1 (mode, rate, range, over-sampling): in continuous mode the part's
+            /// measurement clock starts with this write, its first sample one period later.
+            pub $($async)? fn start(&mut self) -> Result<(), MagError<I2C>> {
+                match self.variant {
+                    Variant::L => {
+                        let c1 = self.config.control1_l().ok_or(q::Error::InvalidConfig)?;
+                        self.write_reg(q::reg_l::CONTROL1, c1) $(.$await)?
+                    }
+                    Variant::P => self.write_reg(q::reg_p::CONTROL1, self.config.control1_p()) $(.$await)?,
+                }
+            }
+
+            /// Whether the part still holds the configuration (CONTROL1 and CONTROL2 read back):
+            /// a power cycle or a soft reset clears them.
+            pub $($async)? fn config_intact(&mut self) -> Result<bool, MagError<I2C>> {
+                let (c1_reg, c1, c2) = match self.variant {
+                    Variant::L => (
+                        q::reg_l::CONTROL1,
+                        self.config.control1_l().ok_or(q::Error::InvalidConfig)?,
+                        self.config.control2_l(),
+                    ),
+                    Variant::P => (q::reg_p::CONTROL1, self.config.control1_p(), self.config.control2_p()),
+                };
+                let mut b = [0u8; 2];
+                self.read_regs(c1_reg, &mut b) $(.$await)? ?;
+                Ok(b == [c1, c2])
             }
 
             /// Read the status register.
@@ -446,6 +548,15 @@ macro_rules! drivers {
                     overflow: status.overflow,
                     skipped: status.skipped,
                 })
+            }
+
+            /// The six data bytes alone (no status): the latest measurement, whether or not it
+            /// is new (a caller that polled the status first knows). Reading them clears DRDY
+            /// and DOR.
+            pub $($async)? fn read_data(&mut self) -> Result<[i16; 3], MagError<I2C>> {
+                let mut d = [0u8; 6];
+                self.read_regs(self.variant.data_reg(), &mut d) $(.$await)? ?;
+                Ok(q::decode_xyz(d))
             }
 
             /// Sensitivity of the applied configuration, LSB/G.

@@ -236,7 +236,7 @@ fn batch() -> SampleBatch {
                 t_us: 1_000_000 + 1000 * u64::from(k + gap),
                 accel: [12, -812, 15032],
                 gyro: [-447, 156, -86 + k as i32],
-                temp: -1500,
+                temp: Some(-1500),
             })
             .unwrap();
     }
@@ -258,17 +258,14 @@ fn messages() -> (Vec<DeviceMsg>, Vec<HostFrame>) {
         sum2: 123_456_789_012_345,
         n3: 990,
         sum3: 99,
-        tau_s: 0.016,
-        dev: 0.01,
-        edf: 400.0,
-        lo: 0.009,
-        hi: 0.011,
     };
     let mut levels = imu_proto::Vec::new();
     levels.push(level).unwrap();
     let table = AllanTable {
         channel: Channel::Gz,
-        tau0_us: 1000,
+        snapshot: 3,
+        t_us: 2_000_000,
+        tau0_ns: 1_000_000,
         scale: 0.0076336,
         pushed: 1_000_000,
         gaps: 2,

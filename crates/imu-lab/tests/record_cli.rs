@@ -79,7 +79,7 @@ fn fake_device(listener: TcpListener) {
                 t_us: u64::from(s) * 1000,
                 accel: [0, 0, 9810],
                 gyro: [0, 0, s as i32],
-                temp: 500,
+                temp: Some(500),
             });
         }
         seq += 10;
@@ -127,15 +127,19 @@ fn ctrl_c_ends_a_recording_cleanly_with_every_row_written() {
 
     let text = std::fs::read_to_string(&csv).expect("csv");
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("t,ax,ay,az,gx,gy,gz,mx,my,mz,temp"));
+    assert_eq!(
+        lines.next(),
+        Some("t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before")
+    );
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|f| f.parse::<f64>().expect(l)).collect())
         .collect();
     assert!(rows.len() > 1000, "{} rows", rows.len());
-    assert!(rows.iter().all(|r| r.len() == 11), "every row complete");
+    assert!(rows.iter().all(|r| r.len() == 12), "every row complete");
+    assert!(rows.iter().all(|r| r[11] == 0.0), "nothing lost");
     // The summary counts exactly the rows in the file: nothing received was lost.
     assert!(
-        stdout.contains(&format!(": {} rows,", rows.len())),
+        stdout.contains(&format!(": {} rows over", rows.len())),
         "{stdout}"
     );
     // Consecutive samples, gz = sample number × 0.01 deg/s, t in seconds.

@@ -1,13 +1,13 @@
 //! The wire layout of a [`SampleBatch`] (its serde impls) and the postcard bytes of
 //! `DeviceMsg::Samples(batch)`, written by hand.
 //!
-//! # Layout (protocol version 3)
+//! # Layout (protocol version 4)
 //!
 //! `calibrated: bool`, `scales: Scales`, then the IMU samples and the magnetometer samples, each
 //! as a length (varint) and that many samples. The first sample of a sensor carries `seq: u32`
 //! and `t_us: u64`; every later one carries `seq − previous seq` (u32, wrapping) and
 //! `t_us − previous t_us − P` (i64, wrapping, zig-zag), P the nominal period ([`IMU_PERIOD_US`],
-//! [`MAG_PERIOD_US`]), then its values (`[i32; 3]`, `[i32; 3]`, `i32` for the IMU; `[i32; 3]`
+//! [`MAG_PERIOD_US`]), then its values (`[i32; 3]`, `[i32; 3]`, `Option<i32>` for the IMU; `[i32; 3]`
 //! for the magnetometer). A regular run (consecutive numbers, one period apart) therefore costs
 //! two bytes of bookkeeping a sample instead of eight or nine, a third less per IMU sample, and
 //! every value still round-trips exactly.
@@ -35,12 +35,10 @@ use core::marker::PhantomData;
 use serde::de::{self, Deserialize, Deserializer, SeqAccess, Visitor};
 use serde::ser::{Serialize, SerializeSeq, SerializeTuple, Serializer};
 
-use crate::{ImuSample, MagSample, SampleBatch, Scales, Vec, MAX_BATCH_IMU, MAX_BATCH_MAG};
-
-/// Nominal spacing of IMU samples on the wire, µs (subtracted from their time differences).
-pub const IMU_PERIOD_US: u64 = 1_000;
-/// Nominal spacing of magnetometer samples on the wire, µs.
-pub const MAG_PERIOD_US: u64 = 5_000;
+use crate::{
+    ImuSample, MagSample, SampleBatch, Scales, Vec, IMU_PERIOD_US, MAG_PERIOD_US, MAX_BATCH_IMU,
+    MAX_BATCH_MAG,
+};
 
 /// What the wire layout needs of a sample: its bookkeeping and its values.
 trait Sample: Copy {
@@ -54,7 +52,7 @@ trait Sample: Copy {
 
 impl Sample for ImuSample {
     const PERIOD_US: u64 = IMU_PERIOD_US;
-    type Values = ([i32; 3], [i32; 3], i32);
+    type Values = ([i32; 3], [i32; 3], Option<i32>);
     fn seq(&self) -> u32 {
         self.seq
     }
@@ -206,8 +204,9 @@ impl<'de> Deserialize<'de> for SampleBatch {
 /// Index of `DeviceMsg::Samples` among `DeviceMsg`'s variants (tested against the serde path).
 pub(crate) const SAMPLES_VARIANT: u8 = 1;
 
-/// Most bytes of one encoded [`ImuSample`]: seq (5) + t_us (10) + 7 zig-zag `i32` (5 each).
-const IMU_SAMPLE_MAX: usize = 5 + 10 + 7 * 5;
+/// Most bytes of one encoded [`ImuSample`]: seq (5) + t_us (10) + 6 zig-zag `i32` (5 each) +
+/// the temperature's `Option` tag and zig-zag `i32`.
+const IMU_SAMPLE_MAX: usize = 5 + 10 + 6 * 5 + 1 + 5;
 /// Most bytes of one encoded [`MagSample`]: seq (5) + t_us (10) + 3 zig-zag `i32`.
 const MAG_SAMPLE_MAX: usize = 5 + 10 + 3 * 5;
 /// Most bytes [`write`] produces for a full batch (see `bound`).
@@ -333,7 +332,14 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
         self.zigzag(gx);
         self.zigzag(gy);
         self.zigzag(gz);
-        self.zigzag(s.temp);
+        // `Option`: a 0 byte for `None`, a 1 byte and the value for `Some`.
+        match s.temp {
+            Some(t) => {
+                self.byte(1);
+                self.zigzag(t);
+            }
+            None => self.byte(0),
+        }
     }
 
     fn mag(&mut self, s: &MagSample, prev: Option<&MagSample>) {
@@ -396,7 +402,7 @@ mod tests {
             t_us: u64::MAX.wrapping_add((k as u64) << 63),
             accel: [i32::MIN; 3],
             gyro: [i32::MAX; 3],
-            temp: i32::MIN,
+            temp: Some(i32::MIN),
         };
         let mag = |k: usize| MagSample {
             seq: u32::MAX.wrapping_add((k as u32) << 31),

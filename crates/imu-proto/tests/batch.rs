@@ -79,7 +79,7 @@ fn arb_batch() -> impl Strategy<Value = SampleBatch> {
         arb_u64(),
         [arb_i32(), arb_i32(), arb_i32()],
         [arb_i32(), arb_i32(), arb_i32()],
-        arb_i32(),
+        proptest::option::of(arb_i32()),
     )
         .prop_map(imu_sample);
     let mag = (arb_u32(), arb_u64(), [arb_i32(), arb_i32(), arb_i32()])
@@ -145,7 +145,7 @@ fn a_small_batch_frame_byte_for_byte() {
             t_us: 1 << 32,                 // 80 80 80 80 10
             accel: [-1, 1, 64],            // 01 02 80 01
             gyro: [i32::MIN, i32::MAX, 0], // ff ff ff ff 0f, fe ff ff ff 0f, 00
-            temp: -65,                     // 81 01
+            temp: Some(-65),               // 01 81 01
         }])
         .unwrap(),
         mag: Vec::from_slice(&[MagSample {
@@ -165,7 +165,7 @@ fn a_small_batch_frame_byte_for_byte() {
         0xac, 0x02, 0x80, 0x80, 0x80, 0x80, 0x10,
         0x01, 0x02, 0x80, 0x01,
         0xff, 0xff, 0xff, 0xff, 0x0f, 0xfe, 0xff, 0xff, 0xff, 0x0f, 0x00,
-        0x81, 0x01,
+        0x01, 0x81, 0x01,
         0x01, // one magnetometer sample
         0x7f, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0xff, 0x01,
         0x00, 0x7f, 0x7e,
@@ -222,7 +222,13 @@ fn arb_regular_batch() -> impl Strategy<Value = SampleBatch> {
                 .map(|&((ds, jitter), v)| {
                     seq = seq.wrapping_add(ds);
                     t = t.wrapping_add(1_000).wrapping_add(jitter as u64);
-                    imu_sample((seq, t, [v, v.wrapping_neg(), 7], [v / 3, 0, -1], v ^ 5))
+                    imu_sample((
+                        seq,
+                        t,
+                        [v, v.wrapping_neg(), 7],
+                        [v / 3, 0, -1],
+                        Some(v ^ 5),
+                    ))
                 })
                 .collect();
             let (mut seq, mut t) = (seq0 / 5, t0);
@@ -265,8 +271,8 @@ proptest! {
 #[test]
 fn later_samples_carry_differences() {
     let imu = [
-        imu_sample((1000, 50_000_000, [1, 2, 3], [4, 5, 6], 7)),
-        imu_sample((1001, 50_001_000, [1, 2, 3], [4, 5, 6], 7)),
+        imu_sample((1000, 50_000_000, [1, 2, 3], [4, 5, 6], Some(7))),
+        imu_sample((1001, 50_001_000, [1, 2, 3], [4, 5, 6], Some(7))),
     ];
     let mag = [
         MagSample {
@@ -292,14 +298,14 @@ fn later_samples_carry_differences() {
         PROTOCOL_VERSION, 0x01, 0x00, // version, Samples, raw
     ];
     assert_eq!(&body[..3], expected);
-    // After the 20 bytes of scales: IMU count, sample 0 (seq e8 07, t 80 e1 eb 17, values),
-    // sample 1 (01 00, values).
+    // After the 20 bytes of scales: IMU count, sample 0 (seq e8 07, t 80 e1 eb 17, values, the
+    // temperature as `Some`: 01 0e), sample 1 (01 00, values).
     let imu_part = &body[23..];
     #[rustfmt::skip]
     let imu_expected: &[u8] = &[
         0x02,
-        0xe8, 0x07, 0x80, 0xe1, 0xeb, 0x17, 0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x0e,
-        0x01, 0x00, 0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x0e,
+        0xe8, 0x07, 0x80, 0xe1, 0xeb, 0x17, 0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x01, 0x0e,
+        0x01, 0x00, 0x02, 0x04, 0x06, 0x08, 0x0a, 0x0c, 0x01, 0x0e,
         0x02,
         0x09, 0xf4, 0xe4, 0xeb, 0x17, 0x00, 0x00, 0x00,
         0x01, 0x06, 0x00, 0x00, 0x00,

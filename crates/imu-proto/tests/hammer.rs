@@ -51,7 +51,7 @@ fn arb_batch() -> impl Strategy<Value = SampleBatch> {
         any::<u64>(),
         any::<[i32; 3]>(),
         any::<[i32; 3]>(),
-        any::<i32>(),
+        proptest::option::of(any::<i32>()),
     )
         .prop_map(imu_sample);
     let mag = (any::<u32>(), any::<u64>(), any::<[i32; 3]>())

@@ -28,18 +28,22 @@ fn status() -> Status {
         samples_taken: 60_000,
         samples_dropped: 3,
         mag_samples: 12_000,
+        mag_dropped: 4,
         fifo_overflows: 1,
         i2c_errors: 7,
+        bus_faults: 1,
         bus_recoveries: 2,
         frames_rejected: 4,
         frames_unsent: 0,
         cpu_load_permille: 37,
-        temp_milli_c: -12_345,
+        temp_milli_c: Some(-12_345),
         imu: SensorState::Ok,
-        mag: SensorState::Missing,
+        mag: SensorState::Stalled,
+        imu_period_ns: 1_013_171,
+        mag_period_ns: 0,
         cal: CalStatus {
             source: CalSource::Identity,
-            fault: Some(CalFault::OldVersion(0)),
+            fault: Some(CalFault::Rejected(CalProblem::Version(0))),
         },
         mode: StreamMode::Calibrated,
     }
@@ -57,17 +61,14 @@ fn table() -> AllanTable {
                 sum2: (u128::from(u64::MAX) << 20) + u128::from(k),
                 n3: 59_000,
                 sum3: u128::MAX - u128::from(k),
-                tau_s: 0.001 * (1u64 << k) as f32,
-                dev: 0.01 / (k as f32 + 1.0),
-                edf: 1234.5,
-                lo: 0.009,
-                hi: 0.011,
             })
             .unwrap();
     }
     AllanTable {
         channel: Channel::Gz,
-        tau0_us: 1000,
+        snapshot: u32::MAX,
+        t_us: u64::MAX,
+        tau0_ns: 1_013_171,
         scale: 1.0 / 131.0,
         pushed: 60_000,
         gaps: 1,
@@ -83,7 +84,7 @@ fn batch() -> SampleBatch {
             t_us: 1_000 * u64::from(i) + u64::MAX / 2,
             accel: [i32::MIN, -1, i32::MAX],
             gyro: [0, 131 * i as i32, -32768],
-            temp: -521,
+            temp: if i % 2 == 0 { Some(-521) } else { None },
         })
         .unwrap();
     }
@@ -116,12 +117,31 @@ fn all_device_msgs() -> std::vec::Vec<DeviceMsg> {
             t_us: 5,
             down_us: 2_000_000
         }),
-        DeviceMsg::Event(Event::FifoOverflow { t_us: 99, lost: 12 }),
+        DeviceMsg::Event(Event::SensorStalled {
+            sensor: Sensor::Imu,
+            t_us: 99,
+            since_us: 12
+        }),
+        DeviceMsg::Event(Event::BusFault {
+            t_us: 1,
+            fault: BusFault::Timeout
+        }),
+        DeviceMsg::Event(Event::BusRecovered {
+            t_us: 2,
+            pulses: 9,
+            sda_released: true
+        }),
         DeviceMsg::Event(Event::Gap {
             sensor: Sensor::Mag,
             at: 123_456_789_012,
-            cause: GapCause::Late
+            cause: GapCause::Overwritten,
+            lost: u32::MAX,
+            t_us: 77
         }),
+        DeviceMsg::Reply {
+            id: 11,
+            reply: Reply::Tables { snapshot: 3 }
+        },
         DeviceMsg::Reply {
             id: 7,
             reply: Reply::Ok
@@ -132,7 +152,11 @@ fn all_device_msgs() -> std::vec::Vec<DeviceMsg> {
         },
         DeviceMsg::Reply {
             id: 9,
-            reply: Reply::Error(ErrorCode::BadCalibration)
+            reply: Reply::Error(ErrorCode::BadCalibration(CalProblem::Implausible {
+                sensor: CalSensor::Mag,
+                check: CalCheck::Condition,
+                axis: 2
+            }))
         },
         DeviceMsg::Reply {
             id: 10,

@@ -28,9 +28,13 @@ export class I2cBus {
     });
     // Faults
     this.nackBudget = new Map(); // address -> number of address phases still to NACK
+    this.nackUntil = new Map(); // address -> ns until which every address phase is NACKed
     this.stuck = false;
+    this.stuckUntil = null; // ns: SDA held regardless of clocking until then (null: until 9 pulses)
+    this.hang = false; // a START waits (does not lose arbitration) while SDA is held
+    this.hangPending = false; // a START is waiting for the bus
     this.sclPulsesWhileStuck = 0;
-    this.stats = { transactions: 0, nacks: 0, arbitrationLost: 0, bytes: 0, busyNanos: 0, stuckEvents: 0, stuckReleases: 0 };
+    this.stats = { transactions: 0, nacks: 0, arbitrationLost: 0, hungStarts: 0, bytes: 0, busyNanos: 0, stuckEvents: 0, stuckReleases: 0 };
     // Pull-ups: both lines idle high.
     this.sdaPin.setInputValue(true);
     this.sclPin.setInputValue(true);
@@ -41,9 +45,10 @@ export class I2cBus {
       lastScl = value;
       if (this.stuck && wasLow && !low) {
         this.sclPulsesWhileStuck++;
-        if (this.sclPulsesWhileStuck >= 9) this.releaseStuck();
+        if (this.sclPulsesWhileStuck >= 9 && this.stuckUntil === null) this.releaseStuck();
       }
     });
+    this.patchControllerReset();
     const c = this.i2c;
     c.onStart = (repeated) => this.onStart(repeated);
     c.onConnect = (addr, mode) => this.onConnect(addr, mode);
@@ -82,21 +87,82 @@ export class I2cBus {
     this.nackBudget.set(address, (this.nackBudget.get(address) ?? 0) + count);
   }
 
-  /** SDA held low by a slave until 9 SCL pulses are clocked through GPIO (bus recovery). */
-  injectStuckBus() {
+  /** NACK every address phase to `address` for the next `nanos` ns. */
+  injectNackWindow(address, nanos) {
+    this.nackUntil.set(address, this.mcu.clock.nanos + nanos);
+  }
+
+  /**
+   * A slave holds SDA low. Without `nanos`, until 9 SCL pulses are clocked through GPIO (bus
+   * recovery, UM10204 §3.1.16); with `nanos`, for that long whatever is clocked. `hang`: a
+   * START waits for the bus to be free (silicon's behaviour on a busy bus) instead of losing
+   * arbitration at once, so the transfer hangs until the firmware gives up on it.
+   */
+  injectStuckBus({ nanos = null, hang = false } = {}) {
     this.stuck = true;
+    this.hang = hang;
     this.sclPulsesWhileStuck = 0;
     this.stats.stuckEvents++;
     this.sdaPin.setInputValue(false);
+    this.stuckUntil = null;
+    if (nanos !== null) {
+      this.stuckUntil = this.mcu.clock.nanos + nanos;
+      const alarm = this.mcu.clock.createAlarm(() => this.releaseStuck());
+      alarm.schedule(nanos);
+    }
   }
 
   releaseStuck() {
+    if (!this.stuck) return;
     this.stuck = false;
+    this.hang = false;
+    this.stuckUntil = null;
     this.stats.stuckReleases++;
     this.sdaPin.setInputValue(true);
+    if (this.hangPending) {
+      // The waiting START goes ahead now that the bus is free.
+      this.hangPending = false;
+      this.after(1, () => this.i2c.completeStart());
+    }
+  }
+
+  /**
+   * rp2040js does not reset a peripheral through RESETS (RP2040 datasheet §2.14): a controller
+   * left waiting on a START would stay busy for ever after the firmware re-creates it. Setting
+   * the I2C0/I2C1 reset bit puts the controller back in its idle state and drops its FIFOs.
+   */
+  patchControllerReset() {
+    const resets = this.mcu.findPeripheral(0x4000c000); // RESETS
+    if (!resets || resets.__i2cResetPatched) return;
+    resets.__i2cResetPatched = true;
+    const bit = 1 << (3 + (this.i2c === this.mcu.i2c[1] ? 1 : 0));
+    const write = resets.writeUint32.bind(resets);
+    resets.writeUint32 = (offset, value) => {
+      if (offset === 0 && value & bit && !(resets.reset & bit)) {
+        const c = this.i2c;
+        c.state = 0; // I2CState.Idle
+        c.busy = false;
+        c.stop = false;
+        c.pendingRestart = false;
+        c.txFIFO.reset();
+        c.rxFIFO.reset();
+        c.abortSource = 0;
+        c.intRaw = 0;
+        c.checkInterrupts();
+        this.hangPending = false;
+        this.pending = null;
+      }
+      write(offset, value);
+    };
   }
 
   onStart(repeated) {
+    if (this.stuck && this.hang) {
+      // The START waits for a free bus: nothing completes until the slave lets go.
+      this.stats.hungStarts++;
+      this.hangPending = true;
+      return;
+    }
     if (this.stuck) {
       // A master cannot drive START on a bus whose SDA is held low: the DW_apb_i2c reports it
       // as arbitration lost (ABRT_ARB_LOST).
@@ -111,12 +177,14 @@ export class I2cBus {
   onConnect(addr, mode) {
     this.stats.transactions++;
     const device = this.devices.get(addr);
-    let ack = !!device && device.present(this.mcu.clock.nanos);
+    const now = this.mcu.clock.nanos;
+    let ack = !!device && device.present(now);
     const budget = this.nackBudget.get(addr) ?? 0;
     if (ack && budget > 0) {
       this.nackBudget.set(addr, budget - 1);
       ack = false;
     }
+    if (ack && now < (this.nackUntil.get(addr) ?? 0)) ack = false;
     if (!ack) this.stats.nacks++;
     this.current = ack ? { device, mode } : null;
     if (ack) device.start(mode === 1 ? 'read' : 'write', this.mcu.clock.nanos);
@@ -151,8 +219,13 @@ export class RegisterDevice {
     this.absentUntil = null;
   }
 
-  /** The device does not answer (NACKs its address) between `from` and `until` ns. */
+  /**
+   * The device loses power between `from` and `until` ns: it NACKs its address, produces
+   * nothing, and comes back from power-on reset. Call at `from` (it produces what was due up to
+   * then first).
+   */
   vanish(fromNanos, untilNanos) {
+    this.advance?.(fromNanos);
     this.absentFrom = fromNanos;
     this.absentUntil = untilNanos;
   }

@@ -33,19 +33,19 @@ export class Mpu6050 extends RegisterDevice {
    * @param stream source of physical values (Stream.imuAt)
    * @param opts.record keep every sample produced and whether it was served (for bit-exact checks)
    */
-  constructor(stream, { record = true } = {}) {
+  constructor(stream, { record = true, clockError = 0 } = {}) {
     super();
     this.stream = stream;
     this.record = record;
-    this.samples = []; // { k, t, raw: Int16Array(7) [ax ay az temp gx gy gz], served: 0 | ns }
-    this.stats = { produced: 0, overflows: 0, fifoResets: 0, servedFifo: 0, servedRegs: 0, overwrittenBytes: 0, resets: 0 };
+    this.clockError = clockError;
+    this.samples = []; // { k, slot, t, raw: Int16Array(7) [ax ay az temp gx gy gz], served: 0 | ns }
+    this.stats = { produced: 0, overflows: 0, fifoResets: 0, servedFifo: 0, servedRegs: 0, overwrittenBytes: 0, resets: 0, stalledSlots: 0 };
+    this.slots = new SlotGrid();
+    this.stalls = [];
     this.powerOnReset(0);
   }
 
   powerOnReset(nanos = 0) {
-    // A power cycle loses whatever was in flight: leave a hole in the sample index so that a
-    // host replaying the served samples sees the discontinuity (k jumps).
-    if (this.stats && this.stats.produced > 0) this.stats.produced++;
     this.regs = new Uint8Array(128);
     this.regs[REG.PWR_MGMT_1] = 0x40; // SLEEP
     this.regs[REG.WHO_AM_I] = 0x68;
@@ -69,9 +69,17 @@ export class Mpu6050 extends RegisterDevice {
     return DLPF[this.regs[REG.CONFIG] & 7];
   }
 
-  /** Sample period in ns: gyro output rate / (1 + SMPLRT_DIV). */
+  /**
+   * Sample period in ns: gyro output rate / (1 + SMPLRT_DIV), on the part's own oscillator
+   * (`clockError`: its relative rate error, −0.013 for a clock 1.3 % slow).
+   */
   get samplePeriodNanos() {
-    return (1e9 * (1 + this.regs[REG.SMPLRT_DIV])) / this.dlpf[2];
+    return (1e9 * (1 + this.regs[REG.SMPLRT_DIV])) / (this.dlpf[2] * (1 + this.clockError));
+  }
+
+  /** No sample is produced (no DATA_RDY, no FIFO write) in [from, until) ns; the clock runs on. */
+  stall(fromNanos, untilNanos = Infinity) {
+    this.stalls.push([fromNanos, untilNanos]);
   }
 
   restartSampling(nanos) {
@@ -82,7 +90,9 @@ export class Mpu6050 extends RegisterDevice {
   advance(nanos) {
     if (this.nextSample === null) return;
     while (this.nextSample <= nanos) {
-      this.produce(this.nextSample);
+      const t = this.nextSample;
+      if (this.stalls.some(([a, b]) => t >= a && t < b)) this.stats.stalledSlots++;
+      else this.produce(t);
       this.nextSample += this.samplePeriodNanos;
     }
   }
@@ -112,7 +122,8 @@ export class Mpu6050 extends RegisterDevice {
     raw[5] = clamp16(f[4] * lg);
     raw[6] = clamp16(f[5] * lg);
     const k = this.stats.produced++;
-    const sample = { k, t, raw, served: 0, bytesRead: 0, fifoBytes: 0 };
+    const slot = this.slots.of(t, this.samplePeriodNanos);
+    const sample = { k, slot, t, raw, served: 0, bytesRead: 0, fifoBytes: 0 };
     if (this.record) this.samples.push(sample);
     this.latest = sample;
     // Data registers 0x3B..0x48 (big-endian words).
@@ -234,10 +245,31 @@ export class Mpu6050 extends RegisterDevice {
     this.readBurst = null;
   }
 
-  /** Served samples as CSV rows: k, t_ns, ax ay az temp gx gy gz [counts], served_ns. */
+  /**
+   * Served samples as CSV rows: k (produced index), slot (position on the sample grid),
+   * t_ns (when the part sampled it), ax ay az temp gx gy gz [counts], served_ns.
+   */
   servedCsv() {
-    const out = ['k,t_ns,ax,ay,az,temp,gx,gy,gz,served_ns'];
-    for (const s of this.samples) if (s.served) out.push([s.k, s.t, ...s.raw, s.served].join(','));
+    const out = ['k,slot,t_ns,ax,ay,az,temp,gx,gy,gz,served_ns'];
+    for (const s of this.samples) if (s.served) out.push([s.k, s.slot, s.t, ...s.raw, s.served].join(','));
     return out.join('\n') + '\n';
+  }
+}
+
+/**
+ * A sensor's sample grid, the ground truth of what was lost: slot = round((t − t₀) / T), t₀ the
+ * first sample the part ever produced and T its period at the time. Within an uninterrupted run
+ * consecutive samples are one slot apart; a stall, an unread FIFO or an outage leaves the slots
+ * of the samples that never reached the reader, and a part restarted in step with its old grid
+ * (the firmware times its re-initialisation for that) continues on the same slots.
+ */
+export class SlotGrid {
+  constructor() {
+    this.origin = null;
+  }
+
+  of(t, period) {
+    if (this.origin === null) this.origin = t;
+    return Math.round((t - this.origin) / period);
   }
 }

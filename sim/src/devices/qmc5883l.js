@@ -6,24 +6,25 @@
 // Sensitivity 12000 LSB/G at ±2 G and 3000 LSB/G at ±8 G; 1 G = 100 µT.
 
 import { RegisterDevice } from './i2c-bus.js';
+import { SlotGrid } from './mpu6050.js';
 
 export const ODR_HZ = [10, 50, 100, 200];
 export const LSB_PER_UT = [120, 30]; // RNG 0 (±2 G), RNG 1 (±8 G)
 
 export class Qmc5883l extends RegisterDevice {
-  constructor(stream, { record = true } = {}) {
+  constructor(stream, { record = true, clockError = 0 } = {}) {
     super();
     this.stream = stream;
     this.record = record;
+    this.clockError = clockError;
     this.samples = [];
-    this.stats = { produced: 0, overflows: 0, dataOverruns: 0, served: 0, resets: 0 };
+    this.stats = { produced: 0, overflows: 0, dataOverruns: 0, served: 0, resets: 0, stalledSlots: 0 };
+    this.slots = new SlotGrid();
+    this.stalls = [];
     this.powerOnReset(0);
   }
 
   powerOnReset() {
-    // A power cycle loses whatever was in flight: leave a hole in the sample index so that a
-    // host replaying the served samples sees the discontinuity (k jumps).
-    if (this.stats && this.stats.produced > 0) this.stats.produced++;
     this.regs = new Uint8Array(16);
     this.regs[0x0d] = 0xff;
     this.nextSample = null;
@@ -37,14 +38,22 @@ export class Qmc5883l extends RegisterDevice {
     return (this.regs[0x09] & 3) === 1;
   }
 
+  /** Output period on the part's own oscillator (`clockError`: relative rate error). */
   get periodNanos() {
-    return 1e9 / ODR_HZ[(this.regs[0x09] >> 2) & 3];
+    return 1e9 / (ODR_HZ[(this.regs[0x09] >> 2) & 3] * (1 + this.clockError));
+  }
+
+  /** No measurement completes (DRDY never set) in [from, until) ns; the clock runs on. */
+  stall(fromNanos, untilNanos = Infinity) {
+    this.stalls.push([fromNanos, untilNanos]);
   }
 
   advance(nanos) {
     if (this.nextSample === null) return;
     while (this.nextSample <= nanos) {
-      this.produce(this.nextSample);
+      const t = this.nextSample;
+      if (this.stalls.some(([a, b]) => t >= a && t < b)) this.stats.stalledSlots++;
+      else this.produce(t);
       this.nextSample += this.periodNanos;
     }
   }
@@ -76,7 +85,7 @@ export class Qmc5883l extends RegisterDevice {
     }
     this.regs[0x07] = raw[3] & 0xff;
     this.regs[0x08] = (raw[3] >> 8) & 0xff;
-    const sample = { k: this.stats.produced++, t, raw, served: 0 };
+    const sample = { k: this.stats.produced++, slot: this.slots.of(t, this.periodNanos), t, raw, served: 0 };
     if (this.record) this.samples.push(sample);
     this.latest = sample;
     this.dataRead = 0;
@@ -129,9 +138,10 @@ export class Qmc5883l extends RegisterDevice {
     if (r === 0x09) this.nextSample = this.continuous ? nanos + this.periodNanos : null;
   }
 
+  /** Served samples: k, slot (see SlotGrid), t_ns, mx my mz temp [counts], served_ns. */
   servedCsv() {
-    const out = ['k,t_ns,mx,my,mz,temp,served_ns'];
-    for (const s of this.samples) if (s.served) out.push([s.k, s.t, ...s.raw, s.served].join(','));
+    const out = ['k,slot,t_ns,mx,my,mz,temp,served_ns'];
+    for (const s of this.samples) if (s.served) out.push([s.k, s.slot, s.t, ...s.raw, s.served].join(','));
     return out.join('\n') + '\n';
   }
 }

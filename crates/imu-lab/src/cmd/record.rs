@@ -1,11 +1,23 @@
 //! `imu-lab record --port PORT --out FILE.csv [--raw] [--seconds S]`: stream samples from the
 //! device into a CSV in the contract every other subcommand reads.
 //!
-//! Rows are the IMU samples (1 kHz): `t` is the device timestamp in s since boot, the
-//! magnetometer columns hold the latest magnetometer sample taken at or before `t` (200 Hz,
-//! zero-order hold), and rows start at the first IMU sample after the first magnetometer sample,
-//! so every row is complete. `--raw` records the uncorrected counts (converted with the nominal
-//! sensitivities), as calibration fitting needs; the default records the corrected values.
+//! The CSV (docs/firmware.md, "The recording"): header `t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,
+//! gap_before`, one row per IMU sample received (1 kHz):
+//! * `t`: when the sensor took the sample, s since the device booted, on the sensor's own sample
+//!   clock (the device's stamps: `t₀ + k·T̂`, docs/firmware.md "Timestamps");
+//! * `ax … temp` in m/s², deg/s, µT, °C; the magnetometer columns hold the latest magnetometer
+//!   sample taken at or before `t` (200 Hz, zero-order hold); rows start at the first IMU sample
+//!   after the first magnetometer sample;
+//! * `gap_before`: how many IMU samples of the device's sample grid are missing right before this
+//!   row (0 normally): lost on the device (each comes with a `Gap` event and its cause) or on the
+//!   link;
+//! * a value the device did not have (a temperature the sample did not carry) is an empty field,
+//!   never a number.
+//!
+//! `--raw` records the uncorrected counts (converted with the nominal sensitivities), as
+//! calibration fitting needs; the default records the corrected values. The summary states the
+//! samples the device took over the recording, those received, and those lost with their causes.
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
@@ -14,16 +26,24 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
-use imu_proto::{DeviceMsg, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, StreamMode};
+use imu_proto::{
+    DeviceMsg, Event, GapCause, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, Sensor,
+    StreamMode,
+};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::link::PortArgs;
 
 #[derive(clap::Args, Debug)]
+#[command(
+    after_help = "CSV: t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before — t in s on the sensor's \
+sample clock (the device's stamps), values in m/s², deg/s, µT, °C; gap_before = IMU samples lost \
+right before the row (0 normally); a value the device did not have is an empty field."
+)]
 pub struct Args {
     #[command(flatten)]
     pub port: PortArgs,
-    /// Output CSV (columns t,ax,ay,az,gx,gy,gz,mx,my,mz,temp).
+    /// Output CSV (columns t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before).
     #[arg(long)]
     pub out: PathBuf,
     /// Record raw counts (nominal sensitivity, no corrections) instead of corrected values.
@@ -35,53 +55,72 @@ pub struct Args {
 }
 
 /// The CSV header of the contract.
-pub const HEADER: &str = "t,ax,ay,az,gx,gy,gz,mx,my,mz,temp";
+pub const HEADER: &str = "t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before";
 
-/// Turns sample batches into contract rows (pure: no I/O, unit-tested below).
+/// One CSV row: `t` (s), the ten values in contract units (`None`: missing), and the IMU samples
+/// missing right before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Row {
+    pub t: f64,
+    pub values: [Option<f64>; 10],
+    pub gap_before: u64,
+}
+
+/// Turns sample batches into contract rows and keeps the accounts (pure: no I/O).
 #[derive(Debug, Default)]
 pub struct Rows {
     mag: Option<[f64; 3]>,
     last_seq: Option<u32>,
+    last_mag_seq: Option<u32>,
     /// IMU samples dropped because no magnetometer sample had arrived yet.
     pub before_mag: u64,
-    /// Jumps in the IMU sequence numbers, and the samples missing in them.
-    pub gaps: u64,
+    /// IMU samples missing between received ones (jumps of the sample-grid numbers).
     pub missing: u64,
+    /// Magnetometer samples missing between received ones.
+    pub mag_missing: u64,
+    pub mag_received: u64,
     pub rows: u64,
     pub first_t: Option<f64>,
     pub last_t: Option<f64>,
 }
 
 impl Rows {
-    /// Convert one batch; calls `row` with `[t, ax … temp]` for each complete row.
-    pub fn batch(&mut self, b: &SampleBatch, mut row: impl FnMut(&[f64; 11])) {
+    /// Convert one batch; calls `row` for each complete row.
+    pub fn batch(&mut self, b: &SampleBatch, mut row: impl FnMut(&Row)) {
         let s = b.scales;
         let mut mags = b.mag.iter().peekable();
         for imu in &b.imu {
             while let Some(m) = mags.next_if(|m| m.t_us <= imu.t_us) {
-                self.mag = Some(mag_ut(m, &s));
+                self.take_mag(m, &s);
             }
-            if let Some(prev) = self.last_seq {
-                let step = imu.seq.wrapping_sub(prev);
-                if step != 1 {
-                    self.gaps += 1;
-                    self.missing += u64::from(step.wrapping_sub(1));
-                }
-            }
+            let gap = match self.last_seq {
+                Some(prev) => u64::from(imu.seq.wrapping_sub(prev).wrapping_sub(1)),
+                None => 0,
+            };
+            self.missing += gap;
             self.last_seq = Some(imu.seq);
             let Some(mag) = self.mag else {
                 self.before_mag += 1;
                 continue;
             };
-            let r = imu_row(imu, mag, &s);
-            self.first_t.get_or_insert(r[0]);
-            self.last_t = Some(r[0]);
+            let r = imu_row(imu, mag, &s, gap);
+            self.first_t.get_or_insert(r.t);
+            self.last_t = Some(r.t);
             self.rows += 1;
             row(&r);
         }
         for m in mags {
-            self.mag = Some(mag_ut(m, &s));
+            self.take_mag(m, &s);
         }
+    }
+
+    fn take_mag(&mut self, m: &MagSample, s: &Scales) {
+        if let Some(prev) = self.last_mag_seq {
+            self.mag_missing += u64::from(m.seq.wrapping_sub(prev).wrapping_sub(1));
+        }
+        self.last_mag_seq = Some(m.seq);
+        self.mag_received += 1;
+        self.mag = Some(mag_ut(m, s));
     }
 
     /// Device time covered so far, s.
@@ -97,33 +136,42 @@ fn mag_ut(m: &MagSample, s: &Scales) -> [f64; 3] {
     m.mag.map(|v| f64::from(v) * f64::from(s.mag))
 }
 
-fn imu_row(i: &ImuSample, mag: [f64; 3], s: &Scales) -> [f64; 11] {
+fn imu_row(i: &ImuSample, mag: [f64; 3], s: &Scales, gap_before: u64) -> Row {
     let a = i.accel.map(|v| f64::from(v) * f64::from(s.accel));
     let g = i.gyro.map(|v| f64::from(v) * f64::from(s.gyro));
-    let temp = f64::from(i.temp) * f64::from(s.temp) + f64::from(s.temp_offset);
-    [
-        i.t_us as f64 * 1e-6,
-        a[0],
-        a[1],
-        a[2],
-        g[0],
-        g[1],
-        g[2],
-        mag[0],
-        mag[1],
-        mag[2],
-        temp,
-    ]
+    let temp = i
+        .temp
+        .map(|t| f64::from(t) * f64::from(s.temp) + f64::from(s.temp_offset));
+    Row {
+        t: i.t_us as f64 * 1e-6,
+        values: [
+            Some(a[0]),
+            Some(a[1]),
+            Some(a[2]),
+            Some(g[0]),
+            Some(g[1]),
+            Some(g[2]),
+            Some(mag[0]),
+            Some(mag[1]),
+            Some(mag[2]),
+            temp,
+        ],
+        gap_before,
+    }
 }
 
 /// One CSV line: `t` with µs resolution, the values at f32 precision (shortest
-/// representation), which exceeds the sensors' 16-bit resolution.
-pub fn csv_line(r: &[f64; 11]) -> String {
-    let mut s = format!("{:.6}", r[0]);
-    for v in &r[1..] {
+/// representation, which exceeds the sensors' 16-bit resolution), a missing value empty.
+pub fn csv_line(r: &Row) -> String {
+    let mut s = format!("{:.6}", r.t);
+    for v in &r.values {
         s.push(',');
-        s.push_str(&(*v as f32).to_string());
+        if let Some(v) = v {
+            s.push_str(&(*v as f32).to_string());
+        }
     }
+    s.push(',');
+    s.push_str(&r.gap_before.to_string());
     s
 }
 
@@ -136,6 +184,82 @@ fn write_batch(b: &SampleBatch, rows: &mut Rows, w: &mut impl Write) -> std::io:
         }
     });
     res
+}
+
+/// The device's own account of its losses during the recording: `Gap` events by sensor and
+/// cause.
+#[derive(Debug, Default)]
+pub struct DeviceLosses {
+    pub imu: BTreeMap<String, u64>,
+    pub mag: BTreeMap<String, u64>,
+}
+
+impl DeviceLosses {
+    pub fn event(&mut self, e: &Event) {
+        if let Event::Gap {
+            sensor,
+            cause,
+            lost,
+            ..
+        } = e
+        {
+            if *lost > 0 {
+                let m = match sensor {
+                    Sensor::Imu => &mut self.imu,
+                    Sensor::Mag => &mut self.mag,
+                };
+                *m.entry(cause_name(*cause).to_string()).or_default() += u64::from(*lost);
+            }
+        }
+    }
+
+    fn total(m: &BTreeMap<String, u64>) -> u64 {
+        m.values().sum()
+    }
+}
+
+fn cause_name(c: GapCause) -> &'static str {
+    match c {
+        GapCause::FifoOverflow => "FIFO overflow",
+        GapCause::SensorFault => "sensor fault",
+        GapCause::BusFault => "bus fault",
+        GapCause::Stalled => "sensor stalled",
+        GapCause::Overwritten => "overwritten unread",
+        GapCause::Paused => "paused for a flash write",
+    }
+}
+
+/// "12 FIFO overflow, 3 bus fault" (the device's), plus what only the numbering shows (lost on
+/// the link).
+fn causes(device: &BTreeMap<String, u64>, missing: u64) -> String {
+    let mut parts: Vec<String> = device.iter().map(|(c, n)| format!("{n} {c}")).collect();
+    let on_device = DeviceLosses::total(device);
+    if missing > on_device {
+        parts.push(format!("{} not received (link)", missing - on_device));
+    }
+    if parts.is_empty() {
+        "none".into()
+    } else {
+        parts.join(", ")
+    }
+}
+
+/// The summary line's facts, every count with what it counts.
+pub fn summary(rows: &Rows, losses: &DeviceLosses) -> String {
+    let lost = rows.missing.max(DeviceLosses::total(&losses.imu));
+    let mag_lost = rows.mag_missing.max(DeviceLosses::total(&losses.mag));
+    format!(
+        "{} rows over {:.3} s of device time; IMU: {} samples taken by the device, {} received, {} lost ({}); magnetometer: {} received, {} lost ({})",
+        rows.rows,
+        rows.span(),
+        rows.rows + lost,
+        rows.rows,
+        lost,
+        causes(&losses.imu, rows.missing),
+        rows.mag_received,
+        mag_lost,
+        causes(&losses.mag, rows.mag_missing),
+    )
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -182,6 +306,7 @@ pub fn run(a: Args) -> Result<()> {
         pb.println(format!("Ctrl-C will not end the recording cleanly: {e}"));
     }
     let mut events = Vec::new();
+    let mut losses = DeviceLosses::default();
     let mut idle = 0;
     while rows.span() < a.seconds && !stop.load(Ordering::Relaxed) {
         match link.recv(Duration::from_millis(500))? {
@@ -192,11 +317,12 @@ pub fn run(a: Args) -> Result<()> {
                         .with_context(|| format!("writing {}", a.out.display()))?;
                 }
                 pb.set_position((rows.span() * 1000.0) as u64);
-                pb.set_message(format!("{} rows, {} gaps", rows.rows, rows.gaps));
+                pb.set_message(format!("{} rows, {} samples lost", rows.rows, rows.missing));
             }
             Some(DeviceMsg::Event(e)) => {
                 // suspend + eprintln: shown even when the bar is hidden (stderr not a terminal).
                 pb.suspend(|| eprintln!("device event: {e:?}"));
+                losses.event(&e);
                 events.push(e);
             }
             Some(_) => {}
@@ -231,19 +357,16 @@ pub fn run(a: Args) -> Result<()> {
         )
         .and_then(|_| link.request(Request::GetStatus));
     println!(
-        "{}: {} rows, {:.3} s of device time, {} gaps ({} samples missing), {} samples before the first magnetometer reading skipped, {} device events",
+        "{}: {}; {} samples before the first magnetometer reading not recorded, {} device events",
         a.out.display(),
-        rows.rows,
-        rows.span(),
-        rows.gaps,
-        rows.missing,
+        summary(&rows, &losses),
         rows.before_mag,
         events.len()
     );
     if let Ok(Reply::Status(s)) = status {
         println!(
-            "device: {} samples taken, {} dropped, {} FIFO overflows, {} I2C errors, {} frames not sent",
-            s.samples_taken, s.samples_dropped, s.fifo_overflows, s.i2c_errors, s.frames_unsent
+            "device counters since boot: IMU {} samples taken, {} lost; magnetometer {} taken, {} lost; {} FIFO overflows, {} I2C errors, {} frames not sent",
+            s.samples_taken, s.samples_dropped, s.mag_samples, s.mag_dropped, s.fifo_overflows, s.i2c_errors, s.frames_unsent
         );
     }
     let st = link.rx_stats();
@@ -277,18 +400,22 @@ mod tests {
             t_us: t_ms * 1000,
             accel: [2, 4, 6],
             gyro: [4, 8, -12],
-            temp: 340,
+            temp: Some(340),
+        }
+    }
+
+    fn batch() -> SampleBatch {
+        SampleBatch {
+            calibrated: true,
+            scales: scales(),
+            imu: HVec::new(),
+            mag: HVec::new(),
         }
     }
 
     #[test]
     fn rows_hold_the_latest_magnetometer_sample_and_scale_to_contract_units() {
-        let mut b = SampleBatch {
-            calibrated: true,
-            scales: scales(),
-            imu: HVec::new(),
-            mag: HVec::new(),
-        };
+        let mut b = batch();
         for k in 0..10 {
             b.imu.push(imu(k, 100 + u64::from(k))).unwrap();
         }
@@ -314,31 +441,28 @@ mod tests {
         assert_eq!(r.before_mag, 2);
         assert_eq!(out.len(), 8);
         // Scales are f32 on the wire: 0.1 µT/LSB is 0.1 within 1.5e-9; compare to 1e-6.
-        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
-        assert_eq!(out[0][0], 0.102);
+        let v = |row: &Row, i: usize| row.values[i].unwrap();
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+        assert_eq!(out[0].t, 0.102);
         assert!(
-            close(&out[0][1..7], &[1.0, 2.0, 3.0, 1.0, 2.0, -3.0]),
+            close(v(&out[0], 0), 1.0) && close(v(&out[0], 5), -3.0),
             "{:?}",
             out[0]
         );
-        assert!(close(&out[0][7..10], &[1.0, 2.0, 3.0]), "{:?}", out[0]);
-        assert!(close(&out[4][7..10], &[1.0, 2.0, 3.0])); // 106 ms: still the 102 ms reading
-        assert!(close(&out[5][7..10], &[4.0, 5.0, 6.0])); // 107 ms: the new one
+        assert!(close(v(&out[0], 6), 1.0) && close(v(&out[0], 8), 3.0));
+        assert!(close(v(&out[4], 6), 1.0)); // 106 ms: still the 102 ms reading
+        assert!(close(v(&out[5], 6), 4.0)); // 107 ms: the new one
         assert_eq!(csv_line(&out[5]).split(',').nth(7), Some("4"));
         // 340 LSB = 1 °C above 36.53 °C.
-        assert!((out[0][10] - 37.53).abs() < 1e-5, "{}", out[0][10]); // f32 offset: ±2e-6 °C
-        assert_eq!(r.gaps, 0);
+        assert!((v(&out[0], 9) - 37.53).abs() < 1e-5); // f32 offset: ±2e-6 °C
+        assert_eq!(r.missing, 0);
+        assert!(out.iter().all(|row| row.gap_before == 0));
         assert!((r.span() - 0.007).abs() < 1e-12);
     }
 
     #[test]
-    fn a_sequence_jump_is_counted_as_a_gap() {
-        let mut b = SampleBatch {
-            calibrated: true,
-            scales: scales(),
-            imu: HVec::new(),
-            mag: HVec::new(),
-        };
+    fn a_sequence_jump_is_marked_on_the_row_after_it() {
+        let mut b = batch();
         b.mag
             .push(MagSample {
                 seq: 0,
@@ -350,7 +474,65 @@ mod tests {
             b.imu.push(imu(seq, t)).unwrap();
         }
         let mut r = Rows::default();
+        let mut out = Vec::new();
+        r.batch(&b, |row| out.push(*row));
+        assert_eq!((r.missing, r.rows), (3, 4));
+        let gaps: Vec<u64> = out.iter().map(|r| r.gap_before).collect();
+        assert_eq!(gaps, [0, 0, 3, 0]);
+        assert!(csv_line(&out[2]).ends_with(",3"));
+    }
+
+    #[test]
+    fn a_missing_temperature_is_an_empty_field() {
+        let mut b = batch();
+        b.mag
+            .push(MagSample {
+                seq: 0,
+                t_us: 0,
+                mag: [1, 2, 3],
+            })
+            .unwrap();
+        let mut s = imu(0, 1);
+        s.temp = None;
+        b.imu.push(s).unwrap();
+        let mut r = Rows::default();
+        let mut out = Vec::new();
+        r.batch(&b, |row| out.push(*row));
+        let line = csv_line(&out[0]);
+        let fields: Vec<&str> = line.split(',').collect();
+        assert_eq!(fields.len(), HEADER.split(',').count());
+        assert_eq!(fields[10], "", "{line}");
+        assert_eq!(fields[11], "0");
+    }
+
+    #[test]
+    fn the_summary_splits_losses_by_the_device_causes_and_the_link() {
+        let mut r = Rows::default();
+        let mut b = batch();
+        b.mag
+            .push(MagSample {
+                seq: 0,
+                t_us: 0,
+                mag: [0, 0, 0],
+            })
+            .unwrap();
+        for (seq, t) in [(0, 1), (1, 2), (20, 21), (21, 22)] {
+            b.imu.push(imu(seq, t)).unwrap();
+        }
         r.batch(&b, |_| {});
-        assert_eq!((r.gaps, r.missing, r.rows), (1, 3, 4));
+        let mut l = DeviceLosses::default();
+        l.event(&Event::Gap {
+            sensor: Sensor::Imu,
+            at: 2,
+            cause: GapCause::FifoOverflow,
+            lost: 15,
+            t_us: 21_000,
+        });
+        let s = summary(&r, &l);
+        assert!(
+            s.contains("22 samples taken by the device, 4 received, 18 lost"),
+            "{s}"
+        );
+        assert!(s.contains("15 FIFO overflow, 3 not received (link)"), "{s}");
     }
 }

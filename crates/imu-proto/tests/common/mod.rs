@@ -6,7 +6,7 @@ use imu_proto::{ImuSample, MagSample, SampleBatch, Scales, Vec};
 
 /// The IMU sample of generated parts (seq, t_us, accel, gyro, temp).
 pub fn imu_sample(
-    (seq, t_us, accel, gyro, temp): (u32, u64, [i32; 3], [i32; 3], i32),
+    (seq, t_us, accel, gyro, temp): (u32, u64, [i32; 3], [i32; 3], Option<i32>),
 ) -> ImuSample {
     ImuSample {
         seq,

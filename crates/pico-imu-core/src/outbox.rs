@@ -13,7 +13,7 @@ pub trait FrameSink {
 
 /// Result of [`Outbox::send`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Sent {
     Queued(usize),
     /// No room: the frame was dropped and counted.

@@ -1,0 +1,434 @@
+//! The messages: what the host asks ([`HostFrame`]) and what the device sends ([`DeviceMsg`]).
+use serde::{Deserialize, Serialize};
+
+use crate::{Channel, Scales, Sensor, String, Vec};
+
+/// Octave levels in a device Allan table (m = 1, 2, 4, … 2^23).
+pub const MAX_LEVELS: usize = 24;
+/// IMU samples per [`SampleBatch`] (32 ms of data at 1 kHz).
+pub const MAX_BATCH_IMU: usize = 32;
+/// Magnetometer samples per [`SampleBatch`].
+pub const MAX_BATCH_MAG: usize = 16;
+/// Largest calibration blob (`imu_cal::device::encode_blob`), bytes.
+pub const MAX_CAL_BLOB: usize = 256;
+
+/// One accelerometer + gyroscope + temperature sample from the MPU-6050 FIFO.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ImuSample {
+    /// The sample's slot on the sensor's sample grid since boot: consecutive samples differ by
+    /// one, and a jump of `n + 1` means `n` samples were lost (each loss also comes as an
+    /// [`Event::Gap`] with its cause).
+    pub seq: u32,
+    /// When the sensor took the sample, µs since boot, on the sensor's own sample clock
+    /// (docs/firmware.md, "Timestamps").
+    pub t_us: u64,
+    pub accel: [i32; 3],
+    pub gyro: [i32; 3],
+    /// Die temperature; `None` when the sample carried none (never a made-up number).
+    pub temp: Option<i32>,
+}
+
+/// One magnetometer sample.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MagSample {
+    /// Slot on the magnetometer's sample grid (as [`ImuSample::seq`]).
+    pub seq: u32,
+    /// When the sensor took the sample, µs since boot (as [`ImuSample::t_us`]).
+    pub t_us: u64,
+    pub mag: [i32; 3],
+}
+
+/// A batch of samples, calibrated (fixed-point corrected) or raw counts.
+///
+/// On the wire each sample after the first of its sensor carries its sequence number and time
+/// as differences from the previous sample's (the time minus the nominal period), so a regular
+/// run costs two bytes a sample instead of eight or nine (`batch.rs` has the layout; serde
+/// `Serialize`/`Deserialize` are implemented there).
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SampleBatch {
+    /// `true`: corrected values (the very integers the Allan engines eat); `false`: raw counts.
+    pub calibrated: bool,
+    pub scales: Scales,
+    pub imu: Vec<ImuSample, MAX_BATCH_IMU>,
+    pub mag: Vec<MagSample, MAX_BATCH_MAG>,
+}
+
+/// One octave level of a device Allan table: the streaming engine's exact integer sums, from
+/// which the host derives the deviation and its bounds (`allan::stream::LevelSums`; overlapping
+/// ADEV `σ² = Σ D2² / (2 n m²)`, NIST SP 1065 eq. 11; bounds from `allan::ci`).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AllanLevel {
+    /// Cluster size (samples); τ = m·τ0.
+    pub m: u32,
+    /// Spacing of the second differences that were summed (1 = fully overlapping).
+    pub stride: u32,
+    /// Number of second differences summed.
+    pub n2: u64,
+    /// Σ (θ[k+2m] − 2θ[k+m] + θ[k])², θ the integer phase (cumulative sum of the samples).
+    pub sum2: u128,
+    /// Number of third differences summed.
+    pub n3: u64,
+    /// Σ (θ[k+3m] − 3θ[k+2m] + 3θ[k+m] − θ[k])².
+    pub sum3: u128,
+}
+
+/// The Allan table of one channel, as it stood at its round's snapshot.
+///
+/// Every table of one round (a `GetTables` request or a periodic round) was taken at the same
+/// instant: all ten carry the same `snapshot` and `t_us`. A host combining tables checks that
+/// they do.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct AllanTable {
+    pub channel: Channel,
+    /// The round this table belongs to (counts up from 1 since boot).
+    pub snapshot: u32,
+    /// Device time of the round's snapshot, µs since boot.
+    pub t_us: u64,
+    /// The sample period behind τ = m·τ0: the sensor's own period as the device measured it
+    /// (its sample clock), ns.
+    pub tau0_ns: u32,
+    /// Contract unit per LSB of the integers the engine ate.
+    pub scale: f32,
+    /// Samples pushed since the last reset.
+    pub pushed: u64,
+    /// Gaps marked since the last reset.
+    pub gaps: u32,
+    pub levels: Vec<AllanLevel, MAX_LEVELS>,
+}
+
+/// What the device streams besides tables and status.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StreamMode {
+    /// No sample batches (tables and status only).
+    Off,
+    /// Corrected fixed-point samples.
+    Calibrated,
+    /// Raw sensor counts.
+    Raw,
+}
+
+/// Health of one sensor.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SensorState {
+    /// Not probed yet.
+    Unknown,
+    /// Delivering samples.
+    Ok,
+    /// Not answering; retrying with bus recovery.
+    Missing,
+    /// Answering on the bus but producing no data (data-ready never set, FIFO not growing);
+    /// re-initialised with back-off.
+    Stalled,
+}
+
+/// Where the corrections in use came from.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalSource {
+    /// No stored record: identity corrections.
+    Identity,
+    /// Loaded from flash at boot or written there on request.
+    Flash,
+    /// Set by the host, not persisted (lost at reset).
+    Host,
+}
+
+/// Which sensor's correction a [`CalProblem`] is about.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalSensor {
+    Accel,
+    Gyro,
+    Mag,
+}
+
+/// Which plausibility check a correction failed (`imu_cal::device::plausible` has the bounds).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalCheck {
+    /// A scale factor (singular value of the correction matrix) outside [0.5, 2].
+    Scale,
+    /// An axis turned by more than 10° (or flipped).
+    Misalignment,
+    /// The soft-iron matrix's condition number is over 3.
+    Condition,
+    /// The matrix is singular (a zero scale).
+    Singular,
+    /// The gyro bias is over a quarter of full scale.
+    Bias,
+    /// The hard iron (or accelerometer offset) is beyond the sensor's range.
+    Offset,
+    /// A non-positive or non-finite LSB factor (calibration file).
+    LsbFactor,
+}
+
+/// Why a calibration was refused, by the device or by the host (the same checks).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalProblem {
+    /// Not a calibration blob: length, magic, CRC or payload.
+    Corrupt,
+    /// Another blob format version.
+    Version(u16),
+    /// A coefficient outside the fixed-point range.
+    OutOfRange,
+    /// Physically implausible.
+    Implausible {
+        sensor: CalSensor,
+        check: CalCheck,
+        axis: u8,
+    },
+    /// Fitted for other full-scale ranges than the firmware uses.
+    OtherRanges,
+    /// Fitted for another sensor part than the one found.
+    OtherPart,
+}
+
+/// Why the stored calibration is not in use.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalFault {
+    /// The flash could not be read or written.
+    Flash,
+    /// The stored record was refused.
+    Rejected(CalProblem),
+}
+
+/// Calibration state.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CalStatus {
+    pub source: CalSource,
+    /// The last problem met with the stored record, if any (identity is used meanwhile).
+    pub fault: Option<CalFault>,
+}
+
+/// Device counters and health.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Status {
+    pub uptime_us: u64,
+    /// IMU samples read from the FIFO.
+    pub samples_taken: u64,
+    /// IMU samples lost: slots of the IMU's sample grid between delivered samples (FIFO
+    /// contents discarded, outages, stalls, bursts abandoned on a bus fault, pauses). The sum of
+    /// the `lost` of every IMU [`Event::Gap`].
+    pub samples_dropped: u64,
+    /// Magnetometer samples read.
+    pub mag_samples: u64,
+    /// Magnetometer samples lost (overwritten before they were read, outages, stalls).
+    pub mag_dropped: u64,
+    pub fifo_overflows: u32,
+    pub i2c_errors: u32,
+    /// Transfers that lost arbitration (SDA held) or hung until the deadline.
+    pub bus_faults: u32,
+    pub bus_recoveries: u32,
+    /// Host frames rejected (corrupt, unknown, oversized).
+    pub frames_rejected: u32,
+    /// Device frames not sent because the host was not reading.
+    pub frames_unsent: u32,
+    /// CPU busy time over the last status interval, ‰.
+    pub cpu_load_permille: u16,
+    /// Latest die temperature, m°C (`None` before the first sample that carried one).
+    pub temp_milli_c: Option<i32>,
+    pub imu: SensorState,
+    pub mag: SensorState,
+    /// The sensors' sample periods as their sample clocks measure them, ns (0: not yet).
+    pub imu_period_ns: u32,
+    pub mag_period_ns: u32,
+    pub cal: CalStatus,
+    pub mode: StreamMode,
+}
+
+/// Who the device is.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Identity {
+    pub protocol: u8,
+    pub firmware: String<24>,
+    pub board: String<24>,
+    pub imu_rate_hz: u16,
+    pub mag_rate_hz: u16,
+    /// Overlap factor P and octave levels L of the streaming Allan engines: `allan_levels` for
+    /// the 1 kHz channels, `allan_levels_mag` for the magnetometer.
+    pub allan_overlap: u8,
+    pub allan_levels: u8,
+    pub allan_levels_mag: u8,
+}
+
+/// What kind of bus fault ended a transfer.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum BusFault {
+    /// The START lost arbitration: a slave holds SDA low.
+    ArbitrationLost,
+    /// The transfer did not finish before its deadline (a hung START or a stretched clock).
+    Timeout,
+}
+
+/// An asynchronous event worth a line in the host's log.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Event {
+    /// The sensor stopped answering for longer than the retries cover.
+    SensorLost { sensor: Sensor, t_us: u64 },
+    /// The sensor delivers samples again after a loss or a stall.
+    SensorBack {
+        sensor: Sensor,
+        t_us: u64,
+        down_us: u64,
+    },
+    /// The sensor answers but has produced no sample since `since_us` (data-ready never set,
+    /// FIFO count not growing).
+    SensorStalled {
+        sensor: Sensor,
+        t_us: u64,
+        since_us: u64,
+    },
+    /// A transfer ended by a bus fault; the bus is recovered (9 SCL pulses and a STOP) before
+    /// the next one.
+    BusFault { t_us: u64, fault: BusFault },
+    /// A bus recovery ran: `pulses` SCL pulses were clocked; SDA was free at the end or not.
+    BusRecovered {
+        t_us: u64,
+        pulses: u8,
+        sda_released: bool,
+    },
+    /// The sensor's series has a discontinuity before the next sample: `lost` samples of its
+    /// grid (maybe 0) did not reach the host, for `cause`. The Allan engines were split there:
+    /// no difference straddles the position `at`, the number of samples pushed into each of the
+    /// sensor's engines (since boot or the last Allan reset) before the split. A host that
+    /// replays the same samples applies the same splits and gets the same sums, bit for bit.
+    Gap {
+        sensor: Sensor,
+        at: u64,
+        cause: GapCause,
+        lost: u32,
+        /// Device time of the first sample after the gap (its stamp), µs.
+        t_us: u64,
+    },
+}
+
+/// Why samples were lost or a series split (see [`Event::Gap`]).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum GapCause {
+    /// The MPU-6050 FIFO overflowed; its contents were discarded by a reset.
+    FifoOverflow,
+    /// The sensor stopped answering (or lost its configuration and was re-initialised).
+    SensorFault,
+    /// A bus fault (arbitration lost, a hung transfer) cost samples.
+    BusFault,
+    /// The sensor produced no data for a while.
+    Stalled,
+    /// The magnetometer overwrote samples that were not read in time.
+    Overwritten,
+    /// Sampling paused (a flash write).
+    Paused,
+}
+
+/// Host → device request.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[allow(clippy::large_enum_variant)] // no heap on the device: the blob is inline by design
+pub enum Request {
+    Identify,
+    GetStatus,
+    GetCalibration,
+    /// Use this calibration blob; with `persist`, also write it to flash (measurement pauses).
+    SetCalibration {
+        blob: Vec<u8, MAX_CAL_BLOB>,
+        persist: bool,
+    },
+    ResetAllan,
+    SetMode(StreamMode),
+    /// Intervals of the unsolicited status and table frames, ms (0 = never).
+    SetIntervals {
+        status_ms: u32,
+        tables_ms: u32,
+    },
+    /// Take a snapshot of every channel's table now and send them (answered by
+    /// [`Reply::Tables`]); a round in progress is abandoned.
+    GetTables,
+}
+
+/// A request with the id its reply will carry.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HostFrame {
+    pub id: u16,
+    pub req: Request,
+}
+
+/// Why a request failed.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ErrorCode {
+    /// The calibration was refused, with the reason.
+    BadCalibration(CalProblem),
+    /// The flash write failed.
+    FlashWrite,
+    /// The device cannot take this request now.
+    Busy,
+}
+
+/// The answer to a [`HostFrame`].
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Reply {
+    Ok,
+    Identity(Identity),
+    Status(Status),
+    Calibration {
+        blob: Vec<u8, MAX_CAL_BLOB>,
+        status: CalStatus,
+    },
+    Error(ErrorCode),
+    /// `GetTables` started a round: ten `Table` frames with this `snapshot` follow.
+    Tables {
+        snapshot: u32,
+    },
+}
+
+/// Device → host message.
+#[derive(Serialize, Deserialize, Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[allow(clippy::large_enum_variant)]
+pub enum DeviceMsg {
+    Reply { id: u16, reply: Reply },
+    Samples(SampleBatch),
+    Table(AllanTable),
+    Status(Status),
+    Event(Event),
+}
+
+/// A borrowed view of [`DeviceMsg`] with the same wire encoding (postcard writes a variant as
+/// its index and a reference as its referent), so the device frames a batch or a table without
+/// copying it first. The variant order must stay that of [`DeviceMsg`] (tested).
+#[derive(Serialize, Debug, Clone, Copy)]
+pub enum DeviceMsgRef<'a> {
+    Reply { id: u16, reply: &'a Reply },
+    Samples(&'a SampleBatch),
+    Table(&'a AllanTable),
+    Status(&'a Status),
+    Event(&'a Event),
+}
+
+impl<'a> From<&'a DeviceMsg> for DeviceMsgRef<'a> {
+    fn from(m: &'a DeviceMsg) -> Self {
+        match m {
+            DeviceMsg::Reply { id, reply } => DeviceMsgRef::Reply { id: *id, reply },
+            DeviceMsg::Samples(b) => DeviceMsgRef::Samples(b),
+            DeviceMsg::Table(t) => DeviceMsgRef::Table(t),
+            DeviceMsg::Status(s) => DeviceMsgRef::Status(s),
+            DeviceMsg::Event(e) => DeviceMsgRef::Event(e),
+        }
+    }
+}

@@ -1,0 +1,619 @@
+//! Sample clocks: where a sensor's samples fall on the RP2040's time base. The one owner of
+//! timestamps: every sample time the firmware reports comes from [`SampleClock::stamps`].
+//!
+//! A sensor samples on its own oscillator (the MPU-6050's is specified only to a few percent),
+//! so sample `k` of a run happened at `t_k = t₀ + k·T` with `T` the part's true period. The
+//! firmware cannot see `t_k`; it sees, at instants `τ` it knows to a microsecond (when a bus
+//! transfer latched a register, [`BusTiming`]), how many samples the part had produced: a FIFO
+//! count, or a data-ready bit. Each such observation says on which side of `τ` one or two
+//! sample instants lie. The clock keeps a line `t̂_k = t̂_a + (k − a)·T̂` and the interval of
+//! prediction errors `(lo, hi]` that every observation so far allows:
+//!
+//! * an observation "sample `n` was produced by `τ`" gives `e ≤ τ − t̂_n`, and "sample `n + 1`
+//!   was not" gives `e > τ − t̂_{n+1}`; the interval is intersected with them;
+//! * each observation's bounds are loosened by the latch jitter ([`JITTER`]); between
+//!   observations the interval widens by what the period's uncertainty allows over the samples in
+//!   between, so the line may drift;
+//! * the line is moved to the middle of the interval after every observation;
+//! * a reader that chooses *when* to observe places the latch in the middle of the interval
+//!   ([`SampleClock::probe_after`]): each such probe halves it (bisection), so the phase is
+//!   known to a few µs after a handful of probes;
+//! * `T̂` starts at the nominal period; the number of samples counted between two observations
+//!   far apart corrects it to `T/Δn` (coarse), and once the interval is narrow, two located
+//!   sample instants far apart give `T̂ = Δt/Δk` to a fraction of a nanosecond.
+//!
+//! An observation that contradicts the interval (a restarted part, a wrong assumption about
+//! when its first sample comes) replaces it by what the observation alone allows.
+//!
+//! The stamp of a sample is `t̂_k` at the time it is reported; the remaining error is the
+//! interval's half-width plus a constant: the difference between the modelled latch instant
+//! (start of the transfer + the bit times before the latched byte) and the instant the part
+//! really latches it, which docs/firmware.md reports as measured in the emulator.
+//!
+//! Times are `u64` µs × 2^16 ([`Fine`]), on the RP2040's µs timer; no floating point, and a
+//! division only when the period is re-estimated (a few times per run).
+
+/// A time on the RP2040's µs timer in 1/65536 µs, or a duration in those units.
+pub type Fine = u64;
+
+/// Fractional bits of [`Fine`].
+pub const FINE_BITS: u32 = 16;
+
+/// One µs in [`Fine`] units.
+pub const US: u64 = 1 << FINE_BITS;
+
+/// `us` µs as [`Fine`].
+pub const fn fine(us: u64) -> Fine {
+    us << FINE_BITS
+}
+
+/// A [`Fine`] time rounded to whole µs.
+pub const fn whole_us(t: Fine) -> u64 {
+    (t + (US >> 1)) >> FINE_BITS
+}
+
+/// Latch jitter allowed in each observation: the time between reading the timer and the transfer
+/// starting varies by a few CPU instructions.
+pub const JITTER: u64 = 3 * US;
+
+/// The interval is narrow enough to measure the period from located sample instants.
+pub const LOCKED_WIDTH: u64 = 64 * US;
+
+/// Below this width a reader need not place its observations (no probes).
+pub const PROBE_WIDTH: u64 = 16 * US;
+
+/// Where in a transfer a register is latched: the bus's bit period and the start of the
+/// transfer, from which a sensor service derives the latch instant of the byte it reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BusTiming {
+    /// One SCL period, [`Fine`] units (2.5 µs at 400 kHz; 0 for an instantaneous test bus).
+    pub bit: u64,
+}
+
+impl BusTiming {
+    /// An SCL clock of `hz` (0 Hz: instantaneous transfers, as the host tests' simulated bus).
+    pub const fn from_hz(hz: u32) -> Self {
+        BusTiming {
+            bit: if hz == 0 {
+                0
+            } else {
+                (1_000_000 * US) / hz as u64
+            },
+        }
+    }
+
+    /// The instant, `bits` SCL periods after the transfer started at `start`, at which the
+    /// target latches a byte: START (1) + address (9) + register (9) put a written data byte at
+    /// 19; a repeated START (1) and the address again (9) put the first byte read at 29, the
+    /// second at 38.
+    pub const fn latch(&self, start: Fine, bits: u64) -> Fine {
+        start + bits * self.bit
+    }
+}
+
+/// Bit of a written data byte (one-register write).
+pub const WRITE_DATA_BIT: u64 = 19;
+/// Bit of the first byte of a register read.
+pub const READ_FIRST_BIT: u64 = 29;
+/// Bit of the second byte of a register read.
+pub const READ_SECOND_BIT: u64 = 38;
+
+/// `floor(a / p)` for a signed `a`.
+fn floor_div(a: i64, p: u64) -> i64 {
+    if a >= 0 {
+        (a as u64 / p) as i64
+    } else {
+        -((a.unsigned_abs()).div_ceil(p) as i64)
+    }
+}
+
+/// The stamps of a run of consecutive samples: sample `k0 + i` at `t0 + i·period`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Stamps {
+    /// Index of the first sample on the sensor's grid.
+    pub k0: u32,
+    /// Its time, [`Fine`].
+    pub t0: Fine,
+    /// Period, [`Fine`].
+    pub period: Fine,
+}
+
+impl Stamps {
+    /// Time of sample `k0 + i`, whole µs.
+    #[inline]
+    pub fn us(&self, i: u32) -> u64 {
+        whole_us(self.t0 + u64::from(i) * self.period)
+    }
+
+    /// The stamps of samples `k0 + i`, `k0 + i + 1`, … in whole µs, one addition each.
+    pub fn iter_us(&self) -> impl Iterator<Item = u64> {
+        let (mut t, p) = (self.t0 + (US >> 1), self.period);
+        core::iter::from_fn(move || {
+            let us = t >> FINE_BITS;
+            t += p;
+            Some(us)
+        })
+    }
+}
+
+/// A sensor's sample clock.
+#[derive(Debug, Clone)]
+pub struct SampleClock {
+    nominal: u64,
+    /// T̂.
+    period: u64,
+    /// Bound on |T − T̂| per sample (drift allowance), [`Fine`].
+    period_err: u64,
+    /// The line passes through `(k_at, t_at)`.
+    k_at: u32,
+    t_at: Fine,
+    /// Prediction error interval around `k_at`: the true instant is in `(t̂ + lo, t̂ + hi]`.
+    lo: i64,
+    hi: i64,
+    /// A grid exists (the part was started).
+    known: bool,
+    /// The first observation of the run (newest sample index, τ), for the coarse period.
+    first: Option<(u32, Fine)>,
+    /// Samples between the observations behind the current coarse period (0: none yet).
+    coarse_span: u32,
+    /// A located sample instant of this run (interval narrow) and the interval's width then,
+    /// for the fine period.
+    edge: Option<(u32, Fine, u64)>,
+    /// Samples behind the current fine period since `edge` (0: none yet).
+    fine_span: u32,
+    /// The period comes from located instants (the coarse estimate no longer applies).
+    fine: bool,
+    /// Index of the last observation, for the drift allowance.
+    last_k: u32,
+    /// Latest stamp issued, [`Fine`] (stamps never go backwards).
+    issued: Option<Fine>,
+    /// Observations that contradicted the interval (replaced it).
+    pub contradictions: u32,
+}
+
+impl SampleClock {
+    /// A clock for a part whose nominal period is `nominal_us` µs; no grid until [`Self::start`].
+    pub const fn new(nominal_us: u32) -> Self {
+        let nominal = fine(nominal_us as u64);
+        SampleClock {
+            nominal,
+            period: nominal,
+            // The MPU-6050's oscillator is specified to ±2 % (PS §6.3 "initial tolerance"); a
+            // little more covers any part of the family.
+            period_err: nominal / 32,
+            k_at: 0,
+            t_at: 0,
+            lo: 0,
+            hi: 0,
+            known: false,
+            first: None,
+            coarse_span: 0,
+            edge: None,
+            fine_span: 0,
+            fine: false,
+            last_k: 0,
+            issued: None,
+            contradictions: 0,
+        }
+    }
+
+    /// Whether the part has a grid (started at least once).
+    pub fn known(&self) -> bool {
+        self.known
+    }
+
+    /// T̂, [`Fine`].
+    pub fn period(&self) -> Fine {
+        self.period
+    }
+
+    /// T̂ in ns (0 before the part was started), for the status report.
+    pub fn period_ns(&self) -> u32 {
+        if !self.known {
+            return 0;
+        }
+        ((self.period * 1000 + (US >> 1)) >> FINE_BITS) as u32
+    }
+
+    /// Width of the error interval, [`Fine`].
+    pub fn width(&self) -> u64 {
+        (self.hi - self.lo).max(0) as u64
+    }
+
+    /// Predicted time of sample `k`, [`Fine`].
+    pub fn time(&self, k: u32) -> Fine {
+        let d = i64::from(k.wrapping_sub(self.k_at) as i32);
+        self.t_at.wrapping_add((d * self.period as i64) as u64)
+    }
+
+    /// The part's sample clock (re)started so that its first sample, index `k`, comes at about
+    /// `t_first` (it starts one period after the write that wakes it, docs/firmware.md). With
+    /// `keep` the grid is the old one, continued (the restart was timed onto it, `t_first` =
+    /// [`Self::time`]`(k)` within `err`): phase and period are kept and the interval widened by
+    /// `err`. Otherwise a new grid starts at `k`: its phase is known only to within half a
+    /// period, the period stays.
+    pub fn start(&mut self, k: u32, t_first: Fine, keep: bool, err: u64) {
+        if keep && self.known {
+            let c = t_first as i64 - self.time(k) as i64;
+            self.rebase(k);
+            self.lo = self.lo.min(c) - err as i64;
+            self.hi = self.hi.max(c) + err as i64;
+        } else {
+            self.k_at = k;
+            self.t_at = t_first;
+            let half = (self.period / 2) as i64;
+            self.lo = -half;
+            self.hi = half;
+        }
+        self.known = true;
+        self.last_k = k;
+        // A new run: its own first observation and located instant; the period (the part's
+        // oscillator) and how well it is known carry over.
+        self.first = None;
+        self.edge = None;
+        self.fine_span = 0;
+    }
+
+    /// Move the line's reference to sample `k` (same line).
+    fn rebase(&mut self, k: u32) {
+        self.t_at = self.time(k);
+        self.k_at = k;
+    }
+
+    /// An observation at latch instant `tau`: sample `newest` had been produced by then, and
+    /// with `next_not_yet` sample `newest + 1` had not.
+    ///
+    /// An observation that contradicts the interval replaces it when it says a sample came
+    /// *earlier* than thought (only a wrong phase explains that). One that says a sample came
+    /// *later* is also explained by a part that stopped producing (a stall, a lost sample): it
+    /// replaces the interval only with `trust_late` (the caller saw samples flowing), and is
+    /// otherwise ignored. Returns whether the observation fitted.
+    pub fn observe(
+        &mut self,
+        tau: Fine,
+        newest: u32,
+        next_not_yet: bool,
+        trust_late: bool,
+    ) -> bool {
+        if !self.known {
+            return true;
+        }
+        // The drift the period's uncertainty allows since the last observation.
+        let gap = u64::from((newest.wrapping_sub(self.last_k) as i32).unsigned_abs()).min(1 << 20);
+        let relax = (gap * self.period_err) as i64;
+        self.rebase(newest);
+        let mut lo = self.lo - relax;
+        let mut hi = self.hi + relax;
+        // Never wider than a period: one period of uncertainty is every phase there is.
+        let p = self.period as i64;
+        if hi - lo > p {
+            let mid = (hi + lo) / 2;
+            lo = mid - p / 2;
+            hi = mid + p / 2;
+        }
+        // The observation's own bounds, loosened by the latch jitter.
+        let j = JITTER as i64;
+        let upper = tau as i64 - self.t_at as i64 + j;
+        let lower = next_not_yet.then(|| upper - p - 2 * j);
+        let fits;
+        if upper <= lo {
+            // Produced earlier than the interval allows: the phase was wrong.
+            self.contradictions = self.contradictions.saturating_add(1);
+            fits = false;
+            hi = upper;
+            lo = lower.unwrap_or(upper - p - 2 * j);
+        } else if lower.is_some_and(|l| l >= hi) {
+            self.contradictions = self.contradictions.saturating_add(1);
+            fits = false;
+            if trust_late {
+                hi = upper;
+                lo = lower.unwrap_or(upper - p - 2 * j);
+            } else {
+                hi = hi.min(upper);
+            }
+        } else {
+            fits = true;
+            hi = hi.min(upper);
+            lo = lower.map_or(lo, |l| lo.max(l));
+        }
+        self.lo = lo;
+        self.hi = hi;
+        self.last_k = newest;
+        // Only an observation that brackets τ between two samples says how far τ is from the
+        // newest (less than a period): the coarse period needs that.
+        if next_not_yet && fits {
+            self.coarse(newest, tau);
+        }
+        self.recentre();
+        fits
+    }
+
+    /// Put the line in the middle of the interval; once it is narrow, use the located instant
+    /// for the fine period: `T̂ = Δt/Δk` between it and an earlier located instant, re-measured
+    /// each time the distance doubles. A reference located much more precisely than the first
+    /// one replaces it.
+    fn recentre(&mut self) {
+        let c = (self.lo + self.hi) / 2;
+        self.t_at = self.t_at.wrapping_add(c as u64);
+        self.lo -= c;
+        self.hi -= c;
+        let w = self.width();
+        if w > LOCKED_WIDTH {
+            return;
+        }
+        let here = (self.k_at, self.t_at, w);
+        let Some((k0, t0, w0)) = self.edge else {
+            self.edge = Some(here);
+            return;
+        };
+        if 4 * w <= w0 {
+            self.edge = Some(here);
+            self.fine_span = 0;
+            return;
+        }
+        let span = self.k_at.wrapping_sub(k0);
+        if span >= 256 && span >= 2 * self.fine_span && span < 1 << 30 {
+            let dt = self.t_at.wrapping_sub(t0);
+            self.period = dt / u64::from(span);
+            // Both ends located within their intervals: the period to within that per sample.
+            self.period_err = ((w0 + w) / 2 / u64::from(span)).max(1);
+            self.fine_span = span;
+            self.fine = true;
+        }
+    }
+
+    /// The coarse period: samples counted between the run's first observation and this one.
+    fn coarse(&mut self, newest: u32, tau: Fine) {
+        if self.fine || self.coarse_span >= 1 << 16 {
+            return;
+        }
+        let Some((k0, t0)) = self.first else {
+            self.first = Some((newest, tau));
+            return;
+        };
+        let span = newest.wrapping_sub(k0);
+        if span >= 64 && span >= 2 * self.coarse_span && span < 1 << 30 {
+            // Each end is within a period after its sample: T to within T/span.
+            let p = tau.wrapping_sub(t0) / u64::from(span);
+            if p > self.nominal / 2 && p < self.nominal * 2 {
+                self.period = p;
+                self.period_err = (p / u64::from(span)).max(1);
+                self.coarse_span = span;
+            }
+        }
+    }
+
+    /// When to latch the next observation, at or after `earliest`, so that it halves the
+    /// interval: the middle of the interval around the first predicted instant after
+    /// `earliest`. `None` when the interval is already narrow (observe whenever convenient).
+    pub fn probe_after(&self, earliest: Fine) -> Option<Fine> {
+        if !self.known || self.width() <= PROBE_WIDTH {
+            return None;
+        }
+        let mid = (self.lo + self.hi) / 2;
+        Some(self.instant_after(earliest, mid))
+    }
+
+    /// The first time ≥ `earliest` that lies `offset` after a predicted sample instant.
+    pub fn instant_after(&self, earliest: Fine, offset: i64) -> Fine {
+        let p = self.period;
+        let base = self.t_at.wrapping_add(offset as u64);
+        if earliest <= base {
+            let back = (base - earliest) / p;
+            return base - back * p;
+        }
+        let ahead = (earliest - base).div_ceil(p);
+        base + ahead * p
+    }
+
+    /// A time ≥ `earliest` halfway between two predicted sample instants: a write that must not
+    /// race a sample (a FIFO restart) latched there is unambiguously between the two.
+    pub fn mid_slot_after(&self, earliest: Fine) -> Fine {
+        self.instant_after(earliest, (self.period / 2) as i64)
+    }
+
+    /// The index of the newest sample produced by `tau`, or `None` if a sample instant may lie
+    /// within `margin` of `tau` (given the interval's uncertainty): then which side it is on is
+    /// not known.
+    pub fn newest_at(&self, tau: Fine, margin: u64) -> Option<u32> {
+        if !self.known {
+            return None;
+        }
+        let rel = tau as i64 - self.t_at as i64;
+        let m = margin as i64;
+        // Newest = k_at + floor((rel − e) / p) for the true error e ∈ (lo, hi]; certain when the
+        // extremes (widened by the margin) agree.
+        let early = floor_div(rel - self.hi - m, self.period);
+        let late = floor_div(rel - self.lo + m, self.period);
+        (early == late).then(|| self.k_at.wrapping_add(early as u32))
+    }
+
+    /// The index of the first sample produced after `tau` (see [`Self::newest_at`]).
+    pub fn first_after(&self, tau: Fine, margin: u64) -> Option<u32> {
+        self.newest_at(tau, margin).map(|k| k.wrapping_add(1))
+    }
+
+    /// The index of the predicted sample instant nearest to `t`.
+    pub fn nearest(&self, t: Fine) -> u32 {
+        let rel = t as i64 - self.t_at as i64 + (self.period / 2) as i64;
+        self.k_at.wrapping_add(floor_div(rel, self.period) as u32)
+    }
+
+    /// Stamps for the samples `k0`, `k0 + 1`, …: the current line, moved later if needed so that
+    /// they never go back behind a stamp already issued (a correction of the line after the
+    /// first probes can move it back by up to half a period). `n` samples are stamped.
+    pub fn stamps(&mut self, k0: u32, n: u32) -> Stamps {
+        let mut t0 = self.time(k0);
+        if let Some(last) = self.issued {
+            if t0 <= last {
+                t0 = last + US;
+            }
+        }
+        let period = self.period;
+        if n > 0 {
+            self.issued = Some(t0 + u64::from(n - 1) * period);
+        }
+        Stamps { k0, t0, period }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A part with true period `p_ns` and first sample at `t0_ns` (both in ns).
+    struct Part {
+        t0_ns: f64,
+        p_ns: f64,
+    }
+
+    impl Part {
+        fn t(&self, k: u32) -> f64 {
+            self.t0_ns + f64::from(k) * self.p_ns
+        }
+        /// Index of the newest sample at `tau_ns` (samples before t0 don't exist).
+        fn newest(&self, tau_ns: f64) -> u32 {
+            ((tau_ns - self.t0_ns) / self.p_ns).floor() as u32
+        }
+    }
+
+    fn f(ns: f64) -> Fine {
+        (ns * US as f64 / 1000.0).round() as Fine
+    }
+
+    fn err_us(c: &SampleClock, part: &Part, k: u32) -> f64 {
+        (c.time(k) as f64 / US as f64) - part.t(k) / 1000.0
+    }
+
+    /// Reads every 10 ms at a fixed phase relative to a reader clock, with probes when the
+    /// clock asks for them, against a part 1.3 % slow: the clock locks within a few seconds and
+    /// stays within a few µs from 3 s on; its period converges to the part's.
+    #[test]
+    fn a_slow_part_is_tracked_to_a_few_microseconds() {
+        let part = Part {
+            t0_ns: 1_000_000.0 + 1e9 / 987.0 * 0.37,
+            p_ns: 1e9 / 987.0,
+        };
+        let mut c = SampleClock::new(1000);
+        // Started at the nominal assumption (one nominal period after a wake at 1 ms).
+        c.start(0, fine(2000), false, 0);
+        let mut worst_late = 0.0f64;
+        for burst in 1..2000u32 {
+            let ready = 1_000_000.0 + f64::from(burst) * 10_000_000.0;
+            let tau_ns = match c.probe_after(f(ready)) {
+                Some(t) => t as f64 * 1000.0 / US as f64,
+                None => ready,
+            };
+            let n = part.newest(tau_ns);
+            c.observe(f(tau_ns), n, true, true);
+            if burst > 300 {
+                worst_late = worst_late.max(err_us(&c, &part, n).abs());
+            }
+        }
+        assert!(worst_late < 8.0, "worst error after 3 s: {worst_late} µs");
+        let p_err = (c.period() as f64 / US as f64) - part.p_ns / 1000.0;
+        assert!(p_err.abs() < 0.01, "period error {p_err} µs");
+        assert_eq!(c.period_ns(), 1_013_171);
+    }
+
+    /// Without probes (observations at whatever phase they fall), a part whose phase relative to
+    /// the reads does not change leaves the interval a period wide: probing is what locates it.
+    #[test]
+    fn probing_is_what_locates_the_phase() {
+        let part = Part {
+            t0_ns: 1_400_000.0,
+            p_ns: 1_000_000.0,
+        };
+        let mut c = SampleClock::new(1000);
+        c.start(0, fine(2000), false, 0);
+        for burst in 1..500u32 {
+            let tau_ns = 1_000_000.0 + f64::from(burst) * 10_000_000.0;
+            c.observe(f(tau_ns), part.newest(tau_ns), true, true);
+        }
+        assert!(c.width() > 500 * US, "width {}", c.width() / US);
+    }
+
+    #[test]
+    fn newest_is_refused_near_an_edge_and_given_elsewhere() {
+        let mut c = SampleClock::new(1000);
+        c.start(0, fine(2000), false, 0);
+        // Locate sample 5 at 7000 µs ± 2 µs.
+        c.observe(fine(7002), 5, false, false);
+        c.observe(fine(6998), 4, true, false);
+        // 4 µs between the two latches, each loosened by the jitter, widened by the drift a
+        // nominal period allows over one sample (the period is not measured yet).
+        assert!(c.width() <= 42 * US, "{}", c.width());
+        assert_eq!(c.newest_at(fine(7500), 10 * US), Some(5));
+        assert_eq!(c.newest_at(fine(6500), 10 * US), Some(4));
+        assert_eq!(c.newest_at(fine(7005), 10 * US), None);
+        assert_eq!(c.first_after(fine(7500), 10 * US), Some(6));
+        let mid = c.mid_slot_after(fine(7100));
+        assert!(mid.abs_diff(c.time(5) + 500 * US) < US, "{}", mid / US);
+        assert!(mid.abs_diff(fine(7500)) < 20 * US, "{}", mid / US);
+    }
+
+    #[test]
+    fn a_restart_on_the_old_grid_keeps_phase_and_period() {
+        let mut c = SampleClock::new(1000);
+        c.start(0, fine(2000), false, 0);
+        for k in 0..5000u32 {
+            let t = 2000 + u64::from(k) * 1000;
+            c.observe(fine(t + 1), k, false, false);
+            if k > 0 {
+                c.observe(fine(t - 1), k - 1, true, false);
+            }
+        }
+        let before = c.time(9000);
+        c.start(9000, before + 5 * US, true, 4 * US);
+        assert!((c.time(9000) as i64 - before as i64).unsigned_abs() <= 5 * US);
+        assert!(c.width() <= 30 * US, "{}", c.width() / US);
+        // A new grid at a new phase: half a period either way.
+        c.start(0, fine(123_456), false, 0);
+        assert!(c.width().abs_diff(c.period()) <= 1);
+    }
+
+    #[test]
+    fn stamps_never_go_back() {
+        let mut c = SampleClock::new(1000);
+        c.start(0, fine(2000), false, 0);
+        let a = c.stamps(0, 10);
+        assert_eq!(a.us(0), 2000);
+        assert_eq!(a.iter_us().nth(9), Some(11_000));
+        // A correction moves the line 400 µs back: the next stamps still follow the last one.
+        c.observe(fine(10_700), 9, true, true);
+        let b = c.stamps(10, 5);
+        assert!(b.us(0) > a.us(9), "{} after {}", b.us(0), a.us(9));
+    }
+}
+
+#[cfg(test)]
+mod stall_tests {
+    use super::*;
+
+    /// A part that stops producing says "not yet" where the clock expects a sample: without
+    /// `trust_late` that is not taken for a phase change, so the grid survives the stall.
+    #[test]
+    fn a_stall_does_not_move_the_grid() {
+        let mut c = SampleClock::new(1000);
+        c.start(0, fine(2000), false, 0);
+        for k in 0..3000u32 {
+            let t = 2000 + u64::from(k) * 1000;
+            c.observe(fine(t + 2), k, false, true);
+            if k > 0 {
+                c.observe(fine(t - 2), k - 1, true, true);
+            }
+        }
+        let before = c.time(3100);
+        // 100 reads during a stall: sample 3000 never comes.
+        for i in 0..100u64 {
+            let tau = fine(2000 + 3000 * 1000 + 300 + i * 1000);
+            c.observe(tau, 2999, true, false);
+        }
+        assert!(c.time(3100).abs_diff(before) < 10 * US);
+        assert!(c.contradictions > 90);
+        // The same with samples flowing (trust_late) is a phase change, taken.
+        c.observe(fine(2000 + 3000 * 1000 + 700), 2999, true, true);
+        assert!(c.time(3000) > before - 100 * 1000 * US + 600 * US);
+    }
+}

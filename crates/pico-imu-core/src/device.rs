@@ -1,0 +1,246 @@
+//! The processing task's state machine: sensor messages through the sample path
+//! ([`crate::pipeline`]), the table rounds ([`crate::tables`]), host requests
+//! ([`crate::requests`]), counters and the status report.
+use imu_cal::device::Calibration;
+use imu_proto::{
+    CalSource, CalStatus, DeviceMsg, DeviceMsgRef, Event, Scales, Sensor, SensorState, Status,
+};
+
+use crate::msg::{Report, SensorMsg};
+use crate::outbox::{FrameSink, Outbox, Sent};
+use crate::pipeline::Pipeline;
+use crate::tables::Tables;
+
+/// Counters reported in [`Status`] besides the sample path's.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Counters {
+    pub fifo_overflows: u32,
+    pub i2c_errors: u32,
+    pub bus_faults: u32,
+    pub bus_recoveries: u32,
+    pub frames_rejected: u32,
+}
+
+/// The device state machine.
+pub struct Device {
+    pub(crate) pipeline: Pipeline,
+    pub(crate) tables: Tables,
+    pub(crate) outbox: Outbox,
+    pub(crate) cal_status: CalStatus,
+    pub(crate) status_ms: u32,
+    pub(crate) tables_ms: u32,
+    pub counters: Counters,
+    state: [SensorState; 2],
+    /// The sensors' sample periods from their clocks, ns (0: not known yet).
+    period_ns: [u32; 2],
+    pub(crate) firmware: &'static str,
+}
+
+impl Device {
+    /// A device with identity corrections, streaming calibrated samples, status every 1 s and
+    /// tables every 10 s. `scales` converts corrected counts to contract units.
+    pub fn new(scales: Scales, firmware: &'static str) -> Self {
+        Self {
+            pipeline: Pipeline::new(scales),
+            tables: Tables::new(),
+            outbox: Outbox::new(),
+            cal_status: CalStatus {
+                source: CalSource::Identity,
+                fault: None,
+            },
+            status_ms: 1000,
+            tables_ms: 10_000,
+            counters: Counters::default(),
+            state: [SensorState::Unknown; 2],
+            period_ns: [0; 2],
+            firmware,
+        }
+    }
+
+    pub fn cal_status(&self) -> CalStatus {
+        self.cal_status
+    }
+
+    /// The corrections in use.
+    pub fn calibration(&self) -> &Calibration {
+        &self.pipeline.cal
+    }
+
+    pub fn mode(&self) -> imu_proto::StreamMode {
+        self.pipeline.mode
+    }
+
+    /// Status frame interval, ms (0 = off).
+    pub fn status_interval_ms(&self) -> u32 {
+        self.status_ms
+    }
+
+    /// Table round interval, ms (0 = off).
+    pub fn tables_interval_ms(&self) -> u32 {
+        self.tables_ms
+    }
+
+    /// Frames dropped because the host was not reading.
+    pub fn frames_unsent(&self) -> u32 {
+        self.outbox.unsent
+    }
+
+    /// Feed one sensor message through the pipeline.
+    pub fn on_sensor(&mut self, msg: &SensorMsg, sink: &mut impl FrameSink) {
+        match msg {
+            SensorMsg::Imu {
+                stamps,
+                samples,
+                after,
+            } => {
+                self.period_ns[0] = period_ns(stamps.period);
+                self.pipeline
+                    .imu_burst(samples, stamps, *after, &mut self.outbox, sink)
+            }
+            SensorMsg::Mag { stamps, xyz, after } => {
+                self.period_ns[1] = period_ns(stamps.period);
+                self.pipeline.mag_sample(
+                    stamps.k0,
+                    stamps.us(0),
+                    *xyz,
+                    *after,
+                    &mut self.outbox,
+                    sink,
+                )
+            }
+            SensorMsg::Report(r) => self.report(r, sink),
+            SensorMsg::BusRecovered {
+                t_us,
+                pulses,
+                sda_released,
+            } => {
+                self.counters.bus_recoveries = self.counters.bus_recoveries.saturating_add(1);
+                self.send(
+                    &DeviceMsg::Event(Event::BusRecovered {
+                        t_us: *t_us,
+                        pulses: *pulses,
+                        sda_released: *sda_released,
+                    }),
+                    sink,
+                );
+            }
+        }
+    }
+
+    fn report(&mut self, r: &Report, sink: &mut impl FrameSink) {
+        let c = &mut self.counters;
+        c.i2c_errors = c.i2c_errors.saturating_add(r.i2c_errors);
+        c.bus_faults = c.bus_faults.saturating_add(r.bus_faults);
+        c.fifo_overflows = c.fifo_overflows.saturating_add(r.fifo_overflows);
+        let i = r.sensor as usize;
+        self.state[i] = r.state;
+        if r.period_ns != 0 {
+            self.period_ns[i] = r.period_ns;
+        }
+        if let Some(e) = r.event {
+            self.send(&DeviceMsg::Event(e), sink);
+        }
+    }
+
+    /// Send the batch assembled so far (if any).
+    pub fn flush(&mut self, sink: &mut impl FrameSink) {
+        self.pipeline.flush(&mut self.outbox, sink);
+    }
+
+    pub(crate) fn send(&mut self, msg: &DeviceMsg, sink: &mut impl FrameSink) -> Sent {
+        self.outbox.send(msg, sink)
+    }
+
+    /// A sensor's state as last reported.
+    pub fn sensor_state(&self, sensor: Sensor) -> SensorState {
+        self.state[sensor as usize]
+    }
+
+    /// Counters and health now.
+    pub fn status(&self, uptime_us: u64, cpu_load_permille: u16) -> Status {
+        let p = &self.pipeline;
+        let s = p.scales;
+        let n = &p.counts;
+        Status {
+            uptime_us,
+            samples_taken: n.imu_taken,
+            samples_dropped: n.imu_lost,
+            mag_samples: n.mag_taken,
+            mag_dropped: n.mag_lost,
+            fifo_overflows: self.counters.fifo_overflows,
+            i2c_errors: self.counters.i2c_errors,
+            bus_faults: self.counters.bus_faults,
+            bus_recoveries: self.counters.bus_recoveries,
+            frames_rejected: self.counters.frames_rejected,
+            frames_unsent: self.outbox.unsent,
+            cpu_load_permille,
+            temp_milli_c: p
+                .last_temp
+                .map(|t| ((f32::from(t) * s.temp + s.temp_offset) * 1000.0) as i32),
+            imu: self.state[0],
+            mag: self.state[1],
+            imu_period_ns: self.period_ns[0],
+            mag_period_ns: self.period_ns[1],
+            cal: self.cal_status,
+            mode: p.mode,
+        }
+    }
+
+    /// Send a status frame.
+    pub fn send_status(
+        &mut self,
+        uptime_us: u64,
+        cpu_load_permille: u16,
+        sink: &mut impl FrameSink,
+    ) -> Sent {
+        let st = self.status(uptime_us, cpu_load_permille);
+        self.outbox.send(&DeviceMsgRef::Status(&st), sink)
+    }
+
+    /// Whether the magnetometer is delivering samples (table work is then scheduled right
+    /// after its reads; see `process_task`).
+    pub fn mag_ok(&self) -> bool {
+        self.state[1] == SensorState::Ok
+    }
+
+    /// Start a table round now (one snapshot of every engine; a round in progress is
+    /// abandoned). Returns its number.
+    pub fn start_tables(&mut self, t_us: u64) -> u32 {
+        self.tables
+            .start(&self.pipeline.engines, t_us, self.period_ns)
+    }
+
+    /// Whether a table round is in progress.
+    pub fn tables_pending(&self) -> bool {
+        self.tables.pending()
+    }
+
+    /// Send the round's next table when it is time and there is room; returns its table.
+    pub fn tables_step(
+        &mut self,
+        now_us: u64,
+        sink: &mut impl FrameSink,
+    ) -> Option<imu_proto::Channel> {
+        self.tables
+            .step(now_us, &self.pipeline.scales, &mut self.outbox, sink)
+    }
+
+    /// The table of a channel now (tests): an immediate snapshot.
+    pub fn table(&mut self, ch: imu_proto::Channel, t_us: u64) -> imu_proto::AllanTable {
+        let round = self.start_tables(t_us);
+        let _ = round;
+        let t = self.tables.table(ch.index(), &self.pipeline.scales);
+        self.tables.abandon();
+        t
+    }
+
+    /// A host frame was rejected by the decoder.
+    pub fn rejected_frame(&mut self) {
+        self.counters.frames_rejected = self.counters.frames_rejected.saturating_add(1);
+    }
+}
+
+/// A [`crate::clock::Fine`] period in ns.
+fn period_ns(p: crate::clock::Fine) -> u32 {
+    ((p * 1000 + (crate::clock::US >> 1)) >> crate::clock::FINE_BITS) as u32
+}

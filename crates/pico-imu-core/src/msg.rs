@@ -1,0 +1,56 @@
+//! What the sensor tasks tell the processing task.
+use imu_drivers::mpu6050::RawSample;
+use imu_proto::{Event, GapCause, Sensor, SensorState, Vec};
+
+use crate::clock::Stamps;
+
+/// Most FIFO frames one [`SensorMsg::Imu`] carries: a 10 ms burst holds 10 frames (more after a
+/// delay), read in one I2C transfer of at most 16.
+pub const BURST_MAX: usize = 16;
+
+/// One sensor task's message.
+#[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant)] // no heap: the burst travels inline through the channel
+pub enum SensorMsg {
+    /// FIFO frames in arrival order: sample `i` is slot `stamps.k0 + i` of the IMU's grid.
+    /// `after`: a discontinuity of that cause comes before the first of them (the slots between
+    /// the previous burst and this one are the samples it cost, maybe none).
+    Imu {
+        stamps: Stamps,
+        samples: Vec<RawSample, BURST_MAX>,
+        after: Option<GapCause>,
+    },
+    /// One magnetometer reading, slot `stamps.k0` of its grid; `after` as for `Imu`.
+    Mag {
+        stamps: Stamps,
+        xyz: [i16; 3],
+        after: Option<GapCause>,
+    },
+    /// A sensor service's state, counters and events.
+    Report(Report),
+    /// The bus was recovered (SCL clocked, STOP) before a sensor's transfer.
+    BusRecovered {
+        t_us: u64,
+        pulses: u8,
+        sda_released: bool,
+    },
+}
+
+/// A sensor service's report: the state after its tick, what it counted, and an event.
+#[derive(Debug, Clone, Copy)]
+pub struct Report {
+    pub sensor: Sensor,
+    pub state: SensorState,
+    /// Failed transfers since the last report.
+    pub i2c_errors: u32,
+    /// Of those, bus faults (arbitration lost, deadline).
+    pub bus_faults: u32,
+    /// FIFO overflows since the last report.
+    pub fifo_overflows: u32,
+    /// The sample clock's period, ns (0: not known yet).
+    pub period_ns: u32,
+    pub event: Option<Event>,
+}
+
+/// The messages of one tick of a sensor task (a few bursts or readings and their reports).
+pub type Out = Vec<SensorMsg, 6>;

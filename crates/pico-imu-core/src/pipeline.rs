@@ -1,0 +1,242 @@
+//! The sample path: per burst, in a straight line, fixed-point corrections (`imu_cal::device`)
+//! → the Allan engines (`allan::stream`) → the sample batch → one frame per full batch. Nothing
+//! on it allocates, divides or touches floating point.
+//!
+//! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
+//! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
+//! reported as an `Event::Gap` with its cause, before the sample.
+use imu_cal::device::{Calibration, Prepared};
+use imu_drivers::mpu6050::RawSample;
+use imu_proto::{
+    DeviceMsg, Event, GapCause, ImuSample, MagSample, SampleBatch, Scales, Sensor, StreamMode, Vec,
+};
+
+use crate::clock::Stamps;
+use crate::engines::{Engines, ImuInputs};
+use crate::msg::BURST_MAX;
+use crate::outbox::{FrameSink, Outbox};
+use crate::stage::{self, Stage};
+
+/// What the sample path counts.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SampleCounts {
+    pub imu_taken: u64,
+    pub imu_lost: u64,
+    pub mag_taken: u64,
+    pub mag_lost: u64,
+}
+
+/// The sample path's state.
+pub struct Pipeline {
+    /// The calibration as stored and reported.
+    pub(crate) cal: Calibration,
+    /// The same, prepared for the per-sample path (split coefficients, diagonal fast path).
+    fast: Prepared,
+    pub(crate) engines: Engines,
+    pub(crate) scales: Scales,
+    pub(crate) mode: StreamMode,
+    batch: SampleBatch,
+    /// The slot expected next on each sensor's grid (`None` before its first sample).
+    next_k: [Option<u32>; 2],
+    /// The latest raw temperature, for the gyro's temperature term and the status.
+    pub(crate) last_temp: Option<i16>,
+    pub(crate) counts: SampleCounts,
+}
+
+impl Pipeline {
+    pub fn new(scales: Scales) -> Self {
+        Pipeline {
+            cal: Calibration::identity(),
+            fast: Prepared::new(&Calibration::identity()),
+            engines: Engines::new(),
+            scales,
+            mode: StreamMode::Calibrated,
+            batch: SampleBatch {
+                calibrated: true,
+                scales,
+                imu: Vec::new(),
+                mag: Vec::new(),
+            },
+            next_k: [None; 2],
+            last_temp: None,
+            counts: SampleCounts::default(),
+        }
+    }
+
+    pub(crate) fn set_cal(&mut self, cal: Calibration) {
+        self.cal = cal;
+        self.fast = Prepared::new(&cal);
+    }
+
+    /// A discontinuity before slot `k` of `sensor`: the slots skipped since the last sample are
+    /// lost; split the engines and report (also with nothing lost, when `cause` is given).
+    fn discontinuity(
+        &mut self,
+        sensor: Sensor,
+        k: u32,
+        t_us: u64,
+        cause: Option<GapCause>,
+        outbox: &mut Outbox,
+        sink: &mut impl FrameSink,
+    ) {
+        let i = sensor as usize;
+        let lost = self.next_k[i].map_or(0, |e| k.wrapping_sub(e));
+        // A slot behind the expected one is not a loss (nothing skipped); it cannot happen with
+        // a monotonic grid, and is not counted.
+        let lost = if lost >= 1 << 31 { 0 } else { lost };
+        if lost == 0 && cause.is_none() {
+            return;
+        }
+        match sensor {
+            Sensor::Imu => self.counts.imu_lost += u64::from(lost),
+            Sensor::Mag => self.counts.mag_lost += u64::from(lost),
+        }
+        let cause = cause.unwrap_or(match sensor {
+            Sensor::Imu => GapCause::SensorFault,
+            Sensor::Mag => GapCause::Overwritten,
+        });
+        // No Allan difference may straddle the discontinuity. A split of an empty segment
+        // (nothing pushed since the last one) changes nothing: the loss is then reported at the
+        // same position as that split.
+        let at = self
+            .engines
+            .split(sensor)
+            .unwrap_or_else(|| self.engines.pushed(sensor));
+        outbox.send(
+            &DeviceMsg::Event(Event::Gap {
+                sensor,
+                at,
+                cause,
+                lost,
+                t_us,
+            }),
+            sink,
+        );
+    }
+
+    /// The per-sample path for one FIFO burst: sample `i` is slot `stamps.k0 + i`.
+    pub fn imu_burst(
+        &mut self,
+        samples: &[RawSample],
+        stamps: &Stamps,
+        after: Option<GapCause>,
+        outbox: &mut Outbox,
+        sink: &mut impl FrameSink,
+    ) {
+        let samples = &samples[..samples.len().min(BURST_MAX)];
+        if samples.is_empty() {
+            return;
+        }
+        if after.is_some() || self.next_k[0] != Some(stamps.k0) {
+            self.discontinuity(Sensor::Imu, stamps.k0, stamps.us(0), after, outbox, sink);
+        }
+        // Three passes over the burst, one per budget stage (docs/emulator.md, cycle markers):
+        // corrections, Allan update, framing. Each sample still goes through all three in order.
+        // A `Vec`, not a zeroed array: nothing to clear before it is filled.
+        let mut fixed: Vec<ImuInputs, BURST_MAX> = Vec::new();
+        stage::enter(Stage::Corrections);
+        for s in samples {
+            // The gyro's temperature term needs a temperature: the latest one known; before the
+            // first, none (the reference temperature: no correction).
+            if s.temp.is_some() {
+                self.last_temp = s.temp;
+            }
+            // At most BURST_MAX samples (cut above): never full.
+            let _ = fixed.push((
+                self.fast.apply_accel(s.accel),
+                self.fast.apply_gyro_opt(s.gyro, self.last_temp),
+                s.temp.map(i32::from),
+            ));
+        }
+        stage::enter(Stage::Allan);
+        self.engines.push_imu(&fixed);
+        stage::enter(Stage::Usb);
+        let n = samples.len() as u32;
+        self.counts.imu_taken += u64::from(n);
+        self.next_k[0] = Some(stamps.k0.wrapping_add(n));
+        if self.mode != StreamMode::Off {
+            let raw = self.mode == StreamMode::Raw;
+            let mut seq = stamps.k0;
+            for ((s, (accel, gyro, temp)), t_us) in samples.iter().zip(&fixed).zip(stamps.iter_us())
+            {
+                let out = ImuSample {
+                    seq,
+                    t_us,
+                    accel: if raw { s.accel.map(i32::from) } else { *accel },
+                    gyro: if raw { s.gyro.map(i32::from) } else { *gyro },
+                    temp: *temp,
+                };
+                seq = seq.wrapping_add(1);
+                if self.batch.imu.push(out).is_err() {
+                    self.flush(outbox, sink);
+                    // The batch was just emptied, so this cannot fail; ignore rather than panic.
+                    let _ = self.batch.imu.push(out);
+                }
+                if self.batch.imu.is_full() {
+                    self.flush(outbox, sink);
+                }
+            }
+        }
+        stage::leave();
+    }
+
+    /// One magnetometer sample, slot `k`, taken at `t_us`.
+    pub fn mag_sample(
+        &mut self,
+        k: u32,
+        t_us: u64,
+        xyz: [i16; 3],
+        after: Option<GapCause>,
+        outbox: &mut Outbox,
+        sink: &mut impl FrameSink,
+    ) {
+        if after.is_some() || self.next_k[1] != Some(k) {
+            self.discontinuity(Sensor::Mag, k, t_us, after, outbox, sink);
+        }
+        stage::enter(Stage::Corrections);
+        let mag = self.fast.apply_mag(xyz);
+        stage::enter(Stage::Allan);
+        self.engines.push_mag(&mag);
+        stage::enter(Stage::Usb);
+        self.counts.mag_taken += 1;
+        self.next_k[1] = Some(k.wrapping_add(1));
+        if self.mode != StreamMode::Off {
+            let out = MagSample {
+                seq: k,
+                t_us,
+                mag: if self.mode == StreamMode::Raw {
+                    xyz.map(i32::from)
+                } else {
+                    mag
+                },
+            };
+            if self.batch.mag.push(out).is_err() {
+                self.flush(outbox, sink);
+                let _ = self.batch.mag.push(out);
+            }
+            if self.batch.mag.is_full() {
+                self.flush(outbox, sink);
+            }
+        }
+        stage::leave();
+    }
+
+    /// Send the batch assembled so far (if any).
+    pub fn flush(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) {
+        if self.batch.imu.is_empty() && self.batch.mag.is_empty() {
+            return;
+        }
+        self.batch.calibrated = self.mode != StreamMode::Raw;
+        self.batch.scales = self.scales;
+        // Framed in place (no copy of the batch into a `DeviceMsg`), then emptied.
+        outbox.send_samples(&self.batch, sink);
+        self.batch.imu.clear();
+        self.batch.mag.clear();
+    }
+
+    /// Forget the Allan state (new corrections, or the host asked). The grids go on: slot
+    /// numbers and loss accounting are not the engines'.
+    pub fn reset_allan(&mut self) {
+        self.engines.reset();
+    }
+}

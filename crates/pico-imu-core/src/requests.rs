@@ -1,0 +1,163 @@
+//! Host requests: identity, status, calibration, streaming mode, intervals, tables.
+use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
+use imu_proto::{
+    CalFault, CalProblem, CalSource, CalStatus, DeviceMsg, ErrorCode, HostFrame, Identity, Reply,
+    Request, Vec, IMU_RATE_HZ, MAG_RATE_HZ, MAX_CAL_BLOB, PROTOCOL_VERSION,
+};
+
+use crate::device::Device;
+use crate::outbox::FrameSink;
+
+/// Allan engine overlap factor and levels, as reported in [`Identity`]; tied to the engine
+/// types at compile time.
+pub const ALLAN_OVERLAP: u8 = 8;
+pub const ALLAN_LEVELS: u8 = 24;
+pub const ALLAN_LEVELS_MAG: u8 = 22;
+const _: () = assert!(
+    core::mem::size_of::<allan::stream::DeviceEngine>()
+        == core::mem::size_of::<allan::stream::Engine<8, 24, 12, 20>>()
+        && core::mem::size_of::<allan::stream::MagEngine>()
+            == core::mem::size_of::<allan::stream::Engine<8, 22, 12, 18>>()
+);
+
+/// A calibration the host asked to persist; the firmware pauses sampling, writes it and
+/// reports back through [`Device::persisted`].
+#[derive(Debug, Clone)]
+pub struct PersistRequest {
+    pub id: u16,
+    pub blob: Vec<u8, MAX_CAL_BLOB>,
+}
+
+/// The wire's reason for a blob the device refuses.
+pub fn cal_problem(e: BlobError) -> CalProblem {
+    match e {
+        BlobError::WrongVersion { found, .. } => CalProblem::Version(found),
+        BlobError::OutOfRange { .. } => CalProblem::OutOfRange,
+        _ => CalProblem::Corrupt,
+    }
+}
+
+impl Device {
+    fn use_cal(&mut self, cal: Calibration, source: CalSource) {
+        self.pipeline.set_cal(cal);
+        self.cal_status = CalStatus {
+            source,
+            fault: None,
+        };
+    }
+
+    /// Use a blob read from flash at boot; a bad one is reported and identity kept.
+    pub fn load_stored(&mut self, blob: Option<&[u8]>) {
+        match blob.map(decode_blob) {
+            None => self.use_cal(Calibration::identity(), CalSource::Identity),
+            Some(Ok(cal)) => self.use_cal(cal, CalSource::Flash),
+            Some(Err(e)) => {
+                self.use_cal(Calibration::identity(), CalSource::Identity);
+                self.cal_status.fault = Some(CalFault::Rejected(cal_problem(e)));
+            }
+        }
+    }
+
+    /// The flash could not be read at boot.
+    pub fn flash_unreadable(&mut self) {
+        self.cal_status = CalStatus {
+            source: CalSource::Identity,
+            fault: Some(CalFault::Flash),
+        };
+    }
+
+    /// Who we are.
+    pub fn identity(&self) -> Identity {
+        Identity {
+            protocol: PROTOCOL_VERSION,
+            firmware: imu_proto::String::try_from(self.firmware).unwrap_or_default(),
+            board: imu_proto::String::try_from("Raspberry Pi Pico W").unwrap_or_default(),
+            imu_rate_hz: IMU_RATE_HZ as u16,
+            mag_rate_hz: MAG_RATE_HZ as u16,
+            allan_overlap: ALLAN_OVERLAP,
+            allan_levels: ALLAN_LEVELS,
+            allan_levels_mag: ALLAN_LEVELS_MAG,
+        }
+    }
+
+    /// Handle one host request. Returns a [`PersistRequest`] when the calibration must be
+    /// written to flash (the reply then comes from [`Device::persisted`]).
+    pub fn handle(
+        &mut self,
+        frame: HostFrame,
+        uptime_us: u64,
+        cpu: u16,
+        sink: &mut impl FrameSink,
+    ) -> Option<PersistRequest> {
+        let id = frame.id;
+        let reply = match frame.req {
+            Request::Identify => Reply::Identity(self.identity()),
+            Request::GetStatus => Reply::Status(self.status(uptime_us, cpu)),
+            Request::GetCalibration => {
+                let mut buf = [0u8; MAX_BLOB_LEN];
+                match encode_blob(&self.pipeline.cal, &mut buf) {
+                    Ok(b) => Reply::Calibration {
+                        blob: Vec::from_slice(b).unwrap_or_default(),
+                        status: self.cal_status,
+                    },
+                    Err(e) => Reply::Error(ErrorCode::BadCalibration(cal_problem(e))),
+                }
+            }
+            Request::SetCalibration { blob, persist } => match decode_blob(&blob) {
+                Ok(cal) => {
+                    self.use_cal(cal, CalSource::Host);
+                    // New corrections change the engines' input: old sums would mix scales.
+                    self.reset_allan();
+                    if persist {
+                        return Some(PersistRequest { id, blob });
+                    }
+                    Reply::Ok
+                }
+                Err(e) => Reply::Error(ErrorCode::BadCalibration(cal_problem(e))),
+            },
+            Request::ResetAllan => {
+                self.reset_allan();
+                Reply::Ok
+            }
+            Request::SetMode(m) => {
+                self.flush(sink);
+                self.pipeline.mode = m;
+                Reply::Ok
+            }
+            Request::SetIntervals {
+                status_ms,
+                tables_ms,
+            } => {
+                self.status_ms = status_ms;
+                self.tables_ms = tables_ms;
+                Reply::Ok
+            }
+            Request::GetTables => Reply::Tables {
+                snapshot: self.start_tables(uptime_us),
+            },
+        };
+        self.send(&DeviceMsg::Reply { id, reply }, sink);
+        None
+    }
+
+    /// Report the outcome of a [`PersistRequest`].
+    pub fn persisted(&mut self, id: u16, ok: bool, sink: &mut impl FrameSink) {
+        let reply = if ok {
+            self.cal_status = CalStatus {
+                source: CalSource::Flash,
+                fault: None,
+            };
+            Reply::Ok
+        } else {
+            self.cal_status.fault = Some(CalFault::Flash);
+            Reply::Error(ErrorCode::FlashWrite)
+        };
+        self.send(&DeviceMsg::Reply { id, reply }, sink);
+    }
+
+    /// Forget all Allan state. The round in progress describes the old state: abandoned.
+    pub fn reset_allan(&mut self) {
+        self.pipeline.reset_allan();
+        self.tables.abandon();
+    }
+}
