@@ -26,6 +26,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
+use imu_proto::csv::{WriteOptions, Writer, GAP_BEFORE};
 use imu_proto::{
     DeviceMsg, Event, GapCause, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, Sensor,
     StreamMode,
@@ -54,8 +55,28 @@ pub struct Args {
     pub seconds: f64,
 }
 
-/// The CSV header of the contract.
-pub const HEADER: &str = "t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before";
+/// The recording's columns, in order (names of the CSV contract, `imu_proto::csv`).
+pub const COLUMNS: [&str; 12] = [
+    "t",
+    "ax",
+    "ay",
+    "az",
+    "gx",
+    "gy",
+    "gz",
+    "mx",
+    "my",
+    "mz",
+    "temp",
+    GAP_BEFORE,
+];
+
+/// How the recording prints numbers: `t` with µs resolution, the values at f32 precision
+/// (shortest text that reads back; beyond the sensors' 16-bit resolution).
+const PRINT: WriteOptions = WriteOptions {
+    time_decimals: Some(6),
+    f32_values: true,
+};
 
 /// One CSV row: `t` (s), the ten values in contract units (`None`: missing), and the IMU samples
 /// missing right before it.
@@ -160,27 +181,27 @@ fn imu_row(i: &ImuSample, mag: [f64; 3], s: &Scales, gap_before: u64) -> Row {
     }
 }
 
-/// One CSV line: `t` with µs resolution, the values at f32 precision (shortest
-/// representation, which exceeds the sensors' 16-bit resolution), a missing value empty.
-pub fn csv_line(r: &Row) -> String {
-    let mut s = format!("{:.6}", r.t);
-    for v in &r.values {
-        s.push(',');
-        if let Some(v) = v {
-            s.push_str(&(*v as f32).to_string());
-        }
+impl Row {
+    /// The row's fields in [`COLUMNS`] order (`None`: an empty field).
+    pub fn fields(&self) -> [Option<f64>; 12] {
+        let mut f = [None; 12];
+        f[0] = Some(self.t);
+        f[1..11].copy_from_slice(&self.values);
+        f[11] = Some(self.gap_before as f64);
+        f
     }
-    s.push(',');
-    s.push_str(&r.gap_before.to_string());
-    s
 }
 
 /// Append the rows of one batch to the CSV.
-fn write_batch(b: &SampleBatch, rows: &mut Rows, w: &mut impl Write) -> std::io::Result<()> {
+fn write_batch(
+    b: &SampleBatch,
+    rows: &mut Rows,
+    w: &mut Writer<impl Write>,
+) -> std::io::Result<()> {
     let mut res = Ok(());
     rows.batch(b, |r| {
         if res.is_ok() {
-            res = writeln!(w, "{}", csv_line(r));
+            res = w.row(&r.fields());
         }
     });
     res
@@ -277,8 +298,8 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     let file = File::create(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let mut w = BufWriter::new(file);
-    writeln!(w, "{HEADER}")?;
+    let mut w = Writer::new(BufWriter::new(file), &COLUMNS, PRINT)
+        .with_context(|| format!("writing {}", a.out.display()))?;
 
     let mode = if a.raw {
         StreamMode::Raw
@@ -346,7 +367,7 @@ pub fn run(a: Args) -> Result<()> {
             rows.span()
         );
     }
-    w.flush()
+    w.finish()
         .with_context(|| format!("writing {}", a.out.display()))?;
     // Stop streaming; a failure here does not lose the recording.
     let status = link
@@ -383,6 +404,14 @@ pub fn run(a: Args) -> Result<()> {
 mod tests {
     use super::*;
     use imu_proto::Vec as HVec;
+
+    /// The CSV line the recording writes for `r`.
+    fn csv_line(r: &Row) -> String {
+        let mut w = Writer::new(Vec::new(), &COLUMNS, PRINT).unwrap();
+        w.row(&r.fields()).unwrap();
+        let text = String::from_utf8(w.finish().unwrap()).unwrap();
+        text.lines().nth(1).unwrap().to_string()
+    }
 
     fn scales() -> Scales {
         Scales {
@@ -500,7 +529,7 @@ mod tests {
         r.batch(&b, |row| out.push(*row));
         let line = csv_line(&out[0]);
         let fields: Vec<&str> = line.split(',').collect();
-        assert_eq!(fields.len(), HEADER.split(',').count());
+        assert_eq!(fields.len(), COLUMNS.len());
         assert_eq!(fields[10], "", "{line}");
         assert_eq!(fields[11], "0");
     }
