@@ -271,67 +271,13 @@ fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {
             "--json",
         ])
         .arg(out.join("tables.json")))?;
-    // The lab loop: fit, read the diagnosis, add the effect it names, fit again (at most three
-    // effects), then write the report with every step.
-    let mut added: Vec<String> = Vec::new();
-    for _ in 0..3 {
-        let mut c = imu_lab();
-        c.args(["fit"])
-            .arg(&recording)
-            .args(["--column", "gx", "--json"]);
-        if !added.is_empty() {
-            c.args(["--add", &added.join(",")]);
-        }
-        let shown = format!("{c:?}");
-        let fit = c
-            .current_dir(root())
-            .output()
-            .with_context(|| format!("running {shown}"))?;
-        if !fit.status.success() {
-            bail!("{shown} failed: {}", String::from_utf8_lossy(&fit.stderr));
-        }
-        let json: serde_json::Value = serde_json::from_slice(&fit.stdout)
-            .with_context(|| format!("parsing the JSON of {shown}"))?;
-        let diag = json.get("diagnosis");
-        let adequate = diag
-            .and_then(|d| d.get("adequate"))
-            .and_then(|v| v.as_bool())
-            .unwrap_or(false);
-        let missing = diag
-            .and_then(|d| d.get("missing"))
-            .and_then(|v| v.as_str())
-            .map(str::to_string);
-        let model = if added.is_empty() {
-            "five-term model".to_string()
-        } else {
-            format!("model + {}", added.join(" + "))
-        };
-        match (adequate, missing) {
-            (true, _) => {
-                eprintln!("xtask: the {model} is adequate");
-                break;
-            }
-            (false, Some(effect)) if !added.contains(&effect) => {
-                eprintln!(
-                    "xtask: the {model} fails; the diagnosis names the missing effect: {effect}"
-                );
-                added.push(effect);
-            }
-            (false, _) => {
-                eprintln!("xtask: the {model} fails and the diagnosis names no further effect");
-                break;
-            }
-        }
-    }
-    let mut c = imu_lab();
-    c.args(["fit"])
+    // The lab's walk: fit, diagnose, add the effect it names, refit until adequate; imu-lab
+    // prints the step table and writes the report with every step.
+    run(imu_lab()
+        .arg("fit")
         .arg(&recording)
-        .args(["--column", "gx", "--report"])
-        .arg(&report);
-    if !added.is_empty() {
-        c.args(["--add", &added.join(",")]);
-    }
-    run(&mut c)?;
+        .args(["--column", "gx", "--auto", "--report"])
+        .arg(&report))?;
     eprintln!("xtask: demo report written to {}", report.display());
     Ok(())
 }
