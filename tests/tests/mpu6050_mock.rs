@@ -466,7 +466,7 @@ fn sample_bytes(accel: [i16; 3], gyro: [i16; 3]) -> Vec<u8> {
 fn self_test_sequence_mpu6050() {
     // RM 4.1: GYRO_CONFIG = XG/YG/ZG_ST | FS_SEL 0 = 0xE0; ACCEL_CONFIG = XA/YA/ZA_ST | AFS_SEL 2
     // (±8 g) = 0xF0; wait, average; self-test off (0x00, 0x10); wait, average; read the four
-    // SELF_TEST registers; restore the seed ranges (0x00, 0x08).
+    // SELF_TEST registers; restore the default ranges (0x00, 0x08).
     // Trim codes 1 everywhere: FT gyro = 3275 LSB (−3275 for Y), FT accel = 1392.64 LSB.
     let on = sample_bytes([1393, 1393, 1393 + 4096], [3275, -3275, 3275]);
     let off = sample_bytes([0, 0, 4096], [0, 0, 0]);

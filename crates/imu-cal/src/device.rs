@@ -31,7 +31,7 @@
 //! # Correction model and Q formats
 //!
 //! Each sensor is an affine map `out = M · (raw − o)`; the gyro offset also moves with the die
-//! temperature: `o(T) = b + k · (T_raw − T_ref)` (issue 4, gyro "temperature" effect). The host
+//! temperature: `o(T) = b + k · (T_raw − T_ref)` (the calibration lab's gyro `temperature` effect). The host
 //! folds the offset through the matrix once (`c = M·o`, `κ = M·k`), so the device computes
 //!
 //! ```text
@@ -55,8 +55,8 @@
 //! whose temperature term adds 2 per axis).
 //!
 //! The firmware applies a [`Prepared`] copy, rebuilt whenever the calibration changes: the
-//! coefficients are split once instead of per sample, and a diagonal matrix (the seed's model:
-//! offset and scale per axis; a bias-only gyro; identity) skips its six zero products. Same
+//! coefficients are split once instead of per sample, and a diagonal matrix (the model of Jaime et al.,
+//! eq. 1: offset and scale per axis; a bias-only gyro; identity) skips its six zero products. Same
 //! results bit for bit (`tests/fixed_point.rs`). Emulated cost of the corrections per 1 kHz
 //! sample set (accel + gyro with temperature term, plus the 200 Hz magnetometer): 703 cycles
 //! applying `Calibration` directly, 579 prepared with full matrices, 276 with diagonal ones
@@ -501,7 +501,7 @@ impl Calibration {
 }
 
 /// One [`Affine`] laid out for the per-sample path: each Q24 coefficient already split into
-/// the two halves [`mul_q24`] multiplies by, and whether the matrix is diagonal (the seed's
+/// the two halves [`mul_q24`] multiplies by, and whether the matrix is diagonal (Jaime et al.'s
 /// accelerometer model, offset and scale per axis, and a bias-only gyro are), in which case
 /// the six zero products are skipped. The results are bit for bit those of
 /// [`Affine::apply`]: a zero coefficient contributes exactly 0 to both partial sums.

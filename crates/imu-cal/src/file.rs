@@ -4,7 +4,7 @@
 //! LSB make one unit at the device's configured range, which is what turns the physical
 //! correction into the raw-count correction of [`crate::device`]:
 //! if `raw = s·a` (s in LSB per unit) and `a_cal = M·(a − o)`, the device output in nominal
-//! LSB is `s·a_cal = M·(raw − s·o)`. Defaults are the seed's configuration (MPU-6050 ±4 g and
+//! LSB is `s·a_cal = M·(raw − s·o)`. Defaults are the configuration of Jaime et al. (MPU-6050 ±4 g and
 //! ±250 °/s, QMC5883 ±2 G).
 //!
 //! ```toml

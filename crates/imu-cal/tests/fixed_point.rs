@@ -1,4 +1,4 @@
-//! Fixed-point vs float corrections: ≤ 1 LSB over the whole i16 input range (issue 4 §4).
+//! Fixed-point vs float corrections: ≤ 1 LSB over the whole i16 input range (the device's correction contract).
 //!
 //! The float reference is the correction with the *unquantised* f64 parameters,
 //! `out = M·(raw − o)` (gyro: `o = b + k·(T − T_ref)`), rounded to the nearest count.

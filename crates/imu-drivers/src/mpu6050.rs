@@ -313,7 +313,8 @@ pub enum Dlpf {
     Hz21 = 4,
     /// 10 Hz / 10 Hz.
     Hz10 = 5,
-    /// 5 Hz / 5 Hz (delay 19.0 / 18.6 ms): the seed configuration.
+    /// 5 Hz / 5 Hz (delay 19.0 / 18.6 ms): the configuration Jaime et al. use
+    /// ("Caracterización y calibración de unidades de medición inercial de bajo costo").
     #[default]
     Hz5 = 6,
 }
@@ -428,7 +429,7 @@ impl InterruptConfig {
     }
 }
 
-/// MPU-6050 configuration. [`Config::default`] is the seed configuration: ±250 °/s, ±4 g,
+/// MPU-6050 configuration. [`Config::default`] is the configuration of Jaime et al.: ±250 °/s, ±4 g,
 /// DLPF_CFG 6 (5 Hz), SMPLRT_DIV 0 → 1 kHz, FIFO with accel + gyro, data-ready interrupt.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -18,7 +18,8 @@ pub struct Recalibration {
 
 /// Predicted rms bias change after T seconds, D(T) = √2·σ_drift(T), where
 /// σ²_drift(T) = (2 ln2/π)B² + K²T/3 + R²T²/2 is the Allan variance of the drift terms only
-/// (seed eqs. 12–14). By the definition of the Allan variance, √2·σ(T) is the rms difference
+/// (Jaime et al., "Caracterización y calibración de unidades de medición inercial de bajo
+/// costo", eqs. 12–14). By the definition of the Allan variance, √2·σ(T) is the rms difference
 /// between the bias averaged over one window of length T and over the next: calibrate the bias
 /// by averaging for T and it stays within D(T) (1σ) over the following T.
 pub fn bias_drift(b: f64, k: f64, r: f64, t: f64) -> f64 {

@@ -6,7 +6,7 @@
 //!
 //! 1. Clears a stuck bus (9 SCL pulses + STOP, `imu_drivers::recovery`) with GP4/GP5 as
 //!    open-drain GPIOs, then hands them to the I2C0 peripheral.
-//! 2. Configures the MPU-6050 with the seed configuration (±250 °/s, ±4 g, DLPF 5 Hz, 1 kHz,
+//! 2. Configures the MPU-6050 with the configuration of Jaime et al. (±250 °/s, ±4 g, DLPF 5 Hz, 1 kHz,
 //!    FIFO accel + gyro) and runs the factory self-test (MPU-6050 and MPU-6500 family).
 //! 3. Detects the magnetometer and configures it (±2 G, 200 Hz, OSR 512, continuous).
 //! 4. Every 10 ms drains the FIFO and polls the magnetometer; every second prints over

@@ -57,18 +57,7 @@ pub struct Args {
 
 /// The recording's columns, in order (names of the CSV contract, `imu_proto::csv`).
 pub const COLUMNS: [&str; 12] = [
-    "t",
-    "ax",
-    "ay",
-    "az",
-    "gx",
-    "gy",
-    "gz",
-    "mx",
-    "my",
-    "mz",
-    "temp",
-    GAP_BEFORE,
+    "t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp", GAP_BEFORE,
 ];
 
 /// How the recording prints numbers: `t` with µs resolution, the values at f32 precision
