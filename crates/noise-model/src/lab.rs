@@ -36,6 +36,12 @@ pub const P_CANDIDATE: f64 = 1e-3;
 pub const P_SIGNAL: f64 = 1e-3;
 /// Most steps of a walk.
 pub const MAX_STEPS: usize = 6;
+/// Candidates whose χ² + 2p is within this of the best one's are equally supported by the data
+/// (a likelihood ratio below e: "substantial support" for both, Burnham & Anderson 2002, §2.6).
+pub const EQUAL_SUPPORT: f64 = 2.0;
+/// Candidates within this of the best one's χ² + 2p (relative likelihood above e⁻² ≈ 0.14) are
+/// named beside it as fitting nearly as well.
+pub const NEAR_SUPPORT: f64 = 4.0;
 
 /// What the timestamps say: the CSV contract's timing analysis (median, mean and 95th-percentile
 /// spacing, bursts, jitter, duplicates, gaps).
@@ -514,7 +520,8 @@ impl<'a> NoiseLab<'a> {
     }
 
     /// AIC: −2 log-likelihood of the points ([`crate::assess::neg2_loglik`]) + 2p.
-    fn criterion(m: &Model) -> f64 {
+    /// The penalised criterion that ranks candidates: −2 log-likelihood + 2 × free parameters (AIC).
+    pub fn criterion(m: &Model) -> f64 {
         m.neg2ll + 2.0 * m.fit.n_params() as f64
     }
 
@@ -768,8 +775,60 @@ impl<'a> NoiseLab<'a> {
                 .then(line_explains(b).cmp(&line_explains(a)))
                 .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
         });
+        Self::prefer_simplest_of_equals(&mut cands);
         out.extend(cands);
         Ok(out)
+    }
+
+    /// Among the admissible candidates the data cannot tell apart from the best — χ² + 2p within
+    /// [`EQUAL_SUPPORT`] — the one with the fewest added parameters, then the earliest in the
+    /// vocabulary (the simpler physics: a one-pole filter before a two-pole one) goes first. The
+    /// first candidate's reading names the others that fit nearly as well
+    /// ([`NEAR_SUPPORT`]), so a user sees which physical forms the record cannot tell apart.
+    fn prefer_simplest_of_equals(cands: &mut [Candidate<Effect, Model>]) {
+        let Some(best) = cands.first().filter(|c| c.admissible) else {
+            return;
+        };
+        let top = Self::criterion(&best.model);
+        let equal = cands
+            .iter()
+            .take_while(|c| c.admissible && Self::criterion(&c.model) <= top + EQUAL_SUPPORT)
+            .count();
+        let rank = |c: &Candidate<Effect, Model>| {
+            let order = c
+                .edit
+                .add
+                .iter()
+                .map(|e| {
+                    crate::effect::ALL_EFFECTS
+                        .iter()
+                        .position(|v| v == e)
+                        .unwrap_or(crate::effect::ALL_EFFECTS.len())
+                })
+                .min()
+                .unwrap_or(crate::effect::ALL_EFFECTS.len());
+            (c.extra_params, order)
+        };
+        cands[..equal].sort_by_key(rank);
+        let top = Self::criterion(&cands[0].model);
+        let others: Vec<String> = cands[1..]
+            .iter()
+            .filter(|c| c.admissible && Self::criterion(&c.model) <= top + NEAR_SUPPORT)
+            .map(|c| {
+                format!(
+                    "{} (Δ(χ² + 2p) = {:+.1})",
+                    c.reading,
+                    Self::criterion(&c.model) - top
+                )
+            })
+            .collect();
+        if !others.is_empty() {
+            cands[0].reading = format!(
+                "{}; the record fits nearly as well: {}",
+                cands[0].reading,
+                others.join("; ")
+            );
+        }
     }
 
     /// The time-domain likelihood ratio of a candidate against the current model: the block

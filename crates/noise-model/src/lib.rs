@@ -44,7 +44,7 @@ pub use fit::{
     fit, fit_model, Fit, FitError, FitOptions, Known, Measurement, ParamValue, Point, TermFit,
     TermSpec, Weighting,
 };
-pub use lab::{Model, NoiseLab, Record, Timing};
+pub use lab::{Model, NoiseLab, Record, Timing, EQUAL_SUPPORT, NEAR_SUPPORT};
 pub use model_lab::{walk, Candidate, Edit, Step, Stop, Summary, Walk};
 pub use practical::{recalibration, KalibrImu, Recalibration};
 pub use psd::{find_line, line_near, welch, Line, LineTest, Psd};

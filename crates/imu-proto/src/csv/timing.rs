@@ -19,6 +19,13 @@ pub fn is_gap(k: f64) -> bool {
 /// A spacing that differs from the nominal period by more than this fraction (and is not a gap)
 /// is a jittered stamp.
 pub const JITTER_TOLERANCE: f64 = 0.01;
+/// The stamps are jittered when more than this fraction of the spacings are jittered, or when
+/// the RMS deviation of the spacings from the period exceeds [`JITTER_TOLERANCE`] of it. Rarer,
+/// smaller deviations (a device correcting its estimate of the sensor's clock by a few µs, a
+/// stamp rounded) are counted and described but leave the clock regular: they move no sample,
+/// and even at the Nyquist frequency an RMS timing error of 1 % of the period is a phase error
+/// of 0.03 rad.
+pub const JITTERED_FRACTION: f64 = 0.01;
 /// When more than this fraction of the spacings are off the sample clock (shorter than half a
 /// period, or long but not a whole number of periods) the stamps are bursty.
 pub const BURSTY_FRACTION: f64 = 0.01;
@@ -26,9 +33,10 @@ pub const BURSTY_FRACTION: f64 = 0.01;
 /// How regular a time column is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Regularity {
-    /// Every spacing is the nominal period (within [`JITTER_TOLERANCE`]) or a gap.
+    /// The spacings are the nominal period (within [`JITTER_TOLERANCE`]) or gaps, but for a
+    /// few ([`JITTERED_FRACTION`]).
     Regular,
-    /// A sample clock, but some spacings are off the period by more than [`JITTER_TOLERANCE`].
+    /// A sample clock, but many spacings are off the period ([`JITTERED_FRACTION`]).
     Jittered,
     /// Not a sample clock: many spacings far shorter than the period and long ones that are no
     /// whole number of periods (host read times of buffered data). The samples are then taken
@@ -339,7 +347,9 @@ impl TimingScan {
         };
         let regularity = if self.clock.bursty {
             Regularity::Bursty
-        } else if self.jittered > 0 {
+        } else if self.jittered as f64 > JITTERED_FRACTION * self.cnt.max(1) as f64
+            || self.ss > (JITTER_TOLERANCE * period).powi(2) * self.cnt as f64
+        {
             Regularity::Jittered
         } else {
             Regularity::Regular
@@ -566,8 +576,38 @@ mod tests {
         assert_eq!(tm.duplicates, 1);
         assert!(tm.gaps.is_empty());
         assert_eq!(tm.jittered, 2, "both sides of the late stamp");
+        // Two of 998 spacings, RMS 0.9 % of the period: counted, but the clock is regular;
+        // the duplicated row makes the record irregular.
+        assert_eq!(tm.regularity, Regularity::Regular);
+        assert!(tm.irregular());
+        // A stamp jittered every 50 rows (4 % of the spacings): jittered.
+        let mut t = clock(1000, 100.0);
+        for k in (10..1000).step_by(50) {
+            t[k] += 0.0003;
+        }
+        let tm = timing(&t, None).unwrap();
+        assert_eq!((tm.jittered, tm.duplicates), (40, 0));
         assert_eq!(tm.regularity, Regularity::Jittered);
         assert!(tm.irregular());
+    }
+
+    #[test]
+    fn rare_small_stamp_corrections_leave_the_clock_regular() {
+        // A device stamping t0 + k·T̂ that now and then corrects its estimate of the sensor's
+        // clock: 0.3 % of the spacings off by 2–6 % of the period.
+        let mut t = clock(60_000, 1000.0);
+        for (i, k) in (100..60_000).step_by(300).enumerate() {
+            let shift = 20e-6 + 40e-6 * (i % 2) as f64;
+            for v in &mut t[k..] {
+                *v += shift;
+            }
+        }
+        let tm = timing(&t, None).unwrap();
+        assert_eq!(tm.jittered, 200);
+        assert!(tm.jitter_rms_s < 0.01 * tm.period_s, "{}", tm.jitter_rms_s);
+        assert_eq!(tm.regularity, Regularity::Regular);
+        assert!(!tm.irregular());
+        assert!(tm.describe().contains("200 jittered"), "{}", tm.describe());
     }
 
     #[test]
