@@ -18,7 +18,7 @@ const A: u8 = 0x68;
 /// 0x19..0x1C (SMPLRT_DIV 0, DLPF_CFG 6, FS_SEL 0 → 0x00, AFS_SEL 1 → 0x08), INT_PIN_CFG 0,
 /// INT_ENABLE DATA_RDY|FIFO_OFLOW = 0x11, FIFO reset, FIFO_EN accel+XYZ gyro = 0x78, FIFO on,
 /// and last the wake-up CLKSEL=1 (the sample clock starts with it).
-fn seed_init(who: u8, burst: Vec<u8>) -> Vec<T> {
+fn default_init(who: u8, burst: Vec<u8>) -> Vec<T> {
     vec![
         T::write_read(A, vec![0x75], vec![who]),
         T::write(A, vec![0x6B, 0x80]),
@@ -32,7 +32,7 @@ fn seed_init(who: u8, burst: Vec<u8>) -> Vec<T> {
     ]
 }
 
-fn seed_burst_6050() -> Vec<u8> {
+fn default_burst_6050() -> Vec<u8> {
     vec![0x19, 0x00, 0x06, 0x00, 0x08]
 }
 
@@ -52,9 +52,27 @@ fn both<R: PartialEq + std::fmt::Debug>(
     r1
 }
 
+/// `init` with `cfg`, blocking and async (the same result from both).
+fn init_ok(exp: &[T], cfg: &Config) -> ChipId {
+    both(
+        exp,
+        |d| d.init(&mut NoopDelay, cfg).unwrap(),
+        async |d| d.init(&mut NoopDelay, cfg).await.unwrap(),
+    )
+}
+
+/// `init` with `cfg` failing, blocking and async (the same error from both).
+fn init_err(exp: &[T], cfg: &Config) -> Error<ErrorKind> {
+    both(
+        exp,
+        |d| d.init(&mut NoopDelay, cfg).unwrap_err(),
+        async |d| d.init(&mut NoopDelay, cfg).await.unwrap_err(),
+    )
+}
+
 #[test]
-fn seed_init_sequence_and_reset_delay() {
-    let exp = seed_init(0x68, seed_burst_6050());
+fn default_init_sequence_and_reset_delay() {
+    let exp = default_init(0x68, default_burst_6050());
     let chip = both(
         &exp,
         |d| {
@@ -74,7 +92,7 @@ fn seed_init_sequence_and_reset_delay() {
 }
 
 #[test]
-fn seed_config_is_the_papers() {
+fn default_config_is_the_papers() {
     let c = Config::default();
     assert_eq!(c.gyro_range, GyroRange::Dps250);
     assert_eq!(c.accel_range, AccelRange::G4);
@@ -96,12 +114,8 @@ fn clone_ids_accepted_and_6500_family_gets_accel_config2() {
         (0x98, ChipId::Icm20689),
         (0x19, ChipId::Mpu6886),
     ] {
-        let exp = seed_init(who, vec![0x19, 0x00, 0x06, 0x00, 0x08, 0x06]);
-        let got = both(
-            &exp,
-            |d| d.init(&mut NoopDelay, &Config::default()).unwrap(),
-            async |d| d.init(&mut NoopDelay, &Config::default()).await.unwrap(),
-        );
+        let exp = default_init(who, vec![0x19, 0x00, 0x06, 0x00, 0x08, 0x06]);
+        let got = init_ok(&exp, &Config::default());
         assert_eq!(got, chip, "WHO_AM_I 0x{who:02X}");
     }
 }
@@ -110,15 +124,7 @@ fn clone_ids_accepted_and_6500_family_gets_accel_config2() {
 fn wrong_chip_stops_before_any_write() {
     for who in [0x00, 0xFF, 0x69, 0x34, 0xEA] {
         let exp = [T::write_read(A, vec![0x75], vec![who])];
-        let e = both(
-            &exp,
-            |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
-            async |d| {
-                d.init(&mut NoopDelay, &Config::default())
-                    .await
-                    .unwrap_err()
-            },
-        );
+        let e = init_err(&exp, &Config::default());
         assert_eq!(e, Error::WrongChip { found: who });
     }
 }
@@ -127,15 +133,7 @@ fn wrong_chip_stops_before_any_write() {
 fn nack_on_address_is_a_bus_error() {
     let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
     let exp = [T::write_read(A, vec![0x75], vec![0]).with_error(nack)];
-    let e = both(
-        &exp,
-        |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
-        async |d| {
-            d.init(&mut NoopDelay, &Config::default())
-                .await
-                .unwrap_err()
-        },
-    );
+    let e = init_err(&exp, &Config::default());
     assert_eq!(e, Error::Bus(nack));
 }
 
@@ -145,17 +143,9 @@ fn nack_midway_through_init_is_reported() {
     let exp = [
         T::write_read(A, vec![0x75], vec![0x68]),
         T::write(A, vec![0x6B, 0x80]),
-        T::write(A, seed_burst_6050()).with_error(nack),
+        T::write(A, default_burst_6050()).with_error(nack),
     ];
-    let e = both(
-        &exp,
-        |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
-        async |d| {
-            d.init(&mut NoopDelay, &Config::default())
-                .await
-                .unwrap_err()
-        },
-    );
+    let e = init_err(&exp, &Config::default());
     assert_eq!(e, Error::Bus(nack));
 }
 
@@ -205,7 +195,7 @@ fn fifo_off_config_disables_fifo() {
     let exp = [
         T::write_read(A, vec![0x75], vec![0x68]),
         T::write(A, vec![0x6B, 0x80]),
-        T::write(A, seed_burst_6050()),
+        T::write(A, default_burst_6050()),
         T::write(A, vec![0x37, 0x00]),
         T::write(A, vec![0x38, 0x01]),
         T::write(A, vec![0x23, 0x00]),
@@ -284,7 +274,7 @@ fn read_if_ready_respects_data_ready() {
 }
 
 fn inited(extra: &[T]) -> Vec<T> {
-    let mut v = seed_init(0x68, seed_burst_6050());
+    let mut v = default_init(0x68, default_burst_6050());
     v.extend_from_slice(extra);
     v
 }
@@ -408,7 +398,7 @@ fn fifo_with_temperature_frames() {
         fifo: Some(FifoFrame::AccelTempGyro),
         ..Config::default()
     };
-    let mut exp = seed_init(0x68, seed_burst_6050());
+    let mut exp = default_init(0x68, default_burst_6050());
     exp[6] = T::write(A, vec![0x23, 0xF8]);
     let frame: Vec<u8> = [1i16, 2, 3, -100, 4, 5, 6]
         .iter()

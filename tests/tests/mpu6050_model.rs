@@ -28,7 +28,7 @@ fn init(bus: &SimBus, cfg: &Config) -> blocking::Mpu6050<SimBus> {
 }
 
 #[test]
-fn seed_registers_land_in_the_chip() {
+fn default_registers_land_in_the_chip() {
     let bus = bus_with(0x68);
     let _d = init(&bus, &Config::default());
     bus.mpu(|m| {

@@ -28,10 +28,30 @@ fn both<R: PartialEq + std::fmt::Debug>(
     r1
 }
 
-/// QMC5883L seed: chip id 0x0D = 0xFF; CONTROL2 (0x0A) = 0x80 soft reset; SET/RESET period
+/// `init` with `cfg`, blocking and async (the same result from both).
+fn init_ok(variant: Variant, exp: &[T], cfg: &Config) {
+    both(
+        variant,
+        exp,
+        |d| d.init(&mut NoopDelay, cfg).unwrap(),
+        async |d| d.init(&mut NoopDelay, cfg).await.unwrap(),
+    )
+}
+
+/// `init` with `cfg` failing, blocking and async (the same error from both).
+fn init_err(variant: Variant, exp: &[T], cfg: &Config) -> Error<ErrorKind> {
+    both(
+        variant,
+        exp,
+        |d| d.init(&mut NoopDelay, cfg).unwrap_err(),
+        async |d| d.init(&mut NoopDelay, cfg).await.unwrap_err(),
+    )
+}
+
+/// QMC5883L default configuration: chip id 0x0D = 0xFF; CONTROL2 (0x0A) = 0x80 soft reset; SET/RESET period
 /// (0x0B) = 0x01; CONTROL2 = 0x00 (DRDY pin on); CONTROL1 (0x09) = OSR 512 (00) | RNG 2 G (00)
 /// | ODR 200 Hz (11) | continuous (01) = 0b0000_1101 = 0x0D.
-fn l_seed() -> Vec<T> {
+fn l_default() -> Vec<T> {
     vec![
         T::write_read(L, vec![0x0D], vec![0xFF]),
         T::write(L, vec![0x0A, 0x80]),
@@ -42,10 +62,10 @@ fn l_seed() -> Vec<T> {
 }
 
 #[test]
-fn l_seed_init() {
+fn l_default_init() {
     both(
         Variant::L,
-        &l_seed(),
+        &l_default(),
         |d| {
             let mut delay = CheckedDelay::new(&[D::delay_ms(1)]);
             d.init(&mut delay, &Config::default()).unwrap();
@@ -78,16 +98,11 @@ fn l_other_settings() {
         T::write(L, vec![0x0A, 0x01]),
         T::write(L, vec![0x09, 0xD0]),
     ];
-    both(
-        Variant::L,
-        &exp,
-        |d| d.init(&mut NoopDelay, &cfg).unwrap(),
-        async |d| d.init(&mut NoopDelay, &cfg).await.unwrap(),
-    );
+    init_ok(Variant::L, &exp, &cfg);
 }
 
 #[test]
-fn p_seed_init() {
+fn p_default_init() {
     // Chip id reg 0x00 = 0x80; CONTROL2 (0x0B) = 0x80 soft reset; 0x29 = 0x06 (axis sign);
     // CONTROL2 = RNG ±2 G (11 in bits 3:2) = 0x0C, set/reset on; CONTROL1 (0x0A) =
     // OSR2 1 (00) | OSR1 8 (00) | ODR 200 Hz (11) | continuous (11) = 0x0F.
@@ -98,12 +113,7 @@ fn p_seed_init() {
         T::write(P, vec![0x0B, 0x0C]),
         T::write(P, vec![0x0A, 0x0F]),
     ];
-    both(
-        Variant::P,
-        &exp,
-        |d| d.init(&mut NoopDelay, &Config::default()).unwrap(),
-        async |d| d.init(&mut NoopDelay, &Config::default()).await.unwrap(),
-    );
+    init_ok(Variant::P, &exp, &Config::default());
 }
 
 #[test]
@@ -161,16 +171,7 @@ fn wrong_chip_id() {
 #[test]
 fn nack_is_bus_error() {
     let exp = [T::write_read(L, vec![0x0D], vec![0]).with_error(NACK)];
-    let e = both(
-        Variant::L,
-        &exp,
-        |d| d.init(&mut NoopDelay, &Config::default()).unwrap_err(),
-        async |d| {
-            d.init(&mut NoopDelay, &Config::default())
-                .await
-                .unwrap_err()
-        },
-    );
+    let e = init_err(Variant::L, &exp, &Config::default());
     assert_eq!(e, Error::Bus(NACK));
 }
 
@@ -218,7 +219,7 @@ fn l_roll_over_read_is_one_transfer() {
         roll_over: true,
         ..Config::default()
     };
-    let mut exp = l_seed();
+    let mut exp = l_default();
     exp[3] = T::write(L, vec![0x0A, 0x40]);
     exp.push(T::write_read(
         L,

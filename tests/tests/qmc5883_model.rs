@@ -14,7 +14,7 @@ fn init(bus: &SimBus, v: Variant, cfg: &Config) -> blocking::Qmc5883<SimBus> {
 }
 
 #[test]
-fn l_seed_reads_field_temperature_and_rate() {
+fn l_default_reads_field_temperature_and_rate() {
     let bus = SimBus::new().with_mag(QmcModel::new(QmcVariant::L));
     let mut d = init(&bus, Variant::L, &Config::default());
     bus.mag(|m| {

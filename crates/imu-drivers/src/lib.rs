@@ -19,7 +19,7 @@
 //!
 //! async fn stream<I: I2c, D: DelayNs>(i2c: I, mut delay: D) -> Result<(), mpu6050::Error<I::Error>> {
 //!     let mut imu = Mpu6050::new(i2c, Address::Ad0Low);
-//!     // Seed: ±250 °/s, ±4 g, 5 Hz DLPF, 1 kHz, FIFO accel + gyro.
+//!     // The default: ±250 °/s, ±4 g, 5 Hz DLPF, 1 kHz, FIFO accel + gyro.
 //!     let _chip = imu.init(&mut delay, &Config::default()).await?;
 //!     let one: RawSample = imu.read_all().await?; // one 14-byte burst
 //!     let mut frames = [RawSample::default(); 32];
@@ -55,7 +55,7 @@
 //!         _ => Variant::L,
 //!     };
 //!     let mut mag = Qmc5883::new_variant(i2c, variant); // or Qmc5883::new(i2c) for the L
-//!     mag.init(&mut delay, &Config::default())?; // seed: ±2 G, 200 Hz, OSR 512, continuous
+//!     mag.init(&mut delay, &Config::default())?; // default: ±2 G, 200 Hz, OSR 512, continuous
 //!     loop {
 //!         match mag.read() {
 //!             Ok(s) => return Ok(mag.microtesla(&s)), // s: MagSample { xyz, temp, overflow, skipped }

@@ -187,7 +187,7 @@ pub enum Odr {
     Hz50 = 1,
     /// 100 Hz.
     Hz100 = 2,
-    /// 200 Hz (seed).
+    /// 200 Hz (the default).
     #[default]
     Hz200 = 3,
 }
@@ -208,7 +208,7 @@ impl Odr {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Osr {
-    /// L: 512, P: OSR1 = 8 (the maximum of each; seed).
+    /// L: 512, P: OSR1 = 8 (the maximum of each; the default).
     #[default]
     Max = 0,
     /// L: 256, P: 4.
@@ -225,12 +225,12 @@ pub enum Osr {
 pub enum Mode {
     /// Standby (L) / suspend (P).
     Standby,
-    /// Continuous measurement at the ODR (seed).
+    /// Continuous measurement at the ODR (the default).
     #[default]
     Continuous,
 }
 
-/// Magnetometer configuration. The default is the seed: ±2 G, 200 Hz, maximum oversampling,
+/// Magnetometer configuration. The default is that of Jaime et al.: ±2 G, 200 Hz, maximum oversampling,
 /// continuous, SET/RESET period 0x01, DRDY pin enabled.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -57,28 +57,37 @@ fn plots_in_svg_and_png_and_refuses_other_names() {
 fn dlpf_file(dir: &std::path::Path) -> String {
     let p = dir.join("dlpf.csv");
     let p = p.to_str().unwrap().to_string();
-    run_ok([
-        "simulate",
-        "--rate",
-        "100",
-        "--samples",
-        "180000",
-        "--seed",
-        "5",
-        "--quantization",
-        "2e-4",
-        "--white",
-        "5e-3",
-        "--flicker",
-        "3e-3",
-        "--rrw",
-        "1e-4",
-        "--dlpf",
-        "5",
-        "-o",
-        &p,
-    ]);
+    simulate_gyro(&p, 5, &["--dlpf", "5"]);
     p
+}
+
+/// `imu-lab simulate`: 30 min at 100 Hz of a gyro's background noise (quantization, white,
+/// flicker, rate random walk) plus `extra`, written to `path`.
+fn simulate_gyro(path: &str, seed: u64, extra: &[&str]) {
+    let seed = seed.to_string();
+    run_ok(
+        [
+            "simulate",
+            "--rate",
+            "100",
+            "--samples",
+            "180000",
+            "--seed",
+            &seed,
+            "--quantization",
+            "2e-4",
+            "--white",
+            "5e-3",
+            "--flicker",
+            "3e-3",
+            "--rrw",
+            "1e-4",
+            "-o",
+            path,
+        ]
+        .into_iter()
+        .chain(extra.iter().copied()),
+    );
 }
 
 #[test]
@@ -212,29 +221,11 @@ fn the_temperature_coefficient_is_the_calibration_labs() {
     let dir = tempfile::tempdir().unwrap();
     let f = dir.path().join("warm.csv");
     let f = f.to_str().unwrap();
-    run_ok([
-        "simulate",
-        "--rate",
-        "100",
-        "--samples",
-        "180000",
-        "--seed",
-        "9",
-        "--columns",
-        "gx,gy,gz",
-        "--quantization",
-        "2e-4",
-        "--white",
-        "5e-3",
-        "--flicker",
-        "3e-3",
-        "--rrw",
-        "1e-4",
-        "--temperature",
-        "0.02,25,15,900",
-        "-o",
+    simulate_gyro(
         f,
-    ]);
+        9,
+        &["--columns", "gx,gy,gz", "--temperature", "0.02,25,15,900"],
+    );
     let out = run_ok(["fit", f, "--column", "gz", "--auto", "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let t = v["terms"]

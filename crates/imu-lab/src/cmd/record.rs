@@ -431,6 +431,27 @@ mod tests {
         }
     }
 
+    /// A batch opening with one magnetometer sample `mag` at t = 0.
+    fn batch_with_mag(mag: [i32; 3]) -> SampleBatch {
+        let mut b = batch();
+        b.mag
+            .push(MagSample {
+                seq: 0,
+                t_us: 0,
+                mag,
+            })
+            .unwrap();
+        b
+    }
+
+    /// The rows of `b` and the accounts after it.
+    fn rows_of(b: &SampleBatch) -> (Rows, Vec<Row>) {
+        let mut r = Rows::default();
+        let mut out = Vec::new();
+        r.batch(b, |row| out.push(*row));
+        (r, out)
+    }
+
     #[test]
     fn rows_hold_the_latest_magnetometer_sample_and_scale_to_contract_units() {
         let mut b = batch();
@@ -452,9 +473,7 @@ mod tests {
                 mag: [40, 50, 60],
             })
             .unwrap();
-        let mut r = Rows::default();
-        let mut out = Vec::new();
-        r.batch(&b, |row| out.push(*row));
+        let (r, out) = rows_of(&b);
         // Samples at 100 and 101 ms precede the first magnetometer reading.
         assert_eq!(r.before_mag, 2);
         assert_eq!(out.len(), 8);
@@ -480,20 +499,11 @@ mod tests {
 
     #[test]
     fn a_sequence_jump_is_marked_on_the_row_after_it() {
-        let mut b = batch();
-        b.mag
-            .push(MagSample {
-                seq: 0,
-                t_us: 0,
-                mag: [0, 0, 0],
-            })
-            .unwrap();
+        let mut b = batch_with_mag([0, 0, 0]);
         for (seq, t) in [(0, 1), (1, 2), (5, 6), (6, 7)] {
             b.imu.push(imu(seq, t)).unwrap();
         }
-        let mut r = Rows::default();
-        let mut out = Vec::new();
-        r.batch(&b, |row| out.push(*row));
+        let (r, out) = rows_of(&b);
         assert_eq!((r.missing, r.rows), (3, 4));
         let gaps: Vec<u64> = out.iter().map(|r| r.gap_before).collect();
         assert_eq!(gaps, [0, 0, 3, 0]);
@@ -502,20 +512,11 @@ mod tests {
 
     #[test]
     fn a_missing_temperature_is_an_empty_field() {
-        let mut b = batch();
-        b.mag
-            .push(MagSample {
-                seq: 0,
-                t_us: 0,
-                mag: [1, 2, 3],
-            })
-            .unwrap();
+        let mut b = batch_with_mag([1, 2, 3]);
         let mut s = imu(0, 1);
         s.temp = None;
         b.imu.push(s).unwrap();
-        let mut r = Rows::default();
-        let mut out = Vec::new();
-        r.batch(&b, |row| out.push(*row));
+        let (_, out) = rows_of(&b);
         let line = csv_line(&out[0]);
         let fields: Vec<&str> = line.split(',').collect();
         assert_eq!(fields.len(), COLUMNS.len());
@@ -526,14 +527,7 @@ mod tests {
     #[test]
     fn the_summary_splits_losses_by_the_device_causes_and_the_link() {
         let mut r = Rows::default();
-        let mut b = batch();
-        b.mag
-            .push(MagSample {
-                seq: 0,
-                t_us: 0,
-                mag: [0, 0, 0],
-            })
-            .unwrap();
+        let mut b = batch_with_mag([0, 0, 0]);
         for (seq, t) in [(0, 1), (1, 2), (20, 21), (21, 22)] {
             b.imu.push(imu(seq, t)).unwrap();
         }

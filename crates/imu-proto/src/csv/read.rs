@@ -387,36 +387,17 @@ mod tests {
             },
         )
         .unwrap();
-        w.row(&[
-            Some(0.001),
-            Some(0.0),
-            Some(0.5),
-            Some(0.0),
-            Some(9.81),
-            Some(0.01),
-            Some(-0.02),
-            Some(0.0),
-            Some(20.0),
-            Some(-3.0),
-            Some(40.0),
-            None,
-        ])
-        .unwrap();
-        w.row(&[
-            Some(0.005),
-            Some(3.0),
-            Some(0.5),
-            Some(0.0),
-            Some(9.81),
-            Some(0.01),
-            Some(-0.02),
-            Some(0.0),
-            Some(20.0),
-            Some(-3.0),
-            Some(40.0),
-            Some(25.5),
-        ])
-        .unwrap();
+        // t, gap_before, then the same values on both rows but for the temperature.
+        let row = |t: f64, gap: f64, temp: Option<f64>| {
+            let mut r = [0.5, 0.0, 9.81, 0.01, -0.02, 0.0, 20.0, -3.0, 40.0]
+                .map(Some)
+                .to_vec();
+            r.splice(0..0, [Some(t), Some(gap)]);
+            r.push(temp);
+            r
+        };
+        w.row(&row(0.001, 0.0, None)).unwrap();
+        w.row(&row(0.005, 3.0, Some(25.5))).unwrap();
         let text = String::from_utf8(w.finish().unwrap()).unwrap();
         assert_eq!(text.lines().next().unwrap(), HEADER.join(","));
         assert_eq!(
