@@ -853,3 +853,77 @@ fn task_slots_match_the_division_and_skip_missed_ones() {
         assert_eq!(s.next_after(now), div(now), "at {now}");
     }
 }
+
+#[test]
+fn the_device_refuses_calibrations_for_other_ranges_or_beyond_the_physical_bounds() {
+    use imu_cal::file::CalFile;
+    use imu_proto::{CalCheck, CalSensor, ErrorCode};
+    let mut dev = Device::new(config::scales(), "test");
+    let mut sink = Sink::roomy();
+    let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+    let mut upload = |dev: &mut Device, blob: &[u8]| {
+        let req = Request::SetCalibration {
+            blob: imu_proto::Vec::from_slice(blob).unwrap(),
+            persist: true,
+        };
+        let persist = dev.handle(HostFrame { id: 3, req }, 0, 0, &mut sink);
+        (persist.is_some(), sink.messages().pop())
+    };
+    // Fitted at the device's ranges: taken (and to be persisted).
+    let good = CalFile::default().to_device().unwrap();
+    let blob = imu_cal::device::encode_blob(&good, &mut buf)
+        .unwrap()
+        .to_vec();
+    assert_eq!(upload(&mut dev, &blob), (true, None));
+    assert_eq!(dev.cal_status().source, CalSource::Host);
+    // Fitted with the gyro at ±500 °/s (65.5 LSB per deg/s): refused, nothing written.
+    let mut f = CalFile::default();
+    f.gyro.lsb_per_unit = 65.5;
+    let blob = imu_cal::device::encode_blob(&f.to_device().unwrap(), &mut buf)
+        .unwrap()
+        .to_vec();
+    let refused = |p| {
+        Some(DeviceMsg::Reply {
+            id: 3,
+            reply: Reply::Error(ErrorCode::BadCalibration(p)),
+        })
+    };
+    assert_eq!(
+        upload(&mut dev, &blob),
+        (false, refused(CalProblem::OtherRanges))
+    );
+    // Stored at boot: refused the same way, identity in use, the reason in the status.
+    dev.load_stored(Some(&blob));
+    assert_eq!(dev.cal_status().source, CalSource::Identity);
+    assert_eq!(
+        dev.cal_status().fault,
+        Some(CalFault::Rejected(CalProblem::OtherRanges))
+    );
+    // A zero accelerometer scale, encoded past the host's checks: refused by the device.
+    let zero = imu_cal::device::Affine::from_float(
+        imu_cal::device::Sensor::Accel,
+        [[0.0; 3]; 3],
+        [0.0; 3],
+    )
+    .unwrap();
+    let bad = imu_cal::device::Calibration::new(
+        zero,
+        imu_cal::device::GyroCorrection::IDENTITY,
+        imu_cal::device::Affine::IDENTITY,
+    )
+    .unwrap();
+    let blob = imu_cal::device::encode_blob(&bad, &mut buf)
+        .unwrap()
+        .to_vec();
+    assert_eq!(
+        upload(&mut dev, &blob),
+        (
+            false,
+            refused(CalProblem::Implausible {
+                sensor: CalSensor::Accel,
+                check: CalCheck::Singular,
+                axis: 0
+            })
+        )
+    );
+}

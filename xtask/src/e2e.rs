@@ -243,7 +243,8 @@ struct Session {
     persisted: bool,
 }
 
-/// A calibration far enough from identity that its effect on every channel is visible.
+/// A calibration far enough from identity that its effect on every channel is visible, within
+/// the physical bounds the device checks.
 fn test_calibration() -> Result<Calibration> {
     let m = [[1.02, 0.01, 0.0], [0.0, 0.98, -0.02], [0.005, 0.0, 1.01]];
     let accel = Affine::from_float(CalSensor::Accel, m, [12.0, -30.0, 250.0])
@@ -252,7 +253,10 @@ fn test_calibration() -> Result<Calibration> {
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let mag = Affine::from_float(CalSensor::Mag, m, [100.0, -200.0, 50.0])
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-    Calibration::new(accel, gyro, mag).map_err(|e| anyhow::anyhow!("{e:?}"))
+    // Fitted at the ranges the firmware runs, as the host's calibration file would say.
+    let s = pico_imu_core::config::scales();
+    Calibration::fitted(accel, gyro, mag, [1.0 / s.accel, 1.0 / s.gyro, 1.0 / s.mag])
+        .map_err(|e| anyhow::anyhow!("{e:?}"))
 }
 
 fn session(port: u16, seconds: f64, calibrate: bool) -> Result<Session> {

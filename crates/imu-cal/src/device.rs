@@ -87,11 +87,49 @@ use serde::{Deserialize, Serialize};
 /// Magic bytes at the start of every calibration blob.
 pub const BLOB_MAGIC: [u8; 4] = *b"PCAL";
 /// The blob format version this build reads and writes.
-pub const BLOB_VERSION: u16 = 1;
+pub const BLOB_VERSION: u16 = 2;
 /// Upper bound of an encoded blob (header + worst-case postcard varints + CRC).
 /// Payload worst case: three affine parts of 12 i32 varints (≤ 5 bytes each), 3 more i32 and
-/// one i16 (≤ 3 bytes) for the gyro temperature term.
-pub const MAX_BLOB_LEN: usize = 8 + (3 * 12 * 5 + 3 * 5 + 3) + 4;
+/// one i16 (≤ 3 bytes) for the gyro temperature term, the optional sensitivities (1 + 3 × 4).
+pub const MAX_BLOB_LEN: usize = 8 + (3 * 12 * 5 + 3 * 5 + 3) + 13 + 4;
+
+/// Physical bounds a stored correction must respect ([`Calibration::check_physics`]).
+pub mod bounds {
+    /// Least and greatest scale factor (norm of a row of `M`): a MEMS part's sensitivity error
+    /// is a few percent; a factor of 2 is a wrong range or a wrong fit.
+    pub const SCALE: (f64, f64) = (0.5, 2.0);
+    /// Largest angle between a corrected axis (a row of `M`) and the raw axis, degrees
+    /// (accelerometer and gyro; mounting and cross-axis errors are ≲ 2°). A flipped axis is
+    /// 180°.
+    pub const MISALIGNMENT_DEG: f64 = 10.0;
+    /// cos² of [`MISALIGNMENT_DEG`].
+    pub const MISALIGNMENT_COS2: f64 = 0.969_846_310_392_954;
+    /// Largest condition number of the magnetometer's soft-iron matrix (σ_max/σ_min).
+    pub const CONDITION: f64 = 3.0;
+    /// Largest gyro bias, LSB: a quarter of full scale (2¹⁵/4).
+    pub const GYRO_BIAS_LSB: f64 = 8192.0;
+    /// Largest accelerometer offset or hard iron, LSB: the sensor's range (2¹⁵).
+    pub const OFFSET_LSB: f64 = 32768.0;
+}
+
+/// Which physical bound a correction breaks ([`bounds`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Check {
+    /// A scale factor outside [`bounds::SCALE`].
+    Scale,
+    /// An axis turned by more than [`bounds::MISALIGNMENT_DEG`] (or flipped).
+    Misalignment,
+    /// The soft-iron matrix's condition number over [`bounds::CONDITION`].
+    Condition,
+    /// A singular matrix (an axis mapped to zero or two axes onto one).
+    Singular,
+    /// A gyro bias over [`bounds::GYRO_BIAS_LSB`].
+    Bias,
+    /// An accelerometer offset or hard iron over [`bounds::OFFSET_LSB`].
+    Offset,
+    /// A non-positive or non-finite LSB-per-unit factor.
+    LsbFactor,
+}
 
 /// Fractional bits of the matrix and temperature coefficients (Q8.24).
 pub const COEF_FRAC_BITS: u32 = 24;
@@ -127,6 +165,12 @@ pub enum BlobError {
     },
     /// The output buffer given to [`encode_blob`] is too small.
     BufferTooSmall { len: usize },
+    /// A correction outside the physical bounds ([`bounds`]).
+    Implausible {
+        sensor: Sensor,
+        check: Check,
+        axis: u8,
+    },
 }
 
 /// Which sensor a [`BlobError::OutOfRange`] refers to.
@@ -175,6 +219,23 @@ impl core::fmt::Display for BlobError {
             BlobError::BufferTooSmall { len } => {
                 write!(f, "buffer of {len} bytes too small for a calibration blob")
             }
+            BlobError::Implausible {
+                sensor,
+                check,
+                axis,
+            } => write!(
+                f,
+                "calibration {sensor:?} axis {axis} implausible: {}",
+                match check {
+                    Check::Scale => "a scale factor outside [0.5, 2]",
+                    Check::Misalignment => "an axis turned by more than 10° (or flipped)",
+                    Check::Condition => "a soft-iron matrix with condition number over 3",
+                    Check::Singular => "a singular matrix",
+                    Check::Bias => "a gyro bias over a quarter of full scale",
+                    Check::Offset => "an offset beyond the sensor's range",
+                    Check::LsbFactor => "a non-positive or non-finite LSB-per-unit factor",
+                }
+            ),
         }
     }
 }
@@ -285,6 +346,52 @@ impl Affine {
         Ok(())
     }
 
+    /// The physical bounds ([`bounds`]): every row's norm (scale) in [`bounds::SCALE`], the
+    /// matrix non-singular, and for the accelerometer and gyro each corrected axis within
+    /// [`bounds::MISALIGNMENT_DEG`] of its raw axis; for the magnetometer (soft iron, a
+    /// symmetric stretch) no flipped axis and a condition number within [`bounds::CONDITION`];
+    /// the folded offset within `max_offset` LSB.
+    fn check_physics(&self, sensor: Sensor, max_offset: f64) -> Result<(), BlobError> {
+        let m = self.matrix();
+        let bad = |check, axis: usize| BlobError::Implausible {
+            sensor,
+            check,
+            axis: axis as u8,
+        };
+        let (lo, hi) = bounds::SCALE;
+        for (i, row) in m.iter().enumerate() {
+            let n2: f64 = row.iter().map(|v| v * v).sum();
+            if n2 == 0.0 {
+                return Err(bad(Check::Singular, i));
+            }
+            if !(lo * lo..=hi * hi).contains(&n2) {
+                return Err(bad(Check::Scale, i));
+            }
+            let cos_ok = row[i] > 0.0 && row[i] * row[i] >= bounds::MISALIGNMENT_COS2 * n2;
+            if !cos_ok && (sensor != Sensor::Mag || row[i] <= 0.0) {
+                return Err(bad(Check::Misalignment, i));
+            }
+        }
+        let (smin2, smax2) = singular_values_squared(&m);
+        if !(smin2 > 1e-6 * smax2) {
+            return Err(bad(Check::Singular, 0));
+        }
+        if sensor == Sensor::Mag && smax2 > bounds::CONDITION * bounds::CONDITION * smin2 {
+            return Err(bad(Check::Condition, 0));
+        }
+        for (i, c) in self.folded_offset().iter().enumerate() {
+            if c.abs() > max_offset {
+                let check = if sensor == Sensor::Gyro {
+                    Check::Bias
+                } else {
+                    Check::Offset
+                };
+                return Err(bad(check, i));
+            }
+        }
+        Ok(())
+    }
+
     /// `M·raw` in Q12 (before the offset), per the split multiply.
     #[inline(always)]
     fn mat_q12(&self, raw: [i16; 3]) -> [i32; 3] {
@@ -310,6 +417,62 @@ impl Affine {
             round_q12(q[2] - self.c[2]),
         ]
     }
+}
+
+/// `√x` for x ≥ 0 without `std` (Newton's iteration from an exponent-halved start; 8 steps
+/// reach f64 precision for the matrices checked here).
+fn sqrt(x: f64) -> f64 {
+    if !(x > 0.0) {
+        return 0.0;
+    }
+    let mut r = f64::from_bits((x.to_bits() >> 1) + (0x3ff << 51));
+    for _ in 0..8 {
+        r = 0.5 * (r + x / r);
+    }
+    r
+}
+
+/// The least and greatest squared singular values of `m`: the extreme eigenvalues of the
+/// symmetric `MᵀM`, by cyclic Jacobi rotations (Golub & Van Loan, §8.5; 3×3 converges to
+/// f64 precision in a few sweeps; at most 16 are run).
+fn singular_values_squared(m: &[[f64; 3]; 3]) -> (f64, f64) {
+    let mut a = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            a[i][j] = (0..3).map(|k| m[k][i] * m[k][j]).sum();
+        }
+    }
+    for _ in 0..16 {
+        let off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        let diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if !(off > 1e-30 * diag) {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + sqrt(theta * theta + 1.0));
+            let c = 1.0 / sqrt(t * t + 1.0);
+            let s = t * c;
+            for k in 0..3 {
+                let (akp, akq) = (a[k][p], a[k][q]);
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+        }
+    }
+    let d = [a[0][0], a[1][1], a[2][2]];
+    (
+        d.iter().copied().fold(f64::INFINITY, f64::min),
+        d.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    )
 }
 
 /// Round a Q12 value to the nearest integer (ties toward +∞).
@@ -430,11 +593,15 @@ impl GyroCorrection {
 }
 
 /// Corrections for every sensor, as stored on the device.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Calibration {
     accel: Affine,
     gyro: GyroCorrection,
     mag: Affine,
+    /// LSB per unit of the accelerometer (m/s²), gyro (deg/s) and magnetometer (µT) at the
+    /// ranges the corrections were fitted for; `None` for corrections that apply at any range
+    /// (identity).
+    lsb_per_unit: Option<[f32; 3]>,
 }
 
 impl Default for Calibration {
@@ -450,14 +617,76 @@ impl Calibration {
             accel: Affine::IDENTITY,
             gyro: GyroCorrection::IDENTITY,
             mag: Affine::IDENTITY,
+            lsb_per_unit: None,
         }
     }
 
-    /// Assemble validated parts.
+    /// Assemble parts that fit the fixed-point path (no physical check, no sensor ranges:
+    /// see [`Calibration::fitted`] for a calibration a device may store).
     pub fn new(accel: Affine, gyro: GyroCorrection, mag: Affine) -> Result<Calibration, BlobError> {
-        let c = Calibration { accel, gyro, mag };
+        let c = Calibration {
+            accel,
+            gyro,
+            mag,
+            lsb_per_unit: None,
+        };
         c.validate()?;
         Ok(c)
+    }
+
+    /// A calibration fitted at the ranges whose sensitivities are `lsb_per_unit` (accelerometer
+    /// LSB per m/s², gyro LSB per deg/s, magnetometer LSB per µT), checked against the
+    /// physical bounds ([`Calibration::check_physics`]).
+    pub fn fitted(
+        accel: Affine,
+        gyro: GyroCorrection,
+        mag: Affine,
+        lsb_per_unit: [f32; 3],
+    ) -> Result<Calibration, BlobError> {
+        for (i, (l, sensor)) in lsb_per_unit
+            .iter()
+            .zip([Sensor::Accel, Sensor::Gyro, Sensor::Mag])
+            .enumerate()
+        {
+            if !(l.is_finite() && *l > 0.0) {
+                return Err(BlobError::Implausible {
+                    sensor,
+                    check: Check::LsbFactor,
+                    axis: i as u8,
+                });
+            }
+        }
+        let c = Calibration {
+            lsb_per_unit: Some(lsb_per_unit),
+            ..Calibration::new(accel, gyro, mag)?
+        };
+        c.check_physics()?;
+        Ok(c)
+    }
+
+    /// The sensitivities the corrections were fitted for (see [`Calibration::fitted`]).
+    pub fn lsb_per_unit(&self) -> Option<[f32; 3]> {
+        self.lsb_per_unit
+    }
+
+    /// Whether the corrections were fitted for sensitivities within 1 % of `lsb_per_unit`
+    /// (the device's ranges); identity fits any.
+    pub fn fits_ranges(&self, lsb_per_unit: [f32; 3]) -> bool {
+        self.lsb_per_unit.is_none_or(|have| {
+            have.iter()
+                .zip(lsb_per_unit)
+                .all(|(h, l)| (h / l - 1.0).abs() <= 0.01)
+        })
+    }
+
+    /// The physical bounds ([`bounds`]) of every part; identity passes.
+    pub fn check_physics(&self) -> Result<(), BlobError> {
+        self.accel
+            .check_physics(Sensor::Accel, bounds::OFFSET_LSB)?;
+        self.gyro
+            .affine
+            .check_physics(Sensor::Gyro, bounds::GYRO_BIAS_LSB)?;
+        self.mag.check_physics(Sensor::Mag, bounds::OFFSET_LSB)
     }
 
     /// Check every coefficient against the fixed-point ranges (module docs).
@@ -642,7 +871,8 @@ pub fn encode_blob<'a>(cal: &Calibration, buf: &'a mut [u8]) -> Result<&'a [u8],
     Ok(&buf[..12 + n])
 }
 
-/// Decode and validate a blob. Checks, in order: length, magic, version, CRC, payload, ranges.
+/// Decode and validate a blob. Checks, in order: length, magic, version, CRC, payload, the
+/// fixed-point ranges, the physical bounds ([`bounds`]).
 pub fn decode_blob(bytes: &[u8]) -> Result<Calibration, BlobError> {
     if bytes.len() < 12 {
         return Err(BlobError::Truncated {
@@ -679,6 +909,7 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Calibration, BlobError> {
         return Err(BlobError::Malformed);
     }
     cal.validate()?;
+    cal.check_physics()?;
     Ok(cal)
 }
 

@@ -29,7 +29,7 @@
 //! soft_iron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
 //! ```
 use crate::accel::correction_matrix;
-use crate::device::{Affine, BlobError, Calibration, GyroCorrection, Sensor};
+use crate::device::{Affine, BlobError, Calibration, Check, GyroCorrection, Sensor};
 use crate::lab::{CalError, Params};
 use serde::{Deserialize, Serialize};
 
@@ -189,6 +189,21 @@ impl CalFile {
 
     /// Convert to the device's fixed-point corrections (module docs).
     pub fn to_device(&self) -> Result<Calibration, BlobError> {
+        let lsb = [
+            (self.accel.lsb_per_unit, Sensor::Accel),
+            (self.gyro.lsb_per_unit, Sensor::Gyro),
+            (self.gyro.temp_lsb_per_c, Sensor::Gyro),
+            (self.mag.lsb_per_unit, Sensor::Mag),
+        ];
+        for (i, (l, sensor)) in lsb.into_iter().enumerate() {
+            if !(l.is_finite() && l > 0.0 && l < f32::MAX as f64) {
+                return Err(BlobError::Implausible {
+                    sensor,
+                    check: Check::LsbFactor,
+                    axis: if i == 2 { 3 } else { 0 },
+                });
+            }
+        }
         let a = &self.accel;
         let ap = Params {
             scale: Some(a.scale),
@@ -224,6 +239,15 @@ impl CalFile {
             mg.soft_iron,
             mg.hard_iron.map(|h| h * mg.lsb_per_unit),
         )?;
-        Calibration::new(accel, gyro, mag)
+        Calibration::fitted(
+            accel,
+            gyro,
+            mag,
+            [
+                self.accel.lsb_per_unit as f32,
+                self.gyro.lsb_per_unit as f32,
+                self.mag.lsb_per_unit as f32,
+            ],
+        )
     }
 }

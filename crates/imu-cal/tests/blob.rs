@@ -58,11 +58,11 @@ fn errors_name_the_fault() {
     b[0] = b'X';
     assert!(matches!(decode_blob(&b), Err(BlobError::BadMagic { .. })));
     let mut b = blob.clone();
-    b[4] = 2;
+    b[4] = 1;
     assert_eq!(
         decode_blob(&b),
         Err(BlobError::WrongVersion {
-            found: 2,
+            found: 1,
             expected: BLOB_VERSION
         })
     );

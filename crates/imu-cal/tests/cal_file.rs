@@ -155,3 +155,134 @@ fn gyro_scale_and_misalignment_reach_the_device() {
         }
     }
 }
+
+/// A change to a calibration file.
+type Edit = Box<dyn Fn(&mut CalFile)>;
+
+/// Plainly wrong calibrations are refused by the host (`CalFile::to_device`) with the bound
+/// named, and a blob carrying one is refused by the decoder the firmware runs.
+#[test]
+fn implausible_calibrations_are_refused_with_the_bound_named() {
+    use imu_cal::device::{Affine, BlobError, Calibration, Check, GyroCorrection, Sensor};
+    let cases: Vec<(&str, Edit, Sensor, Check)> = vec![
+        (
+            "accel scale 0",
+            Box::new(|f| f.accel.scale = [0.0; 3]),
+            Sensor::Accel,
+            Check::Singular,
+        ),
+        (
+            "accel scale 2.5",
+            Box::new(|f| f.accel.scale = [1.0, 2.5, 1.0]),
+            Sensor::Accel,
+            Check::Scale,
+        ),
+        (
+            "flipped accel axis",
+            Box::new(|f| f.accel.scale = [1.0, 1.0, -1.0]),
+            Sensor::Accel,
+            Check::Misalignment,
+        ),
+        (
+            "89° misalignment",
+            Box::new(|f| f.accel.misalignment_deg = [89.0, 0.0, 0.0]),
+            Sensor::Accel,
+            Check::Misalignment,
+        ),
+        (
+            "200 °/s gyro bias at ±250 °/s",
+            Box::new(|f| f.gyro.bias = [0.0, 200.0, 0.0]),
+            Sensor::Gyro,
+            Check::Bias,
+        ),
+        (
+            "all-zero soft iron",
+            Box::new(|f| f.mag.soft_iron = [[0.0; 3]; 3]),
+            Sensor::Mag,
+            Check::Singular,
+        ),
+        (
+            "soft iron of condition 3.5",
+            Box::new(|f| f.mag.soft_iron = [[1.9, 0.0, 0.0], [0.0, 0.55, 0.0], [0.0, 0.0, 1.0]]),
+            Sensor::Mag,
+            Check::Condition,
+        ),
+        (
+            "hard iron beyond the range (±2 G = ±200 µT)",
+            Box::new(|f| f.mag.hard_iron = [0.0, 0.0, 300.0]),
+            Sensor::Mag,
+            Check::Offset,
+        ),
+        (
+            "accel lsb_per_unit 0",
+            Box::new(|f| f.accel.lsb_per_unit = 0.0),
+            Sensor::Accel,
+            Check::LsbFactor,
+        ),
+        (
+            "gyro lsb_per_unit NaN",
+            Box::new(|f| f.gyro.lsb_per_unit = f64::NAN),
+            Sensor::Gyro,
+            Check::LsbFactor,
+        ),
+    ];
+    for (what, edit, sensor, check) in &cases {
+        let mut f = fitted_file();
+        edit(&mut f);
+        match f.to_device() {
+            Err(BlobError::Implausible {
+                sensor: s,
+                check: c,
+                ..
+            }) => assert_eq!((s, c), (*sensor, *check), "{what}"),
+            other => panic!("{what}: {other:?}"),
+        }
+    }
+    // Within the bounds: a 1.9 scale, 9° misalignment, a 60 °/s bias, condition 2.9.
+    let within: [Edit; 4] = [
+        Box::new(|f| f.accel.scale = [1.9, 1.0, 1.0]),
+        Box::new(|f| f.accel.misalignment_deg = [9.0, 0.0, 0.0]),
+        Box::new(|f| f.gyro.bias = [60.0, 0.0, 0.0]),
+        Box::new(|f| f.mag.soft_iron = [[1.45, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, 1.0]]),
+    ];
+    for edit in &within {
+        let mut f = fitted_file();
+        edit(&mut f);
+        let cal = f.to_device().expect("within the bounds");
+        assert_eq!(cal.lsb_per_unit().map(|l| l[1]), Some(131.0));
+    }
+    // The same checks in the decoder: a blob of a flipped gyro axis, encoded without them.
+    let flip = Affine::from_float(
+        Sensor::Gyro,
+        [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]],
+        [0.0; 3],
+    )
+    .unwrap();
+    let gyro = GyroCorrection::from_float(flip.matrix(), [0.0; 3], [0.0; 3], 0).unwrap();
+    let bad = Calibration::new(Affine::IDENTITY, gyro, Affine::IDENTITY).unwrap();
+    let mut buf = [0u8; MAX_BLOB_LEN];
+    let blob = encode_blob(&bad, &mut buf).unwrap();
+    assert_eq!(
+        decode_blob(blob),
+        Err(BlobError::Implausible {
+            sensor: Sensor::Gyro,
+            check: Check::Misalignment,
+            axis: 1
+        })
+    );
+}
+
+#[test]
+fn a_calibration_fits_only_the_ranges_it_was_fitted_for() {
+    let cal = fitted_file().to_device().unwrap();
+    let fitted = cal.lsb_per_unit().unwrap();
+    assert!(cal.fits_ranges(fitted));
+    // The gyro at ±500 °/s (65.5 LSB per deg/s) instead of ±250 °/s.
+    assert!(!cal.fits_ranges([fitted[0], 65.5, fitted[2]]));
+    // 0.5 % off (rounding of the nominal sensitivities) still fits.
+    assert!(cal.fits_ranges(fitted.map(|l| l * 1.005)));
+    assert!(imu_cal::device::Calibration::identity().fits_ranges([1.0, 2.0, 3.0]));
+    let mut buf = [0u8; MAX_BLOB_LEN];
+    let back = decode_blob(encode_blob(&cal, &mut buf).unwrap()).unwrap();
+    assert_eq!(back.lsb_per_unit(), Some(fitted));
+}

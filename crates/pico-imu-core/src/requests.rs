@@ -1,8 +1,9 @@
 //! Host requests: identity, status, calibration, streaming mode, intervals, tables.
 use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
 use imu_proto::{
-    CalFault, CalProblem, CalSource, CalStatus, DeviceMsg, ErrorCode, HostFrame, Identity, Reply,
-    Request, Vec, IMU_RATE_HZ, MAG_RATE_HZ, MAX_CAL_BLOB, PROTOCOL_VERSION,
+    CalCheck, CalFault, CalProblem, CalSensor, CalSource, CalStatus, DeviceMsg, ErrorCode,
+    HostFrame, Identity, Reply, Request, Scales, Vec, IMU_RATE_HZ, MAG_RATE_HZ, MAX_CAL_BLOB,
+    PROTOCOL_VERSION,
 };
 
 use crate::device::Device;
@@ -30,11 +31,44 @@ pub struct PersistRequest {
 
 /// The wire's reason for a blob the device refuses.
 pub fn cal_problem(e: BlobError) -> CalProblem {
+    use imu_cal::device::{Check, Sensor};
     match e {
         BlobError::WrongVersion { found, .. } => CalProblem::Version(found),
         BlobError::OutOfRange { .. } => CalProblem::OutOfRange,
+        BlobError::Implausible {
+            sensor,
+            check,
+            axis,
+        } => CalProblem::Implausible {
+            sensor: match sensor {
+                Sensor::Accel => CalSensor::Accel,
+                Sensor::Gyro => CalSensor::Gyro,
+                Sensor::Mag => CalSensor::Mag,
+            },
+            check: match check {
+                Check::Scale => CalCheck::Scale,
+                Check::Misalignment => CalCheck::Misalignment,
+                Check::Condition => CalCheck::Condition,
+                Check::Singular => CalCheck::Singular,
+                Check::Bias => CalCheck::Bias,
+                Check::Offset => CalCheck::Offset,
+                Check::LsbFactor => CalCheck::LsbFactor,
+            },
+            axis,
+        },
         _ => CalProblem::Corrupt,
     }
+}
+
+/// Decode a blob and check it was fitted for the ranges the device runs (`scales`: the
+/// physical unit per LSB of each sensor).
+pub fn decode_for(blob: &[u8], scales: &Scales) -> Result<Calibration, CalProblem> {
+    let cal = decode_blob(blob).map_err(cal_problem)?;
+    let lsb = [1.0 / scales.accel, 1.0 / scales.gyro, 1.0 / scales.mag];
+    if !cal.fits_ranges(lsb) {
+        return Err(CalProblem::OtherRanges);
+    }
+    Ok(cal)
 }
 
 impl Device {
@@ -48,12 +82,13 @@ impl Device {
 
     /// Use a blob read from flash at boot; a bad one is reported and identity kept.
     pub fn load_stored(&mut self, blob: Option<&[u8]>) {
-        match blob.map(decode_blob) {
+        let scales = self.pipeline.scales;
+        match blob.map(|b| decode_for(b, &scales)) {
             None => self.use_cal(Calibration::identity(), CalSource::Identity),
             Some(Ok(cal)) => self.use_cal(cal, CalSource::Flash),
             Some(Err(e)) => {
                 self.use_cal(Calibration::identity(), CalSource::Identity);
-                self.cal_status.fault = Some(CalFault::Rejected(cal_problem(e)));
+                self.cal_status.fault = Some(CalFault::Rejected(e));
             }
         }
     }
@@ -103,18 +138,20 @@ impl Device {
                     Err(e) => Reply::Error(ErrorCode::BadCalibration(cal_problem(e))),
                 }
             }
-            Request::SetCalibration { blob, persist } => match decode_blob(&blob) {
-                Ok(cal) => {
-                    self.use_cal(cal, CalSource::Host);
-                    // New corrections change the engines' input: old sums would mix scales.
-                    self.reset_allan();
-                    if persist {
-                        return Some(PersistRequest { id, blob });
+            Request::SetCalibration { blob, persist } => {
+                match decode_for(&blob, &self.pipeline.scales) {
+                    Ok(cal) => {
+                        self.use_cal(cal, CalSource::Host);
+                        // New corrections change the engines' input: old sums would mix scales.
+                        self.reset_allan();
+                        if persist {
+                            return Some(PersistRequest { id, blob });
+                        }
+                        Reply::Ok
                     }
-                    Reply::Ok
+                    Err(e) => Reply::Error(ErrorCode::BadCalibration(e)),
                 }
-                Err(e) => Reply::Error(ErrorCode::BadCalibration(cal_problem(e))),
-            },
+            }
             Request::ResetAllan => {
                 self.reset_allan();
                 Reply::Ok

@@ -59,7 +59,13 @@ pub struct TablesArgs {
 }
 
 #[derive(clap::Args, Debug)]
-#[group(required = true, multiple = false)]
+#[group(skip)]
+#[command(group(
+    clap::ArgGroup::new("action")
+        .required(true)
+        .multiple(false)
+        .args(["upload", "download"])
+))]
 pub struct CalArgs {
     /// Calibration to store: a TOML calibration file (imu_cal::file) or a `.bin` blob.
     #[arg(long)]
@@ -68,10 +74,10 @@ pub struct CalArgs {
     #[arg(long)]
     pub download: bool,
     /// With --download: write the blob here (re-uploadable with --upload FILE.bin).
-    #[arg(long, requires = "download")]
+    #[arg(long, requires = "download", conflicts_with = "upload")]
     pub out: Option<PathBuf>,
-    /// With --upload: apply without writing flash.
-    #[arg(long)]
+    /// With --upload: apply without writing flash (in RAM only, lost at reset).
+    #[arg(long, requires = "upload", conflicts_with = "download")]
     pub no_persist: bool,
 }
 
@@ -559,6 +565,37 @@ fn print_cal(cal: &imu_cal::device::Calibration) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[derive(clap::Parser, Debug)]
+    struct Cal {
+        #[command(flatten)]
+        c: CalArgs,
+    }
+
+    #[test]
+    fn every_documented_calibrate_flag_combination_parses_and_no_other() {
+        use clap::Parser;
+        let p = |args: &[&str]| {
+            Cal::try_parse_from(std::iter::once("calibrate").chain(args.iter().copied()))
+        };
+        let c = p(&["--upload", "cal.toml", "--no-persist"]).unwrap().c;
+        assert!(c.no_persist && c.upload.is_some());
+        let c = p(&["--upload", "cal.bin"]).unwrap().c;
+        assert!(!c.no_persist);
+        let c = p(&["--download", "--out", "cal.bin"]).unwrap().c;
+        assert!(c.download && c.out.is_some());
+        assert!(p(&["--download"]).unwrap().c.download);
+        for bad in [
+            &[][..],
+            &["--no-persist"][..],
+            &["--upload", "a", "--download"][..],
+            &["--out", "x.bin"][..],
+            &["--upload", "a", "--out", "x.bin"][..],
+            &["--download", "--no-persist"][..],
+        ] {
+            assert!(p(bad).is_err(), "{bad:?} accepted");
+        }
+    }
 
     /// A white-FM table (σ ∝ τ^−½, 60000 samples, strided above m = 8) built from its sums.
     fn white_fm_table() -> AllanTable {
