@@ -11,10 +11,12 @@
 //!   as consecutive samples at `--rate` and ignores `t`. Rates outside
 //!   [`RATE_MIN_HZ`]…[`RATE_MAX_HZ`] are refused.
 //! * **Units never lie.** A column's unit is, in order: `--unit U`; with `--scale K` alone the
-//!   contract unit of its name (the factor converts into it); else the contract unit if the
-//!   file is a contract file for that column (its own name is the contract name and there are
-//!   no metadata lines). Otherwise the file does not say: a column of whole numbers is raw
-//!   counts, labelled [`COUNTS`]; anything else is refused until `--unit` or `--scale` says.
+//!   contract unit of its name (the factor converts into it); else a column of whole numbers
+//!   is raw counts, labelled [`COUNTS`] (even under a contract name: no MEMS part resolves
+//!   whole deg/s, m/s² or µT, and the contract's writers print fractions); else the contract
+//!   unit if the file is a contract file for that column (its own name is the contract name
+//!   and there are no metadata lines). Otherwise the file does not say, and it is refused
+//!   until `--unit` or `--scale` says.
 //!   `t` is always in s and `temp` in °C (neither is scaled).
 //! * A malformed file is refused with an error naming the line and the field.
 use std::fs::File;
@@ -181,8 +183,10 @@ pub fn unit_of(args: &InputArgs, col: &HeaderColumn, integers: Option<bool>) -> 
     }
     let contract_file = !col.renamed() && args.skip_lines == 0;
     match (contract_unit, contract_file, integers) {
-        (Some(u), true, _) => Ok(u.to_string()),
+        // Whole numbers only: raw counts, even under a contract name (no MEMS part's physical
+        // resolution is a whole deg/s, m/s² or µT, and the contract's writers print fractions).
         (_, _, Some(true)) => Ok(COUNTS.to_string()),
+        (Some(u), true, _) => Ok(u.to_string()),
         (_, _, None) => bail!(
             "column {name:?}: the file does not state its unit{}; give --unit (e.g. --unit {}) \
              or --scale to convert counts into {}",
@@ -560,6 +564,12 @@ mod tests {
         a.rate = Some(100.0);
         let r = load(&a, &["gz"]).unwrap();
         assert_eq!(r.column("gz").unwrap().unit, COUNTS);
+        // A contract file whose column holds only whole numbers: counts, not deg/s; with a
+        // fraction anywhere, the contract's unit.
+        let f = csv("t,gz\n0,131\n0.01,-262\n");
+        assert_eq!(load(&args(&f), &["gz"]).unwrap().columns[0].unit, COUNTS);
+        let f = csv("t,gz\n0,131\n0.01,-2.5\n");
+        assert_eq!(load(&args(&f), &["gz"]).unwrap().columns[0].unit, "deg/s");
         // A renamed column of whole numbers too.
         let f = csv("t,gyro_z\n0,131\n0.01,262\n");
         let mut a = args(&f);
