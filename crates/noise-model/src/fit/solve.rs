@@ -1,0 +1,665 @@
+//! The solver behind [`super::fit_model`]: whitening by the estimates' covariance, NNLS for the
+//! coefficients, the profile χ² over the non-linear parameters (grid, then golden section), the
+//! covariance update, and the uncertainties at the optimum (module docs of [`super`]).
+use super::*;
+
+fn validate(points: &[Point]) -> Result<(), FitError> {
+    for (i, p) in points.iter().enumerate() {
+        let bad = |what: &str| {
+            Err(FitError::BadPoint {
+                index: i,
+                what: format!("{what} (τ = {} s, dev = {}, edf = {})", p.tau, p.dev, p.edf),
+            })
+        };
+        if !(p.tau.is_finite() && p.tau > 0.0) {
+            return bad("τ is not a positive finite number");
+        }
+        if !(p.dev.is_finite() && p.dev > 0.0) {
+            return bad("deviation is not a positive finite number");
+        }
+        if !(p.edf.is_finite() && p.edf > 0.0) {
+            return bad("EDF is not a positive finite number");
+        }
+        if !(p.lo.is_finite() && p.hi.is_finite() && p.lo <= p.dev && p.dev <= p.hi) {
+            return bad("confidence bounds do not bracket the deviation");
+        }
+    }
+    Ok(())
+}
+
+/// Floor applied to the model variance in diagonal weights, relative to the measurement, so that
+/// a model that is (for now) far too low cannot create infinite weights.
+const MODEL_FLOOR: f64 = 1e-3;
+
+/// The whitening of the residuals: W = L⁻¹ S⁻¹ with C = S ρ S, ρ = L Lᵀ.
+#[derive(Clone)]
+struct Whitener {
+    inv_s: Vec<f64>,
+    l: DMatrix<f64>,
+}
+
+impl Whitener {
+    fn diagonal(var: &[f64]) -> Whitener {
+        let n = var.len();
+        Whitener {
+            inv_s: var.iter().map(|v| 1.0 / v.max(1e-300).sqrt()).collect(),
+            l: DMatrix::identity(n, n),
+        }
+    }
+
+    fn from_cov(c: &DMatrix<f64>) -> Whitener {
+        match crate::cov::correlation_factor(c) {
+            (s, Some(l)) => Whitener {
+                inv_s: s.iter().map(|v| 1.0 / v).collect(),
+                l,
+            },
+            (_, None) => Whitener::diagonal(&(0..c.nrows()).map(|j| c[(j, j)]).collect::<Vec<_>>()),
+        }
+    }
+
+    fn apply(&self, v: &[f64]) -> DVector<f64> {
+        let x = DVector::from_iterator(v.len(), v.iter().zip(&self.inv_s).map(|(a, b)| a * b));
+        self.l.solve_lower_triangular(&x).unwrap_or(x)
+    }
+}
+
+/// One term during the fit.
+#[derive(Clone)]
+struct Work {
+    spec: TermSpec,
+    specs: Vec<ParamSpec>,
+    theta: Vec<f64>,
+    basis: Basis,
+    /// basis values at the points
+    b: Vec<f64>,
+}
+
+struct Problem<'a> {
+    meas: &'a Measurement,
+    y: Vec<f64>,
+    ms: Vec<f64>,
+}
+
+impl Problem<'_> {
+    fn eval_basis(&self, e: &Effect, theta: &[f64]) -> Result<(Basis, Vec<f64>), FitError> {
+        let basis = e
+            .basis(theta, &self.meas.ctx)
+            .map_err(|m| FitError::BadTerms(format!("{e}: {m}")))?;
+        let b = self
+            .ms
+            .iter()
+            .map(|&m| {
+                let v = basis.avar(m, self.meas.ctx.tau0);
+                if v.is_finite() {
+                    v.max(0.0)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        Ok((basis, b))
+    }
+
+    /// NNLS for the free coefficients with the whitening fixed; returns (coefficients, χ²).
+    fn solve(&self, work: &[Work], w: &Whitener) -> (Vec<f64>, f64) {
+        let n = self.y.len();
+        let mut target = self.y.clone();
+        let free: Vec<usize> = (0..work.len())
+            .filter(|&k| work[k].spec.known.is_none())
+            .collect();
+        for t in work.iter() {
+            if let Some(k) = t.spec.known {
+                for (j, v) in target.iter_mut().enumerate() {
+                    *v -= k.coef * t.b[j];
+                }
+            }
+        }
+        let yw = w.apply(&target);
+        let mut coef: Vec<f64> = work
+            .iter()
+            .map(|t| t.spec.known.map_or(0.0, |k| k.coef))
+            .collect();
+        if free.is_empty() {
+            return (coef, yw.norm_squared());
+        }
+        let mut a = DMatrix::<f64>::zeros(n, free.len());
+        let mut scale = vec![0.0; free.len()];
+        for (c, &k) in free.iter().enumerate() {
+            let col = w.apply(&work[k].b);
+            let s = col.norm();
+            scale[c] = s;
+            if s > 0.0 && s.is_finite() {
+                a.set_column(c, &(col / s));
+            }
+        }
+        let x = nnls(&a, &yw);
+        for (c, &k) in free.iter().enumerate() {
+            coef[k] = if scale[c] > 0.0 && scale[c].is_finite() {
+                x[c] / scale[c]
+            } else {
+                0.0
+            };
+        }
+        let model = self.model(work, &coef);
+        let r: Vec<f64> = self.y.iter().zip(&model).map(|(a, b)| a - b).collect();
+        (coef, w.apply(&r).norm_squared())
+    }
+
+    fn model(&self, work: &[Work], coef: &[f64]) -> Vec<f64> {
+        (0..self.y.len())
+            .map(|j| work.iter().zip(coef).map(|(t, c)| c * t.b[j]).sum())
+            .collect()
+    }
+
+    fn whitener(&self, work: &[Work], coef: &[f64]) -> Whitener {
+        let model = self.model(work, coef);
+        match self.meas.weighting {
+            Weighting::Diagonal => Whitener::diagonal(
+                &self
+                    .meas
+                    .points
+                    .iter()
+                    .zip(&model)
+                    .zip(&self.y)
+                    .map(|((p, &m), &y)| 2.0 * m.max(MODEL_FLOOR * y).powi(2) / p.edf)
+                    .collect::<Vec<_>>(),
+            ),
+            Weighting::Model => {
+                let c = self.point_cov(work, coef, &model);
+                Whitener::from_cov(&c)
+            }
+        }
+    }
+
+    fn point_cov(&self, work: &[Work], coef: &[f64], model: &[f64]) -> DMatrix<f64> {
+        let n = self.y.len();
+        if self.meas.weighting == Weighting::Diagonal {
+            return DMatrix::from_fn(n, n, |a, b| {
+                if a == b {
+                    2.0 * model[a].max(MODEL_FLOOR * self.y[a]).powi(2) / self.meas.points[a].edf
+                } else {
+                    0.0
+                }
+            });
+        }
+        let mut comps = Vec::new();
+        let mut det = Deterministic {
+            mean_diff: vec![0.0; n],
+            sines: Vec::new(),
+        };
+        let mut det_avar = vec![0.0; n];
+        for (t, &c) in work.iter().zip(coef) {
+            if c <= 0.0 {
+                continue;
+            }
+            match (&t.basis, t.spec.effect.kind()) {
+                (Basis::Stochastic { structure, factor }, _) => comps.push(Component {
+                    coef: c * factor,
+                    structure: structure.clone(),
+                }),
+                (Basis::Sine { theta }, _) => det.sines.push((c, *theta)),
+                _ => {
+                    for (d, b) in det_avar.iter_mut().zip(&t.b) {
+                        *d += c * b;
+                    }
+                }
+            }
+        }
+        for ((md, m), a) in det.mean_diff.iter_mut().zip(&self.ms).zip(&det_avar) {
+            *md = m * (2.0 * a).sqrt();
+        }
+        // Floor: a point the model cannot produce (model ≈ 0) keeps a finite weight.
+        let mut c = self.meas.cache.covariance(&comps, &det);
+        for j in 0..n {
+            let floor = 2.0 * (MODEL_FLOOR * self.y[j]).powi(2) / self.meas.points[j].edf.max(1.0);
+            if !(c[(j, j)] > floor) {
+                c[(j, j)] = floor;
+            }
+        }
+        c
+    }
+
+    fn grid(spec: &ParamSpec, start: Option<f64>) -> Vec<f64> {
+        let mut g: Vec<f64> = if spec.log {
+            let (lo, hi) = (spec.lo.max(1e-300), spec.hi.max(spec.lo * 1.0001));
+            let n = ((hi / lo).log10() * spec.density).ceil().clamp(2.0, 2000.0) as usize + 1;
+            (0..n)
+                .map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64))
+                .collect()
+        } else {
+            let n = spec.density.clamp(2.0, 2000.0) as usize;
+            (0..n)
+                .map(|i| spec.lo + (spec.hi - spec.lo) * i as f64 / (n - 1) as f64)
+                .collect()
+        };
+        if let Some(s) = start {
+            if s > spec.lo && s < spec.hi {
+                g.push(s);
+                g.sort_by(f64::total_cmp);
+            }
+        }
+        g
+    }
+
+    /// Minimise χ² over non-linear parameter `i` of term `k`, others fixed.
+    fn refine(
+        &self,
+        work: &mut [Work],
+        k: usize,
+        i: usize,
+        w: &Whitener,
+        full_grid: bool,
+    ) -> Result<f64, FitError> {
+        let spec = work[k].specs[i].clone();
+        let start = work[k].theta.get(i).copied().filter(|v| v.is_finite());
+        let grid = if full_grid || start.is_none() {
+            Self::grid(&spec, start)
+        } else {
+            // local: ±1/2 decade (log) or ±10 % of the range around the current value
+            let s = start.unwrap_or(spec.lo);
+            let local = ParamSpec {
+                lo: if spec.log {
+                    (s / 3.2).max(spec.lo)
+                } else {
+                    (s - 0.1 * (spec.hi - spec.lo)).max(spec.lo)
+                },
+                hi: if spec.log {
+                    (s * 3.2).min(spec.hi)
+                } else {
+                    (s + 0.1 * (spec.hi - spec.lo)).min(spec.hi)
+                },
+                density: if spec.log { spec.density * 2.0 } else { 9.0 },
+                ..spec.clone()
+            };
+            Self::grid(&local, start)
+        };
+        let eval = |v: f64, work: &mut [Work]| -> Result<f64, FitError> {
+            work[k].theta[i] = v;
+            let (basis, b) = self.eval_basis(&work[k].spec.effect, &work[k].theta)?;
+            work[k].basis = basis;
+            work[k].b = b;
+            Ok(self.solve(work, w).1)
+        };
+        let mut best = (f64::INFINITY, 0usize);
+        for (gi, &v) in grid.iter().enumerate() {
+            let c = eval(v, work).unwrap_or(f64::INFINITY);
+            if c < best.0 {
+                best = (c, gi);
+            }
+        }
+        if !best.0.is_finite() {
+            return Err(FitError::BadTerms(format!(
+                "{}: no value of {} in [{}, {}] gives a finite fit",
+                work[k].spec.effect, spec.name, spec.lo, spec.hi
+            )));
+        }
+        let gi = best.1;
+        let tr = |v: f64| if spec.log { v.ln() } else { v };
+        let inv = |v: f64| if spec.log { v.exp() } else { v };
+        let (a, b) = (
+            tr(grid[gi.saturating_sub(1)]),
+            tr(grid[(gi + 1).min(grid.len() - 1)]),
+        );
+        let mut best_v = grid[gi];
+        let mut best_c = best.0;
+        if b > a {
+            let (xm, fm) = golden_min(
+                |x| eval(inv(x), work).unwrap_or(f64::INFINITY),
+                a,
+                b,
+                GOLDEN_ITERATIONS,
+            );
+            if fm < best_c {
+                best_c = fm;
+                best_v = inv(xm);
+            }
+        }
+        eval(best_v, work)?;
+        Ok(best_c)
+    }
+}
+
+/// Minimise `f` on [a, b] by golden-section search (at most `iterations` steps, or until the
+/// bracket is 1e-7 of its position): (argmin, min).
+pub fn golden_min(
+    mut f: impl FnMut(f64) -> f64,
+    mut a: f64,
+    mut b: f64,
+    iterations: usize,
+) -> (f64, f64) {
+    let r = 0.618_033_988_749_895;
+    let mut x1 = b - r * (b - a);
+    let mut x2 = a + r * (b - a);
+    let mut f1 = f(x1);
+    let mut f2 = f(x2);
+    for _ in 0..iterations {
+        if f1 < f2 {
+            b = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = b - r * (b - a);
+            f1 = f(x1);
+        } else {
+            a = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = a + r * (b - a);
+            f2 = f(x2);
+        }
+        if (b - a).abs() <= 1e-7 * (a.abs() + b.abs()).max(1e-300) {
+            break;
+        }
+    }
+    if f1 < f2 {
+        (x1, f1)
+    } else {
+        (x2, f2)
+    }
+}
+
+/// Fit the terms `specs` to the measurement.
+pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError> {
+    let points = &meas.points;
+    validate(points)?;
+    let tau0 = meas.ctx.tau0;
+    if !(tau0 > 0.0 && tau0.is_finite()) {
+        return Err(FitError::BadTerms(format!(
+            "sampling interval τ0 = {tau0} s is not positive"
+        )));
+    }
+    if specs.is_empty() {
+        return Err(FitError::BadTerms("no terms to fit".into()));
+    }
+    for (i, s) in specs.iter().enumerate() {
+        if !s.effect.repeatable() && specs[..i].iter().any(|o| o.effect == s.effect) {
+            return Err(FitError::BadTerms(format!(
+                "term {} listed twice",
+                s.effect
+            )));
+        }
+        if let Some(k) = s.known {
+            if !(k.coef.is_finite() && k.coef >= 0.0) {
+                return Err(FitError::BadTerms(format!(
+                    "{}: the known coefficient {} is not a non-negative number",
+                    s.effect, k.coef
+                )));
+            }
+        }
+    }
+    let n_params: usize = specs
+        .iter()
+        .map(|s| {
+            usize::from(s.known.is_none())
+                + if s.theta_fixed {
+                    0
+                } else {
+                    s.effect.nonlinear(&meas.ctx).len()
+                }
+        })
+        .sum();
+    if points.len() < n_params + 1 {
+        return Err(FitError::TooFewPoints {
+            points: points.len(),
+            params: n_params,
+        });
+    }
+    let prob = Problem {
+        meas,
+        y: points.iter().map(|p| p.dev * p.dev).collect(),
+        ms: points.iter().map(|p| p.m as f64).collect(),
+    };
+    let mut work: Vec<Work> = Vec::with_capacity(specs.len());
+    for s in specs {
+        let pspecs = s.effect.nonlinear(&meas.ctx);
+        let theta: Vec<f64> = match &s.theta {
+            Some(t) if t.len() == pspecs.len() => t.clone(),
+            Some(t) => {
+                return Err(FitError::BadTerms(format!(
+                    "{}: {} non-linear parameter(s) given, {} expected ({})",
+                    s.effect,
+                    t.len(),
+                    pspecs.len(),
+                    pspecs
+                        .iter()
+                        .map(|p| p.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )))
+            }
+            None => vec![f64::NAN; pspecs.len()],
+        };
+        if s.theta_fixed && theta.iter().any(|v| !v.is_finite()) {
+            return Err(FitError::BadTerms(format!(
+                "{}: fixed non-linear parameters must be given",
+                s.effect
+            )));
+        }
+        let (basis, b) = if theta.iter().all(|v| v.is_finite()) {
+            prob.eval_basis(&s.effect, &theta)?
+        } else {
+            (Basis::Zero, vec![0.0; points.len()])
+        };
+        work.push(Work {
+            spec: s.clone(),
+            specs: pspecs,
+            theta,
+            basis,
+            b,
+        });
+    }
+    let nl: Vec<(usize, usize)> = work
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| !t.spec.theta_fixed)
+        .flat_map(|(k, t)| (0..t.specs.len()).map(move |i| (k, i)))
+        .collect();
+
+    // Start: diagonal weights from the measurement's own EDFs.
+    let mut w = Whitener::diagonal(
+        &points
+            .iter()
+            .map(|p| 2.0 * (p.dev * p.dev).powi(2) / p.edf)
+            .collect::<Vec<_>>(),
+    );
+    // Initialise each searched term alone (the others' searched terms absent), then jointly.
+    for &(k, i) in &nl {
+        let saved: Vec<(Basis, Vec<f64>)> = work
+            .iter()
+            .map(|t| (t.basis.clone(), t.b.clone()))
+            .collect();
+        for &(o, _) in &nl {
+            if o != k && work[o].theta.iter().any(|v| !v.is_finite()) {
+                work[o].b = vec![0.0; points.len()];
+            }
+        }
+        prob.refine(&mut work, k, i, &w, true)?;
+        for (o, (bs, b)) in saved.into_iter().enumerate() {
+            if o != k {
+                work[o].basis = bs;
+                work[o].b = b;
+            }
+        }
+    }
+    for &(k, _) in &nl {
+        let (basis, b) = prob.eval_basis(&work[k].spec.effect, &work[k].theta.clone())?;
+        work[k].basis = basis;
+        work[k].b = b;
+    }
+    let rounds = if nl.len() > 1 { NONLINEAR_ROUNDS } else { 0 };
+    for _ in 0..rounds {
+        for &(k, i) in &nl {
+            prob.refine(&mut work, k, i, &w, true)?;
+        }
+    }
+    let (mut coef, _) = prob.solve(&work, &w);
+    // Outer iterations: covariance (or diagonal weights) from the model.
+    let mut converged = false;
+    for it in 0..OUTER_ITERATIONS.max(if meas.weighting == Weighting::Diagonal {
+        12
+    } else {
+        0
+    }) {
+        w = prob.whitener(&work, &coef);
+        for _ in 0..if nl.len() > 1 { 2 } else { 1 } {
+            for &(k, i) in &nl {
+                prob.refine(&mut work, k, i, &w, it == 0)?;
+            }
+        }
+        let (new_coef, _) = prob.solve(&work, &w);
+        // converged when no coefficient that matters moved by more than 1e-4 of the largest
+        // contribution it makes (the covariance, hence the weights, then no longer changes)
+        let change = new_coef
+            .iter()
+            .zip(&coef)
+            .zip(&work)
+            .map(|((a, b), t)| {
+                let peak =
+                    t.b.iter()
+                        .zip(&prob.y)
+                        .map(|(bv, y)| bv / y)
+                        .fold(0.0, f64::max);
+                (a - b).abs() * peak
+            })
+            .fold(0.0, f64::max);
+        coef = new_coef;
+        if change < 1e-4 {
+            converged = true;
+            break;
+        }
+    }
+    let _ = converged; // the last iterate is used either way; χ² below is evaluated at it
+    let model = prob.model(&work, &coef);
+    let point_cov = prob.point_cov(&work, &coef, &model);
+    let wf = match meas.weighting {
+        Weighting::Model => Whitener::from_cov(&point_cov),
+        Weighting::Diagonal => prob.whitener(&work, &coef),
+    };
+    let r: Vec<f64> = prob.y.iter().zip(&model).map(|(a, b)| a - b).collect();
+    let chi2 = wf.apply(&r).norm_squared();
+    let model_edf: Vec<f64> = (0..points.len())
+        .map(|j| 2.0 * model[j].max(1e-300).powi(2) / point_cov[(j, j)])
+        .collect();
+
+    // Fisher matrix over the free parameters: coefficients of non-known terms and the searched
+    // non-linear parameters of terms present.
+    let mut cols: Vec<DVector<f64>> = Vec::new();
+    let mut index = Vec::new();
+    for (k, t) in work.iter().enumerate() {
+        if t.spec.known.is_none() {
+            cols.push(wf.apply(&t.b));
+            index.push((k, 0));
+        }
+    }
+    for &(k, i) in &nl {
+        if coef[k] <= 0.0 {
+            continue;
+        }
+        let v = work[k].theta[i];
+        let spec = &work[k].specs[i];
+        let h = if spec.log {
+            1e-4 * v.abs()
+        } else {
+            1e-4 * (spec.hi - spec.lo)
+        };
+        if !(h > 0.0) {
+            continue;
+        }
+        let mut up = work[k].theta.clone();
+        let mut dn = work[k].theta.clone();
+        up[i] = v + h;
+        dn[i] = v - h;
+        let (_, bu) = prob.eval_basis(&work[k].spec.effect, &up)?;
+        let (_, bd) = prob.eval_basis(&work[k].spec.effect, &dn)?;
+        let d: Vec<f64> = bu
+            .iter()
+            .zip(&bd)
+            .map(|(a, b)| coef[k] * (a - b) / (2.0 * h))
+            .collect();
+        if d.iter().all(|x| *x == 0.0) {
+            continue;
+        }
+        cols.push(wf.apply(&d));
+        index.push((k, i + 1));
+    }
+    let q = cols.len();
+    // A coefficient held at its bound 0 by the constraint counts half: the χ² reduction of a
+    // boundary parameter is 0 or 1 degree of freedom with probability ½ each (the chi-bar-square
+    // mixture; Self & Liang, JASA 1987).
+    let interior = index
+        .iter()
+        .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
+        .count();
+    let boundary = index.len() - interior;
+    let dof = (points.len() as f64 - interior as f64 - 0.5 * boundary as f64).max(1.0);
+    let chi2_dof = chi2 / dof;
+    let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
+    let d: Vec<f64> = (0..q)
+        .map(|a| {
+            let v = fisher[(a, a)];
+            if v > 0.0 {
+                1.0 / v.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let fs = DMatrix::from_fn(q, q, |a, b| fisher[(a, b)] * d[a] * d[b]);
+    let inv = fs.clone().try_inverse().or_else(|| crate::nnls::pinv(&fs));
+    let infl = chi2_dof.max(1.0);
+    let param_cov = match &inv {
+        Some(m) => DMatrix::from_fn(q, q, |a, b| m[(a, b)] * d[a] * d[b] * infl),
+        None => DMatrix::from_element(q, q, f64::NAN),
+    };
+    let mut terms: Vec<TermFit> = work
+        .iter()
+        .zip(&coef)
+        .map(|(t, &c)| TermFit {
+            effect: t.spec.effect.clone(),
+            coef: c,
+            coef_sigma: t.spec.known.map_or(f64::NAN, |k| k.coef_sigma),
+            sign: t
+                .spec
+                .known
+                .map_or(1.0, |k| if k.sign < 0.0 { -1.0 } else { 1.0 }),
+            theta: t.theta.clone(),
+            theta_sigma: t
+                .spec
+                .theta_sigma
+                .clone()
+                .unwrap_or_else(|| vec![f64::NAN; t.theta.len()]),
+            specs: t.specs.clone(),
+            known: t.spec.known.is_some(),
+            detected: false,
+        })
+        .collect();
+    for (a, &(k, i)) in index.iter().enumerate() {
+        let s = param_cov[(a, a)].max(0.0).sqrt();
+        if i == 0 {
+            terms[k].coef_sigma = s;
+        } else {
+            terms[k].theta_sigma[i - 1] = s;
+        }
+    }
+    for t in &mut terms {
+        t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
+    }
+    let per_term_basis = work.iter().map(|t| t.b.clone()).collect();
+    let mut out = Fit {
+        tau0,
+        points: points.clone(),
+        ctx: meas.ctx.clone(),
+        weighting: meas.weighting,
+        terms,
+        model_avar: model,
+        point_cov,
+        model_edf,
+        chi2: f64::NAN,
+        objective: chi2,
+        dof,
+        param_cov,
+        param_index: index,
+        per_term_basis,
+    };
+    out.chi2 = crate::assess::statistic(&out).1;
+    Ok(out)
+}

@@ -1,0 +1,431 @@
+//! Candidate edits of a model: the non-stationarity findings first, then the Allan-curve
+//! candidates, each refitted and tested (nested χ², the time-domain likelihood ratio), gated by
+//! their evidence and ranked by the penalised criterion.
+use super::*;
+
+impl<'a> NoiseLab<'a> {
+    /// Candidate edits of a model, refitted and tested, best first.
+    pub fn candidate_edits(&self, cur: &Model) -> Result<Vec<Candidate<Effect, Model>>, FitError> {
+        let mut out: Vec<Candidate<Effect, Model>> = Vec::new();
+        let have: Vec<Effect> = cur.specs.iter().map(|s| s.effect.clone()).collect();
+        // 1. non-stationarity findings first
+        for f in &cur.findings {
+            let mut specs = cur.specs.clone();
+            specs.push(f.spec.clone());
+            let mut edits: Vec<(Vec<TermSpec>, Edit<Effect>)> = vec![(
+                specs.clone(),
+                Edit {
+                    add: vec![f.effect.clone()],
+                    remove: vec![],
+                },
+            )];
+            // a physical cause found in the time domain replaces the ramp that stood in for it
+            if f.effect == Effect::Temperature && have.contains(&Effect::RateRamp) {
+                let s2: Vec<TermSpec> = specs
+                    .iter()
+                    .filter(|s| s.effect != Effect::RateRamp)
+                    .cloned()
+                    .collect();
+                edits.push((
+                    s2,
+                    Edit {
+                        add: vec![f.effect.clone()],
+                        remove: vec![Effect::RateRamp],
+                    },
+                ));
+            }
+            let mut best: Option<Candidate<Effect, Model>> = None;
+            for (specs, edit) in edits {
+                let Ok(m) = self.fit(&specs) else { continue };
+                let c = self.candidate(cur, m, edit, f.p_value, true, f.text.clone());
+                // prefer the replacement when it explains the data as well (fewer terms)
+                if best.as_ref().is_none_or(|b| {
+                    Self::criterion(&c.model) <= Self::criterion(&b.model) + 2.0
+                        && c.model.findings.len() <= b.model.findings.len()
+                }) {
+                    best = Some(c);
+                }
+            }
+            if let Some(b) = best {
+                out.push(b);
+            }
+        }
+        if !out.is_empty() {
+            return Ok(out);
+        }
+        // 2. Allan-curve candidates
+        let mut tries: Vec<(Vec<TermSpec>, Edit<Effect>, String)> = Vec::new();
+        let add = |e: Effect,
+                   spec: TermSpec,
+                   why: String,
+                   tries: &mut Vec<(Vec<TermSpec>, Edit<Effect>, String)>| {
+            let mut s = cur.specs.clone();
+            s.push(spec);
+            tries.push((
+                s,
+                Edit {
+                    add: vec![e],
+                    remove: vec![],
+                },
+                why,
+            ));
+        };
+        for e in [
+            Effect::Quantization,
+            Effect::White,
+            Effect::Flicker,
+            Effect::RateRandomWalk,
+            Effect::RateRamp,
+        ] {
+            if !have.contains(&e) {
+                add(e.clone(), TermSpec::new(e), String::new(), &mut tries);
+            }
+        }
+        if !have.contains(&Effect::Resolution) {
+            if let Some(s) = self.resolution_spec() {
+                add(
+                    Effect::Resolution,
+                    s,
+                    format!(
+                        "the values sit on a lattice of {:.4e}",
+                        self.lsb.unwrap_or(0.0)
+                    ),
+                    &mut tries,
+                );
+            }
+        }
+        let blocked = self.spectral_blocked();
+        if !blocked {
+            let n_markov = have.iter().filter(|e| **e == Effect::Markov).count();
+            if n_markov < 3 {
+                add(
+                    Effect::Markov,
+                    TermSpec::new(Effect::Markov),
+                    String::new(),
+                    &mut tries,
+                );
+            }
+            // the strongest spectral line not yet in the model
+            let fitted: Vec<f64> = cur
+                .fit
+                .terms
+                .iter()
+                .filter(|t| t.effect == Effect::Sinusoid)
+                .filter_map(|t| t.theta0())
+                .collect();
+            let df_w = self.periodogram_df;
+            if let Some(l) = self.lines.iter().find(|l| {
+                !fitted
+                    .iter()
+                    .any(|&f| (f - l.freq_hz).abs() < 4.0 * df_w.max(1e-12) + 0.02 * f)
+            }) {
+                // the whole-record periodogram pins the frequency
+                let y = self.longest_segment();
+                let fs = 1.0 / self.record.tau0;
+                let (f, sf) = match line_near(y, fs, l.freq_hz, 0.05) {
+                    Some(t) if t.p_value < P_CANDIDATE => (t.freq_hz, self.periodogram_df / 2.0),
+                    _ => (l.freq_hz, self.periodogram_df * 8.0),
+                };
+                add(
+                    Effect::Sinusoid,
+                    TermSpec {
+                        theta: Some(vec![f]),
+                        theta_fixed: true,
+                        theta_sigma: Some(vec![sf]),
+                        ..TermSpec::new(Effect::Sinusoid)
+                    },
+                    format!(
+                        "the spectrum has a line at {:.4} Hz, {:.0}× the local background \
+                         (threshold {:.1}×)",
+                        l.freq_hz, l.ratio, l.threshold
+                    ),
+                    &mut tries,
+                );
+            }
+            for e in [
+                Effect::Lowpass,
+                Effect::Lowpass2,
+                Effect::Boxcar,
+                Effect::Bartlett,
+            ] {
+                if have.contains(&e) {
+                    continue;
+                }
+                let mut s: Vec<TermSpec> = cur
+                    .specs
+                    .iter()
+                    .filter(|s| s.effect != Effect::White)
+                    .cloned()
+                    .collect();
+                s.push(TermSpec::new(e.clone()));
+                let remove = if have.contains(&Effect::White) {
+                    vec![Effect::White]
+                } else {
+                    vec![]
+                };
+                tries.push((
+                    s,
+                    Edit {
+                        add: vec![e],
+                        remove,
+                    },
+                    String::new(),
+                ));
+            }
+            for u in &self.record.user_effects {
+                if !have.contains(u) {
+                    add(
+                        u.clone(),
+                        TermSpec::new(u.clone()),
+                        String::new(),
+                        &mut tries,
+                    );
+                }
+            }
+        }
+        let cur_crit = Self::criterion(cur);
+        let line_explains = |c: &Candidate<Effect, Model>| {
+            c.edit.add.contains(&Effect::Sinusoid) && c.p_value < P_CANDIDATE
+        };
+        let mut cands: Vec<Candidate<Effect, Model>> = Vec::new();
+        for (specs, edit, why) in tries {
+            let Ok(m) = self.fit(&specs) else { continue };
+            let extra = m.fit.n_params() as i64 - cur.fit.n_params() as i64;
+            // two likelihood-ratio tests on the same data, Bonferroni-combined: the Allan points
+            // (every τ) and the block differences in the time domain (long τ)
+            let s = m.fit.chi2_dof().max(1.0);
+            let lr_p = |delta: f64| {
+                if extra > 0 {
+                    chi2_sf(delta.max(0.0) / s, extra as f64)
+                } else if delta > 0.0 {
+                    0.0
+                } else {
+                    1.0
+                }
+            };
+            let d_time = self.time_lr(cur, &m, &edit.add);
+            let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(d_time))).min(1.0);
+            let mut c = self.candidate(cur, m, edit, p, false, why);
+            let added_present = c.edit.add.iter().all(|e| {
+                c.model
+                    .fit
+                    .terms
+                    .iter()
+                    .any(|t| t.effect == *e && t.coef > 0.0)
+            });
+            let better = Self::criterion(&c.model) < cur_crit;
+            c.admissible = p < P_CANDIDATE && added_present && better;
+            if !c.admissible {
+                c.reason = if !added_present {
+                    format!("{}the refit puts its amplitude at zero", prefix(&c.reason))
+                } else if p >= P_CANDIDATE {
+                    format!("{}not significant (p = {:.1e})", prefix(&c.reason), p)
+                } else {
+                    format!(
+                        "{}it does not lower χ² + 2p (over-fitting)",
+                        prefix(&c.reason)
+                    )
+                };
+            }
+            cands.push(c);
+        }
+        // A narrow line in the periodogram is direct evidence: when the sinusoid at that line
+        // explains the misfit, the smooth-spectrum shapes (Markov, filters) that would absorb it
+        // are not named in its place; it comes first.
+        if cands.iter().any(|c| line_explains(c) && c.admissible) {
+            for c in &mut cands {
+                let smooth = c.edit.add.iter().any(|e| {
+                    *e == Effect::Markov || e.replaces_white() || matches!(e, Effect::User(_))
+                });
+                if smooth && c.admissible {
+                    c.admissible = false;
+                    c.reason =
+                        "a spectral line explains the misfit; the sinusoid is named first".into();
+                }
+            }
+        }
+        cands.sort_by(|a, b| {
+            b.admissible
+                .cmp(&a.admissible)
+                .then(line_explains(b).cmp(&line_explains(a)))
+                .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
+        });
+        Self::prefer_simplest_of_equals(&mut cands);
+        out.extend(cands);
+        Ok(out)
+    }
+
+    /// Among the admissible candidates the data cannot tell apart from the best — χ² + 2p within
+    /// [`EQUAL_SUPPORT`] — the one with the fewest added parameters, then the earliest in the
+    /// vocabulary (the simpler physics: a one-pole filter before a two-pole one) goes first. The
+    /// first candidate's reading names the others that fit nearly as well
+    /// ([`NEAR_SUPPORT`]), so a user sees which physical forms the record cannot tell apart.
+    fn prefer_simplest_of_equals(cands: &mut [Candidate<Effect, Model>]) {
+        let Some(best) = cands.first().filter(|c| c.admissible) else {
+            return;
+        };
+        let top = Self::criterion(&best.model);
+        let equal = cands
+            .iter()
+            .take_while(|c| c.admissible && Self::criterion(&c.model) <= top + EQUAL_SUPPORT)
+            .count();
+        let rank = |c: &Candidate<Effect, Model>| {
+            let order = c
+                .edit
+                .add
+                .iter()
+                .map(|e| {
+                    crate::effect::ALL_EFFECTS
+                        .iter()
+                        .position(|v| v == e)
+                        .unwrap_or(crate::effect::ALL_EFFECTS.len())
+                })
+                .min()
+                .unwrap_or(crate::effect::ALL_EFFECTS.len());
+            (c.extra_params, order)
+        };
+        cands[..equal].sort_by_key(rank);
+        let top = Self::criterion(&cands[0].model);
+        let others: Vec<String> = cands[1..]
+            .iter()
+            .filter(|c| c.admissible && Self::criterion(&c.model) <= top + NEAR_SUPPORT)
+            .map(|c| {
+                format!(
+                    "{} (Δ(χ² + 2p) = {:+.1})",
+                    c.reading,
+                    Self::criterion(&c.model) - top
+                )
+            })
+            .collect();
+        if !others.is_empty() {
+            cands[0].reading = format!(
+                "{}; the record fits nearly as well: {}",
+                cands[0].reading,
+                others.join("; ")
+            );
+        }
+    }
+
+    /// The time-domain likelihood ratio of a candidate against the current model: the block
+    /// differences' −2ℓ of the current model minus that of the candidate, with the added
+    /// stochastic term's amplitude (and non-linear parameter) re-estimated on the block differences
+    /// themselves (profile likelihood; the other terms stay at their Allan fit). Terms that live
+    /// below the block scale (filters) are left to the Allan points.
+    fn time_lr(&self, cur: &Model, m: &Model, added: &[Effect]) -> f64 {
+        let base = cur.neg2ll_time - m.neg2ll_time;
+        let [e] = added else { return base };
+        let Some(k) = m.fit.terms.iter().rposition(|t| t.effect == *e) else {
+            return base;
+        };
+        let t = &m.fit.terms[k];
+        if e.kind() != crate::effect::Kind::Stochastic || t.known {
+            return base;
+        }
+        let gls = nonstat::gls_scale(&self.blocks);
+        let block_tau = gls.size as f64 * self.record.tau0;
+        if tau_range(&m.fit, k).is_none_or(|(_, hi)| hi < 2.0 * block_tau) {
+            return base;
+        }
+        let signals: Vec<Signal> = m.specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let others: Vec<crate::cov::Component> = m
+            .fit
+            .terms
+            .iter()
+            .enumerate()
+            .filter(|(j, t)| *j != k && t.coef > 0.0)
+            .filter_map(|(_, t)| match t.effect.basis(&t.theta, &m.fit.ctx) {
+                Ok(crate::effect::Basis::Stochastic { structure, factor }) => {
+                    Some(crate::cov::Component {
+                        coef: t.coef * factor,
+                        structure,
+                    })
+                }
+                _ => None,
+            })
+            .collect();
+        let eval = |theta: &[f64], c: f64| -> f64 {
+            let Ok(crate::effect::Basis::Stochastic { structure, factor }) =
+                e.basis(theta, &m.fit.ctx)
+            else {
+                return f64::INFINITY;
+            };
+            let mut comps = others.clone();
+            comps.push(crate::cov::Component {
+                coef: c * factor,
+                structure,
+            });
+            nonstat::neg2_loglik(&gls, &comps, &signals)
+        };
+        // scale of the coefficient: the Allan estimate, or where the term would equal the model
+        let c0 = if t.coef > 0.0 {
+            t.coef
+        } else {
+            let b = e
+                .basis(&t.theta, &m.fit.ctx)
+                .map(|b| b.avar(gls.size as f64, self.record.tau0))
+                .unwrap_or(0.0);
+            let mv = m.fit.model_avar_at(block_tau);
+            if b > 0.0 && mv > 0.0 {
+                mv / b
+            } else {
+                return base;
+            }
+        };
+        let thetas: Vec<Vec<f64>> = if t.theta.is_empty() {
+            vec![Vec::new()]
+        } else {
+            [0.25, 0.5, 1.0, 2.0, 4.0]
+                .iter()
+                .map(|f| {
+                    let mut th = t.theta.clone();
+                    th[0] *= f;
+                    th
+                })
+                .collect()
+        };
+        let mut best = f64::INFINITY;
+        for th in &thetas {
+            // golden section on ln c over [c0/1e3, c0·1e3]
+            let (_, fm) =
+                crate::fit::golden_min(|x| eval(th, x.exp()), (c0 / 1e3).ln(), (c0 * 1e3).ln(), 30);
+            best = best.min(fm);
+        }
+        base.max(cur.neg2ll_time - best)
+    }
+
+    fn candidate(
+        &self,
+        cur: &Model,
+        m: Model,
+        edit: Edit<Effect>,
+        p: f64,
+        td: bool,
+        why: String,
+    ) -> Candidate<Effect, Model> {
+        let reading = edit
+            .add
+            .iter()
+            .map(|e| reading(&m.fit, e))
+            .collect::<Vec<_>>()
+            .join("; ");
+        Candidate {
+            summary: self.summary_of(&m),
+            delta: cur.neg2ll - m.neg2ll,
+            extra_params: m.fit.n_params() as i64 - cur.fit.n_params() as i64,
+            p_value: p,
+            admissible: td,
+            reason: why,
+            reading,
+            edit,
+            model: m,
+        }
+    }
+}
+
+fn prefix(s: &str) -> String {
+    if s.is_empty() {
+        String::new()
+    } else {
+        format!("{s}; ")
+    }
+}

@@ -1,0 +1,133 @@
+//! The physical reading of a fitted effect, and where on the τ axis a term or a misfit shows.
+use crate::assess::{Assessment, TauRange};
+use crate::effect::Effect;
+use crate::fit::Fit;
+
+pub(super) fn fmt_s(t: f64) -> String {
+    if !t.is_finite() {
+        "n/a".into()
+    } else if t < 1e-3 {
+        format!("{:.1} µs", t * 1e6)
+    } else if t < 1.0 {
+        format!("{:.3} s", t)
+    } else if t < 100.0 {
+        format!("{:.2} s", t)
+    } else {
+        format!("{:.0} s", t)
+    }
+}
+
+/// The physical reading of an effect as fitted.
+pub fn reading(fit: &Fit, e: &Effect) -> String {
+    let Some(t) = fit.terms.iter().rev().find(|t| t.effect == *e) else {
+        return String::new();
+    };
+    let th = t.theta0().unwrap_or(f64::NAN);
+    let two_pi = 2.0 * std::f64::consts::PI;
+    match e {
+        Effect::Markov => format!(
+            "correlated noise with τ_c = {} (peak of σ at τ ≈ {}); as a low-pass on white noise it \
+             would be a corner at {:.3} Hz",
+            fmt_s(th),
+            fmt_s(1.89 * th),
+            1.0 / (two_pi * th)
+        ),
+        Effect::Sinusoid => format!(
+            "a sinusoid of {:.3e} at {:.4} Hz (period {}); σ has nulls at τ = k/f",
+            t.amplitude(),
+            th,
+            fmt_s(1.0 / th)
+        ),
+        Effect::Lowpass | Effect::Lowpass2 => {
+            let dlpf = [
+                (188.0, 1),
+                (98.0, 2),
+                (42.0, 3),
+                (20.0, 4),
+                (10.0, 5),
+                (5.0, 6),
+            ]
+            .iter()
+            .find(|(bw, _)| (th / bw - 1.0).abs() < 0.25)
+            .map(|(bw, cfg)| {
+                format!(" — close to the MPU-6050's DLPF_CFG = {cfg} ({bw} Hz gyro bandwidth)")
+            })
+            .unwrap_or_default();
+            format!(
+                "the sensor's own {}low-pass filter at f_c = {:.3} Hz on its white noise{dlpf}",
+                if *e == Effect::Lowpass2 {
+                    "two-pole "
+                } else {
+                    ""
+                },
+                th
+            )
+        }
+        Effect::Boxcar | Effect::Bartlett => format!(
+            "a {} decimation filter {:.2} samples long ({})",
+            if *e == Effect::Boxcar {
+                "moving-average"
+            } else {
+                "triangular"
+            },
+            th,
+            fmt_s(th * fit.tau0)
+        ),
+        Effect::BiasStep => format!(
+            "a bias step of {:+.4e} at t = {} — a non-stationarity of this record, not noise",
+            t.amplitude(),
+            fmt_s(th)
+        ),
+        Effect::Temperature => {
+            if fit.ctx.temp_avar.is_some() {
+                format!(
+                    "the bias follows the temperature with {:+.4e} per °C",
+                    t.amplitude()
+                )
+            } else {
+                format!(
+                    "a warm-up transient of {:+.4e} with time constant {}",
+                    t.amplitude(),
+                    fmt_s(th)
+                )
+            }
+        }
+        Effect::Resolution => format!("rounding to the data's LSB of {:.4e}", t.amplitude()),
+        e => format!("{} = {:.4e}", e.amp_name(), t.amplitude()),
+    }
+}
+
+/// The τ range where a term shows: the points where its share of the model variance is at least
+/// half its largest share.
+pub fn tau_range(fit: &Fit, k: usize) -> Option<(f64, f64)> {
+    let share: Vec<f64> = fit
+        .term_avar(k)
+        .iter()
+        .zip(&fit.model_avar)
+        .map(|(a, m)| if *m > 0.0 { a / m } else { 0.0 })
+        .collect();
+    let max = share.iter().copied().fold(0.0, f64::max);
+    if !(max > 0.0) {
+        return None;
+    }
+    let idx: Vec<usize> = (0..share.len())
+        .filter(|&j| share[j] >= 0.5 * max)
+        .collect();
+    Some((fit.points[*idx.first()?].tau, fit.points[*idx.last()?].tau))
+}
+
+/// The union of failing (or else outside) τ ranges of an assessment.
+pub fn misfit_range(a: &Assessment) -> Option<(f64, f64)> {
+    let rs: &[TauRange] = if a.failing.is_empty() {
+        &a.outside
+    } else {
+        &a.failing
+    };
+    if rs.is_empty() {
+        return None;
+    }
+    Some((
+        rs.iter().map(|r| r.lo).fold(f64::INFINITY, f64::min),
+        rs.iter().map(|r| r.hi).fold(0.0, f64::max),
+    ))
+}
