@@ -24,16 +24,16 @@ test('WHO_AM_I reads 0x68 and the device powers up asleep (no samples)', () => {
 
 test('FIFO fills at 1 kHz with DLPF_CFG=1, SMPLRT_DIV=0: 12 bytes per sample set', () => {
   const m = awake(constantStream({}));
-  const [h, l] = readRegs(m, ms(10) + 1, REG.FIFO_COUNTH, 2);
+  const [h, l] = readRegs(m, ms(10) + 1, REG.FIFO_COUNT_H, 2);
   assert.equal((h << 8) | l, 10 * 12); // samples at 1, 2, ..., 10 ms
 });
 
 test('rate honours SMPLRT_DIV and the 8 kHz gyro rate of DLPF_CFG=0', () => {
   const a = awake(constantStream({}), { div: 4, dlpf: 1 }); // 1 kHz / 5 = 200 Hz
-  const [h, l] = readRegs(a, ms(100) + 1, REG.FIFO_COUNTH, 2);
+  const [h, l] = readRegs(a, ms(100) + 1, REG.FIFO_COUNT_H, 2);
   assert.equal(((h << 8) | l) / 12, 20);
   const b = awake(constantStream({}), { div: 7, dlpf: 0 }); // 8 kHz / 8 = 1 kHz
-  const [h2, l2] = readRegs(b, ms(20) + 1, REG.FIFO_COUNTH, 2);
+  const [h2, l2] = readRegs(b, ms(20) + 1, REG.FIFO_COUNT_H, 2);
   assert.equal(((h2 << 8) | l2) / 12, 20);
 });
 
@@ -55,14 +55,14 @@ test('FIFO overflows after 1024 bytes: FIFO_OFLOW_INT set, cleared on read, coun
   const st = readRegs(m, ms(90) + 1, REG.INT_STATUS, 1)[0];
   assert.equal(st & 0x10, 0x10);
   assert.equal(readRegs(m, ms(90) + 1, REG.INT_STATUS, 1)[0] & 0x10, 0);
-  const [h, l] = readRegs(m, ms(90) + 1, REG.FIFO_COUNTH, 2);
+  const [h, l] = readRegs(m, ms(90) + 1, REG.FIFO_COUNT_H, 2);
   assert.equal((h << 8) | l, 1024);
   assert.equal(m.stats.overflows, 1);
   // After overflow the oldest bytes were overwritten: 90*12 - 1024 = 56 bytes lost.
   assert.equal(m.stats.overwrittenBytes, 90 * 12 - 1024);
   // FIFO_RESET empties it.
   writeRegs(m, ms(90) + 1, REG.USER_CTRL, 0x44);
-  const [h2, l2] = readRegs(m, ms(90) + 1, REG.FIFO_COUNTH, 2);
+  const [h2, l2] = readRegs(m, ms(90) + 1, REG.FIFO_COUNT_H, 2);
   assert.equal((h2 << 8) | l2, 0);
 });
 

@@ -18,6 +18,7 @@ use std::collections::VecDeque;
 use embedded_hal::i2c::{NoAcknowledgeSource, Operation};
 
 use crate::SimError;
+use imu_drivers::mpu6050::reg;
 
 /// Physical input at one sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -77,19 +78,15 @@ pub struct Mpu6050Model {
     reset_until_ns: u64,
 }
 
-const SMPLRT_DIV: usize = 0x19;
-const CONFIG: usize = 0x1A;
-const GYRO_CONFIG: usize = 0x1B;
-const ACCEL_CONFIG: usize = 0x1C;
-const FIFO_EN: usize = 0x23;
-const INT_ENABLE: usize = 0x38;
-const INT_STATUS: u8 = 0x3A;
-const USER_CTRL: u8 = 0x6A;
-const PWR_MGMT_1: u8 = 0x6B;
-const FIFO_COUNT_H: u8 = 0x72;
-const FIFO_COUNT_L: u8 = 0x73;
-const FIFO_R_W: u8 = 0x74;
-const WHO_AM_I: u8 = 0x75;
+// The part's one register table is the driver's (`imu_drivers::mpu6050::reg`); the behaviour
+// below is the model's own, from the Register Map.
+const SMPLRT_DIV: usize = reg::SMPLRT_DIV as usize;
+const CONFIG: usize = reg::CONFIG as usize;
+const GYRO_CONFIG: usize = reg::GYRO_CONFIG as usize;
+const ACCEL_CONFIG: usize = reg::ACCEL_CONFIG as usize;
+const FIFO_EN: usize = reg::FIFO_EN as usize;
+const INT_ENABLE: usize = reg::INT_ENABLE as usize;
+use reg::{FIFO_COUNT_H, FIFO_COUNT_L, FIFO_R_W, INT_STATUS, PWR_MGMT_1, USER_CTRL, WHO_AM_I};
 
 /// Reset duration the model enforces, ns (PS 6.3: 100 ms start-up for register access).
 pub const RESET_NS: u64 = 100_000_000;

@@ -11,6 +11,7 @@
 //! - with ROL_PNT (L, CONTROL2 bit 6) a read rolls over from 06H to 00H.
 
 use embedded_hal::i2c::{NoAcknowledgeSource, Operation};
+use imu_drivers::qmc5883::{reg_l, reg_p};
 
 use crate::SimError;
 
@@ -91,22 +92,22 @@ impl QmcModel {
 
     fn ctrl1(&self) -> u8 {
         match self.variant {
-            QmcVariant::L => self.regs[0x09],
-            QmcVariant::P => self.regs[0x0A],
+            QmcVariant::L => self.regs[reg_l::CONTROL1 as usize],
+            QmcVariant::P => self.regs[reg_p::CONTROL1 as usize],
         }
     }
 
     fn status_reg(&self) -> usize {
         match self.variant {
-            QmcVariant::L => 0x06,
-            QmcVariant::P => 0x09,
+            QmcVariant::L => reg_l::STATUS as usize,
+            QmcVariant::P => reg_p::STATUS as usize,
         }
     }
 
     fn data_regs(&self) -> std::ops::RangeInclusive<u8> {
         match self.variant {
-            QmcVariant::L => 0x00..=0x05,
-            QmcVariant::P => 0x01..=0x06,
+            QmcVariant::L => reg_l::DATA_X_LSB..=reg_l::DATA_X_LSB + 5,
+            QmcVariant::P => reg_p::DATA_X_LSB..=reg_p::DATA_X_LSB + 5,
         }
     }
 
@@ -127,11 +128,11 @@ impl QmcModel {
     /// (LSB per gauss, full scale in gauss) of the configured range.
     pub fn range(&self) -> (f64, f64) {
         match self.variant {
-            QmcVariant::L => match (self.regs[0x09] >> 4) & 3 {
+            QmcVariant::L => match (self.regs[reg_l::CONTROL1 as usize] >> 4) & 3 {
                 0 => (12000.0, 2.0),
                 _ => (3000.0, 8.0),
             },
-            QmcVariant::P => match (self.regs[0x0B] >> 2) & 3 {
+            QmcVariant::P => match (self.regs[reg_p::CONTROL2 as usize] >> 2) & 3 {
                 0 => (1000.0, 30.0),
                 1 => (2500.0, 12.0),
                 2 => (3750.0, 8.0),
@@ -194,15 +195,15 @@ impl QmcModel {
         if self.variant == QmcVariant::L {
             let t = (self.temp_c * 100.0).round().clamp(-32768.0, 32767.0) as i16;
             let [lo, hi] = t.to_le_bytes();
-            self.regs[0x07] = lo;
-            self.regs[0x08] = hi;
+            self.regs[reg_l::TEMP_LSB as usize] = lo;
+            self.regs[reg_l::TEMP_LSB as usize + 1] = hi;
         }
     }
 
     fn read_byte(&mut self) -> u8 {
         let r = self.ptr;
-        let v = if (self.variant == QmcVariant::L && r == 0x0D)
-            || (self.variant == QmcVariant::P && r == 0x00)
+        let v = if (self.variant == QmcVariant::L && r == reg_l::CHIP_ID)
+            || (self.variant == QmcVariant::P && r == reg_p::CHIP_ID)
         {
             self.chip_id
         } else {

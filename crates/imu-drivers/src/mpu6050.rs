@@ -43,10 +43,44 @@ pub mod reg {
     pub const PWR_MGMT_1: u8 = 0x6B;
     /// FIFO byte count, high byte first (RM 4.30).
     pub const FIFO_COUNT_H: u8 = 0x72;
+    /// FIFO count, low byte (RM 4.30).
+    pub const FIFO_COUNT_L: u8 = 0x73;
     /// FIFO read port; burst reads keep popping this register (RM 4.31).
     pub const FIFO_R_W: u8 = 0x74;
     /// Chip identity (RM 4.32).
     pub const WHO_AM_I: u8 = 0x75;
+    /// Temperature, high byte (RM 4.18; the driver reads it within the burst from ACCEL_XOUT_H).
+    pub const TEMP_OUT_H: u8 = 0x41;
+    /// Gyro X, high byte (RM 4.19; likewise within the burst).
+    pub const GYRO_XOUT_H: u8 = 0x43;
+    /// Power management 2: standby of single axes (RM 4.29; the driver leaves it at 0).
+    pub const PWR_MGMT_2: u8 = 0x6C;
+
+    /// Every register above by name: the one register table of the part. The chip models
+    /// (tests/src/mpu6050_model.rs, sim/src/devices/mpu6050.js) are checked against it.
+    pub const TABLE: &[(&str, u8)] = &[
+        ("SELF_TEST_X", SELF_TEST_X),
+        ("SMPLRT_DIV", SMPLRT_DIV),
+        ("CONFIG", CONFIG),
+        ("GYRO_CONFIG", GYRO_CONFIG),
+        ("ACCEL_CONFIG", ACCEL_CONFIG),
+        ("ACCEL_CONFIG2", ACCEL_CONFIG2),
+        ("FIFO_EN", FIFO_EN),
+        ("INT_PIN_CFG", INT_PIN_CFG),
+        ("INT_ENABLE", INT_ENABLE),
+        ("INT_STATUS", INT_STATUS),
+        ("ACCEL_XOUT_H", ACCEL_XOUT_H),
+        ("TEMP_OUT_H", TEMP_OUT_H),
+        ("GYRO_XOUT_H", GYRO_XOUT_H),
+        ("SIGNAL_PATH_RESET", SIGNAL_PATH_RESET),
+        ("USER_CTRL", USER_CTRL),
+        ("PWR_MGMT_1", PWR_MGMT_1),
+        ("PWR_MGMT_2", PWR_MGMT_2),
+        ("FIFO_COUNT_H", FIFO_COUNT_H),
+        ("FIFO_COUNT_L", FIFO_COUNT_L),
+        ("FIFO_R_W", FIFO_R_W),
+        ("WHO_AM_I", WHO_AM_I),
+    ];
 }
 
 /// Register bit fields.

@@ -32,6 +32,18 @@ pub mod reg_l {
     pub const CHIP_ID: u8 = 0x0D;
     /// Expected CHIP_ID value.
     pub const CHIP_ID_VALUE: u8 = 0xFF;
+
+    /// Every register above by name: the one register table of the QMC5883L. The chip models
+    /// (tests/src/qmc5883_model.rs, sim/src/devices/qmc5883l.js) are checked against it.
+    pub const TABLE: &[(&str, u8)] = &[
+        ("DATA_X_LSB", DATA_X_LSB),
+        ("STATUS", STATUS),
+        ("TEMP_LSB", TEMP_LSB),
+        ("CONTROL1", CONTROL1),
+        ("CONTROL2", CONTROL2),
+        ("SET_RESET_PERIOD", SET_RESET_PERIOD),
+        ("CHIP_ID", CHIP_ID),
+    ];
 }
 
 /// QMC5883P registers (QMC-P register map).

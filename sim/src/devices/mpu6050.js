@@ -10,8 +10,8 @@ import { RegisterDevice } from './i2c-bus.js';
 export const REG = {
   SMPLRT_DIV: 0x19, CONFIG: 0x1a, GYRO_CONFIG: 0x1b, ACCEL_CONFIG: 0x1c, FIFO_EN: 0x23,
   INT_PIN_CFG: 0x37, INT_ENABLE: 0x38, INT_STATUS: 0x3a, ACCEL_XOUT_H: 0x3b, TEMP_OUT_H: 0x41,
-  GYRO_XOUT_H: 0x43, USER_CTRL: 0x6a, PWR_MGMT_1: 0x6b, PWR_MGMT_2: 0x6c, FIFO_COUNTH: 0x72,
-  FIFO_COUNTL: 0x73, FIFO_R_W: 0x74, WHO_AM_I: 0x75,
+  GYRO_XOUT_H: 0x43, USER_CTRL: 0x6a, PWR_MGMT_1: 0x6b, PWR_MGMT_2: 0x6c, FIFO_COUNT_H: 0x72,
+  FIFO_COUNT_L: 0x73, FIFO_R_W: 0x74, WHO_AM_I: 0x75,
 };
 
 const FIFO_SIZE = 1024;
@@ -195,8 +195,8 @@ export class Mpu6050 extends RegisterDevice {
     this.advance(nanos);
     if (this.readBurst) this.readBurst.n++;
     if (r === REG.FIFO_R_W) return this.fifoPop(nanos);
-    if (r === REG.FIFO_COUNTH) return (this.fifoCount >> 8) & 0xff;
-    if (r === REG.FIFO_COUNTL) return this.fifoCount & 0xff;
+    if (r === REG.FIFO_COUNT_H) return (this.fifoCount >> 8) & 0xff;
+    if (r === REG.FIFO_COUNT_L) return this.fifoCount & 0xff;
     const v = this.regs[r & 0x7f];
     if (r === REG.INT_STATUS || this.regs[REG.INT_PIN_CFG] & 0x10) this.regs[REG.INT_STATUS] = 0;
     return v;

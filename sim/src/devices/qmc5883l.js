@@ -8,6 +8,12 @@
 import { RegisterDevice } from './i2c-bus.js';
 import { SlotGrid } from './mpu6050.js';
 
+/** Register addresses (the driver's `imu_drivers::qmc5883::reg_l::TABLE`, checked by a test). */
+export const REG = {
+  DATA_X_LSB: 0x00, STATUS: 0x06, TEMP_LSB: 0x07, CONTROL1: 0x09, CONTROL2: 0x0a,
+  SET_RESET_PERIOD: 0x0b, CHIP_ID: 0x0d,
+};
+
 export const ODR_HZ = [10, 50, 100, 200];
 export const LSB_PER_UT = [120, 30]; // RNG 0 (±2 G), RNG 1 (±8 G)
 
@@ -26,7 +32,7 @@ export class Qmc5883l extends RegisterDevice {
 
   powerOnReset() {
     this.regs = new Uint8Array(16);
-    this.regs[0x0d] = 0xff;
+    this.regs[REG.CHIP_ID] = 0xff;
     this.nextSample = null;
     this.latest = null;
     this.dataRead = 0;
@@ -35,12 +41,12 @@ export class Qmc5883l extends RegisterDevice {
   }
 
   get continuous() {
-    return (this.regs[0x09] & 3) === 1;
+    return (this.regs[REG.CONTROL1] & 3) === 1;
   }
 
   /** Output period on the part's own oscillator (`clockError`: relative rate error). */
   get periodNanos() {
-    return 1e9 / (ODR_HZ[(this.regs[0x09] >> 2) & 3] * (1 + this.clockError));
+    return 1e9 / (ODR_HZ[(this.regs[REG.CONTROL1] >> 2) & 3] * (1 + this.clockError));
   }
 
   /** No measurement completes (DRDY never set) in [from, until) ns; the clock runs on. */
@@ -60,7 +66,7 @@ export class Qmc5883l extends RegisterDevice {
 
   produce(t) {
     const p = this.stream.magAt(t);
-    const rng = (this.regs[0x09] >> 4) & 1;
+    const rng = (this.regs[REG.CONTROL1] >> 4) & 1;
     const lsb = LSB_PER_UT[rng];
     const raw = new Int16Array(4);
     let ovl = false;
@@ -70,7 +76,7 @@ export class Qmc5883l extends RegisterDevice {
       raw[i] = Math.max(-32768, Math.min(32767, c));
     });
     raw[3] = Math.max(-32768, Math.min(32767, Math.round(p.temp * 100)));
-    const status = this.regs[0x06];
+    const status = this.regs[REG.STATUS];
     let s = 0x01 | (ovl ? 0x02 : 0);
     if (status & 0x01) {
       // The previous sample was never read: data skipped.
@@ -78,13 +84,13 @@ export class Qmc5883l extends RegisterDevice {
       this.stats.dataOverruns++;
     }
     if (ovl) this.stats.overflows++;
-    this.regs[0x06] = s;
+    this.regs[REG.STATUS] = s;
     for (let i = 0; i < 3; i++) {
-      this.regs[2 * i] = raw[i] & 0xff;
-      this.regs[2 * i + 1] = (raw[i] >> 8) & 0xff;
+      this.regs[REG.DATA_X_LSB + 2 * i] = raw[i] & 0xff;
+      this.regs[REG.DATA_X_LSB + 2 * i + 1] = (raw[i] >> 8) & 0xff;
     }
-    this.regs[0x07] = raw[3] & 0xff;
-    this.regs[0x08] = (raw[3] >> 8) & 0xff;
+    this.regs[REG.TEMP_LSB] = raw[3] & 0xff;
+    this.regs[REG.TEMP_LSB + 1] = (raw[3] >> 8) & 0xff;
     const sample = { k: this.stats.produced++, slot: this.slots.of(t, this.periodNanos), t, raw, served: 0 };
     if (this.record) this.samples.push(sample);
     this.latest = sample;
@@ -97,7 +103,7 @@ export class Qmc5883l extends RegisterDevice {
   }
 
   nextPointer(p) {
-    if (this.regs[0x0a] & 0x40 && p === 0x06) return 0x00; // ROL_PNT
+    if (this.regs[REG.CONTROL2] & 0x40 && p === REG.STATUS) return REG.DATA_X_LSB; // ROL_PNT
     return (p + 1) & 0x0f;
   }
 
@@ -107,10 +113,10 @@ export class Qmc5883l extends RegisterDevice {
     const v = this.regs[r];
     // A reader uses the data only after it has seen DRDY set (a roll-over read from 06H reads
     // the data bytes even when the status it got first was clear, and discards them).
-    if (r === 0x06 && v & 0x01) this.readySeen = true;
-    if (r <= 0x05) {
+    if (r === REG.STATUS && v & 0x01) this.readySeen = true;
+    if (r <= REG.DATA_X_LSB + 5) {
       // Reading any data register clears DRDY and DOR.
-      this.regs[0x06] &= ~0x05;
+      this.regs[REG.STATUS] &= ~0x05;
       this.dataRead |= 1 << r;
       if (this.dataRead === 0x3f && this.latest && !this.latest.served) {
         // Served: all six bytes read after a status read that showed DRDY. A sample that
@@ -129,13 +135,13 @@ export class Qmc5883l extends RegisterDevice {
   writeRegister(r, v, nanos) {
     this.advance(nanos);
     r &= 0x0f;
-    if (r === 0x0a && v & 0x80) {
+    if (r === REG.CONTROL2 && v & 0x80) {
       this.powerOnReset();
       return;
     }
-    if (r <= 0x08 || r === 0x0d) return; // read-only
+    if (r <= REG.TEMP_LSB + 1 || r === REG.CHIP_ID) return; // read-only
     this.regs[r] = v;
-    if (r === 0x09) this.nextSample = this.continuous ? nanos + this.periodNanos : null;
+    if (r === REG.CONTROL1) this.nextSample = this.continuous ? nanos + this.periodNanos : null;
   }
 
   /** Served samples: k, slot (see SlotGrid), t_ns, mx my mz temp [counts], served_ns. */
