@@ -263,6 +263,9 @@ impl Rows {
 pub fn open_with(args: &InputArgs, wanted: &[&str], optional: &[&str]) -> Result<Rows> {
     let path = &args.file;
     let shown = path.display().to_string();
+    if let Some(w) = wanted.iter().find(|w| [TIME, GAP_BEFORE].contains(w)) {
+        bail!("--column {w}: `{w}` says when the samples were taken, it is not a measurement to analyse; choose a sensor column (e.g. gz)");
+    }
     let file = File::open(path).with_context(|| format!("cannot open {shown}"))?;
     let size = file.metadata().map(|m| m.len()).unwrap_or(0);
     let progress = progress_bar(size);
@@ -564,6 +567,9 @@ mod tests {
         a.rate = Some(100.0);
         let r = load(&a, &["gz"]).unwrap();
         assert_eq!(r.column("gz").unwrap().unit, COUNTS);
+        // The time column is not a measurement.
+        let f = csv("t,gz\n0,1.5\n0.01,2.5\n");
+        assert!(err(&args(&f), &["t"]).contains("not a measurement"));
         // A contract file whose column holds only whole numbers: counts, not deg/s; with a
         // fraction anywhere, the contract's unit.
         let f = csv("t,gz\n0,131\n0.01,-262\n");
