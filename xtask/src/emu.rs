@@ -155,7 +155,7 @@ impl Sim {
 pub fn bench(args: &[String]) -> Result<()> {
     let elf = build_firmware()?;
     let sim = ensure_sim()?;
-    let seconds = arg_value(args, "--seconds").unwrap_or_else(|| "3".into());
+    let seconds = arg_value(args, "--seconds").unwrap_or_else(|| "12".into());
     let out = out_dir("emu")?;
     run(Command::new("node")
         .arg(sim.join("src/cli.js"))
