@@ -3,10 +3,11 @@
 //!
 //! # What it computes
 //! For every octave level `m = 2^k` (`k = 0..L`) it accumulates, exactly in `u128`, the sums of
-//! squared second differences of the phase `θ` (seed eq. 8–9, `θ[t] = Σ_{i<t} y_i`):
+//! squared second differences of the phase `θ` (Jaime et al., "Caracterización y calibración de
+//! unidades de medición inercial de bajo costo", eqs. 8–9; `θ[t] = Σ_{i<t} y_i`):
 //!
 //! ```text
-//! D2(t) = θ[t] − 2θ[t−m] + θ[t−2m]            (Allan, seed eq. 7 through eq. 9)
+//! D2(t) = θ[t] − 2θ[t−m] + θ[t−2m]            (Allan; Jaime et al. eqs. 7–9)
 //! D3(t) = θ[t] − 3θ[t−m] + 3θ[t−2m] − θ[t−3m] (Hadamard, third differences)
 //! ```
 //!
@@ -63,7 +64,7 @@ pub struct LevelSums {
 
 impl LevelSums {
     /// Overlapping Allan deviation in input units × `scale` (e.g. LSB → deg/s):
-    /// `σ² = Σ D2² / (2 n m²)` (seed eq. 7 with eq. 9; NIST SP 1065 eq. 11).
+    /// `σ² = Σ D2² / (2 n m²)` (Jaime et al. eq. 7 with eq. 9; NIST SP 1065 eq. 11).
     /// `None` when the level has no terms yet.
     pub fn oadev(&self, scale: f64) -> Option<f64> {
         if self.n2 == 0 {
