@@ -1,5 +1,5 @@
-//! Gyroscope scale and misalignment from rotations between static poses (the stretch
-//! goal), after Tedaldi et al. 2014 §IV-C: the accelerometer gives the direction of gravity in
+//! Gyroscope scale and misalignment from rotations between static poses, after Tedaldi et al.
+//! 2014 §IV-C: the accelerometer gives the direction of gravity in
 //! each static pose; integrating the corrected gyro over the move from pose k to pose k + 1
 //! must carry the first direction onto the second.
 //!
