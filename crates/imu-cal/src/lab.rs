@@ -34,15 +34,26 @@
 //!    identifiable from this data is added in turn and the model refitted on the same items. The
 //!    nested-model F-test (e.g. Seber & Wild, *Nonlinear Regression*, §5.3)
 //!    `F = ((RSS₀ − RSS₁)/Δp) / (RSS₁/(N − p₁))` tells whether the drop is significant for the Δp
-//!    extra parameters (p < [`ALPHA_EFFECT`]); among the significant ones the largest F wins.
+//!    extra parameters (p < [`ALPHA_EFFECT`]); the candidate model is then fitted with the robust
+//!    loss on its own and judged. A significant candidate is *admissible* when the current
+//!    model's residual is above the floor (a residual at the floor lacks nothing the data can
+//!    show, however significant a drop); among the admissible ones the largest F comes first.
 //!
-//! The same rule serves all three sensors; nothing is written for one effect.
+//! The same rule serves all three sensors; nothing is written for one effect. The workflow
+//! around it — candidates, the step before → after, the walk from model to model until adequate
+//! or nothing helps — is the project's one lab workflow, [`model_lab`]: [`CalLab`] implements
+//! [`model_lab::Lab`] with [`Model`] as its model, and its summary's `chi2_dof` is the variance
+//! ratio `s²/σ²` of item 4 (1 for a residual at the floor), `rms_residual` the residual RMS in
+//! the data's unit.
 pub use crate::error::CalError;
 use serde::Serialize;
+use std::fmt;
 
 mod analyse;
+mod reading;
 
-pub use analyse::{analyse, normalise_model, robust_fit};
+pub use analyse::{analyse, normalise_model, robust_fit, CalLab};
+pub use reading::reading;
 
 /// Significance level of the adequacy test.
 pub const ALPHA_ADEQUATE: f64 = 0.01;
@@ -72,6 +83,12 @@ pub enum Effect {
     SoftIron,
     SoftIron2d,
     Tilt,
+}
+
+impl fmt::Display for Effect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 impl Effect {
@@ -442,27 +459,6 @@ pub trait Problem {
     }
 }
 
-/// Evidence for one candidate effect.
-#[derive(Debug, Clone, Serialize)]
-pub struct Candidate {
-    /// The effect tried.
-    pub effect: Effect,
-    /// Residual RMS with it added (sensor unit), None when not identifiable.
-    pub residual_rms: Option<f64>,
-    /// The nested F statistic.
-    pub f: Option<f64>,
-    /// Its upper-tail probability.
-    pub p_value: Option<f64>,
-    /// Extra parameters.
-    pub extra_params: usize,
-    /// Why it was not tried, if so.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub skipped: Option<String>,
-    /// Evidence beyond the F-test, in words with numbers.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub evidence: Option<String>,
-}
-
 /// The one-word verdict.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -486,61 +482,113 @@ impl Verdict {
     }
 }
 
-/// The verdict on a model.
-#[derive(Debug, Clone, Serialize)]
-pub struct Diagnosis {
-    /// Adequate, not adequate or underdetermined.
-    pub verdict: Verdict,
-    /// True when the residual is consistent with the noise floor (never for an underdetermined
-    /// model).
-    pub adequate: bool,
-    /// Fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom per parameter.
-    pub underdetermined: bool,
-    /// Items excluded as outliers.
-    pub outliers: usize,
-    /// The missing effect, if one was found significant.
-    pub missing: Option<Effect>,
-    /// Evidence and physical explanation, in words with numbers and units.
-    pub explanation: String,
-    /// P(residual variance ≥ observed | complete model); NaN when it cannot be computed (no
-    /// noise in the data, no degree of freedom).
+/// The nested-model F-test of an effect added to a model (module docs, 5): both fitted on the
+/// items the smaller model kept.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NestedTest {
+    /// `F = ((RSS₀ − RSS₁)/Δp) / (RSS₁/(N − p₁))`.
+    pub f: f64,
+    /// Δp, the extra parameters.
+    pub extra_params: usize,
+    /// N − p₁, the larger model's residual degrees of freedom.
+    pub dof: f64,
+    /// Upper-tail probability of `f` under F(Δp, N − p₁).
     pub p_value: f64,
-    /// Every candidate tried.
-    pub candidates: Vec<Candidate>,
 }
 
-/// Residual RMS before → after adding the missing effect.
-#[derive(Debug, Clone, Serialize)]
-pub struct Step {
-    /// The effect added.
-    pub added: Effect,
-    /// Model after the step.
-    pub model: Vec<Effect>,
-    /// Residual RMS before (sensor unit).
-    pub residual_rms_before: f64,
-    /// Residual RMS after (sensor unit).
-    pub residual_rms_after: f64,
-    /// Parameters after the step.
-    pub params: Params,
-    /// Their standard errors.
-    pub sigma: Params,
-    /// Items excluded as outliers after the step.
-    pub outliers: usize,
-}
-
-/// A lab report: the fit, its residual against the floor, the diagnosis and the next step.
+/// A calibration model fitted and judged against the noise floor: the lab's model in the
+/// project's lab workflow ([`model_lab::Lab`], implemented by [`CalLab`]).
 #[derive(Debug, Clone)]
-pub struct Report {
-    /// The fit of the requested model.
+pub struct Model {
+    /// The robust fit (module docs, 1).
     pub fitted: Fitted,
-    /// Noise floor.
+    /// Noise floor of the data.
     pub floor: NoiseFloor,
     /// Expected residual RMS for a complete model: σ·√((N − p)/N).
     pub expected_rms: f64,
-    /// Verdict.
+    /// The residual variance per degree of freedom over the floor's variance, `s²/σ²`: the
+    /// statistic of the adequacy test, F(N − p, ν)-distributed under a complete model (NaN for
+    /// data without noise).
+    pub ratio: f64,
+    /// P(F ≥ `ratio`); NaN when it cannot be computed (no noise in the data, no degree of
+    /// freedom).
+    pub p_value: f64,
+    /// The residual is at the floor (by the test or within the practical margin).
+    pub fits_floor: bool,
+    /// Fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom per parameter.
+    pub underdetermined: bool,
+    /// Adequate, not adequate or underdetermined.
+    pub verdict: Verdict,
+    /// Items excluded as outliers.
+    pub outliers: usize,
+    /// The test of the effect added last against the model it was added to, when this model
+    /// was reached by adding one (a candidate, a step); None for a model fitted directly.
+    pub nested: Option<NestedTest>,
+}
+
+impl Model {
+    /// True when the residual is consistent with the noise floor with enough degrees of freedom
+    /// (never for an underdetermined model).
+    pub fn adequate(&self) -> bool {
+        self.verdict == Verdict::Adequate
+    }
+
+    /// The effects in the model, sorted.
+    pub fn effects(&self) -> &[Effect] {
+        &self.fitted.model
+    }
+}
+
+/// A candidate edit of a calibration model, refitted and tested: the workflow's candidate.
+pub type Candidate = model_lab::Candidate<Effect, Model>;
+/// One step of the calibration lab: the workflow's step record.
+pub type Step = model_lab::Step<Effect>;
+
+/// An effect of the sensor that was not tried on a model, and why (not identifiable from these
+/// data, no evidence for it in the time domain, or its fit failed).
+#[derive(Debug, Clone, Serialize)]
+pub struct NotTried {
+    /// The effect.
+    pub effect: Effect,
+    /// Why it was not tried, in words with numbers.
+    pub reason: String,
+}
+
+/// What the lab says of a model.
+#[derive(Debug, Clone)]
+pub struct Diagnosis {
+    /// The missing effect: the first admissible candidate's, if any.
+    pub missing: Option<Effect>,
+    /// Evidence and physical explanation, in words with numbers and units.
+    pub explanation: String,
+    /// Every candidate tried, in the lab's order of preference (admissible ones first, then by
+    /// decreasing F).
+    pub candidates: Vec<Candidate>,
+    /// The sensor's other effects, not tried, with the reason.
+    pub not_tried: Vec<NotTried>,
+}
+
+/// A lab report: the model, the diagnosis and the next step.
+#[derive(Debug, Clone)]
+pub struct Report {
+    /// The judged model.
+    pub model: Model,
+    /// Verdict, explanation and candidates.
     pub diagnosis: Diagnosis,
     /// The step with the missing effect added, when one is missing.
     pub step: Option<Step>,
+}
+
+impl Report {
+    /// The model after the step (the first admissible candidate's), when one is missing.
+    pub fn next(&self) -> Option<&Model> {
+        self.step.as_ref()?;
+        self.diagnosis
+            .candidates
+            .iter()
+            .find(|c| c.admissible)
+            .map(|c| &c.model)
+    }
 }
 
 #[cfg(test)]

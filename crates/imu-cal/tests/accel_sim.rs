@@ -49,7 +49,7 @@ fn hidden_misalignment_is_diagnosed_and_recovered() {
         let (p, _) = problem(run, truth);
         let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
         assert!(
-            !r.diagnosis.adequate,
+            !r.model.adequate(),
             "run {run}: {}",
             r.diagnosis.explanation
         );
@@ -59,16 +59,16 @@ fn hidden_misalignment_is_diagnosed_and_recovered() {
             "run {run}: {}",
             r.diagnosis.explanation
         );
-        let step = r.step.unwrap();
-        assert!(step.residual_rms_after < 0.2 * step.residual_rms_before);
-        let r2 = analyse(&p, &step.model).unwrap();
+        let step = r.step.as_ref().unwrap();
+        assert!(step.after.rms_residual < 0.2 * step.before.rms_residual);
+        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
         assert!(
-            r2.diagnosis.adequate,
+            r2.model.adequate(),
             "run {run}: {}",
             r2.diagnosis.explanation
         );
-        let m = r2.fitted.params.misalignment_deg.unwrap();
-        let ms = r2.fitted.sigma.misalignment_deg.unwrap();
+        let m = r2.model.fitted.params.misalignment_deg.unwrap();
+        let ms = r2.model.fitted.sigma.misalignment_deg.unwrap();
         for k in 0..3 {
             assert!(
                 (m[k] - truth[k]).abs() < 0.1,
@@ -80,11 +80,11 @@ fn hidden_misalignment_is_diagnosed_and_recovered() {
                 "run {run}: misalignment {m:?} ± {ms:?}"
             );
         }
-        let o = r2.fitted.params.offset.unwrap();
+        let o = r2.model.fitted.params.offset.unwrap();
         for (k, t) in [0.35, -0.2, 0.5].iter().enumerate() {
             assert!((o[k] - t).abs() < 0.01, "run {run}: offset {o:?}");
         }
-        let s = r2.fitted.params.scale.unwrap();
+        let s = r2.model.fitted.params.scale.unwrap();
         for (k, t) in [1.02, 0.985, 1.01].iter().enumerate() {
             assert!((s[k] - t).abs() < 2e-3, "run {run}: scale {s:?}");
         }
@@ -96,15 +96,14 @@ fn control_without_misalignment_is_adequate() {
     for run in 11..=14 {
         let (p, _) = problem(run, [0.0; 3]);
         let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
-        assert!(
-            r.diagnosis.adequate,
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
         assert_eq!(r.diagnosis.missing, None);
         // Residual RMS close to the floor: within a factor 1.5 (40 poses: the RMS of 34 d.o.f.
         // scatters by ≈ ±12 %).
-        assert!(r.fitted.rms() < 1.5 * r.expected_rms, "run {run}");
+        assert!(
+            r.model.fitted.rms() < 1.5 * r.model.expected_rms,
+            "run {run}"
+        );
     }
 }
 
@@ -115,7 +114,7 @@ fn offset_only_model_misses_scale_or_is_flagged() {
     for run in 21..=23 {
         let (p, _) = problem(run, [0.0; 3]);
         let r = analyse(&p, &[Effect::Offset]).unwrap();
-        assert!(!r.diagnosis.adequate);
+        assert!(!r.model.adequate());
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Scale),
@@ -148,7 +147,7 @@ fn abutting_poses_are_split_at_the_jump() {
     }
     let p = AccelProblem::new(poses, G_STANDARD);
     let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
-    assert!(r.diagnosis.adequate, "{}", r.diagnosis.explanation);
+    assert!(r.model.adequate(), "{}", r.diagnosis.explanation);
 }
 
 /// The reported residual RMS is what the reported parameters give for the poses used, and
@@ -161,7 +160,7 @@ fn residual_recomputes_and_every_parameter_has_an_uncertainty() {
         vec![Effect::Offset, Effect::Scale, Effect::Misalignment],
     ] {
         let r = analyse(&p, &model).unwrap();
-        let f = &r.fitted;
+        let f = &r.model.fitted;
         let s: Vec<f64> = p
             .poses
             .iter()

@@ -78,7 +78,7 @@ fn hidden_gyro_scale_is_diagnosed_and_recovered() {
             assert!((p.bias[k] - BIAS[k]).abs() < 0.01, "bias {:?}", p.bias);
         }
         let r = analyse(&p, &[]).unwrap();
-        assert!(!r.diagnosis.adequate);
+        assert!(!r.model.adequate());
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Scale),
@@ -87,11 +87,11 @@ fn hidden_gyro_scale_is_diagnosed_and_recovered() {
         );
         let r1 = analyse(&p, &[Effect::Scale]).unwrap();
         assert!(
-            r1.diagnosis.adequate,
+            r1.model.adequate(),
             "run {run}: {}",
             r1.diagnosis.explanation
         );
-        let got = r1.fitted.params.scale.unwrap();
+        let got = r1.model.fitted.params.scale.unwrap();
         for k in 0..3 {
             assert!((got[k] - s[k]).abs() < 3e-3, "run {run}: scale {got:?}");
         }
@@ -105,7 +105,7 @@ fn hidden_gyro_misalignment_is_diagnosed_and_recovered() {
     for run in 11..=13 {
         let p = problem(run, s, m);
         let r = analyse(&p, &[Effect::Scale]).unwrap();
-        assert!(!r.diagnosis.adequate, "run {run}");
+        assert!(!r.model.adequate(), "run {run}");
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Misalignment),
@@ -114,11 +114,11 @@ fn hidden_gyro_misalignment_is_diagnosed_and_recovered() {
         );
         let r1 = analyse(&p, &[Effect::Scale, Effect::Misalignment]).unwrap();
         assert!(
-            r1.diagnosis.adequate,
+            r1.model.adequate(),
             "run {run}: {}",
             r1.diagnosis.explanation
         );
-        let got = r1.fitted.params.gyro_misalignment_deg.unwrap();
+        let got = r1.model.fitted.params.gyro_misalignment_deg.unwrap();
         for k in 0..6 {
             assert!(
                 (got[k] - m[k]).abs() < 0.15,
@@ -138,7 +138,7 @@ fn noise_floor_matches_ideal_residual() {
         .map(|run| {
             let p = problem(run, [1.0; 3], [0.0; 6]);
             let r = analyse(&p, &[]).unwrap();
-            r.fitted.rms() / r.expected_rms
+            r.model.fitted.rms() / r.model.expected_rms
         })
         .collect();
     let m = ratios.iter().sum::<f64>() / ratios.len() as f64;
@@ -150,11 +150,7 @@ fn control_ideal_gyro_is_adequate_without_effects() {
     for run in 21..=23 {
         let p = problem(run, [1.0; 3], [0.0; 6]);
         let r = analyse(&p, &[]).unwrap();
-        assert!(
-            r.diagnosis.adequate,
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
     }
 }
 
@@ -164,7 +160,7 @@ fn control_ideal_gyro_is_adequate_without_effects() {
 fn residual_recomputes_and_parameters_have_uncertainties() {
     let p = problem(9, [1.02, 0.99, 1.01], [0.5, -0.3, 0.4, 0.2, -0.6, 0.3]);
     let r = analyse(&p, &[Effect::Scale, Effect::Misalignment]).unwrap();
-    let f = &r.fitted;
+    let f = &r.model.fitted;
     let s: Vec<f64> = p
         .moves
         .iter()

@@ -35,19 +35,19 @@ fn temperature_dependence_is_diagnosed_and_recovered() {
         let p = GyroProblem::new([&g[0], &g[1], &g[2]], Some(&t), 50).unwrap();
         let r = analyse(&p, &[Effect::Bias]).unwrap();
         assert!(
-            !r.diagnosis.adequate,
+            !r.model.adequate(),
             "run {run}: {}",
             r.diagnosis.explanation
         );
         assert_eq!(r.diagnosis.missing, Some(Effect::Temperature));
-        let r2 = analyse(&p, &r.step.unwrap().model).unwrap();
+        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
         assert!(
-            r2.diagnosis.adequate,
+            r2.model.adequate(),
             "run {run}: {}",
             r2.diagnosis.explanation
         );
-        let kc = r2.fitted.params.temp_coeff.unwrap();
-        let b = r2.fitted.params.bias.unwrap();
+        let kc = r2.model.fitted.params.temp_coeff.unwrap();
+        let b = r2.model.fitted.params.bias.unwrap();
         for j in 0..3 {
             assert!((kc[j] - k[j]).abs() < 5e-4, "run {run}: k {kc:?}");
             assert!((b[j] - PAPER_BIAS[j]).abs() < 2e-3, "run {run}: b {b:?}");
@@ -61,11 +61,7 @@ fn control_constant_bias_is_adequate() {
         let (g, t) = recording(run, [0.0; 3]);
         let p = GyroProblem::new([&g[0], &g[1], &g[2]], Some(&t), 50).unwrap();
         let r = analyse(&p, &[Effect::Bias]).unwrap();
-        assert!(
-            r.diagnosis.adequate,
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
         assert_eq!(r.diagnosis.missing, None);
     }
 }
@@ -77,11 +73,11 @@ fn without_temperature_column_the_effect_is_not_offered() {
     let r = analyse(&p, &[Effect::Bias]).unwrap();
     let c = r
         .diagnosis
-        .candidates
+        .not_tried
         .iter()
         .find(|c| c.effect == Effect::Temperature)
         .unwrap();
-    assert_eq!(c.skipped.as_deref(), Some("no temperature column"));
+    assert_eq!(c.reason, "no temperature column");
     assert!(analyse(&p, &[Effect::Bias, Effect::Temperature]).is_err());
 }
 
@@ -100,11 +96,11 @@ fn paper_gyro_bias_worked_example() {
     });
     let p = GyroProblem::new([&g[0], &g[1], &g[2]], None, 60).unwrap();
     let r = analyse(&p, &[Effect::Bias]).unwrap();
-    let b = r.fitted.params.bias.unwrap();
+    let b = r.model.fitted.params.bias.unwrap();
     for j in 0..3 {
         assert!((b[j] - PAPER_BIAS[j]).abs() < 5e-4, "{b:?}");
     }
-    assert!(r.diagnosis.adequate, "{}", r.diagnosis.explanation);
+    assert!(r.model.adequate(), "{}", r.diagnosis.explanation);
 }
 
 /// A constant gyro column (a stuck sensor, or the wrong column) is a clear refusal naming the
@@ -129,7 +125,7 @@ fn residual_recomputes_and_parameters_have_uncertainties() {
     let (g, t) = recording(77, [0.004, -0.003, 0.002]);
     let p = GyroProblem::new([&g[0], &g[1], &g[2]], Some(&t), 50).unwrap();
     let r = analyse(&p, &[Effect::Bias, Effect::Temperature]).unwrap();
-    let f = &r.fitted;
+    let f = &r.model.fitted;
     let nb = p.blocks[0].len();
     let s: f64 = (0..3)
         .flat_map(|j| (0..nb).map(move |i| (j, i)))

@@ -34,7 +34,7 @@ fn hidden_3d_soft_iron_is_diagnosed_and_recovered() {
         let p = MagProblem::new(sphere_data(run, soft(), h), None).unwrap();
         assert!(p.plane.is_none());
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert!(!r.diagnosis.adequate, "run {run}");
+        assert!(!r.model.adequate(), "run {run}");
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::SoftIron),
@@ -44,31 +44,30 @@ fn hidden_3d_soft_iron_is_diagnosed_and_recovered() {
         // soft_iron_2d must have been refused for 3-D data, with the reason.
         let c2d = r
             .diagnosis
-            .candidates
+            .not_tried
             .iter()
             .find(|c| c.effect == Effect::SoftIron2d)
             .unwrap();
-        assert!(c2d.skipped.as_ref().unwrap().contains("3-D"));
-        let step = r.step.unwrap();
-        let r2 = analyse(&p, &step.model).unwrap();
+        assert!(c2d.reason.contains("3-D"));
+        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
         assert!(
-            r2.diagnosis.adequate,
+            r2.model.adequate(),
             "run {run}: {}",
             r2.diagnosis.explanation
         );
-        assert!(r2.fitted.rms() < 1.2 * r2.expected_rms);
-        let hi = r2.fitted.params.hard_iron.unwrap();
+        assert!(r2.model.fitted.rms() < 1.2 * r2.model.expected_rms);
+        let hi = r2.model.fitted.params.hard_iron.unwrap();
         for k in 0..3 {
             assert!((hi[k] - h[k]).abs() < 0.1, "run {run}: hard iron {hi:?}");
         }
         // The correction must be D⁻¹ up to the det-1 normalisation: S·D ∝ I.
-        let s = Matrix3::from_row_slice(&r2.fitted.params.soft_iron.unwrap().concat());
+        let s = Matrix3::from_row_slice(&r2.model.fitted.params.soft_iron.unwrap().concat());
         let sd = s * soft();
         let k = sd.determinant().cbrt();
         let e = (sd / k - Matrix3::identity()).abs().max();
         assert!(e < 5e-3, "run {run}: S·D/k − I max {e}");
         // F·k is the true field seen through S: F_fit = 50·k.
-        let f = r2.fitted.params.field.unwrap();
+        let f = r2.model.fitted.params.field.unwrap();
         assert!((f - F * k).abs() < 0.1, "run {run}: F {f} vs {}", F * k);
     }
 }
@@ -82,13 +81,9 @@ fn control_hard_iron_only_is_adequate() {
         )
         .unwrap();
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert!(
-            r.diagnosis.adequate,
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
         assert_eq!(r.diagnosis.missing, None);
-        assert!((r.fitted.params.field.unwrap() - F).abs() < 0.1);
+        assert!((r.model.fitted.params.field.unwrap() - F).abs() < 0.1);
     }
 }
 
@@ -142,14 +137,14 @@ fn planar_soft_iron_is_the_papers_2d_effect() {
         );
         let c3 = r
             .diagnosis
-            .candidates
+            .not_tried
             .iter()
             .find(|c| c.effect == Effect::SoftIron)
             .unwrap();
-        assert!(c3.skipped.as_ref().unwrap().contains("planar"));
-        let r2 = analyse(&p, &r.step.unwrap().model).unwrap();
-        assert!(r2.diagnosis.adequate, "{}", r2.diagnosis.explanation);
-        let e = r2.fitted.params.soft_iron_2d.unwrap();
+        assert!(c3.reason.contains("planar"));
+        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
+        assert!(r2.model.adequate(), "{}", r2.diagnosis.explanation);
+        let e = r2.model.fitted.params.soft_iron_2d.unwrap();
         assert!((e.theta_deg - 30.0).abs() < 0.5, "θ {}", e.theta_deg);
         assert!((e.sigma - 0.8).abs() < 5e-3, "σ {}", e.sigma);
         // r, q: the circle of radius 25 µT was stretched to r = 25/0.8 along θ.
@@ -157,10 +152,10 @@ fn planar_soft_iron_is_the_papers_2d_effect() {
             (e.r - 31.25).abs() < 0.1 && (e.q - 25.0).abs() < 0.1,
             "{e:?}"
         );
-        let hi = r2.fitted.params.hard_iron.unwrap();
+        let hi = r2.model.fitted.params.hard_iron.unwrap();
         // The applied matrix undoes the distortion without turning the frame: S·D ≈ I
         // (so headings are kept), to 5e-3 (σ is known to ≈ 1e-3).
-        let s = Matrix3::from_row_slice(&r2.fitted.params.soft_iron.unwrap().concat());
+        let s = Matrix3::from_row_slice(&r2.model.fitted.params.soft_iron.unwrap().concat());
         let th = 30f64.to_radians();
         let rot = Matrix3::new(
             th.cos(),
@@ -214,7 +209,7 @@ fn paper_hard_iron_worked_example() {
     let mm = hard_iron_minmax(&m);
     let p = MagProblem::new(m, None).unwrap();
     let r = analyse(&p, &[Effect::HardIron]).unwrap();
-    let hi = r.fitted.params.hard_iron.unwrap();
+    let hi = r.model.fitted.params.hard_iron.unwrap();
     for k in 0..3 {
         assert!((mm[k] - h[k]).abs() < 0.05, "min/max {mm:?}");
         assert!((hi[k] - h[k]).abs() < 0.05, "sphere {hi:?}");
@@ -224,7 +219,7 @@ fn paper_hard_iron_worked_example() {
     for k in 0..3 {
         assert!((hi[k] * 1e4 - paper_ug[k]).abs() < 500.0);
     }
-    assert!((r.fitted.params.field.unwrap() - b0.norm()).abs() < 0.05);
+    assert!((r.model.fitted.params.field.unwrap() - b0.norm()).abs() < 0.05);
 }
 
 /// Degenerate recordings (a sensor that never moved, or moved along a line) are refused with
@@ -290,20 +285,20 @@ fn half_sphere_with_one_percent_outliers() {
             "run {run}: least squares should be pulled off by the outliers"
         );
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert_eq!(r.diagnosis.outliers, hit.len(), "run {run}");
-        for (j, u) in r.fitted.used.iter().enumerate() {
+        assert_eq!(r.model.outliers, hit.len(), "run {run}");
+        for (j, u) in r.model.fitted.used.iter().enumerate() {
             assert_eq!(!u, hit.contains(&j), "run {run}: sample {j}");
         }
         assert!(
-            r.diagnosis.adequate
+            r.model.adequate()
                 && r.diagnosis
                     .explanation
                     .contains(&format!("{} samples beyond 6σ excluded", hit.len())),
             "run {run}: {}",
             r.diagnosis.explanation
         );
-        let hi = r.fitted.params.hard_iron.unwrap();
-        let hs = r.fitted.sigma.hard_iron.unwrap();
+        let hi = r.model.fitted.params.hard_iron.unwrap();
+        let hs = r.model.fitted.sigma.hard_iron.unwrap();
         assert!(off(hi) < 0.1, "run {run}: {hi:?}");
         for k in 0..3 {
             assert!(
@@ -311,7 +306,7 @@ fn half_sphere_with_one_percent_outliers() {
                 "run {run}: {hi:?} ± {hs:?}"
             );
         }
-        assert!((recomputed_rms(&p, &r.fitted) / r.fitted.rms() - 1.0).abs() < 1e-9);
+        assert!((recomputed_rms(&p, &r.model.fitted) / r.model.fitted.rms() - 1.0).abs() < 1e-9);
     }
 }
 
@@ -340,7 +335,7 @@ fn level_turn_with_tilt_wobble_is_tilt_not_soft_iron() {
         let p = MagProblem::new(m, None).unwrap();
         assert_eq!(p.plane, Some([0, 1]));
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert!(!r.diagnosis.adequate);
+        assert!(!r.model.adequate());
         assert_eq!(
             r.diagnosis.missing,
             Some(Effect::Tilt),
@@ -351,29 +346,25 @@ fn level_turn_with_tilt_wobble_is_tilt_not_soft_iron() {
             .diagnosis
             .candidates
             .iter()
-            .find(|c| c.effect == Effect::Tilt)
+            .find(|c| c.edit.add == [Effect::Tilt])
             .unwrap();
-        assert!(c
-            .evidence
-            .as_ref()
-            .unwrap()
-            .contains("follows the out-of-plane component mz"));
-        let r2 = analyse(&p, &r.step.unwrap().model).unwrap();
+        assert!(c.reason.contains("follows the out-of-plane component mz"));
+        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
         assert!(
-            r2.diagnosis.adequate,
+            r2.model.adequate(),
             "run {run}: {}",
             r2.diagnosis.explanation
         );
-        let hi = r2.fitted.params.hard_iron.unwrap();
-        let hs = r2.fitted.sigma.hard_iron.unwrap();
+        let hi = r2.model.fitted.params.hard_iron.unwrap();
+        let hs = r2.model.fitted.sigma.hard_iron.unwrap();
         for k in 0..3 {
             assert!(
                 (hi[k] - h[k]).abs() < 4.0 * hs[k],
                 "run {run}: {hi:?} ± {hs:?}"
             );
         }
-        assert!((r2.fitted.params.field.unwrap() - b.norm()).abs() < 0.2);
-        assert!((recomputed_rms(&p, &r2.fitted) / r2.fitted.rms() - 1.0).abs() < 1e-9);
+        assert!((r2.model.fitted.params.field.unwrap() - b.norm()).abs() < 0.2);
+        assert!((recomputed_rms(&p, &r2.model.fitted) / r2.model.fitted.rms() - 1.0).abs() < 1e-9);
     }
 }
 
@@ -396,27 +387,54 @@ fn residual_recomputes_and_every_parameter_has_an_uncertainty() {
         (&p2, vec![Effect::HardIron, Effect::SoftIron2d]),
     ] {
         let r = analyse(p, &model).unwrap();
-        let got = recomputed_rms(p, &r.fitted);
+        let got = recomputed_rms(p, &r.model.fitted);
         assert!(
-            (got / r.fitted.rms() - 1.0).abs() < 1e-9,
+            (got / r.model.fitted.rms() - 1.0).abs() < 1e-9,
             "{model:?}: {got} vs {}",
-            r.fitted.rms()
+            r.model.fitted.rms()
         );
-        let s = r.fitted.sigma.values();
-        assert_eq!(s.len(), r.fitted.params.values().len());
+        let s = r.model.fitted.sigma.values();
+        assert_eq!(s.len(), r.model.fitted.params.values().len());
         assert!(
             s.iter().all(|v| v.is_finite() && *v >= 0.0),
             "{model:?}: {s:?}"
         );
-        let hs = r.fitted.sigma.hard_iron.unwrap();
+        let hs = r.model.fitted.sigma.hard_iron.unwrap();
         let fitted_axes = if p.plane.is_some() { 2 } else { 3 };
         assert!(
             hs[..fitted_axes].iter().all(|v| *v > 0.0),
             "{model:?}: {hs:?}"
         );
-        assert!(r.fitted.sigma.field.unwrap() > 0.0);
-        if let Some(e) = r.fitted.sigma.soft_iron_2d {
+        assert!(r.model.fitted.sigma.field.unwrap() > 0.0);
+        if let Some(e) = r.model.fitted.sigma.soft_iron_2d {
             assert!(e.theta_deg > 0.0 && e.sigma > 0.0 && e.r > 0.0, "{e:?}");
         }
     }
+}
+
+/// The project's one lab workflow (`model_lab::walk`) on the calibration lab: from hard iron
+/// alone it adds soft iron, the statistic falls to the noise floor, and it stops adequate; on a
+/// control it takes no step.
+#[test]
+fn the_walk_adds_soft_iron_and_stops_adequate() {
+    use imu_cal::lab::CalLab;
+    let h = Vector3::new(12.0, -7.5, 20.0);
+    let p = MagProblem::new(sphere_data(7, soft(), h), None).unwrap();
+    let lab = CalLab::new(&p);
+    let start = lab.fit(&[Effect::HardIron]).unwrap();
+    let w = model_lab::walk(&lab, start, 4).unwrap();
+    assert_eq!(w.stop, model_lab::Stop::Adequate);
+    assert_eq!(w.steps.len(), 1);
+    let s = &w.steps[0];
+    assert_eq!(s.edit.add, vec![Effect::SoftIron]);
+    assert!(s.before.chi2_dof > 50.0 && s.after.chi2_dof < 1.5, "{s:?}");
+    assert!(!s.before.adequate && s.after.adequate);
+    assert!(s.after.rms_residual < 0.3 * s.before.rms_residual);
+    assert_eq!(w.last().effects(), &[Effect::HardIron, Effect::SoftIron]);
+    // Control: hard iron only in the data, no step.
+    let p = MagProblem::new(sphere_data(8, Matrix3::identity(), h), None).unwrap();
+    let lab = CalLab::new(&p);
+    let w = model_lab::walk(&lab, lab.fit(&[Effect::HardIron]).unwrap(), 4).unwrap();
+    assert!(w.steps.is_empty(), "{:?}", w.steps);
+    assert_eq!(w.stop, model_lab::Stop::Adequate);
 }

@@ -248,3 +248,109 @@ fn abutting_poses_are_separate_poses() {
     ]));
     assert_eq!(v["n_residuals"], 24, "{v}");
 }
+
+/// A magnetometer turned slowly over the sphere through soft iron (a stretched, sheared ellipsoid) and
+/// hard iron, with 0.2 µT of white noise per axis, at 100 Hz: the contract's CSV.
+fn soft_iron_sphere(dir: &Path) -> PathBuf {
+    let mut s: u64 = 0x9E37_79B9_7F4A_7C15;
+    let mut uniform = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut gauss = || {
+        let (u, v) = (uniform().max(1e-300), uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    let a = [[1.12, 0.06, 0.0], [0.06, 0.91, 0.03], [0.0, 0.03, 1.02]];
+    let h = [12.0, -7.0, 25.0];
+    let mut text = String::from("t,mx,my,mz\n");
+    for k in 0..3000 {
+        // A slow spiral from pole to pole, 24 turns: consecutive samples a few µT apart, as
+        // when the board is turned by hand.
+        let z: f64 = 2.0 * (k as f64 + 0.5) / 3000.0 - 1.0;
+        let phi = k as f64 * 0.05;
+        let r = (1.0 - z * z).sqrt();
+        let b = [50.0 * r * phi.cos(), 50.0 * r * phi.sin(), 50.0 * z];
+        let m: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| a[i][j] * b[j]).sum::<f64>() + h[i] + 0.2 * gauss())
+            .collect();
+        text += &format!(
+            "{:.3},{:.4},{:.4},{:.4}\n",
+            k as f64 * 0.01,
+            m[0],
+            m[1],
+            m[2]
+        );
+    }
+    let p = dir.join("soft_iron_sphere.csv");
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn auto_walks_from_hard_iron_to_soft_iron_and_stops_adequate() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = soft_iron_sphere(dir.path());
+    let out = run_ok(["calibrate", "mag", f.to_str().unwrap(), "--auto", "--json"]);
+    let v = json(&out);
+    let steps = v["steps"].as_array().expect("steps with --auto");
+    assert_eq!(steps.len(), 1, "{v}");
+    let s = &steps[0];
+    assert_eq!(s["added"], serde_json::json!(["soft_iron"]));
+    let (before, after) = (
+        s["chi2_dof_before"].as_f64().unwrap(),
+        s["chi2_dof_after"].as_f64().unwrap(),
+    );
+    assert!(before > 50.0 && after < 1.5, "s²/σ² {before} → {after}");
+    assert!(
+        s["rms_residual_after"].as_f64().unwrap()
+            < 0.3 * s["rms_residual_before"].as_f64().unwrap()
+    );
+    assert_eq!(
+        (
+            s["adequate_before"].as_bool(),
+            s["adequate_after"].as_bool()
+        ),
+        (Some(false), Some(true))
+    );
+    assert_eq!(s["rms_unit"], "µT");
+    assert_eq!(v["stop"], "the model is adequate");
+    assert_eq!(v["model"], serde_json::json!(["hard_iron", "soft_iron"]));
+    assert_eq!(v["diagnosis"]["adequate"], true);
+    // The final model's hard iron is the truth within 4σ.
+    for (i, truth) in [12.0, -7.0, 25.0].into_iter().enumerate() {
+        let (x, sx) = (
+            v["params"]["hard_iron"][i].as_f64().unwrap(),
+            v["sigma"]["hard_iron"][i].as_f64().unwrap(),
+        );
+        assert!(
+            (x - truth).abs() < 4.0 * sx + 1e-9,
+            "hard iron {i}: {x} ± {sx}, truth {truth}"
+        );
+    }
+    // Without --auto the same file reports the model it was given and no walk.
+    let v = json(&run_ok(["calibrate", "mag", f.to_str().unwrap(), "--json"]));
+    assert!(v.get("steps").is_none() && v.get("stop").is_none());
+    assert_eq!(v["model"], serde_json::json!(["hard_iron"]));
+    assert_eq!(v["step"]["added"], serde_json::json!(["soft_iron"]));
+}
+
+#[test]
+fn auto_on_the_real_tilt_sphere_names_soft_iron_and_says_what_is_left() {
+    let mut a = vec!["calibrate", "mag"];
+    let f = tilt_sphere();
+    a.push(&f);
+    a.extend(SPHERE);
+    a.extend(["--auto", "--json"]);
+    let v = json(&run_ok(a));
+    let steps = v["steps"].as_array().unwrap();
+    assert_eq!(steps[0]["added"], serde_json::json!(["soft_iron"]));
+    assert!(
+        steps[0]["chi2_dof_after"].as_f64().unwrap()
+            < 0.1 * steps[0]["chi2_dof_before"].as_f64().unwrap()
+    );
+    assert_eq!(v["stop"], "no effect of the vocabulary helps further");
+    assert_eq!(v["diagnosis"]["adequate"], false);
+}

@@ -77,6 +77,20 @@ pub struct Step<E> {
     pub reason: String,
 }
 
+impl<E: Clone> Step<E> {
+    /// The step that applies candidate `c` to a model summarised by `before`.
+    pub fn of<M>(before: Summary, c: &Candidate<E, M>) -> Step<E> {
+        Step {
+            edit: c.edit.clone(),
+            before,
+            after: c.summary.clone(),
+            p_value: c.p_value,
+            reading: c.reading.clone(),
+            reason: c.reason.clone(),
+        }
+    }
+}
+
 /// Why a walk ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stop {
@@ -171,16 +185,8 @@ pub fn walk<L: Lab>(
             });
         }
         before.adequate = false;
-        let c = cands[best].clone();
-        steps.push(Step {
-            edit: c.edit,
-            before,
-            after: c.summary,
-            p_value: c.p_value,
-            reading: c.reading,
-            reason: c.reason,
-        });
-        models.push(c.model);
+        steps.push(Step::of(before, &cands[best]));
+        models.push(cands[best].model.clone());
     }
 }
 

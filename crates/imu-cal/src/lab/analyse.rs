@@ -1,9 +1,12 @@
 //! The lab's rule (module docs of `lab`): the robust fit, the verdict, the candidates and the
-//! step.
+//! diagnosis, with [`CalLab`], the calibration problem as an instance of the project's lab
+//! workflow.
+use model_lab::{Edit, Lab, Summary};
+
 use super::{
-    CalError, Candidate, Diagnosis, Effect, Fitted, NoiseFloor, Problem, Report, Step, Verdict,
-    ALPHA_ADEQUATE, ALPHA_EFFECT, DOF_PER_PARAMETER, MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS,
-    PRACTICAL_MARGIN, ROBUST_ROUNDS,
+    reading, CalError, Candidate, Diagnosis, Effect, Fitted, Model, NestedTest, NoiseFloor,
+    NotTried, Problem, Report, Step, Verdict, ALPHA_ADEQUATE, ALPHA_EFFECT, DOF_PER_PARAMETER,
+    MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
 };
 use crate::solve::{f_sf, mad_sigma, median};
 
@@ -49,11 +52,20 @@ pub fn robust_fit(
     model: &[Effect],
     floor: &NoiseFloor,
 ) -> Result<Fitted, CalError> {
+    let first = p.fit_items(model, &vec![true; p.n()])?;
+    robust_from(p, model, floor, first)
+}
+
+/// [`robust_fit`] from `first`, the least-squares fit of every item.
+fn robust_from(
+    p: &dyn Problem,
+    model: &[Effect],
+    floor: &NoiseFloor,
+    first: Fitted,
+) -> Result<Fitted, CalError> {
     let n = p.n();
     let per = p.residuals_per_item();
-    let all = vec![true; n];
-    let first = p.fit_items(model, &all)?;
-    let mut keep = all.clone();
+    let mut keep = vec![true; n];
     let mut fit = first.clone();
     for _ in 0..ROBUST_ROUNDS {
         let used: Vec<f64> = fit.used_residuals().collect();
@@ -86,247 +98,372 @@ pub fn robust_fit(
     )))
 }
 
-/// Run the lab on a problem and a model (module docs).
-pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
-    let model = normalise_model(p, model)?;
-    let floor = p.noise_floor();
-    let fitted = robust_fit(p, &model, &floor)?;
-    let keep = kept_items(p, &fitted);
-    let outliers = keep.iter().filter(|k| !**k).count();
-    let n = fitted.n_used() as f64;
-    let k = fitted.n_params as f64;
-    let dof = n - k;
-    let underdetermined = k > 0.0 && dof < DOF_PER_PARAMETER * k;
-    let dof1 = dof.max(1.0);
-    let expected_rms = floor.sigma * (dof1 / n.max(1.0)).sqrt();
-    let s2 = fitted.rss() / dof1;
-    let rms = fitted.rms();
-    let unit = p.unit();
-    let noiseless = floor.sigma == 0.0;
-    let ratio = if noiseless {
-        f64::NAN
-    } else {
-        s2 / (floor.sigma * floor.sigma)
-    };
-    let p_adequate = if noiseless || dof < 1.0 {
-        f64::NAN
-    } else {
-        f_sf(ratio, dof1, floor.dof)
-    };
-    let fits_floor = if noiseless {
-        rms < 1e-9
-    } else {
-        p_adequate >= ALPHA_ADEQUATE || rms <= PRACTICAL_MARGIN * expected_rms
-    };
-    let adequate = fits_floor && !underdetermined;
+/// The calibration lab over one problem: fits and judges models of named effects against the
+/// noise floor of the data, and proposes the missing effect (module docs). It is the calibration
+/// instance of [`model_lab::Lab`]: [`model_lab::walk`] on it adds the named effects one by one.
+pub struct CalLab<'a> {
+    problem: &'a dyn Problem,
+    floor: NoiseFloor,
+}
 
-    let mut candidates = Vec::new();
-    let mut best: Option<(f64, Effect)> = None;
-    for &e in p.effects() {
-        if model.contains(&e) {
-            continue;
-        }
-        let skip = |why: String| Candidate {
-            effect: e,
-            residual_rms: None,
-            f: None,
-            p_value: None,
-            extra_params: 0,
-            skipped: Some(why),
-            evidence: None,
-        };
-        if let Err(why) = p.identifiable(&model, e) {
-            candidates.push(skip(why));
-            continue;
-        }
-        let evidence = match p.evidence(&fitted, e) {
-            Some(Err(why)) => {
-                candidates.push(skip(why));
-                continue;
-            }
-            Some(Ok(text)) => Some(text),
-            None => None,
-        };
-        let mut m1 = model.clone();
-        m1.push(e);
-        m1.sort();
-        let f1 = match p.fit_items(&m1, &keep) {
-            Ok(f) => f,
-            Err(err) => {
-                candidates.push(skip(err.to_string()));
-                continue;
-            }
-        };
-        let dp = f1.n_params.saturating_sub(fitted.n_params).max(1) as f64;
-        let dof_1 = f1.dof();
-        if dof_1 < 1.0 {
-            candidates.push(skip(format!(
-                "{} residuals leave no degree of freedom for {} parameters",
-                f1.n_used(),
-                f1.n_params
-            )));
-            continue;
-        }
-        let f = ((fitted.rss() - f1.rss()) / dp) / (f1.rss() / dof_1).max(1e-300);
-        let pv = f_sf(f, dp, dof_1);
-        candidates.push(Candidate {
-            effect: e,
-            residual_rms: Some(f1.rms()),
-            f: Some(f),
-            p_value: Some(pv),
-            extra_params: dp as usize,
-            skipped: None,
-            evidence,
-        });
-        if pv < ALPHA_EFFECT && best.is_none_or(|(bf, _)| f > bf) {
-            best = Some((f, e));
+impl<'a> CalLab<'a> {
+    /// The lab over `problem`, with its noise floor estimated once.
+    pub fn new(problem: &'a dyn Problem) -> CalLab<'a> {
+        CalLab {
+            floor: problem.noise_floor(),
+            problem,
         }
     }
 
-    let excluded = if outliers > 0 {
-        format!(
-            "{outliers} {} beyond {OUTLIER_SIGMAS}σ excluded as outliers; ",
-            p.items()
-        )
-    } else {
-        String::new()
-    };
-    let verdict = if noiseless {
-        format!(
-            "{excluded}residual RMS {rms:.4} {unit}, and the data show no noise at all (noise \
-             floor exactly 0 {unit}: every {} residual of a complete model would be 0); {}",
-            p.basis(),
-            if fits_floor {
-                "the model reproduces them exactly".to_string()
-            } else {
-                "so any residual is a misfit".to_string()
-            }
-        )
-    } else {
-        format!(
-            "{excluded}residual RMS {rms:.4} {unit} vs noise floor {:.4} {unit} expected for a \
-             complete model ({} {} residuals, {} fitted parameters; noise from {}); {}",
-            expected_rms,
-            fitted.n_used(),
-            p.basis(),
-            fitted.n_params,
-            floor.method,
-            if p_adequate.is_finite() {
-                format!("P(F ≥ {ratio:.2}) = {p_adequate:.3}")
-            } else {
-                "no degree of freedom left to test".to_string()
-            }
-        )
-    };
-    let need = (k * (1.0 + DOF_PER_PARAMETER)).ceil();
-    let thin = if underdetermined {
-        format!(
-            " (and {} residuals for {} parameters leave {} degrees of freedom, fewer than \
-             {DOF_PER_PARAMETER} per parameter)",
-            fitted.n_used(),
-            fitted.n_params,
-            dof.max(0.0)
-        )
-    } else {
-        String::new()
-    };
-    let verdict = format!("{verdict}{thin}");
-    let (missing, explanation, step) = if underdetermined && fits_floor {
-        (
-            None,
-            format!(
-                "underdetermined: the residual is at the noise floor, but {} residuals for {} \
-                 parameters leave {} degrees of freedom, fewer than {DOF_PER_PARAMETER} per \
-                 parameter, so it cannot tell an adequate model from an overfitted one \
-                 ({verdict}). Record at least {need} {} to judge this model.",
-                fitted.n_used(),
-                fitted.n_params,
-                dof.max(0.0),
-                p.items()
-            ),
-            None,
-        )
-    } else if adequate {
-        (None, format!("adequate: {verdict}."), None)
-    } else if let Some((f, e)) = best {
-        let mut m1 = model.clone();
-        m1.push(e);
-        m1.sort();
-        let f1 = robust_fit(p, &m1, &floor)?;
-        let c = candidates
+    /// The problem.
+    pub fn problem(&self) -> &'a dyn Problem {
+        self.problem
+    }
+
+    /// Fit `model` (checked against the sensor's effects) with the robust loss and judge it.
+    pub fn fit(&self, model: &[Effect]) -> Result<Model, CalError> {
+        let model = normalise_model(self.problem, model)?;
+        let fitted = robust_fit(self.problem, &model, &self.floor)?;
+        Ok(self.judge(fitted, None))
+    }
+
+    /// The verdict on a fit (module docs, 3–4).
+    fn judge(&self, fitted: Fitted, nested: Option<NestedTest>) -> Model {
+        let floor = self.floor;
+        let outliers = kept_items(self.problem, &fitted)
             .iter()
-            .find(|c| c.effect == e)
-            .expect("candidate");
-        let text = format!(
-            "not adequate: {verdict}. Adding '{}' lowers the residual RMS {rms:.4} → {:.4} {unit} \
-             (F = {f:.1} for {} extra parameters, p = {:.2e}), the most significant of the \
-             candidates{}. Physically: {}.",
-            e.name(),
-            c.residual_rms.unwrap_or(f64::NAN),
-            c.extra_params,
-            c.p_value.unwrap_or(f64::NAN),
-            c.evidence
-                .as_ref()
-                .map_or(String::new(), |ev| format!("; {ev}")),
-            e.physics_for(p.sensor())
-        );
-        let out1 = kept_items(p, &f1).iter().filter(|k| !**k).count();
-        let step = Step {
-            added: e,
-            model: f1.model.clone(),
-            residual_rms_before: rms,
-            residual_rms_after: f1.rms(),
-            params: f1.params.clone(),
-            sigma: f1.sigma.clone(),
-            outliers: out1,
+            .filter(|k| !**k)
+            .count();
+        let n = fitted.n_used() as f64;
+        let k = fitted.n_params as f64;
+        let dof = n - k;
+        let underdetermined = k > 0.0 && dof < DOF_PER_PARAMETER * k;
+        let dof1 = dof.max(1.0);
+        let expected_rms = floor.sigma * (dof1 / n.max(1.0)).sqrt();
+        let s2 = fitted.rss() / dof1;
+        let rms = fitted.rms();
+        let noiseless = floor.sigma == 0.0;
+        let ratio = if noiseless {
+            f64::NAN
+        } else {
+            s2 / (floor.sigma * floor.sigma)
         };
-        (Some(e), text, Some(step))
-    } else {
-        let tried: Vec<String> = candidates
-            .iter()
-            .map(|c| match (&c.skipped, c.p_value) {
-                (Some(why), _) => format!("{} (not tried: {why})", c.effect.name()),
-                (None, Some(pv)) => format!("{} (p = {pv:.2e})", c.effect.name()),
-                _ => c.effect.name().to_string(),
-            })
-            .collect();
-        (
-            None,
-            format!(
-                "not adequate: {verdict}. No effect of the catalogue gives a significant drop{}; \
-                 the excess is something the {} models do not contain (nonlinearity, motion \
-                 during the poses, time-varying disturbances, timing skew) or a noise floor \
-                 underestimated by correlated noise.",
-                if tried.is_empty() {
+        let p_value = if noiseless || dof < 1.0 {
+            f64::NAN
+        } else {
+            f_sf(ratio, dof1, floor.dof)
+        };
+        let fits_floor = if noiseless {
+            rms < 1e-9
+        } else {
+            p_value >= ALPHA_ADEQUATE || rms <= PRACTICAL_MARGIN * expected_rms
+        };
+        let verdict = match (fits_floor, underdetermined) {
+            (true, false) => Verdict::Adequate,
+            (true, true) => Verdict::Underdetermined,
+            (false, _) => Verdict::NotAdequate,
+        };
+        Model {
+            fitted,
+            floor,
+            expected_rms,
+            ratio,
+            p_value,
+            fits_floor,
+            underdetermined,
+            verdict,
+            outliers,
+            nested,
+        }
+    }
+
+    /// The workflow's summary of a model (module docs: `chi2_dof` is `s²/σ²`).
+    pub fn summary_of(&self, m: &Model) -> Summary {
+        Summary {
+            chi2_dof: m.ratio,
+            rms_residual: m.fitted.rms(),
+            rms_unit: self.problem.unit().to_string(),
+            adequate: m.adequate(),
+            params: m.fitted.n_params,
+        }
+    }
+
+    /// Every effect of the sensor not in `cur`: the ones identifiable from these data and
+    /// supported by their evidence are added in turn, refitted and tested (module docs, 5); the
+    /// others are returned with the reason they were not tried. Candidates come in the lab's
+    /// order of preference: admissible first, then by decreasing F.
+    pub fn examine(&self, cur: &Model) -> Result<(Vec<Candidate>, Vec<NotTried>), CalError> {
+        let p = self.problem;
+        let model = &cur.fitted.model;
+        let keep = kept_items(p, &cur.fitted);
+        let all_kept = keep.iter().all(|k| *k);
+        let mut cands: Vec<Candidate> = Vec::new();
+        let mut not_tried = Vec::new();
+        let mut skip = |effect: Effect, reason: String| not_tried.push(NotTried { effect, reason });
+        let before = self.summary_of(cur);
+        for &e in p.effects() {
+            if model.contains(&e) {
+                continue;
+            }
+            if let Err(why) = p.identifiable(model, e) {
+                skip(e, why);
+                continue;
+            }
+            let evidence = match p.evidence(&cur.fitted, e) {
+                Some(Err(why)) => {
+                    skip(e, why);
+                    continue;
+                }
+                Some(Ok(text)) => Some(text),
+                None => None,
+            };
+            let mut m1 = model.clone();
+            m1.push(e);
+            m1.sort();
+            // The nested test compares both models on the items the current one kept.
+            let same = match p.fit_items(&m1, &keep) {
+                Ok(f) => f,
+                Err(err) => {
+                    skip(e, err.to_string());
+                    continue;
+                }
+            };
+            let dp = same.n_params.saturating_sub(cur.fitted.n_params).max(1);
+            let dof_1 = same.dof();
+            if dof_1 < 1.0 {
+                skip(
+                    e,
+                    format!(
+                        "{} residuals leave no degree of freedom for {} parameters",
+                        same.n_used(),
+                        same.n_params
+                    ),
+                );
+                continue;
+            }
+            let f =
+                ((cur.fitted.rss() - same.rss()) / dp as f64) / (same.rss() / dof_1).max(1e-300);
+            let pv = f_sf(f, dp as f64, dof_1);
+            let nested = NestedTest {
+                f,
+                extra_params: dp,
+                dof: dof_1,
+                p_value: pv,
+            };
+            // The candidate model is fitted with the robust loss on its own.
+            let refit = if all_kept {
+                robust_from(p, &m1, &self.floor, same)
+            } else {
+                robust_fit(p, &m1, &self.floor)
+            };
+            let refit = match refit {
+                Ok(f) => f,
+                Err(err) => {
+                    skip(e, err.to_string());
+                    continue;
+                }
+            };
+            let next = self.judge(refit, Some(nested));
+            let significant = pv < ALPHA_EFFECT;
+            let admissible = significant && !cur.fits_floor;
+            let test = format!(
+                "F = {f:.1} for {dp} extra parameters, p = {pv:.2e}{}",
+                if significant {
                     String::new()
                 } else {
-                    format!(" ({})", tried.join(", "))
+                    format!(" (not significant: p ≥ {ALPHA_EFFECT})")
+                }
+            );
+            let reason = [
+                evidence,
+                Some(test),
+                (significant && !admissible)
+                    .then(|| "the residual is already at the noise floor".to_string()),
+            ]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+            .join("; ");
+            let summary = self.summary_of(&next);
+            cands.push(Candidate {
+                edit: Edit {
+                    add: vec![e],
+                    remove: vec![],
                 },
-                p.sensor()
-            ),
-            None,
-        )
-    };
-    Ok(Report {
-        fitted,
-        floor,
-        expected_rms,
-        diagnosis: Diagnosis {
-            verdict: if adequate {
-                Verdict::Adequate
-            } else if underdetermined && fits_floor {
-                Verdict::Underdetermined
-            } else {
-                Verdict::NotAdequate
+                delta: before.chi2_dof - summary.chi2_dof,
+                extra_params: dp as i64,
+                p_value: pv,
+                admissible,
+                reason,
+                reading: reading(e, &next.fitted.params, &next.fitted.sigma, p.unit()),
+                summary,
+                model: next,
+            });
+        }
+        let f_of = |c: &Candidate| {
+            c.model.nested.map_or(f64::NEG_INFINITY, |t| {
+                if t.f.is_nan() {
+                    f64::NEG_INFINITY
+                } else {
+                    t.f
+                }
+            })
+        };
+        // Stable: among equal F the sensor's order of effects stands.
+        cands.sort_by(|a, b| {
+            b.admissible
+                .cmp(&a.admissible)
+                .then(f_of(b).total_cmp(&f_of(a)))
+        });
+        Ok((cands, not_tried))
+    }
+
+    /// The verdict on a model in words with numbers and units.
+    fn verdict_text(&self, m: &Model) -> String {
+        let p = self.problem;
+        let unit = p.unit();
+        let rms = m.fitted.rms();
+        let excluded = if m.outliers > 0 {
+            format!(
+                "{} {} beyond {OUTLIER_SIGMAS}σ excluded as outliers; ",
+                m.outliers,
+                p.items()
+            )
+        } else {
+            String::new()
+        };
+        let verdict = if m.floor.sigma == 0.0 {
+            format!(
+                "{excluded}residual RMS {rms:.4} {unit}, and the data show no noise at all (noise \
+                 floor exactly 0 {unit}: every {} residual of a complete model would be 0); {}",
+                p.basis(),
+                if m.fits_floor {
+                    "the model reproduces them exactly".to_string()
+                } else {
+                    "so any residual is a misfit".to_string()
+                }
+            )
+        } else {
+            format!(
+                "{excluded}residual RMS {rms:.4} {unit} vs noise floor {:.4} {unit} expected for a \
+                 complete model ({} {} residuals, {} fitted parameters; noise from {}); {}",
+                m.expected_rms,
+                m.fitted.n_used(),
+                p.basis(),
+                m.fitted.n_params,
+                m.floor.method,
+                if m.p_value.is_finite() {
+                    format!("P(F ≥ {:.2}) = {:.3}", m.ratio, m.p_value)
+                } else {
+                    "no degree of freedom left to test".to_string()
+                }
+            )
+        };
+        if m.underdetermined {
+            format!(
+                "{verdict} (and {} residuals for {} parameters leave {} degrees of freedom, fewer \
+                 than {DOF_PER_PARAMETER} per parameter)",
+                m.fitted.n_used(),
+                m.fitted.n_params,
+                m.fitted.dof().max(0.0)
+            )
+        } else {
+            verdict
+        }
+    }
+
+    /// The lab's report on a model: its candidates, the diagnosis in words and the step.
+    pub fn report(&self, m: Model) -> Result<Report, CalError> {
+        let (candidates, not_tried) = self.examine(&m)?;
+        let p = self.problem;
+        let unit = p.unit();
+        let verdict = self.verdict_text(&m);
+        let best = candidates.iter().find(|c| c.admissible);
+        let explanation = match (m.verdict, best) {
+            (Verdict::Underdetermined, _) => {
+                let k = m.fitted.n_params as f64;
+                let need = (k * (1.0 + DOF_PER_PARAMETER)).ceil();
+                format!(
+                    "underdetermined: the residual is at the noise floor, but {} residuals for {} \
+                     parameters leave {} degrees of freedom, fewer than {DOF_PER_PARAMETER} per \
+                     parameter, so it cannot tell an adequate model from an overfitted one \
+                     ({verdict}). Record at least {need} {} to judge this model.",
+                    m.fitted.n_used(),
+                    m.fitted.n_params,
+                    m.fitted.dof().max(0.0),
+                    p.items()
+                )
+            }
+            (Verdict::Adequate, _) => format!("adequate: {verdict}."),
+            (Verdict::NotAdequate, Some(c)) => {
+                let e = c.edit.add[0];
+                format!(
+                    "not adequate: {verdict}. Adding '{}' lowers the residual RMS {:.4} → {:.4} \
+                     {unit}, the most significant of the candidates: {}. Physically: {}.",
+                    e.name(),
+                    m.fitted.rms(),
+                    c.summary.rms_residual,
+                    c.reason,
+                    e.physics_for(p.sensor())
+                )
+            }
+            (Verdict::NotAdequate, None) => {
+                let tried: Vec<String> = candidates
+                    .iter()
+                    .map(|c| format!("{} (p = {:.2e})", c.edit.add[0].name(), c.p_value))
+                    .chain(
+                        not_tried
+                            .iter()
+                            .map(|n| format!("{} (not tried: {})", n.effect.name(), n.reason)),
+                    )
+                    .collect();
+                format!(
+                    "not adequate: {verdict}. No effect of the catalogue gives a significant \
+                     drop{}; the excess is something the {} models do not contain (nonlinearity, \
+                     motion during the poses, time-varying disturbances, timing skew) or a noise \
+                     floor underestimated by correlated noise.",
+                    if tried.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" ({})", tried.join(", "))
+                    },
+                    p.sensor()
+                )
+            }
+        };
+        let step = best.map(|c| Step::of(self.summary_of(&m), c));
+        let missing = best.map(|c| c.edit.add[0]);
+        Ok(Report {
+            model: m,
+            diagnosis: Diagnosis {
+                missing,
+                explanation,
+                candidates,
+                not_tried,
             },
-            adequate,
-            underdetermined,
-            outliers,
-            missing,
-            explanation,
-            p_value: p_adequate,
-            candidates,
-        },
-        step,
-    })
+            step,
+        })
+    }
+}
+
+impl Lab for CalLab<'_> {
+    type Effect = Effect;
+    type Model = Model;
+    type Error = CalError;
+
+    fn summary(&self, m: &Model) -> Summary {
+        self.summary_of(m)
+    }
+
+    fn candidates(&self, m: &Model) -> Result<Vec<Candidate>, CalError> {
+        Ok(self.examine(m)?.0)
+    }
+}
+
+/// Run the lab on a problem and a model (module docs): the model's fit, verdict, candidates and
+/// the step that adds the missing effect.
+pub fn analyse(p: &dyn Problem, model: &[Effect]) -> Result<Report, CalError> {
+    let lab = CalLab::new(p);
+    let m = lab.fit(model)?;
+    lab.report(m)
 }

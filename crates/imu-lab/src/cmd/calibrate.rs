@@ -10,9 +10,10 @@ use imu_cal::accel::{detect_static_masked, AccelProblem, StaticDetect, G_STANDAR
 use imu_cal::file::CalFile;
 use imu_cal::gyro::GyroProblem;
 use imu_cal::gyro_rot::GyroRotProblem;
-use imu_cal::lab::{analyse, Effect, Params, Problem, Report};
+use imu_cal::lab::{CalLab, Effect, Model, Params, Problem, Report, Step};
 use imu_cal::mag::MagProblem;
 use imu_cal::sentinel::{self, Part, Sentinels};
+use model_lab::{walk, Stop};
 use nalgebra::Vector3;
 use serde::Serialize;
 
@@ -66,6 +67,13 @@ pub struct Args {
     /// Number of blocks the gyro recording is cut into.
     #[arg(long, default_value_t = 50)]
     pub blocks: usize,
+    /// Walk automatically: diagnose → add the named effect → refit, until the model is adequate
+    /// or no effect of the sensor helps (the same workflow as `fit --auto`).
+    #[arg(long)]
+    pub auto: bool,
+    /// Most steps of `--auto`.
+    #[arg(long, default_value_t = 4, requires = "auto")]
+    pub max_steps: usize,
     /// Print one JSON object on stdout instead of the text report.
     #[arg(long)]
     pub json: bool,
@@ -362,6 +370,29 @@ fn load_data(a: &Args, model: &[Effect]) -> Result<Loaded> {
     })
 }
 
+/// What a run produced: the report on the last model, and for `--auto` the walk that led to it.
+pub struct Outcome {
+    /// The model the run started from (`--model`).
+    pub start: Model,
+    /// The steps of the walk (`--auto`), in order.
+    pub steps: Vec<Step>,
+    /// Why the walk ended (`None` without `--auto`).
+    pub stop: Option<Stop>,
+    /// The last model's report: verdict, candidates, diagnosis, the next step.
+    pub report: Report,
+}
+
+#[derive(Serialize)]
+struct JsonCandidate<'a> {
+    added: Vec<&'static str>,
+    admissible: bool,
+    p_value: Option<f64>,
+    residual_rms: f64,
+    ratio: f64,
+    reason: &'a str,
+    reading: &'a str,
+}
+
 #[derive(Serialize)]
 struct JsonDiagnosis<'a> {
     verdict: imu_cal::lab::Verdict,
@@ -370,18 +401,36 @@ struct JsonDiagnosis<'a> {
     missing: Option<&'static str>,
     explanation: &'a str,
     p_value: Option<f64>,
-    candidates: &'a [imu_cal::lab::Candidate],
+    candidates: Vec<JsonCandidate<'a>>,
 }
 
 #[derive(Serialize)]
-struct JsonStep<'a> {
-    added: &'static str,
+struct JsonNext<'a> {
+    added: Vec<&'static str>,
     model: Vec<&'static str>,
     residual_rms_before: f64,
     residual_rms_after: f64,
     params: &'a Params,
     sigma: &'a Params,
     outliers: usize,
+}
+
+/// One step of the walk: the same keys as `fit --auto`'s, the statistic being s²/σ² (the
+/// residual variance over the noise floor's, χ²/ν-distributed for an adequate model) and the
+/// residual RMS in the data's unit.
+#[derive(Serialize)]
+struct JsonWalkStep<'a> {
+    added: Vec<&'static str>,
+    removed: Vec<&'static str>,
+    reading: &'a str,
+    p_value: Option<f64>,
+    chi2_dof_before: f64,
+    chi2_dof_after: f64,
+    rms_residual_before: f64,
+    rms_residual_after: f64,
+    rms_unit: &'a str,
+    adequate_before: bool,
+    adequate_after: bool,
 }
 
 #[derive(Serialize)]
@@ -410,49 +459,119 @@ struct JsonOut<'a> {
     excluded: JsonExcluded<'a>,
     notes: &'a [String],
     diagnosis: JsonDiagnosis<'a>,
-    step: Option<JsonStep<'a>>,
+    /// The step the diagnosis proposes from this model (what `--auto` would add next).
+    step: Option<JsonNext<'a>>,
+    /// The walk of `--auto`, every step (absent without `--auto`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    steps: Option<Vec<JsonWalkStep<'a>>>,
+    /// Why the walk ended (absent without `--auto`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stop: Option<String>,
+}
+
+fn names(m: &[Effect]) -> Vec<&'static str> {
+    m.iter().map(|e| e.name()).collect()
 }
 
 /// The one JSON object of `--json`.
-fn json_out(l: &Loaded, report: &Report) -> Result<String> {
+fn json_out(l: &Loaded, run: &Outcome) -> Result<String> {
     let p = l.data.problem();
-    let names = |m: &[Effect]| m.iter().map(|e| e.name()).collect::<Vec<_>>();
     let finite = |v: f64| v.is_finite().then_some(v);
+    let report = &run.report;
+    let m = &report.model;
+    let d = &report.diagnosis;
     let out = JsonOut {
         sensor: p.sensor(),
         unit: p.unit(),
-        model: names(&report.fitted.model),
-        params: &report.fitted.params,
-        sigma: &report.fitted.sigma,
-        residual_rms: report.fitted.rms(),
-        noise_floor: report.expected_rms,
-        n_residuals: report.fitted.n_used(),
+        model: names(m.effects()),
+        params: &m.fitted.params,
+        sigma: &m.fitted.sigma,
+        residual_rms: m.fitted.rms(),
+        noise_floor: m.expected_rms,
+        n_residuals: m.fitted.n_used(),
         excluded: JsonExcluded {
             sentinels: l.sentinels.samples,
             sentinel_kinds: &l.sentinels.found,
-            outliers: report.diagnosis.outliers,
+            outliers: m.outliers,
         },
         notes: &l.notes,
         diagnosis: JsonDiagnosis {
-            verdict: report.diagnosis.verdict,
-            adequate: report.diagnosis.adequate,
-            underdetermined: report.diagnosis.underdetermined,
-            missing: report.diagnosis.missing.map(|e| e.name()),
-            explanation: &report.diagnosis.explanation,
-            p_value: finite(report.diagnosis.p_value),
-            candidates: &report.diagnosis.candidates,
+            verdict: m.verdict,
+            adequate: m.adequate(),
+            underdetermined: m.underdetermined,
+            missing: d.missing.map(|e| e.name()),
+            explanation: &d.explanation,
+            p_value: finite(m.p_value),
+            candidates: d
+                .candidates
+                .iter()
+                .map(|c| JsonCandidate {
+                    added: names(&c.edit.add),
+                    admissible: c.admissible,
+                    p_value: finite(c.p_value),
+                    residual_rms: c.summary.rms_residual,
+                    ratio: c.summary.chi2_dof,
+                    reason: &c.reason,
+                    reading: &c.reading,
+                })
+                .collect(),
         },
-        step: report.step.as_ref().map(|s| JsonStep {
-            added: s.added.name(),
-            model: names(&s.model),
-            residual_rms_before: s.residual_rms_before,
-            residual_rms_after: s.residual_rms_after,
-            params: &s.params,
-            sigma: &s.sigma,
-            outliers: s.outliers,
+        step: report
+            .step
+            .as_ref()
+            .zip(report.next())
+            .map(|(s, next)| JsonNext {
+                added: names(&s.edit.add),
+                model: names(next.effects()),
+                residual_rms_before: s.before.rms_residual,
+                residual_rms_after: s.after.rms_residual,
+                params: &next.fitted.params,
+                sigma: &next.fitted.sigma,
+                outliers: next.outliers,
+            }),
+        steps: run.stop.map(|_| {
+            run.steps
+                .iter()
+                .map(|s| JsonWalkStep {
+                    added: names(&s.edit.add),
+                    removed: names(&s.edit.remove),
+                    reading: &s.reading,
+                    p_value: finite(s.p_value),
+                    chi2_dof_before: s.before.chi2_dof,
+                    chi2_dof_after: s.after.chi2_dof,
+                    rms_residual_before: s.before.rms_residual,
+                    rms_residual_after: s.after.rms_residual,
+                    rms_unit: p.unit(),
+                    adequate_before: s.before.adequate,
+                    adequate_after: s.after.adequate,
+                })
+                .collect()
         }),
+        stop: run.stop.map(|s| s.to_string()),
     };
     Ok(serde_json::to_string(&out)?)
+}
+
+/// Fit `model`, and with `auto` walk from it; the report is on the last model.
+fn outcome(p: &dyn Problem, model: &[Effect], auto: bool, max_steps: usize) -> Result<Outcome> {
+    let lab = CalLab::new(p);
+    let start = lab.fit(model)?;
+    if !auto {
+        return Ok(Outcome {
+            start: start.clone(),
+            steps: Vec::new(),
+            stop: None,
+            report: lab.report(start)?,
+        });
+    }
+    let w = walk(&lab, start.clone(), max_steps)?;
+    let last = w.last().clone();
+    Ok(Outcome {
+        start,
+        steps: w.steps,
+        stop: Some(w.stop),
+        report: lab.report(last)?,
+    })
 }
 
 /// Run `imu-lab calibrate`.
@@ -477,17 +596,29 @@ pub fn run(a: Args) -> Result<()> {
         }
         model.retain(|e| *e != Effect::Bias);
     }
+    if !(1..=20).contains(&a.max_steps) {
+        bail!("--max-steps {}: give 1 to 20", a.max_steps);
+    }
     let p = loaded.data.problem();
-    let report = analyse(p, &model)?;
+    let run = outcome(p, &model, a.auto, a.max_steps)?;
 
     if a.json {
-        println!("{}", json_out(&loaded, &report)?);
+        println!("{}", json_out(&loaded, &run)?);
     } else {
-        print!("{}", calibration::text_report(&loaded, &report));
+        print!("{}", calibration::text_report(&loaded, &run));
     }
 
     let svg = if a.plot.is_some() || a.report.is_some() {
-        Some(calibration::plot(&loaded.data, &report))
+        // Before → after: the walk's start and end, or the model and its next step.
+        let (before, after) = if run.stop.is_some() {
+            (
+                &run.start,
+                Some(&run.report.model).filter(|_| !run.steps.is_empty()),
+            )
+        } else {
+            (&run.report.model, run.report.next())
+        };
+        Some(calibration::plot(&loaded.data, before, after))
     } else {
         None
     };
@@ -495,7 +626,7 @@ pub fn run(a: Args) -> Result<()> {
         render::write_figure(path, svg)?;
     }
     if let Some(path) = &a.report {
-        let html = calibration::html_report(&loaded, &report, svg.as_deref().unwrap_or(""));
+        let html = calibration::html_report(&loaded, &run, svg.as_deref().unwrap_or(""));
         std::fs::write(path, html).with_context(|| format!("cannot write {}", path.display()))?;
     }
     if let Some(path) = &a.out {
@@ -527,7 +658,7 @@ pub fn run(a: Args) -> Result<()> {
             Data::GyroRot(_) => "gyro-rot",
             _ => p.sensor(),
         };
-        file.set(section, &report.fitted.params)?;
+        file.set(section, &run.report.model.fitted.params)?;
         // The device must be able to hold it.
         file.to_device()
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -566,6 +697,8 @@ mod tests {
             min_static: 1.5,
             blocks: 50,
             saturation: None,
+            auto: false,
+            max_steps: 4,
             json: true,
             plot: None,
             report: None,
@@ -665,7 +798,7 @@ mod json_tests {
     use super::*;
 
     #[test]
-    fn json_has_the_issue_schema_and_only_the_models_params() {
+    fn json_has_the_documented_keys_and_only_the_models_params() {
         // A planar turn of a 25 µT horizontal field with hard iron only.
         let m: Vec<Vector3<f64>> = (0..600)
             .map(|k| {
@@ -675,7 +808,7 @@ mod json_tests {
             })
             .collect();
         let p = MagProblem::new(m, None).unwrap();
-        let r = analyse(&p, &[Effect::HardIron]).unwrap();
+        let r = outcome(&p, &[Effect::HardIron], false, 4).unwrap();
         let l = Loaded {
             data: Data::Mag(p),
             sentinels: Sentinels::default(),

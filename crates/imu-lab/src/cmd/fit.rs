@@ -646,27 +646,7 @@ fn summary(lab: &NoiseLab, m: &Model) -> noise_model::Summary {
 
 /// The step table of a walk.
 pub fn step_table(steps: &[Step<Effect>]) -> String {
-    if steps.is_empty() {
-        return "  (no step: nothing to add)\n".into();
-    }
-    let yn = |b: bool| if b { "yes" } else { "no" };
-    let mut s = String::new();
-    for (i, st) in steps.iter().enumerate() {
-        s += &format!(
-            "  {}. {:<24} χ²/dof {:>9} → {:<9} RMS log-residual {:>7} → {:<7} adequate {} → {}\n     {} (p = {})\n",
-            i + 1,
-            st.edit.to_string(),
-            report::sig(st.before.chi2_dof, 3),
-            report::sig(st.after.chi2_dof, 3),
-            report::sig(st.before.rms_residual, 3),
-            report::sig(st.after.rms_residual, 3),
-            yn(st.before.adequate),
-            yn(st.after.adequate),
-            st.reading,
-            report::sig(st.p_value, 2)
-        );
-    }
-    s
+    crate::render::steps::table(steps, "χ²/dof", "RMS log-residual")
 }
 
 fn print_stage(st: &Stage, unit: &str) {

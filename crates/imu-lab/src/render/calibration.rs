@@ -1,15 +1,16 @@
 //! The calibration lab for people: the text report (parameters with their uncertainties and
-//! units, what was excluded, the verdict, the candidates, the step), the HTML report, and the
+//! units, what was excluded, the verdict, the candidates, the step or the walk's step table),
+//! the HTML report, and the
 //! figures (scatter before/after with the fitted ellipse and the circle, residuals against
 //! orientation or temperature).
 use imu_cal::accel::AccelProblem;
-use imu_cal::lab::{analyse, Effect, Params, Report};
+use imu_cal::lab::{Effect, Model, Params, Problem, Report};
 use imu_cal::mag::MagProblem;
 use nalgebra::{Matrix3, Vector3};
 
 use super::esc;
 use super::scatter::{figure, Panel, Series};
-use crate::cmd::calibrate::{Data, Loaded};
+use crate::cmd::calibrate::{Data, Loaded, Outcome};
 
 /// `v ± s` with `prec` decimals (the σ to two significant digits when it needs more).
 fn pm(v: f64, s: f64, prec: usize) -> String {
@@ -112,156 +113,165 @@ pub fn params_text(p: &Params, sg: &Params, unit: &str) -> String {
     s
 }
 
-/// The whole text report.
-pub fn text_report(l: &Loaded, r: &Report) -> String {
+/// What the data are and what was excluded before fitting.
+fn header(l: &Loaded) -> String {
     let data = &l.data;
-    let p = data.problem();
-    let unit = p.unit();
-    let mut s = String::new();
-    let names = |m: &[Effect]| m.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ");
-    match data {
-        Data::Accel(a) => {
-            s += &format!(
-                "calibrate accel: {} static poses found (g = {} {unit})\n",
-                a.poses.len(),
-                a.g
-            )
-        }
-        Data::Gyro(g) => {
-            s += &format!(
-                "calibrate gyro: {} blocks of {} samples{}\n",
-                g.blocks[0].len(),
-                g.block_len,
-                if g.temp.is_some() {
-                    ", with temperature"
-                } else {
-                    ", no temperature column"
-                }
-            )
-        }
-        Data::GyroRot(g) => {
-            s += &format!(
-                "calibrate gyro (scale/misalignment from rotations): {} moves between static \
-                 poses, {} skipped as saturated, {} holding excluded samples; bias removed {} \
-                 deg/s\n",
-                g.moves.len(),
-                g.skipped_saturated,
-                g.skipped_flagged,
-                v3(&g.bias, Some(&g.bias_sigma), 5)
-            )
-        }
-        Data::Mag(m) => {
-            s += &format!(
-                "calibrate mag: {} samples, principal s.d. {:.2}/{:.2}/{:.2} {unit} ({})\n",
-                m.m.len(),
-                m.principal_sd[0],
-                m.principal_sd[1],
-                m.principal_sd[2],
-                match m.plane {
-                    Some([i, j]) => format!(
-                        "planar in the {}{} plane",
-                        ["x", "y", "z"][i],
-                        ["x", "y", "z"][j]
-                    ),
-                    None => "3-D".into(),
-                }
-            )
-        }
-    }
+    let unit = data.problem().unit();
+    let mut s = match data {
+        Data::Accel(a) => format!(
+            "calibrate accel: {} static poses found (g = {} {unit})\n",
+            a.poses.len(),
+            a.g
+        ),
+        Data::Gyro(g) => format!(
+            "calibrate gyro: {} blocks of {} samples{}\n",
+            g.blocks[0].len(),
+            g.block_len,
+            if g.temp.is_some() {
+                ", with temperature"
+            } else {
+                ", no temperature column"
+            }
+        ),
+        Data::GyroRot(g) => format!(
+            "calibrate gyro (scale/misalignment from rotations): {} moves between static \
+             poses, {} skipped as saturated, {} holding excluded samples; bias removed {} \
+             deg/s\n",
+            g.moves.len(),
+            g.skipped_saturated,
+            g.skipped_flagged,
+            v3(&g.bias, Some(&g.bias_sigma), 5)
+        ),
+        Data::Mag(m) => format!(
+            "calibrate mag: {} samples, principal s.d. {:.2}/{:.2}/{:.2} {unit} ({})\n",
+            m.m.len(),
+            m.principal_sd[0],
+            m.principal_sd[1],
+            m.principal_sd[2],
+            match m.plane {
+                Some([i, j]) => format!(
+                    "planar in the {}{} plane",
+                    ["x", "y", "z"][i],
+                    ["x", "y", "z"][j]
+                ),
+                None => "3-D".into(),
+            }
+        ),
+    };
     if let Some(d) = l.sentinels.describe() {
         s += &format!("excluded before fitting: {d}\n");
     }
     for n in &l.notes {
         s += &format!("note: {n}\n");
     }
-    let model = if r.fitted.model.is_empty() {
+    s
+}
+
+fn names(m: &[Effect]) -> String {
+    if m.is_empty() {
         "(none)".to_string()
     } else {
-        names(&r.fitted.model)
-    };
-    s += &format!(
-        "model: {model}\nparams (± 1σ):\n{}",
-        params_text(&r.fitted.params, &r.fitted.sigma, unit)
+        m.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
+    }
+}
+
+/// The report on one model: parameters, residual against the floor, verdict, candidates,
+/// diagnosis and the step that adds the missing effect.
+fn model_text(p: &dyn Problem, r: &Report, heading: &str) -> String {
+    let unit = p.unit();
+    let m = &r.model;
+    let mut s = format!(
+        "{heading}: {}\nparams (± 1σ):\n{}",
+        names(m.effects()),
+        params_text(&m.fitted.params, &m.fitted.sigma, unit)
     );
     s += &format!(
         "residual RMS {:.5} {unit} over {} residuals{}; noise floor {:.5} {unit} (σ {:.5} {unit} from {})\n",
-        r.fitted.rms(),
-        r.fitted.n_used(),
-        if r.diagnosis.outliers > 0 {
+        m.fitted.rms(),
+        m.fitted.n_used(),
+        if m.outliers > 0 {
             format!(
                 " ({} {} beyond 6σ excluded as outliers)",
-                r.diagnosis.outliers,
+                m.outliers,
                 p.items()
             )
         } else {
             String::new()
         },
-        r.expected_rms,
-        r.floor.sigma,
-        r.floor.method
+        m.expected_rms,
+        m.floor.sigma,
+        m.floor.method
     );
-    s += &format!("verdict: {}\n", r.diagnosis.verdict.word());
-    if !r.diagnosis.candidates.is_empty() {
+    s += &format!(
+        "verdict: {} (s²/σ² = {})\n",
+        m.verdict.word(),
+        super::sig(m.ratio, 3)
+    );
+    let d = &r.diagnosis;
+    if !d.candidates.is_empty() || !d.not_tried.is_empty() {
         s += "candidates:\n";
-        for c in &r.diagnosis.candidates {
-            match (&c.skipped, c.residual_rms, c.f, c.p_value) {
-                (Some(why), ..) => s += &format!("  {:<13} not tried: {why}\n", c.effect.name()),
-                (None, Some(rms), Some(f), Some(pv)) => s += &format!(
-                    "  {:<13} residual RMS {rms:.5} {unit}, F = {f:.2} for {} extra parameters, p = {pv:.3e}{}\n",
-                    c.effect.name(),
-                    c.extra_params,
-                    c.evidence.as_ref().map_or(String::new(), |e| format!("; {e}"))
-                ),
-                _ => {}
-            }
+        for c in &d.candidates {
+            s += &format!(
+                "  {:<13} residual RMS {:.5} {unit}, s²/σ² {}: {}{}\n                {}\n",
+                c.edit
+                    .add
+                    .iter()
+                    .map(|e| e.name())
+                    .collect::<Vec<_>>()
+                    .join("+"),
+                c.summary.rms_residual,
+                super::sig(c.summary.chi2_dof, 3),
+                c.reason,
+                if c.admissible { " (admissible)" } else { "" },
+                c.reading
+            );
+        }
+        for n in &d.not_tried {
+            s += &format!("  {:<13} not tried: {}\n", n.effect.name(), n.reason);
         }
     }
-    s += &format!("diagnosis: {}\n", r.diagnosis.explanation);
-    if let Some(st) = &r.step {
+    s += &format!("diagnosis: {}\n", d.explanation);
+    if let (Some(st), Some(next)) = (&r.step, r.next()) {
         s += &format!(
-            "step: + {} → model {}: residual RMS {:.5} → {:.5} {unit}\nparams after the step (± 1σ):\n{}",
-            st.added.name(),
-            names(&st.model),
-            st.residual_rms_before,
-            st.residual_rms_after,
-            params_text(&st.params, &st.sigma, unit)
+            "step: {} → model {}: residual RMS {:.5} → {:.5} {unit}, s²/σ² {} → {}, {}\nparams after the step (± 1σ):\n{}",
+            st.edit,
+            names(next.effects()),
+            st.before.rms_residual,
+            st.after.rms_residual,
+            super::sig(st.before.chi2_dof, 3),
+            super::sig(st.after.chi2_dof, 3),
+            next.verdict.word(),
+            params_text(&next.fitted.params, &next.fitted.sigma, unit)
         );
     }
     s
 }
 
+/// The whole text report of a run: the data, the walk when there was one, and the report on the
+/// last model.
+pub fn text_report(l: &Loaded, run: &Outcome) -> String {
+    let p = l.data.problem();
+    let mut s = header(l);
+    let Some(stop) = run.stop else {
+        return s + &model_text(p, &run.report, "model");
+    };
+    s += &format!(
+        "walk from model {}: diagnose → add the named effect → refit\n{}stop: {stop}.\n",
+        names(run.start.effects()),
+        super::steps::table(&run.steps, "s²/σ²", "residual RMS")
+    );
+    s + &model_text(p, &run.report, "final model")
+}
+
 /// A self-contained HTML page: the text report and the figure.
-pub fn html_report(l: &Loaded, r: &Report, svg: &str) -> String {
+pub fn html_report(l: &Loaded, run: &Outcome, svg: &str) -> String {
     let sensor = l.data.problem().sensor();
     format!(
         "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>imu-lab calibrate {sensor}</title>\
          <style>body{{font-family:sans-serif;max-width:1300px;margin:2em auto}}pre{{background:#f6f6f6;padding:1em;white-space:pre-wrap}}</style>\
          </head><body><h1>Calibration lab: {sensor}</h1><pre>{}</pre>{svg}</body></html>\n",
-        esc(&text_report(l, r))
+        esc(&text_report(l, run))
     )
-}
-
-/// The model to draw as "after": the step's when a missing effect was found.
-fn after_params(r: &Report) -> (&Params, String) {
-    match &r.step {
-        Some(s) => (
-            &s.params,
-            s.model
-                .iter()
-                .map(|e| e.name())
-                .collect::<Vec<_>>()
-                .join("+"),
-        ),
-        None => (
-            &r.fitted.params,
-            r.fitted
-                .model
-                .iter()
-                .map(|e| e.name())
-                .collect::<Vec<_>>()
-                .join("+"),
-        ),
-    }
 }
 
 fn mag_matrix(p: &Params) -> Matrix3<f64> {
@@ -298,25 +308,24 @@ fn circle(r: f64) -> Vec<(f64, f64)> {
 
 const AX: [&str; 3] = ["X", "Y", "Z"];
 
-/// Without a step, "after" is the same model as "before": keep one copy of each residual set.
-fn residual_series(r: &Report, before: Series, after: Series) -> Vec<Series> {
-    if r.step.is_some() {
+/// Without an "after" model, keep one copy of each residual set.
+fn residual_series(has_after: bool, before: Series, after: Series) -> Vec<Series> {
+    if has_after {
         vec![before, after]
     } else {
         vec![before]
     }
 }
 
-/// The figure of a run (an SVG document).
-pub fn plot(data: &Data, r: &Report) -> String {
-    let (after, after_name) = after_params(r);
-    let before_name = r
-        .fitted
-        .model
-        .iter()
-        .map(|e| e.name())
-        .collect::<Vec<_>>()
-        .join("+");
+/// The figure of a run (an SVG document): the `before` model against `after` (the model after
+/// the step or the walk) when there is one.
+pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String {
+    let has_after = after_model.is_some();
+    let after_m = after_model.unwrap_or(before);
+    let after = &after_m.fitted.params;
+    let join = |m: &[Effect]| m.iter().map(|e| e.name()).collect::<Vec<_>>().join("+");
+    let after_name = join(after_m.effects());
+    let before_name = join(before.effects());
     let before_name = if before_name.is_empty() {
         "no correction".to_string()
     } else {
@@ -329,15 +338,11 @@ pub fn plot(data: &Data, r: &Report) -> String {
                 m.m.iter().map(|v| MagProblem::correct(after, *v)).collect();
             let before_corr: Vec<Vector3<f64>> =
                 m.m.iter()
-                    .map(|v| MagProblem::correct(&r.fitted.params, *v))
+                    .map(|v| MagProblem::correct(&before.fitted.params, *v))
                     .collect();
             // With tilt the fitted F is the full field: the planar views draw the in-plane part
             // it leaves on average, √(F² − mean out-of-plane²).
-            let after_tilt = r
-                .step
-                .as_ref()
-                .map_or(&r.fitted.model, |s| &s.model)
-                .contains(&Effect::Tilt);
+            let after_tilt = after_m.effects().contains(&Effect::Tilt);
             let f = match (m.plane, after_tilt) {
                 (Some([i, j]), true) => {
                     let k = 3 - i - j;
@@ -420,17 +425,14 @@ pub fn plot(data: &Data, r: &Report) -> String {
                     ),
                 ],
             };
-            let after_model = r
-                .step
-                .as_ref()
-                .map_or(r.fitted.model.clone(), |s| s.model.clone());
+            let after_model = &after_m.fitted.model;
             let res_before: Vec<f64> =
                 m.m.iter()
-                    .map(|v| m.residual(&r.fitted.model, &r.fitted.params, *v))
+                    .map(|v| m.residual(&before.fitted.model, &before.fitted.params, *v))
                     .collect();
             let res_after: Vec<f64> =
                 m.m.iter()
-                    .map(|v| m.residual(&after_model, after, *v))
+                    .map(|v| m.residual(after_model, after, *v))
                     .collect();
             for (name, ang) in &angles {
                 panels.push(Panel {
@@ -438,7 +440,7 @@ pub fn plot(data: &Data, r: &Report) -> String {
                     xlabel: format!("{name} of the corrected field (deg)"),
                     ylabel: format!("|m| − F ({unit})"),
                     series: residual_series(
-                        r,
+                        has_after,
                         Series {
                             label: before_name.clone(),
                             color: "#ff7f0e",
@@ -475,7 +477,7 @@ pub fn plot(data: &Data, r: &Report) -> String {
                 .collect();
             let bef: Vec<[f64; 3]> = raw
                 .iter()
-                .map(|v| AccelProblem::correct(&r.fitted.params, *v))
+                .map(|v| AccelProblem::correct(&before.fitted.params, *v))
                 .collect();
             let mut panels = Vec::new();
             for (i, j) in [(0, 1), (1, 2)] {
@@ -517,7 +519,7 @@ pub fn plot(data: &Data, r: &Report) -> String {
                     xlabel: format!("{name} of gravity in the sensor frame (deg)"),
                     ylabel: format!("|a| − g ({unit})"),
                     series: residual_series(
-                        r,
+                        has_after,
                         Series {
                             label: before_name.clone(),
                             color: "#ff7f0e",
@@ -552,22 +554,18 @@ pub fn plot(data: &Data, r: &Report) -> String {
                     .flat_map(|(k, mv)| [(angle(mv), res[2 * k]), (angle(mv), res[2 * k + 1])])
                     .collect()
             };
-            let after_res = match &r.step {
-                Some(_) => analyse(
-                    gp,
-                    &r.step.as_ref().map(|s| s.model.clone()).unwrap_or_default(),
-                )
-                .map(|x| x.fitted.residuals)
-                .unwrap_or_default(),
-                None => vec![],
+            let after_res = if has_after {
+                after_m.fitted.residuals.clone()
+            } else {
+                vec![]
             };
             let mut series = vec![Series {
                 label: before_name.clone(),
                 color: "#ff7f0e",
-                points: pts(&r.fitted.residuals),
+                points: pts(&before.fitted.residuals),
                 line: false,
             }];
-            if after_res.len() == r.fitted.residuals.len() {
+            if after_res.len() == before.fitted.residuals.len() {
                 series.push(Series {
                     label: after_name.clone(),
                     color: "#2ca02c",
@@ -609,11 +607,11 @@ pub fn plot(data: &Data, r: &Report) -> String {
                     xlabel: xl.into(),
                     ylabel: format!("block-mean residual ({})", gp.unit),
                     series: residual_series(
-                        r,
+                        has_after,
                         Series {
                             label: before_name.clone(),
                             color: "#ff7f0e",
-                            points: resid(&r.fitted.params, j),
+                            points: resid(&before.fitted.params, j),
                             line: false,
                         },
                         Series {

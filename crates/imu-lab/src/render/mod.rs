@@ -1,11 +1,13 @@
 //! Everything the lab renders for people, in one place: numbers with significant digits, HTML
 //! escaping, SVG figures (Allan curves of noise-model fits in [`allan`], scatter panels in
 //! [`scatter`]) and their PNG rasterisation, the noise lab's tables and HTML report
-//! ([`noise`]) and the calibration lab's text, HTML report and figures ([`calibration`]).
+//! ([`noise`]), the calibration lab's text, HTML report and figures ([`calibration`]), and the
+//! step table of either lab's walk ([`steps`]).
 pub mod allan;
 pub mod calibration;
 pub mod noise;
 pub mod scatter;
+pub mod steps;
 
 use std::path::Path;
 
