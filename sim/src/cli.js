@@ -35,6 +35,12 @@ function fail(msg, code = 2) {
   process.exit(code);
 }
 
+/** What the run says when the optional defmt-print decoder is not installed. */
+function rawLogNote(log) {
+  const where = log ? ` (${log}.rtt)` : '';
+  return `defmt-print not installed (optional): the firmware log stays raw${where}; \`cargo install defmt-print\` to decode it`;
+}
+
 function streamFrom(v, seconds) {
   if (v.stream) return loadStreamCsv(v.stream);
   const sine = v.sine ? v.sine.split(',').map(Number) : null;
@@ -53,7 +59,7 @@ async function cmdRun(v) {
   const clock = parseClock(v.clock);
   const stream = streamFrom(v, seconds);
   const s = new Session({ elf: v.elf, stream, faults, clock, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
-  if (!s.decoder.available) process.stderr.write('pico-imu-sim: defmt-print not found (cargo install defmt-print): RTT kept raw\n');
+  if (!s.decoder.available) process.stderr.write(`pico-imu-sim: ${rawLogNote(v.log)}\n`);
   const stopAt = seconds * 1e9;
   let stop = null;
   if (v.port !== undefined || v['port-file']) {
@@ -63,7 +69,12 @@ async function cmdRun(v) {
     const port = await s.listen(Number(v.port ?? 0));
     process.stderr.write(`pico-imu-sim: USB CDC on tcp:127.0.0.1:${port}\n`);
     if (v['port-file']) writeFileSync(v['port-file'], `${port}\n`);
-    const onSignal = () => {
+    // A signal ends the run like its end time: the port closes, summary and log are written.
+    // A second one exits at once.
+    let signalled = false;
+    const onSignal = (sig) => {
+      if (signalled) process.exit(sig === 'SIGINT' ? 130 : 143);
+      signalled = true;
       s.emu.stop({ kind: 'signal', message: 'stopped by signal' });
     };
     process.on('SIGINT', onSignal);

@@ -73,13 +73,15 @@ export function parseClock(spec) {
 }
 
 export class Session {
-  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, echoLog = false, markerSymbol } = {}) {
+  /** `defmtPrint`: the decoder's binary (default: found on PATH; null: keep the log raw). */
+  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, echoLog = false, markerSymbol, defmtPrint } = {}) {
     this.logLines = [];
     this.decoder = new DefmtDecoder(elf, {
       onLine: (l) => {
         this.logLines.push(l);
         if (echoLog) process.stderr.write(`[fw] ${l}\n`);
       },
+      binary: defmtPrint,
     });
     this.emu = new Emulator({ elf, markerSymbol, onRtt: (b) => this.decoder.push(b) });
     this.bus = new I2cBus(this.emu.mcu, { index: 0, sda: 4, scl: 5, instant: instantI2c });
@@ -132,30 +134,48 @@ export class Session {
     alarm.schedule(Math.max(0, f.at - emu.clock.nanos));
   }
 
-  /** Opens the CDC port as a TCP server on 127.0.0.1 (port 0 = any free port). */
+  /**
+   * Opens the CDC port as a TCP server on 127.0.0.1 (port 0 = any free port). One host at a
+   * time, like a serial port: a host that connects while another has the port waits, and is
+   * served as soon as that one goes (closes or ends its side).
+   */
   listen(port = 0) {
+    this.waitingHosts = [];
     return new Promise((resolve, reject) => {
       this.server = createServer((sock) => {
-        if (this.client) {
-          sock.end();
-          return;
-        }
         sock.setNoDelay(true);
-        this.client = sock;
-        sock.on('data', (d) => {
-          this.usbStats.fromHost += d.length;
-          if (this.usb.connected) this.usb.write(d);
-          else this.pendingFromHost = Buffer.concat([this.pendingFromHost ?? Buffer.alloc(0), d]);
-        });
-        const drop = () => {
-          if (this.client === sock) this.client = null;
-        };
-        sock.on('close', drop);
-        sock.on('error', drop);
+        sock.on('error', () => {}); // a reset host is dropped by the 'close' that follows
+        if (this.client) {
+          this.waitingHosts.push(sock);
+          sock.on('close', () => {
+            this.waitingHosts = this.waitingHosts.filter((w) => w !== sock);
+          });
+        } else this.serve(sock);
       });
       this.server.on('error', reject);
       this.server.listen(port, '127.0.0.1', () => resolve(this.server.address().port));
     });
+  }
+
+  /** Makes `sock` the host of the port. */
+  serve(sock) {
+    this.client = sock;
+    sock.on('data', (d) => {
+      if (this.client !== sock) return;
+      this.usbStats.fromHost += d.length;
+      if (this.usb.connected) this.usb.write(d);
+      else this.pendingFromHost = Buffer.concat([this.pendingFromHost ?? Buffer.alloc(0), d]);
+    });
+    const drop = () => {
+      if (this.client !== sock) return;
+      this.client = null;
+      const next = this.waitingHosts.shift();
+      if (next) this.serve(next);
+    };
+    // 'end' (the host closed its side) comes before 'close': the next host is served then,
+    // not after the socket has been torn down.
+    sock.on('end', drop);
+    sock.on('close', drop);
   }
 
   flushPendingHost() {
@@ -177,9 +197,18 @@ export class Session {
     return stop;
   }
 
+  /**
+   * Closes the port and stops decoding. Hosts are asked to close (their pending bytes are
+   * flushed) and cut off after 300 ms if they keep their end open.
+   */
   async close() {
-    if (this.client) this.client.end();
-    if (this.server) await new Promise((r) => this.server.close(r));
+    const hosts = [this.client, ...(this.waitingHosts ?? [])].filter(Boolean);
+    for (const h of hosts) h.end();
+    if (this.server) {
+      const cut = setTimeout(() => hosts.forEach((h) => h.destroy()), 300);
+      await new Promise((r) => this.server.close(r));
+      clearTimeout(cut);
+    }
     await this.decoder.close();
   }
 

@@ -1,13 +1,16 @@
 // Runs the real firmware for 1.5 s of emulated time when it has been built
-// (`cargo build --release` in the repository root); skipped otherwise.
+// (`cargo build --release` in the repository root); skipped otherwise. The ELF: PICO_IMU_ELF
+// (`cargo xtask test` sets it), else under CARGO_TARGET_DIR, else under the repository's target/.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { existsSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
+import { resolve } from 'node:path';
 import { Session } from '../src/session.js';
 import { generateStream } from '../src/stream.js';
 
-const elf = process.env.PICO_IMU_ELF ?? fileURLToPath(new URL('../../target/thumbv6m-none-eabi/release/pico-imu', import.meta.url));
+const repo = fileURLToPath(new URL('../..', import.meta.url));
+const elf = process.env.PICO_IMU_ELF ?? resolve(repo, process.env.CARGO_TARGET_DIR ?? 'target', 'thumbv6m-none-eabi/release/pico-imu');
 
 test('the firmware boots, enumerates USB and reads both sensors at their rates', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
   const s = new Session({ elf, stream: generateStream({ seed: 2, seconds: 3 }) });

@@ -20,7 +20,7 @@ use imu_proto::{
 };
 use pico_imu_core::replay::{self, ChannelCheck};
 
-use crate::emu::{arg_value, build_firmware, ensure_sim, out_dir, port_file, Sim};
+use crate::emu::{arg_value, build_firmware, ensure_sim, out_dir, Sim};
 use crate::emu_check::{self, ImuRaw, MagRaw};
 use crate::emu_link::Link;
 use crate::run;
@@ -157,7 +157,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
         sim_args.push("--fault".into());
         sim_args.push("stall:qmc@0s".into());
     }
-    let sim = Sim::start(&elf, &sim_args, &port_file(&out))?;
+    let sim = Sim::start(&elf, &sim_args, &out)?;
     let session = match session(sim.port, seconds, !stall_from_boot) {
         Ok(s) => s,
         Err(e) => {

@@ -7,12 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 
-use crate::{cargo, root, run};
-
-/// The firmware ELF `cargo build --release` produces.
-pub fn firmware_elf() -> PathBuf {
-    root().join("target/thumbv6m-none-eabi/release/pico-imu")
-}
+use crate::{cargo, progress, progress_line, root, run, wait_with_progress, PROGRESS_EVERY};
 
 /// `node` 20 or newer on PATH.
 pub fn node_available() -> bool {
@@ -24,13 +19,9 @@ pub fn node_available() -> bool {
         .unwrap_or(false)
 }
 
+/// Release build of the firmware (`cargo xtask firmware`'s build); returns the ELF path.
 pub fn build_firmware() -> Result<PathBuf> {
-    run(cargo().args(["build", "--release", "-p", "pico-imu"]))?;
-    let elf = firmware_elf();
-    if !elf.exists() {
-        bail!("the firmware build did not produce {}", elf.display());
-    }
-    Ok(elf)
+    crate::firmware::build()
 }
 
 /// `npm ci` in sim/ unless node_modules is already there.
@@ -50,12 +41,12 @@ pub fn ensure_sim() -> Result<PathBuf> {
 /// The emulator harness's own tests (`npm test` in sim/: the chip models, the rp2040js patches,
 /// the profiler; the two that boot the firmware use the release ELF, built first).
 pub fn harness_tests() -> Result<()> {
-    build_firmware()?;
+    let elf = build_firmware()?;
     let sim = ensure_sim()?;
     run(Command::new("npm")
         .args(["test", "--prefix"])
         .arg(&sim)
-        .env("PICO_IMU_ELF", firmware_elf()))
+        .env("PICO_IMU_ELF", elf))
 }
 
 pub fn out_dir(name: &str) -> Result<PathBuf> {
@@ -64,10 +55,71 @@ pub fn out_dir(name: &str) -> Result<PathBuf> {
     Ok(d)
 }
 
-/// Where our emulator child writes its TCP port: named after this process, so that a second
-/// run in the same tree (another `cargo xtask test`) can never hand us its port.
-pub fn port_file(out: &Path) -> PathBuf {
-    out.join(format!("port.{}", std::process::id()))
+/// The file our emulator child writes its TCP port to, `OUT/port.PID`: named after this
+/// process, so that a second run in the same tree (another `cargo xtask test`) can never hand us
+/// its port. Removed when dropped (the run ended, successfully or not); files of runs whose
+/// process is gone (killed before they could remove theirs) are removed when a new one is made.
+pub struct PortFile {
+    path: PathBuf,
+}
+
+impl PortFile {
+    pub fn new(out: &Path) -> PortFile {
+        remove_stale_port_files(out);
+        let path = out.join(format!("port.{}", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        PortFile { path }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for PortFile {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Removes `port.PID` files in `out` whose process no longer runs.
+pub fn remove_stale_port_files(out: &Path) {
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name();
+        let Some(pid) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("port."))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if !process_alive(pid) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// Whether a process with this id runs. Where that cannot be asked cheaply the answer is yes,
+/// so a file is never taken from a live run.
+fn process_alive(pid: u32) -> bool {
+    if pid == std::process::id() {
+        return true;
+    }
+    if cfg!(target_os = "linux") {
+        Path::new("/proc").join(pid.to_string()).exists()
+    } else if cfg!(unix) {
+        Command::new("kill")
+            .args(["-0", &pid.to_string()])
+            .stderr(Stdio::null())
+            .status()
+            .map(|s| s.success())
+            .unwrap_or(true)
+    } else {
+        true
+    }
 }
 
 pub fn arg_value(args: &[String], name: &str) -> Option<String> {
@@ -76,15 +128,19 @@ pub fn arg_value(args: &[String], name: &str) -> Option<String> {
         .and_then(|i| args.get(i + 1).cloned())
 }
 
-/// A running emulator with its USB port on TCP.
+/// A running emulator with its USB port on TCP. Dropping it stops the emulator if it still runs
+/// and removes its port file.
 pub struct Sim {
     child: Child,
     pub port: u16,
+    port_file: PortFile,
 }
 
 impl Sim {
-    pub fn start(elf: &Path, args: &[String], port_file: &Path) -> Result<Sim> {
-        let _ = std::fs::remove_file(port_file);
+    /// Starts `node sim/src/cli.js run` on `elf` with `args`, its port file in `out`, and waits
+    /// for it to open its USB port.
+    pub fn start(elf: &Path, args: &[String], out: &Path) -> Result<Sim> {
+        let port_file = PortFile::new(out);
         let sim = ensure_sim()?;
         let mut cmd = Command::new("node");
         cmd.arg(sim.join("src/cli.js"))
@@ -92,7 +148,7 @@ impl Sim {
             .arg("--elf")
             .arg(elf)
             .arg("--port-file")
-            .arg(port_file)
+            .arg(port_file.path())
             .args(args);
         eprintln!("xtask: {cmd:?}");
         let child = cmd
@@ -100,10 +156,15 @@ impl Sim {
             .stdin(Stdio::null())
             .spawn()
             .context("starting node sim/src/cli.js")?;
-        let mut sim = Sim { child, port: 0 };
+        let mut sim = Sim {
+            child,
+            port: 0,
+            port_file,
+        };
         let start = Instant::now();
+        let mut next_note = PROGRESS_EVERY;
         loop {
-            if let Ok(s) = std::fs::read_to_string(port_file) {
+            if let Ok(s) = std::fs::read_to_string(sim.port_file.path()) {
                 if let Ok(p) = s.trim().parse() {
                     sim.port = p;
                     return Ok(sim);
@@ -117,13 +178,25 @@ impl Sim {
             if start.elapsed() > Duration::from_secs(600) {
                 bail!("the emulator did not open its USB port within 600 s");
             }
+            if start.elapsed() >= next_note {
+                progress_line(progress(
+                    "booting the emulated board (the USB port opens after boot)",
+                    start.elapsed(),
+                ));
+                next_note += PROGRESS_EVERY;
+            }
             std::thread::sleep(Duration::from_millis(100));
         }
     }
 
     /// Waits for the emulator to finish its run; fails if it reported a firmware stop.
     pub fn wait(mut self, what: &str) -> Result<()> {
-        let status = self.child.wait()?;
+        let status = wait_with_progress(
+            &mut self.child,
+            &format!("waiting for the emulator to finish {what}"),
+            PROGRESS_EVERY,
+            &mut progress_line,
+        )?;
         if !status.success() {
             bail!(
                 "the emulator failed during {what} ({status}): see the decoded firmware log above"
@@ -132,13 +205,8 @@ impl Sim {
         Ok(())
     }
 
-    fn kill(mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-
     /// After the host link was dropped: give a `--exit-on-disconnect` run time to write its log
-    /// and reports, then kill it.
+    /// and reports; dropping it then kills it if it has not finished.
     pub fn finish_after_error(mut self) {
         let start = Instant::now();
         while start.elapsed() < Duration::from_secs(30) {
@@ -147,7 +215,15 @@ impl Sim {
             }
             std::thread::sleep(Duration::from_millis(100));
         }
-        self.kill();
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
     }
 }
 
@@ -237,12 +313,11 @@ pub fn demo(args: &[String]) -> Result<()> {
             out.join("firmware.log").display().to_string(),
             "--quiet".into(),
         ],
-        &port_file(&out),
+        &out,
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
-    let r = demo_flow(&port, seconds, &out);
-    sim.kill();
-    r
+    // Dropping the emulator at the end of the flow, or on its error, stops it.
+    demo_flow(&port, seconds, &out)
 }
 
 fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {
@@ -280,4 +355,54 @@ fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {
         .arg(&report))?;
     eprintln!("xtask: demo report written to {}", report.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("xtask-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// Port files of finished processes go; those of running ones and other files stay.
+    #[test]
+    fn stale_port_files_are_removed_live_ones_kept() {
+        let d = scratch("ports");
+        let mut gone = Command::new("true").spawn().unwrap();
+        let dead = gone.id();
+        gone.wait().unwrap();
+        let mut running = Command::new("sleep").arg("5").spawn().unwrap();
+        for f in [
+            format!("port.{dead}"),
+            format!("port.{}", running.id()),
+            "port.x".into(),
+            "stream.csv".into(),
+        ] {
+            std::fs::write(d.join(f), "1\n").unwrap();
+        }
+        let ours = PortFile::new(&d);
+        std::fs::write(ours.path(), "4242\n").unwrap();
+        let mut left: Vec<String> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        let mut want = vec![
+            format!("port.{}", running.id()),
+            format!("port.{}", std::process::id()),
+            "port.x".to_string(),
+            "stream.csv".to_string(),
+        ];
+        want.sort();
+        assert_eq!(left, want);
+        drop(ours);
+        assert!(!d.join(format!("port.{}", std::process::id())).exists());
+        let _ = running.kill();
+        let _ = running.wait();
+        let _ = std::fs::remove_dir_all(&d);
+    }
 }

@@ -154,9 +154,17 @@ impl Link {
         mut done: impl FnMut(&Collected) -> bool,
     ) -> Result<()> {
         let start = Instant::now();
+        let mut next_note = crate::PROGRESS_EVERY;
         while !done(&self.got) {
             if start.elapsed() > timeout {
                 bail!("timed out after {timeout:?} waiting for {what}");
+            }
+            if start.elapsed() >= next_note {
+                crate::progress_line(crate::progress(
+                    &format!("waiting for {what}"),
+                    start.elapsed(),
+                ));
+                next_note += crate::PROGRESS_EVERY;
             }
             if !self.pump()? {
                 bail!("the device port closed while waiting for {what}");

@@ -7,12 +7,12 @@
 //! (flag 0x2000), 476 data bytes of which the RP2040 bootrom uses 256, and an end magic.
 use std::fmt::Write as _;
 use std::fs;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use object::{Object, ObjectSection, ObjectSymbol};
 
-use crate::{cargo, root, run};
+use crate::{cargo, root, run, target_dir};
 
 /// RP2040 family id (UF2 spec, utils/uf2families.json: "RP2040").
 pub const RP2040_FAMILY_ID: u32 = 0xe48b_ff56;
@@ -35,7 +35,7 @@ const RAM_LINKED: u64 = 256 * 1024;
 /// `cargo xtask firmware [--no-build]`.
 pub fn main(args: &[String]) -> Result<()> {
     let elf = if args.iter().any(|a| a == "--no-build") {
-        elf_path()
+        elf_path()?
     } else {
         build()?
     };
@@ -68,16 +68,22 @@ pub fn main(args: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// The ELF `cargo build --release` writes for the firmware.
-pub fn elf_path() -> PathBuf {
-    root().join("target/thumbv6m-none-eabi/release/pico-imu")
+/// The ELF `cargo build --release -p pico-imu` writes, in cargo's target directory (which
+/// honours `CARGO_TARGET_DIR` and `build.target-dir`).
+pub fn elf_path() -> Result<PathBuf> {
+    Ok(elf_in(&target_dir()?))
+}
+
+/// The firmware ELF under the target directory `target`.
+pub fn elf_in(target: &Path) -> PathBuf {
+    target.join("thumbv6m-none-eabi/release/pico-imu")
 }
 
 /// Release build of the firmware; returns the ELF path.
 pub fn build() -> Result<PathBuf> {
     ensure_target();
     run(cargo().args(["build", "--release", "-p", "pico-imu"]))?;
-    let elf = elf_path();
+    let elf = elf_path()?;
     if !elf.is_file() {
         bail!("the firmware build did not produce {}", elf.display());
     }
@@ -388,6 +394,27 @@ mod tests {
         assert_eq!(
             [addr(0), addr(1), addr(2)],
             [0x1000_0000, 0x1000_0100, 0x1000_0400]
+        );
+    }
+
+    /// The ELF is looked for where cargo builds it: under `CARGO_TARGET_DIR` when that is set,
+    /// absolute or relative to the workspace root, not in the workspace's own `target/`.
+    #[test]
+    fn the_firmware_elf_is_found_under_cargo_target_dir() {
+        let dir = std::env::temp_dir().join(format!("xtask-target-{}", std::process::id()));
+        let mut c = cargo();
+        c.current_dir(root()).env("CARGO_TARGET_DIR", &dir);
+        let target = crate::target_dir_from(&mut c).unwrap();
+        assert_eq!(
+            elf_in(&target),
+            dir.join("thumbv6m-none-eabi/release/pico-imu")
+        );
+        let mut c = cargo();
+        c.current_dir(root()).env("CARGO_TARGET_DIR", "elsewhere/t");
+        let target = crate::target_dir_from(&mut c).unwrap();
+        assert_eq!(
+            elf_in(&target),
+            root().join("elsewhere/t/thumbv6m-none-eabi/release/pico-imu")
         );
     }
 

@@ -1,7 +1,10 @@
 //! Project automation. `cargo xtask test` runs every test the project has; `cargo xtask demo`
 //! runs the main job on the emulated device (or on a real Pico with `--port`).
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 
@@ -42,20 +45,140 @@ pub fn root() -> PathBuf {
         .to_path_buf()
 }
 
-/// Run a command in the workspace root, failing with its description if it fails.
+/// Cargo's target directory for this workspace, as cargo resolves it (`CARGO_TARGET_DIR`,
+/// `build.target-dir` in any config file, else `target/` in the workspace root); asked once.
+pub fn target_dir() -> Result<PathBuf> {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    if let Some(d) = DIR.get() {
+        return Ok(d.clone());
+    }
+    let mut c = cargo();
+    c.current_dir(root());
+    let d = target_dir_from(&mut c)?;
+    Ok(DIR.get_or_init(|| d).clone())
+}
+
+/// The `target_directory` that `cargo metadata` run as `cargo` reports.
+pub fn target_dir_from(cargo: &mut Command) -> Result<PathBuf> {
+    let shown = "cargo metadata --format-version 1 --no-deps";
+    let out = cargo
+        .args(["metadata", "--format-version", "1", "--no-deps"])
+        .stderr(Stdio::inherit())
+        .output()
+        .with_context(|| format!("starting {shown}"))?;
+    if !out.status.success() {
+        bail!("{shown} failed with {}", out.status);
+    }
+    let meta: serde_json::Value =
+        serde_json::from_slice(&out.stdout).with_context(|| format!("reading {shown}"))?;
+    let dir = meta
+        .get("target_directory")
+        .and_then(|d| d.as_str())
+        .with_context(|| format!("{shown} names no target_directory"))?;
+    Ok(PathBuf::from(dir))
+}
+
+/// Run a command in the workspace root, failing with its description if it fails. While it
+/// runs, a line every [`PROGRESS_EVERY`] says what is still running and for how long (always,
+/// terminal or log: a first run spends minutes in `cargo run --quiet` builds that print nothing).
 pub fn run(cmd: &mut Command) -> Result<()> {
     let shown = format!("{cmd:?}");
     eprintln!("xtask: {shown}");
-    let status = cmd
+    let label = label(cmd);
+    let mut child = cmd
         .current_dir(root())
-        .status()
+        .spawn()
         .with_context(|| format!("starting {shown}"))?;
+    let status = wait_with_progress(&mut child, &label, PROGRESS_EVERY, &mut progress_line)
+        .with_context(|| format!("waiting for {shown}"))?;
     if !status.success() {
         bail!("{shown} failed with {status}");
     }
     Ok(())
 }
 
+/// How often a long child is reported as still running.
+pub const PROGRESS_EVERY: Duration = Duration::from_secs(10);
+
+/// Prints a progress line on stderr. On a terminal the line is cleared first, so the line does
+/// not land after cargo's own progress bar (which cargo redraws below it).
+pub fn progress_line(line: String) {
+    if std::io::stderr().is_terminal() {
+        eprintln!("\r\x1b[K{line}");
+    } else {
+        eprintln!("{line}");
+    }
+}
+
+/// Waits for `child`, handing `say` a line "xtask: still LABEL (N s)…" every `every`.
+pub fn wait_with_progress(
+    child: &mut Child,
+    label: &str,
+    every: Duration,
+    say: &mut dyn FnMut(String),
+) -> std::io::Result<ExitStatus> {
+    let start = Instant::now();
+    let mut next = every;
+    loop {
+        if let Some(status) = child.try_wait()? {
+            return Ok(status);
+        }
+        let elapsed = start.elapsed();
+        if elapsed >= next {
+            say(progress(label, elapsed));
+            next += every;
+        }
+        std::thread::sleep(Duration::from_millis(50).min(every));
+    }
+}
+
+/// The progress line for `label` after `elapsed`.
+pub fn progress(label: &str, elapsed: Duration) -> String {
+    format!("xtask: still {label} ({:.0} s)…", elapsed.as_secs_f64())
+}
+
+/// What a command is doing, in words: `cargo build -p pico-imu` → "building pico-imu",
+/// `cargo run -p imu-lab -- fit …` → "running imu-lab fit (cargo builds it first when needed)",
+/// other programs → "running PROGRAM FIRST-ARG".
+pub fn label(cmd: &Command) -> String {
+    let prog = Path::new(cmd.get_program())
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let args: Vec<String> = cmd
+        .get_args()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    let after = |flag: &str| {
+        args.iter()
+            .position(|a| a == flag)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    if prog == "cargo" {
+        let package = after("-p").or_else(|| after("--package"));
+        match (args.first().map(String::as_str), package) {
+            (Some("build"), Some(p)) => return format!("building {p}"),
+            (Some("run"), Some(p)) => {
+                let sub = after("--").map(|s| format!(" {s}")).unwrap_or_default();
+                return format!("running {p}{sub} (cargo builds it first when needed)");
+            }
+            (Some("test"), _) => return "building and running the host tests".into(),
+            _ => {}
+        }
+    }
+    if prog == "node" && args.first().is_some_and(|a| a.ends_with("cli.js")) {
+        let sub = args.get(1).map(|s| format!(" {s}")).unwrap_or_default();
+        return format!("running the emulator (sim/src/cli.js{sub})");
+    }
+    let first = args
+        .iter()
+        .find(|a| !a.starts_with('-'))
+        .and_then(|a| Path::new(a).file_name())
+        .map(|a| format!(" {}", a.to_string_lossy()))
+        .unwrap_or_default();
+    format!("running {prog}{first}")
+}
 pub fn cargo() -> Command {
     Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
 }
@@ -78,5 +201,59 @@ fn test(extra: &[String]) -> Result<()> {
             "xtask: node >= 20 not found: emulator end-to-end test and harness tests skipped"
         );
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_long_child_is_reported_while_it_runs_and_a_quick_one_is_not() {
+        let mut lines = Vec::new();
+        let mut child = Command::new("sleep").arg("0.5").spawn().unwrap();
+        let status = wait_with_progress(
+            &mut child,
+            "sleeping",
+            Duration::from_millis(100),
+            &mut |l| lines.push(l),
+        )
+        .unwrap();
+        assert!(status.success());
+        // A line at 0.1, 0.2, 0.3, 0.4 s (the last may race the child's exit).
+        assert!((3..=5).contains(&lines.len()), "{lines:?}");
+        assert!(lines
+            .iter()
+            .all(|l| l.starts_with("xtask: still sleeping (")));
+        let mut lines = Vec::new();
+        let mut child = Command::new("true").spawn().unwrap();
+        wait_with_progress(&mut child, "x", Duration::from_secs(10), &mut |l| {
+            lines.push(l)
+        })
+        .unwrap();
+        assert!(lines.is_empty());
+        assert_eq!(
+            progress("building imu-lab", Duration::from_millis(40_400)),
+            "xtask: still building imu-lab (40 s)…"
+        );
+    }
+
+    #[test]
+    fn commands_are_named_by_what_they_do() {
+        let mut c = Command::new("cargo");
+        c.args(["build", "--release", "-p", "pico-imu"]);
+        assert_eq!(label(&c), "building pico-imu");
+        let mut c = Command::new("/usr/bin/cargo");
+        c.args(["run", "--quiet", "-p", "imu-lab", "--", "fit", "rec.csv"]);
+        assert_eq!(
+            label(&c),
+            "running imu-lab fit (cargo builds it first when needed)"
+        );
+        let mut c = Command::new("node");
+        c.args(["/w/sim/src/cli.js", "bench", "--quiet"]);
+        assert_eq!(label(&c), "running the emulator (sim/src/cli.js bench)");
+        let mut c = Command::new("npm");
+        c.args(["test", "--prefix", "sim"]);
+        assert_eq!(label(&c), "running npm test");
     }
 }

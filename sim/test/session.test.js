@@ -1,0 +1,93 @@
+// The TCP bridge of the emulated USB CDC port: one host at a time, the next one served as soon
+// as the previous goes, like a serial port opened again.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { connect } from 'node:net';
+import { mkdtempSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { Session } from '../src/session.js';
+import { generateStream } from '../src/stream.js';
+import { buildElf, flashImage } from './helpers.js';
+
+function session() {
+  const dir = mkdtempSync(join(tmpdir(), 'sim-session-'));
+  const elf = join(dir, 'spin.elf');
+  writeFileSync(elf, buildElf([flashImage([0xe7fe])]));
+  return new Session({ elf, stream: generateStream({ seed: 1, seconds: 1 }), defmtPrint: null });
+}
+
+/**
+ * A host: connects and collects what the device sends it. `busy`: a host that does not close
+ * its end when the port closes (not reading at the moment).
+ */
+async function host(port, { busy = false } = {}) {
+  const sock = connect({ port, host: '127.0.0.1', allowHalfOpen: busy });
+  sock.got = [];
+  sock.ended = false;
+  sock.on('data', (d) => sock.got.push(...d));
+  sock.on('end', () => (sock.ended = true));
+  sock.on('error', () => {});
+  await new Promise((r) => sock.on('connect', r));
+  return sock;
+}
+
+async function until(what, cond, ms = 3000) {
+  const t0 = Date.now();
+  while (!cond()) {
+    if (Date.now() - t0 > ms) throw new Error(`timed out waiting for ${what}`);
+    await new Promise((r) => setTimeout(r, 5));
+  }
+}
+
+/** The device sends `bytes`; returns once someone (or no one) had the chance to get them. */
+async function deviceSends(s, bytes) {
+  s.usb.onData(new Uint8Array(bytes));
+  await new Promise((r) => setTimeout(r, 50));
+}
+
+test('a host that connects while another holds the port is served when that one leaves', { timeout: 5000 }, async () => {
+  const s = session();
+  const port = await s.listen(0);
+  const a = await host(port);
+  await until('the first host to be served', () => s.client);
+  const b = await host(port);
+  await new Promise((r) => setTimeout(r, 50));
+  assert.equal(b.ended, false, 'the waiting host was turned away');
+  await deviceSends(s, [1, 2]);
+  assert.deepEqual([a.got, b.got], [[1, 2], []]);
+  a.end();
+  await until('the second host to be served', () => s.client && s.usbStats.toHost === 2 && a.ended);
+  await deviceSends(s, [3]);
+  assert.deepEqual(b.got, [3]);
+  b.write(Buffer.from([9, 9, 9]));
+  await until('the second host\'s bytes to arrive', () => s.usbStats.fromHost === 3);
+  b.destroy();
+  await s.close();
+});
+
+test('a host that connects right after another closed is served', { timeout: 5000 }, async () => {
+  const s = session();
+  const port = await s.listen(0);
+  for (let i = 0; i < 5; i++) {
+    const h = await host(port);
+    await until(`host ${i} to be served`, () => s.client);
+    await deviceSends(s, [i]);
+    assert.deepEqual(h.got, [i], `host ${i}`);
+    h.end(); // the next connects at once, before the port has seen this one go
+  }
+  await s.close();
+});
+
+test('closing the session does not wait for a host that keeps its end open', { timeout: 5000 }, async () => {
+  const s = session();
+  const port = await s.listen(0);
+  const a = await host(port, { busy: true });
+  const b = await host(port, { busy: true });
+  await until('the first host to be served', () => s.client);
+  const t0 = Date.now();
+  await s.close();
+  assert.ok(Date.now() - t0 < 1500, `close took ${Date.now() - t0} ms`);
+  a.destroy();
+  b.destroy();
+});
