@@ -273,11 +273,21 @@ pub struct Engine<const P: usize, const L: usize, const R: usize, const S: usize
 
 /// The firmware's configuration: overlap factor 8, 24 octave levels (τ up to 2^23 samples,
 /// 2.3 h at 1 kHz).
-pub type DeviceEngine = Engine<8, 24, 12, 20>;
+pub type DeviceEngine =
+    Engine<{ DEVICE_PARAMS[0] }, { DEVICE_PARAMS[1] }, { DEVICE_PARAMS[2] }, { DEVICE_PARAMS[3] }>;
+
+/// [`DeviceEngine`]'s parameters `[P, L, R, S]`, stated once: the type is built from them, the
+/// firmware reports them, and the Thumb routines (written for this layout) run exactly when an
+/// engine's parameters are these.
+pub const DEVICE_PARAMS: [usize; 4] = [8, 24, 12, 20];
 
 /// The firmware's magnetometer configuration: the same overlap, 22 levels (τ up to 2^21 samples,
 /// 2.9 h at 200 Hz, the same reach in seconds as [`DeviceEngine`] at 1 kHz).
-pub type MagEngine = Engine<8, 22, 12, 18>;
+pub type MagEngine =
+    Engine<{ MAG_PARAMS[0] }, { MAG_PARAMS[1] }, { MAG_PARAMS[2] }, { MAG_PARAMS[3] }>;
+
+/// [`MagEngine`]'s parameters `[P, L, R, S]`, stated once.
+pub const MAG_PARAMS: [usize; 4] = [8, 22, 12, 18];
 
 // The firmware's per-channel memory (docs/allan.md), checked on every target including
 // thumbv6m: the layout is repr(C) and u64/i64 align to 8 there as on the host.
@@ -597,7 +607,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
     #[inline(always)]
     fn as_device_engine(&mut self) -> Option<&mut DeviceEngine> {
-        (P == 8 && L == 24 && R == 12 && S == 20)
+        ([P, L, R, S] == DEVICE_PARAMS)
             // SAFETY: with these parameters `Self` is `DeviceEngine`.
             .then(|| unsafe { &mut *(self as *mut Self).cast::<DeviceEngine>() })
     }

@@ -9,17 +9,12 @@ use imu_proto::{
 use crate::device::Device;
 use crate::outbox::FrameSink;
 
-/// Allan engine overlap factor and levels, as reported in [`Identity`]; tied to the engine
-/// types at compile time.
-pub const ALLAN_OVERLAP: u8 = 8;
-pub const ALLAN_LEVELS: u8 = 24;
-pub const ALLAN_LEVELS_MAG: u8 = 22;
-const _: () = assert!(
-    core::mem::size_of::<allan::stream::DeviceEngine>()
-        == core::mem::size_of::<allan::stream::Engine<8, 24, 12, 20>>()
-        && core::mem::size_of::<allan::stream::MagEngine>()
-            == core::mem::size_of::<allan::stream::Engine<8, 22, 12, 18>>()
-);
+/// Allan engine overlap factor and levels, as reported in [`Identity`]: the engine types'
+/// own parameters.
+pub const ALLAN_OVERLAP: u8 = allan::stream::DEVICE_PARAMS[0] as u8;
+pub const ALLAN_LEVELS: u8 = allan::stream::DEVICE_PARAMS[1] as u8;
+pub const ALLAN_LEVELS_MAG: u8 = allan::stream::MAG_PARAMS[1] as u8;
+const _: () = assert!(allan::stream::MAG_PARAMS[0] == allan::stream::DEVICE_PARAMS[0]);
 
 /// A calibration the host asked to persist; the firmware pauses sampling, writes it and
 /// reports back through [`Device::persisted`].
