@@ -98,12 +98,43 @@ pub const READ_FIRST_BIT: u64 = 29;
 /// Bit of the second byte of a register read.
 pub const READ_SECOND_BIT: u64 = 38;
 
+/// `n / p` (`p > 0`). The clock divides times up to a few dozen periods apart by a period, so
+/// the quotient is nearly always below 256: then eight shift-and-subtract steps give it, where
+/// a 64-bit division is a library call of about 450 cycles on the Cortex-M0+.
+#[inline]
+fn quot(n: u64, p: u64) -> u64 {
+    if n < p {
+        return 0;
+    }
+    if p == 0 || p > u64::MAX >> 8 || n >= p << 8 {
+        return n.checked_div(p).unwrap_or(0);
+    }
+    let (mut r, mut q) = (n, 0);
+    for b in (0..8).rev() {
+        if r >= p << b {
+            r -= p << b;
+            q |= 1 << b;
+        }
+    }
+    q
+}
+
+/// `ceil(n / p)` (`p > 0`).
+fn quot_ceil(n: u64, p: u64) -> u64 {
+    let q = quot(n, p);
+    if q.wrapping_mul(p) == n {
+        q
+    } else {
+        q + 1
+    }
+}
+
 /// `floor(a / p)` for a signed `a`.
 fn floor_div(a: i64, p: u64) -> i64 {
     if a >= 0 {
-        (a as u64 / p) as i64
+        quot(a as u64, p) as i64
     } else {
-        -((a.unsigned_abs()).div_ceil(p) as i64)
+        -(quot_ceil(a.unsigned_abs(), p) as i64)
     }
 }
 
@@ -400,10 +431,10 @@ impl SampleClock {
         let p = self.period;
         let base = self.t_at.wrapping_add(offset as u64);
         if earliest <= base {
-            let back = (base - earliest) / p;
+            let back = quot(base - earliest, p);
             return base - back * p;
         }
-        let ahead = (earliest - base).div_ceil(p);
+        let ahead = quot_ceil(earliest - base, p);
         base + ahead * p
     }
 
@@ -461,6 +492,36 @@ impl SampleClock {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quotients_by_subtraction_equal_division() {
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for i in 0..200_000u64 {
+            let p = match i % 4 {
+                0 => next() % (1 << 28) + 1,
+                1 => fine(1000) + next() % 1000,
+                2 => next() >> (next() % 64),
+                _ => u64::MAX - next() % 3,
+            }
+            .max(1);
+            let n = match i % 3 {
+                0 => next() % (p.saturating_mul(20).max(1)),
+                1 => p.saturating_mul(next() % 300).saturating_add(next() % 2),
+                _ => next(),
+            };
+            assert_eq!(quot(n, p), n / p, "{n} / {p}");
+            assert_eq!(quot_ceil(n, p), n.div_ceil(p), "ceil {n} / {p}");
+        }
+        for a in [-3 * US as i64 - 1, -(US as i64), -1, 0, 1, US as i64 * 17] {
+            assert_eq!(floor_div(a, US), a.div_euclid(US as i64), "{a}");
+        }
+    }
 
     /// A part with true period `p_ns` and first sample at `t0_ns` (both in ns).
     struct Part {
