@@ -231,6 +231,19 @@ macro_rules! drivers {
             /// that knows how long ago that was can tell whether the FIFO may have overflowed
             /// since (the count cannot show an overflow after it), and reset it instead.
             pub $($async)? fn read_fifo_counted(&mut self, count: u16, out: &mut [RawSample]) -> Result<usize, MpuError<I2C>> {
+                let mut slots = out.iter_mut();
+                let max = slots.len();
+                self.read_fifo_counted_with(count, max, |s| {
+                    if let Some(slot) = slots.next() {
+                        *slot = s;
+                    }
+                }) $(.$await)?
+            }
+
+            /// [`Self::read_fifo_counted`] handing each decoded frame to `put`, in FIFO order, at
+            /// most `max` of them (a caller filling a buffer in place need not initialise it
+            /// first). Returns how many were handed over.
+            pub $($async)? fn read_fifo_counted_with(&mut self, count: u16, max: usize, mut put: impl FnMut(RawSample)) -> Result<usize, MpuError<I2C>> {
                 let frame = self.config.fifo.ok_or(m::Error::NotConfigured)?;
                 let chip = self.chip.ok_or(m::Error::NotConfigured)?;
                 // Overflow is read from the count, not from INT_STATUS (one transfer fewer per
@@ -241,11 +254,11 @@ macro_rules! drivers {
                 if count >= chip.fifo_capacity() {
                     return Err(m::Error::FifoOverflow);
                 }
-                // min(count / frame size, out.len()) by subtraction: the Cortex-M0+ has no
-                // divide instruction, and `out` is a few frames long.
+                // min(count / frame size, max) by subtraction: the Cortex-M0+ has no divide
+                // instruction, and `max` is a few frames.
                 let fb = frame.bytes();
                 let (mut wanted, mut left) = (0, count as usize);
-                while wanted < out.len() && left >= fb {
+                while wanted < max && left >= fb {
                     left -= fb;
                     wanted += 1;
                 }
@@ -253,13 +266,11 @@ macro_rules! drivers {
                 while done < wanted {
                     let n = (wanted - done).min(FIFO_CHUNK_FRAMES);
                     // The driver's own scratch: not zeroed on every call.
-                    let mut bytes = &mut self.fifo_buf[..n * fb];
+                    let bytes = &mut self.fifo_buf[..n * fb];
                     self.i2c.write_read(self.address, &[mr::FIFO_R_W], bytes) $(.$await)? ?;
-                    for slot in out[done..done + n].iter_mut() {
-                        let (chunk, rest) = core::mem::take(&mut bytes).split_at_mut(fb);
-                        bytes = rest;
+                    for chunk in bytes.chunks_exact(fb) {
                         if let Some(s) = m::decode_fifo_frame(chunk, frame) {
-                            *slot = s;
+                            put(s);
                         }
                     }
                     done += n;

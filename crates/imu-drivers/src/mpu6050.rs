@@ -506,6 +506,7 @@ pub struct Sample {
     pub temperature_c: Option<f32>,
 }
 
+#[inline(always)]
 fn be(b: &[u8], i: usize) -> i16 {
     // Callers pass fixed-size arrays whose length covers i + 1.
     i16::from_be_bytes([b[i], b[i + 1]])

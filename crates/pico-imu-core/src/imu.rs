@@ -346,14 +346,19 @@ impl ImuService {
             let slot = out.len();
             let _ = out.push(SensorMsg::Imu {
                 stamps: Default::default(),
-                samples: Vec::from_array([EMPTY_FRAME; BURST_MAX]),
+                samples: Vec::new(),
                 after: None,
             });
             let Some(SensorMsg::Imu { samples, .. }) = out.last_mut() else {
                 return;
             };
             stage::enter(Stage::I2c);
-            let r = imu.read_fifo_counted(count, samples).await;
+            let r = imu
+                .read_fifo_counted_with(count, BURST_MAX, |s| {
+                    // At most BURST_MAX frames: never full.
+                    let _ = samples.push(s);
+                })
+                .await;
             stage::leave();
             let n = match r {
                 Ok(n) => n,
@@ -375,7 +380,6 @@ impl ImuService {
                 after: a,
             }) = out.last_mut()
             {
-                samples.truncate(n);
                 *s = stamps;
                 *a = after;
             }
@@ -516,12 +520,6 @@ async fn delay_until<D: DelayNs>(delay: &mut D, now: &impl Fn() -> u64, t: Fine)
             .await;
     }
 }
-
-const EMPTY_FRAME: RawSample = RawSample {
-    accel: [0; 3],
-    temp: None,
-    gyro: [0; 3],
-};
 
 #[cfg(test)]
 mod tests {
