@@ -179,6 +179,11 @@ fn terms(t: u64, span: u64, stride: u64) -> u64 {
     // 64-bit divisions the Cortex-M0+ does in software (a table snapshot asks for 480 of these).
     debug_assert!(stride.is_power_of_two() && span.is_multiple_of(stride));
     let shift = stride.trailing_zeros();
+    if t >> 32 == 0 {
+        // A variable 64-bit shift is a library call on the Cortex-M0+; a 32-bit one is one
+        // instruction (and span ≤ t fits too).
+        return u64::from(((t as u32) >> shift) - ((span as u32) >> shift) + 1);
+    }
     (t >> shift) - (span >> shift) + 1
 }
 
@@ -378,7 +383,11 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
 
     /// (second, third) differences level `k` has taken in the current segment.
     fn segment_terms(&self, k: usize) -> (u64, u64) {
-        let m = 1u64 << k;
+        let m = if k < 32 {
+            u64::from(1u32 << k)
+        } else {
+            1u64 << k
+        };
         let s = Self::stride(k) as u64;
         (terms(self.t, 2 * m, s), terms(self.t, 3 * m, s))
     }

@@ -199,7 +199,9 @@ impl Engines {
                 E::Imu(x) => x.level(k),
                 E::Mag(x) => x.level(k),
             })
-            .filter(|l| l.n2 > 0);
+            // A level has differences only if every level below it has (each needs more
+            // history than the one below): the first empty level ends the table.
+            .take_while(|l| l.n2 > 0);
         (pushed, gaps, levels)
     }
 

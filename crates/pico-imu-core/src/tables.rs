@@ -1,6 +1,6 @@
 //! The table scheduler: a round takes one snapshot of every engine (one instant) and sends the
 //! ten tables from it one at a time, spaced out so that no 100 ms of CPU carries more than one
-//! table's encoding.
+//! table's encoding, and none carries the snapshot and a table both.
 //!
 //! The device sends only the engines' exact integer sums; the deviation, its EDF and its bounds
 //! are the host's (`allan::ci`), which recomputes them from the sums anyway: on the M0+ each
@@ -10,8 +10,9 @@ use imu_proto::{AllanLevel, AllanTable, Channel, Scales, Sensor, Vec};
 use crate::engines::{Engines, Snapshot, CHANNELS};
 use crate::outbox::{FrameSink, Outbox, Sent};
 
-/// Least time between two table frames of a round, µs.
-pub const TABLE_SPACING_US: u64 = 50_000;
+/// Least time between a round's snapshot and its first table frame, and between two table
+/// frames, µs.
+pub const TABLE_SPACING_US: u64 = 100_000;
 
 /// Queue room a table frame needs (a full table with worst-case varints is < 2 KiB).
 pub const TABLE_FRAME_ROOM: usize = 2048;
@@ -57,6 +58,7 @@ impl Tables {
         self.t_us = t_us;
         self.period_ns = period_ns;
         self.next = Some(0);
+        self.last_sent_us = Some(t_us);
         self.round
     }
 
