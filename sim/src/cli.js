@@ -23,7 +23,7 @@ const usage = `usage:
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--report F.md] [--json F.json]
-  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact]
+  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact [--from S]]
                    (PC samples by function; callers of leaf functions matching RE; memcpy/memset
                    calls by caller; --exact: every instruction's cycles by function per sample set)
 fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:1s | stall:qmc@0s
@@ -143,6 +143,7 @@ async function main() {
         callers: { type: 'string' },
         copies: { type: 'boolean' },
         exact: { type: 'boolean' },
+        from: { type: 'string' },
       },
     });
   } catch (e) {

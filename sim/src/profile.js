@@ -108,15 +108,15 @@ function symbolFinder(elf) {
 }
 
 /**
- * `profile --exact`: every executed instruction counted after a 1 s warm-up, its cycles charged
+ * `profile --exact`: every executed instruction counted after a warm-up (`--from S`, 1 s), its cycles charged
  * to the function holding it (exclusive), per 1 kHz sample set served by the MPU-6050 model:
  * the same unit as the bench. With `--callers RE`, calls of library leaf functions matching RE
  * (memcpy, division, 64-bit multiply, …) are also charged inclusively to their call sites.
  * Deterministic: the same ELF gives the same table.
  */
-export async function exactCycles({ elf, seconds = 1, callers = null }) {
-  const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: seconds + 3 }), echoLog: false });
-  await s.run(1e9);
+export async function exactCycles({ elf, seconds = 1, callers = null, from = 1 }) {
+  const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: from + seconds + 2 }), echoLog: false });
+  await s.run(from * 1e9);
   const core = s.emu.core;
   const find = symbolFinder(s.emu.elf);
   const perPc = new Map();
@@ -149,7 +149,7 @@ export async function exactCycles({ elf, seconds = 1, callers = null }) {
     return r;
   };
   const served0 = s.mpu.stats.servedFifo + s.mpu.stats.servedRegs;
-  await s.run((1 + seconds) * 1e9);
+  await s.run((from + seconds) * 1e9);
   const sets = s.mpu.stats.servedFifo + s.mpu.stats.servedRegs - served0;
   await s.close();
   const byFn = new Map();
@@ -163,7 +163,7 @@ export async function exactCycles({ elf, seconds = 1, callers = null }) {
 }
 
 async function exactProfile(v) {
-  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers });
+  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1) });
   const { sets, total, byFn, calls, seconds } = r;
   const top = Number(v.top ?? 25);
   const out = [`# executed cycles per sample set, by function (exclusive): ${(total / sets).toFixed(0)} in all, ${sets} sample sets in ${seconds} s`];
