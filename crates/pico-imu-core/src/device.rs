@@ -6,6 +6,7 @@ use imu_proto::{
     CalSource, CalStatus, DeviceMsg, DeviceMsgRef, Event, Scales, Sensor, SensorState, Status,
 };
 
+use crate::clock::Fine;
 use crate::msg::{Report, SensorMsg};
 use crate::outbox::{FrameSink, Outbox, Sent};
 use crate::pipeline::Pipeline;
@@ -31,7 +32,11 @@ pub struct Device {
     pub(crate) tables_ms: u32,
     pub counters: Counters,
     state: [SensorState; 2],
-    /// The sensors' sample periods from their clocks, ns (0: not known yet).
+    /// The sensors' sample periods from their clocks as the samples carry them ([`Fine`]; 0:
+    /// none yet), converted to ns only for a report: the per-message path does no 64-bit
+    /// multiply.
+    period: [Fine; 2],
+    /// The periods the sensor services last reported, ns (0: not known yet).
     period_ns: [u32; 2],
     pub(crate) firmware: &'static str,
 }
@@ -52,6 +57,7 @@ impl Device {
             tables_ms: 10_000,
             counters: Counters::default(),
             state: [SensorState::Unknown; 2],
+            period: [0; 2],
             period_ns: [0; 2],
             firmware,
         }
@@ -93,12 +99,12 @@ impl Device {
                 samples,
                 after,
             } => {
-                self.period_ns[0] = period_ns(stamps.period);
+                self.period[0] = stamps.period;
                 self.pipeline
                     .imu_burst(samples, stamps, *after, &mut self.outbox, sink)
             }
             SensorMsg::Mag { stamps, xyz, after } => {
-                self.period_ns[1] = period_ns(stamps.period);
+                self.period[1] = stamps.period;
                 self.pipeline.mag_sample(
                     stamps.k0,
                     stamps.us(0),
@@ -136,6 +142,8 @@ impl Device {
         self.state[i] = r.state;
         if r.period_ns != 0 {
             self.period_ns[i] = r.period_ns;
+            // The report is newer than the last samples' period.
+            self.period[i] = 0;
         }
         if let Some(e) = r.event {
             self.send(&DeviceMsg::Event(e), sink);
@@ -179,8 +187,8 @@ impl Device {
                 .map(|t| ((f32::from(t) * s.temp + s.temp_offset) * 1000.0) as i32),
             imu: self.state[0],
             mag: self.state[1],
-            imu_period_ns: self.period_ns[0],
-            mag_period_ns: self.period_ns[1],
+            imu_period_ns: self.periods_ns()[0],
+            mag_period_ns: self.periods_ns()[1],
             cal: self.cal_status,
             mode: p.mode,
         }
@@ -197,6 +205,14 @@ impl Device {
         self.outbox.send(&DeviceMsgRef::Status(&st), sink)
     }
 
+    /// Each sensor's period, ns: from its latest samples, or its latest report when newer.
+    fn periods_ns(&self) -> [u32; 2] {
+        [0, 1].map(|i| match self.period[i] {
+            0 => self.period_ns[i],
+            p => period_ns(p),
+        })
+    }
+
     /// Whether the magnetometer is delivering samples (table work is then scheduled right
     /// after its reads; see `process_task`).
     pub fn mag_ok(&self) -> bool {
@@ -207,7 +223,7 @@ impl Device {
     /// abandoned). Returns its number.
     pub fn start_tables(&mut self, t_us: u64) -> u32 {
         self.tables
-            .start(&self.pipeline.engines, t_us, self.period_ns)
+            .start(&self.pipeline.engines, t_us, self.periods_ns())
     }
 
     /// Whether a table round is in progress.
@@ -240,7 +256,7 @@ impl Device {
     }
 }
 
-/// A [`crate::clock::Fine`] period in ns.
-fn period_ns(p: crate::clock::Fine) -> u32 {
+/// A [`Fine`] period in ns.
+fn period_ns(p: Fine) -> u32 {
     ((p * 1000 + (crate::clock::US >> 1)) >> crate::clock::FINE_BITS) as u32
 }

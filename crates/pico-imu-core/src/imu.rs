@@ -22,7 +22,7 @@
 use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 use imu_drivers::asynch::Mpu6050;
-use imu_drivers::mpu6050::{self as mpu, RawSample};
+use imu_drivers::mpu6050 as mpu;
 use imu_proto::{Event, GapCause, Sensor, SensorState, Vec, IMU_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
@@ -376,8 +376,8 @@ impl ImuService {
             let after = self.after.take();
             if let Some(SensorMsg::Imu {
                 stamps: s,
-                samples,
                 after: a,
+                ..
             }) = out.last_mut()
             {
                 *s = stamps;
