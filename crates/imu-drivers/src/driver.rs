@@ -14,6 +14,7 @@ macro_rules! drivers {
             RawSample, Scale, SelfTestReport,
         };
         use crate::qmc5883::{self as q, Chip, MagSample, Status, Variant};
+        use crate::register::Register;
 
         /// Error type of [`Mpu6050`] on bus `I2C`.
         pub type MpuError<I2C> = m::Error<<I2C as ErrorType>::Error>;
@@ -84,6 +85,16 @@ macro_rules! drivers {
                 Ok(())
             }
 
+            $($async)? fn write_register<R: Register>(&mut self, r: R) -> Result<(), MpuError<I2C>> {
+                self.write_reg(R::ADDR, r.bits()) $(.$await)?
+            }
+
+            $($async)? fn read_register<R: Register>(&mut self) -> Result<R, MpuError<I2C>> {
+                let mut b = [0u8; 1];
+                self.read_regs(R::ADDR, &mut b) $(.$await)? ?;
+                Ok(R::from_bits(b[0]))
+            }
+
             /// Read WHO_AM_I (0x75).
             pub $($async)? fn who_am_i(&mut self) -> Result<u8, MpuError<I2C>> {
                 let mut b = [0u8; 1];
@@ -125,22 +136,22 @@ macro_rules! drivers {
                 config: &Config,
             ) -> Result<ChipId, MpuError<I2C>> {
                 let chip = self.probe() $(.$await)? ?;
-                self.write_reg(mr::PWR_MGMT_1, mb::DEVICE_RESET) $(.$await)? ?;
+                self.write_register(mb::PwrMgmt1::RESET) $(.$await)? ?;
                 delay.delay_ms(m::RESET_DELAY_MS) $(.$await)?;
                 let (burst, len) = config.config_burst(chip);
                 self.i2c.write(self.address, &burst[..len]) $(.$await)? ?;
-                self.write_reg(mr::INT_PIN_CFG, config.interrupt.pin_cfg_bits()) $(.$await)? ?;
-                self.write_reg(mr::INT_ENABLE, config.int_enable_bits()) $(.$await)? ?;
+                self.write_register(config.interrupt.pin_cfg()) $(.$await)? ?;
+                self.write_register(config.int_enable()) $(.$await)? ?;
                 self.config = *config;
                 match config.fifo {
                     Some(frame) => {
-                        self.write_reg(mr::USER_CTRL, mb::USER_FIFO_RESET) $(.$await)? ?;
-                        self.write_reg(mr::FIFO_EN, frame.fifo_en_bits()) $(.$await)? ?;
-                        self.write_reg(mr::USER_CTRL, mb::USER_FIFO_EN) $(.$await)? ?;
+                        self.write_register(mb::UserCtrl::FIFO_EMPTIED) $(.$await)? ?;
+                        self.write_register(frame.fifo_en()) $(.$await)? ?;
+                        self.write_register(mb::UserCtrl::FIFO_ON) $(.$await)? ?;
                     }
                     None => {
-                        self.write_reg(mr::FIFO_EN, 0) $(.$await)? ?;
-                        self.write_reg(mr::USER_CTRL, 0) $(.$await)? ?;
+                        self.write_register(mb::FifoEn::default()) $(.$await)? ?;
+                        self.write_register(mb::UserCtrl::default()) $(.$await)? ?;
                     }
                 }
                 Ok(chip)
@@ -149,7 +160,7 @@ macro_rules! drivers {
             /// Wake the chip: PWR_MGMT_1 = 0x01 (awake, PLL with gyro X reference). Its sample
             /// clock starts with this write; the first sample follows one sample period later.
             pub $($async)? fn start(&mut self) -> Result<(), MpuError<I2C>> {
-                self.write_reg(mr::PWR_MGMT_1, mb::CLKSEL_PLL_GYRO_X) $(.$await)?
+                self.write_register(mb::PwrMgmt1::RUNNING) $(.$await)?
             }
 
             /// Whether the chip still holds what [`Self::init`] configured (read back:
@@ -161,18 +172,16 @@ macro_rules! drivers {
                 let (burst, _) = self.config.config_burst(chip);
                 let mut b = [0u8; 4];
                 self.read_regs(mr::SMPLRT_DIV, &mut b) $(.$await)? ?;
-                let mut fifo_en = [0u8; 1];
-                self.read_regs(mr::FIFO_EN, &mut fifo_en) $(.$await)? ?;
+                let fifo_en: mb::FifoEn = self.read_register() $(.$await)? ?;
+                // USER_CTRL and PWR_MGMT_1 are adjacent: one read.
                 let mut ctrl = [0u8; 2];
-                self.read_regs(mr::USER_CTRL, &mut ctrl) $(.$await)? ?;
-                let (want_fifo, want_user) = match self.config.fifo {
-                    Some(frame) => (frame.fifo_en_bits(), mb::USER_FIFO_EN),
-                    None => (0, 0),
-                };
+                self.read_regs(mb::UserCtrl::ADDR, &mut ctrl) $(.$await)? ?;
+                let (user, power) = (mb::UserCtrl::from_bits(ctrl[0]), mb::PwrMgmt1::from_bits(ctrl[1]));
+                let want_fifo = self.config.fifo.map(|f| f.fifo_en()).unwrap_or_default();
                 Ok(b == [burst[1], burst[2], burst[3], burst[4]]
-                    && fifo_en[0] == want_fifo
-                    && ctrl[0] & mb::USER_FIFO_EN == want_user
-                    && ctrl[1] == mb::CLKSEL_PLL_GYRO_X)
+                    && fifo_en == want_fifo
+                    && user.fifo_en == self.config.fifo.is_some()
+                    && power == mb::PwrMgmt1::RUNNING)
             }
 
             /// One 14-byte burst from ACCEL_XOUT_H: accel, temperature and gyro of the same
@@ -185,9 +194,7 @@ macro_rules! drivers {
 
             /// Read (and thereby clear, RM 4.16) INT_STATUS.
             pub $($async)? fn int_status(&mut self) -> Result<IntStatus, MpuError<I2C>> {
-                let mut b = [0u8; 1];
-                self.read_regs(mr::INT_STATUS, &mut b) $(.$await)? ?;
-                Ok(IntStatus::from_bits(b[0]))
+                self.read_register() $(.$await)?
             }
 
             /// `read_all` if DATA_RDY_INT is set, else [`m::Error::NotReady`].
@@ -293,7 +300,7 @@ macro_rules! drivers {
                 if self.config.fifo.is_none() {
                     return Err(m::Error::NotConfigured);
                 }
-                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_RESET) $(.$await)?
+                self.write_register(mb::UserCtrl::FIFO_EMPTIED) $(.$await)?
             }
 
             /// Fill the FIFO again (USER_CTRL = FIFO_EN): the first frame in it is the first
@@ -302,7 +309,7 @@ macro_rules! drivers {
                 if self.config.fifo.is_none() {
                     return Err(m::Error::NotConfigured);
                 }
-                self.write_reg(mr::USER_CTRL, mb::USER_FIFO_EN) $(.$await)?
+                self.write_register(mb::UserCtrl::FIFO_ON) $(.$await)?
             }
 
             $($async)? fn average<D: $Delay>(&mut self, delay: &mut D) -> Result<([f32; 3], [f32; 3]), MpuError<I2C>> {
@@ -428,6 +435,10 @@ macro_rules! drivers {
                 Ok(())
             }
 
+            $($async)? fn write_register<R: Register>(&mut self, r: R) -> Result<(), MagError<I2C>> {
+                self.write_reg(R::ADDR, r.bits()) $(.$await)?
+            }
+
             $($async)? fn read_regs(&mut self, reg: u8, buf: &mut [u8]) -> Result<(), MagError<I2C>> {
                 self.i2c.write_read(self.variant.addr(), &[reg], buf) $(.$await)? ?;
                 Ok(())
@@ -464,16 +475,16 @@ macro_rules! drivers {
                 }
                 match self.variant {
                     Variant::L => {
-                        self.write_reg(q::reg_l::CONTROL2, q::bits::SOFT_RST) $(.$await)? ?;
+                        self.write_register(q::Control2L::RESET) $(.$await)? ?;
                         delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
                         self.write_reg(q::reg_l::SET_RESET_PERIOD, config.set_reset_period) $(.$await)? ?;
-                        self.write_reg(q::reg_l::CONTROL2, config.control2_l()) $(.$await)? ?;
+                        self.write_register(config.control2_l()) $(.$await)? ?;
                     }
                     Variant::P => {
-                        self.write_reg(q::reg_p::CONTROL2, q::bits::SOFT_RST) $(.$await)? ?;
+                        self.write_register(q::Control2P::RESET) $(.$await)? ?;
                         delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
                         self.write_reg(q::reg_p::AXIS_SIGN, q::reg_p::AXIS_SIGN_VALUE) $(.$await)? ?;
-                        self.write_reg(q::reg_p::CONTROL2, config.control2_p()) $(.$await)? ?;
+                        self.write_register(config.control2_p()) $(.$await)? ?;
                     }
                 }
                 self.config = *config;
@@ -499,9 +510,9 @@ macro_rules! drivers {
                     Variant::L => (
                         q::reg_l::CONTROL1,
                         self.config.control1_l().ok_or(q::Error::InvalidConfig)?,
-                        self.config.control2_l(),
+                        self.config.control2_l().bits(),
                     ),
-                    Variant::P => (q::reg_p::CONTROL1, self.config.control1_p(), self.config.control2_p()),
+                    Variant::P => (q::reg_p::CONTROL1, self.config.control1_p(), self.config.control2_p().bits()),
                 };
                 let mut b = [0u8; 2];
                 self.read_regs(c1_reg, &mut b) $(.$await)? ?;

@@ -75,6 +75,7 @@ mod driver;
 pub mod mpu6050;
 pub mod qmc5883;
 pub mod recovery;
+pub mod register;
 
 /// Blocking drivers over `embedded_hal::i2c::I2c` and `embedded_hal::delay::DelayNs`.
 pub mod blocking {

@@ -283,11 +283,12 @@ impl FifoFrame {
             FifoFrame::AccelTempGyro => 14,
         }
     }
-    /// FIFO_EN value.
-    pub const fn fifo_en_bits(self) -> u8 {
-        match self {
-            FifoFrame::AccelGyro => bits::FIFO_ACCEL | bits::FIFO_GYRO_XYZ,
-            FifoFrame::AccelTempGyro => bits::FIFO_ACCEL | bits::FIFO_GYRO_XYZ | bits::FIFO_TEMP,
+    /// FIFO_EN for frames of this layout.
+    pub const fn fifo_en(self) -> bits::FifoEn {
+        bits::FifoEn {
+            temp: matches!(self, FifoFrame::AccelTempGyro),
+            gyro: true,
+            accel: true,
         }
     }
 }
@@ -325,34 +326,21 @@ impl Default for InterruptConfig {
 }
 
 impl InterruptConfig {
-    /// INT_PIN_CFG value.
-    pub const fn pin_cfg_bits(&self) -> u8 {
-        (if self.active_low {
-            bits::INT_LEVEL_LOW
-        } else {
-            0
-        }) | (if self.open_drain {
-            bits::INT_OPEN_DRAIN
-        } else {
-            0
-        }) | (if self.latch { bits::LATCH_INT_EN } else { 0 })
-            | (if self.clear_on_any_read {
-                bits::INT_RD_CLEAR
-            } else {
-                0
-            })
+    /// INT_PIN_CFG.
+    pub const fn pin_cfg(&self) -> bits::IntPinCfg {
+        bits::IntPinCfg {
+            active_low: self.active_low,
+            open_drain: self.open_drain,
+            latch: self.latch,
+            clear_on_any_read: self.clear_on_any_read,
+        }
     }
-    /// INT_ENABLE value.
-    pub const fn enable_bits(&self) -> u8 {
-        (if self.data_ready {
-            bits::INT_DATA_RDY
-        } else {
-            0
-        }) | (if self.fifo_overflow {
-            bits::INT_FIFO_OFLOW
-        } else {
-            0
-        })
+    /// INT_ENABLE.
+    pub const fn enable(&self) -> bits::IntEnable {
+        bits::IntEnable {
+            fifo_overflow: self.fifo_overflow,
+            data_ready: self.data_ready,
+        }
     }
 }
 
@@ -416,15 +404,12 @@ impl Config {
         (b, len)
     }
 
-    /// INT_ENABLE value: the interrupt configuration, plus FIFO_OFLOW_EN whenever the FIFO is
-    /// on, so that INT_STATUS.FIFO_OFLOW_INT reports an overflow (RM 4.15/4.16).
-    pub const fn int_enable_bits(&self) -> u8 {
-        self.interrupt.enable_bits()
-            | if self.fifo.is_some() {
-                bits::INT_FIFO_OFLOW
-            } else {
-                0
-            }
+    /// INT_ENABLE: the interrupt configuration, plus FIFO_OFLOW_EN whenever the FIFO is on, so
+    /// that INT_STATUS.FIFO_OFLOW_INT reports an overflow (RM 4.15/4.16).
+    pub const fn int_enable(&self) -> bits::IntEnable {
+        let mut e = self.interrupt.enable();
+        e.fifo_overflow |= self.fifo.is_some();
+        e
     }
 
     /// Conversion factors for this configuration on `chip`.
@@ -545,25 +530,7 @@ pub fn decode_fifo_count(b: [u8; 2]) -> u16 {
     u16::from_be_bytes(b) & 0x1FFF
 }
 
-/// Interrupt status flags (RM 4.16).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct IntStatus {
-    /// FIFO_OFLOW_INT.
-    pub fifo_overflow: bool,
-    /// DATA_RDY_INT.
-    pub data_ready: bool,
-}
-
-impl IntStatus {
-    /// Decode INT_STATUS.
-    pub const fn from_bits(b: u8) -> Self {
-        IntStatus {
-            fifo_overflow: b & bits::INT_FIFO_OFLOW != 0,
-            data_ready: b & bits::INT_DATA_RDY != 0,
-        }
-    }
-}
+pub use bits::IntStatus;
 
 /// Result of the self-test: change of the self-test response (output with self-test on minus
 /// output with it off) from the factory value, in percent, per axis, with the pass window of

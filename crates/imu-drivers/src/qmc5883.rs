@@ -7,6 +7,8 @@
 //!   set-up example.
 //! - Honeywell HMC5883L datasheet (2013), register map table 2 (identification registers 10-12).
 
+use crate::register::{flag, Register};
+
 /// QMC5883L 7-bit I²C address (QMC-L 9.1, register map).
 pub const QMC5883L_ADDR: u8 = 0x0D;
 /// QMC5883P 7-bit I²C address (QMC-P register map).
@@ -298,10 +300,12 @@ impl Config {
     }
 
     /// QMC5883L CONTROL2 (0x0A): INT_ENB in bit 0, ROL_PNT in bit 6, soft reset off.
-    pub const fn control2_l(&self) -> u8 {
-        let int = if self.drdy_pin { 0 } else { bits::INT_DISABLE };
-        let rol = if self.roll_over { bits::ROL_PNT } else { 0 };
-        int | rol
+    pub const fn control2_l(&self) -> Control2L {
+        Control2L {
+            soft_reset: false,
+            roll_over: self.roll_over,
+            drdy_pin_off: !self.drdy_pin,
+        }
     }
 
     /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) `[7:6]`, OSR1 `[5:4]`, ODR `[3:2]`,
@@ -316,14 +320,90 @@ impl Config {
 
     /// QMC5883P CONTROL2 (0x0B): RNG `[3:2]` (0 = ±30 G, 1 = ±12 G, 2 = ±8 G, 3 = ±2 G),
     /// SET/RESET mode `[1:0]` = 0 (set and reset on).
-    pub const fn control2_p(&self) -> u8 {
+    pub const fn control2_p(&self) -> Control2P {
+        Control2P {
+            soft_reset: false,
+            range: self.range,
+        }
+    }
+}
+
+/// QMC5883L CONTROL2 (QMC-L 9.2.3).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Control2L {
+    /// SOFT_RST: restores every register's default; self-clearing.
+    pub soft_reset: bool,
+    /// ROL_PNT: a read that starts in 00H–06H rolls over from 06H to 00H.
+    pub roll_over: bool,
+    /// INT_ENB: 1 disables the DRDY pin.
+    pub drdy_pin_off: bool,
+}
+
+impl Control2L {
+    /// A soft reset.
+    pub const RESET: Self = Control2L {
+        soft_reset: true,
+        roll_over: false,
+        drdy_pin_off: false,
+    };
+}
+
+impl Register for Control2L {
+    const ADDR: u8 = reg_l::CONTROL2;
+    fn bits(self) -> u8 {
+        flag(self.soft_reset, bits::SOFT_RST)
+            | flag(self.roll_over, bits::ROL_PNT)
+            | flag(self.drdy_pin_off, bits::INT_DISABLE)
+    }
+    fn from_bits(b: u8) -> Self {
+        Control2L {
+            soft_reset: b & bits::SOFT_RST != 0,
+            roll_over: b & bits::ROL_PNT != 0,
+            drdy_pin_off: b & bits::INT_DISABLE != 0,
+        }
+    }
+}
+
+/// QMC5883P CONTROL2 (QMC-P register map): SOFT_RST and `RNG[3:2]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Control2P {
+    /// SOFT_RST.
+    pub soft_reset: bool,
+    /// RNG.
+    pub range: Range,
+}
+
+impl Control2P {
+    /// A soft reset (the range field then reads ±30 G, its reset value).
+    pub const RESET: Self = Control2P {
+        soft_reset: true,
+        range: Range::G30,
+    };
+}
+
+impl Register for Control2P {
+    const ADDR: u8 = reg_p::CONTROL2;
+    fn bits(self) -> u8 {
         let rng = match self.range {
             Range::G30 => 0,
             Range::G12 => 1,
             Range::G8 => 2,
             Range::G2 => 3,
         };
-        rng << 2
+        flag(self.soft_reset, bits::SOFT_RST) | rng << 2
+    }
+    fn from_bits(b: u8) -> Self {
+        Control2P {
+            soft_reset: b & bits::SOFT_RST != 0,
+            range: match (b >> 2) & 3 {
+                0 => Range::G30,
+                1 => Range::G12,
+                2 => Range::G8,
+                _ => Range::G2,
+            },
+        }
     }
 }
 
@@ -418,3 +498,29 @@ impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
 }
 
 impl<E: core::fmt::Debug> core::error::Error for Error<E> {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// CONTROL2's fields sit on the documented bits (QMC-L 9.2.3; QMC-P register map) and
+    /// every byte they can express reads back as the same fields.
+    #[test]
+    fn control2_fields_sit_on_the_documented_bits() {
+        assert_eq!(Control2L::RESET.bits(), 0x80);
+        assert_eq!(Config::default().control2_l().bits(), 0x00);
+        let pinless = Config {
+            drdy_pin: false,
+            roll_over: true,
+            ..Config::default()
+        };
+        assert_eq!(pinless.control2_l().bits(), 0x41);
+        assert_eq!(Control2P::RESET.bits(), 0x80);
+        assert_eq!(Config::default().control2_p().bits(), 0x0C);
+        for b in 0..=255u8 {
+            assert_eq!(Control2L::from_bits(b).bits(), b & 0xC1, "L {b:#04x}");
+            assert_eq!(Control2P::from_bits(b).bits(), b & 0x8C, "P {b:#04x}");
+        }
+        assert_eq!((Control2L::ADDR, Control2P::ADDR), (0x0A, 0x0B));
+    }
+}
