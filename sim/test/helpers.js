@@ -31,11 +31,12 @@ export function readRegs(dev, nanos, reg, n) {
 export const ms = (x) => x * 1e6;
 
 /**
- * Builds a minimal ELF32 ARM image: PT_LOAD segments (vaddr = paddr) and a symbol table.
- * @param segments [{ paddr, data: Uint8Array }]
- * @param symbols { name: address }
+ * Builds a minimal ELF32 ARM image: PT_LOAD segments and a symbol table.
+ * @param segments [{ paddr, vaddr (default paddr), data: Uint8Array }]
+ * @param symbols { name: address } or { name: { value, size } } (size 4 by default)
+ * @param entry e_entry (default: the first segment's paddr)
  */
-export function buildElf(segments, symbols = {}) {
+export function buildElf(segments, symbols = {}, { entry = segments[0]?.paddr ?? 0 } = {}) {
   const names = Object.keys(symbols);
   const enc = new TextEncoder();
   const strParts = [new Uint8Array([0])];
@@ -57,8 +58,9 @@ export function buildElf(segments, symbols = {}) {
   const sdv = new DataView(symtab.buffer);
   names.forEach((n, i) => {
     sdv.setUint32(16 * (i + 1), nameOff[i], true);
-    sdv.setUint32(16 * (i + 1) + 4, symbols[n], true);
-    sdv.setUint32(16 * (i + 1) + 8, 4, true);
+    const { value, size = 4 } = typeof symbols[n] === 'number' ? { value: symbols[n] } : symbols[n];
+    sdv.setUint32(16 * (i + 1) + 4, value, true);
+    sdv.setUint32(16 * (i + 1) + 8, size, true);
   });
   const ehsize = 52, phsize = 32, shsize = 40;
   let off = ehsize + phsize * segments.length;
@@ -77,7 +79,7 @@ export function buildElf(segments, symbols = {}) {
   const dv = new DataView(b.buffer);
   b.set([0x7f, 0x45, 0x4c, 0x46, 1, 1, 1], 0);
   dv.setUint16(18, 40, true);
-  dv.setUint32(24, segments[0]?.paddr ?? 0, true);
+  dv.setUint32(24, entry, true);
   dv.setUint32(28, ehsize, true);
   dv.setUint32(32, shOff, true);
   dv.setUint16(42, phsize, true);
@@ -88,7 +90,7 @@ export function buildElf(segments, symbols = {}) {
     const p = ehsize + i * phsize;
     dv.setUint32(p, 1, true);
     dv.setUint32(p + 4, segOff[i], true);
-    dv.setUint32(p + 8, s.paddr, true);
+    dv.setUint32(p + 8, s.vaddr ?? s.paddr, true);
     dv.setUint32(p + 12, s.paddr, true);
     dv.setUint32(p + 16, s.data.length, true);
     dv.setUint32(p + 20, s.data.length, true);

@@ -20,32 +20,40 @@ fn stop_sda(released: bool) -> Vec<P> {
     ]
 }
 
+/// SCL: released high, `pulses` clock pulses, then its half of the STOP.
+fn scl_with_pulses(pulses: usize) -> Vec<P> {
+    let mut scl_e = vec![P::set(State::High)];
+    for _ in 0..pulses {
+        scl_e.extend(pulse());
+    }
+    scl_e.extend(stop_scl());
+    scl_e
+}
+
+/// Recovery on pins that expect exactly `scl_e` and `sda_e`.
+fn recover(scl_e: &[P], sda_e: &[P]) -> Recovery {
+    let (mut scl, mut sda) = (Pin::new(scl_e), Pin::new(sda_e));
+    let r = recover_bus(&mut scl, &mut sda, &mut NoopDelay, 5).unwrap();
+    scl.done();
+    sda.done();
+    r
+}
+
 #[test]
 fn free_bus_gets_only_a_stop() {
-    let mut scl_e = vec![P::set(State::High)];
-    scl_e.extend(stop_scl());
     let mut sda_e = vec![P::set(State::High), P::get(State::High)];
     sda_e.extend(stop_sda(true));
-    let (mut scl, mut sda) = (Pin::new(&scl_e), Pin::new(&sda_e));
-    let r = recover_bus(&mut scl, &mut sda, &mut NoopDelay, 5).unwrap();
     assert_eq!(
-        r,
+        recover(&scl_with_pulses(0), &sda_e),
         Recovery {
             pulses: 0,
             sda_released: true
         }
     );
-    scl.done();
-    sda.done();
 }
 
 #[test]
 fn slave_releases_after_three_pulses() {
-    let mut scl_e = vec![P::set(State::High)];
-    for _ in 0..3 {
-        scl_e.extend(pulse());
-    }
-    scl_e.extend(stop_scl());
     let mut sda_e = vec![P::set(State::High)];
     sda_e.extend([
         P::get(State::Low),
@@ -54,38 +62,25 @@ fn slave_releases_after_three_pulses() {
         P::get(State::High),
     ]);
     sda_e.extend(stop_sda(true));
-    let (mut scl, mut sda) = (Pin::new(&scl_e), Pin::new(&sda_e));
-    let r = recover_bus(&mut scl, &mut sda, &mut NoopDelay, 5).unwrap();
     assert_eq!(
-        r,
+        recover(&scl_with_pulses(3), &sda_e),
         Recovery {
             pulses: 3,
             sda_released: true
         }
     );
-    scl.done();
-    sda.done();
 }
 
 #[test]
 fn stuck_forever_stops_after_nine_pulses() {
-    let mut scl_e = vec![P::set(State::High)];
-    for _ in 0..9 {
-        scl_e.extend(pulse());
-    }
-    scl_e.extend(stop_scl());
     let mut sda_e = vec![P::set(State::High)];
     sda_e.extend((0..9).map(|_| P::get(State::Low)));
     sda_e.extend(stop_sda(false));
-    let (mut scl, mut sda) = (Pin::new(&scl_e), Pin::new(&sda_e));
-    let r = recover_bus(&mut scl, &mut sda, &mut NoopDelay, 5).unwrap();
     assert_eq!(
-        r,
+        recover(&scl_with_pulses(9), &sda_e),
         Recovery {
             pulses: 9,
             sda_released: false
         }
     );
-    scl.done();
-    sda.done();
 }

@@ -25,17 +25,11 @@
 //! by more than [`JUMP_SIGMAS`] standard errors of their difference; a noise spike, which also
 //! interrupts the windows, leaves the means equal and the pose whole. Samples flagged by the
 //! caller (overflow sentinels) are never static.
-use crate::lab::{params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem};
-use crate::solve::{covariance, levenberg_marquardt, mean, no_parameters};
+use crate::lab::{
+    model_names, params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem,
+};
+use crate::solve::{covariance, fit_model, mean};
 use nalgebra::{DVector, Matrix3, Vector3};
-
-fn names(model: &[Effect]) -> String {
-    if model.is_empty() {
-        "(no correction)".into()
-    } else {
-        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
-    }
-}
 
 /// A jump in the mean larger than this many standard errors splits a static run in two.
 pub const JUMP_SIGMAS: f64 = 8.0;
@@ -414,16 +408,9 @@ impl Problem for AccelProblem {
             let (tk, o, _, _) = unpack(model, x);
             DVector::from_iterator(means.len(), means.iter().map(|a| (tk * (a - o)).norm() - g))
         };
-        let fit = if p == 0 {
-            no_parameters(res)
-        } else {
-            levenberg_marquardt(
-                DVector::from_vec(x0),
-                res,
-                200,
-                &format!("accelerometer {}", names(model)),
-            )?
-        };
+        let fit = fit_model(x0, res, 200, || {
+            format!("accelerometer {}", model_names(model))
+        })?;
         let to_params = |x: &DVector<f64>| {
             let (_, o, s, al) = unpack(model, x);
             Params {

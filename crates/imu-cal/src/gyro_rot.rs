@@ -23,8 +23,10 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::accel::Pose;
-use crate::lab::{params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem};
-use crate::solve::{covariance, levenberg_marquardt, mean, no_parameters};
+use crate::lab::{
+    model_names, params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem,
+};
+use crate::solve::{covariance, fit_model, mean};
 use nalgebra::{DVector, Matrix3, Rotation3, Vector3};
 
 const EFFECTS: [Effect; 2] = [Effect::Scale, Effect::Misalignment];
@@ -320,19 +322,9 @@ impl Problem for GyroRotProblem {
                     .flat_map(|mv| self.residual(mv, &m).map(f64::to_degrees)),
             )
         };
-        let fit = if x0.is_empty() {
-            no_parameters(res)
-        } else {
-            levenberg_marquardt(
-                DVector::from_vec(x0),
-                res,
-                200,
-                &format!(
-                    "gyro {} from rotations",
-                    model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
-                ),
-            )?
-        };
+        let fit = fit_model(x0, res, 200, || {
+            format!("gyro {} from rotations", model_names(model))
+        })?;
         let bias = self.bias;
         let to_params = |x: &DVector<f64>| {
             let (_, s, g) = Self::matrix(model, x);

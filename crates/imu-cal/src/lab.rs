@@ -159,6 +159,15 @@ impl Effect {
     }
 }
 
+/// A model's effects joined by `+`, for messages ("(no correction)" when it has none).
+pub(crate) fn model_names(model: &[Effect]) -> String {
+    if model.is_empty() {
+        "(no correction)".into()
+    } else {
+        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
+    }
+}
+
 /// The fitted parameters; only the effects in the model are `Some`. Units: the data's (the
 /// contract's m/s², deg/s, µT, °C for files in physical units; LSB for raw counts).
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]

@@ -36,10 +36,10 @@
 //! [`TILT_MIN_CORRELATION`]: without the evidence the 3-D magnitude would let a sphere of huge
 //! radius, centred far away, pass through any planar data (a plane is a sphere of infinite
 //! radius) and "explain" an ellipse that is soft iron.
-use crate::lab::{params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d};
-use crate::solve::{
-    covariance, levenberg_marquardt, lstsq, mean, no_parameters, sigma_second_diff, sym_eigen,
+use crate::lab::{
+    model_names, params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d,
 };
+use crate::solve::{covariance, fit_model, lstsq, mean, sigma_second_diff, sym_eigen};
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector2, Vector3};
 
 /// Ratio of principal standard deviations below which data counts as planar.
@@ -420,16 +420,9 @@ impl MagProblem {
                 }),
             )
         };
-        let fit = if x0.is_empty() {
-            no_parameters(res)
-        } else {
-            levenberg_marquardt(
-                DVector::from_vec(x0),
-                res,
-                300,
-                &format!("magnetometer {} (planar data)", names(model)),
-            )?
-        };
+        let fit = fit_model(x0, res, 300, || {
+            format!("magnetometer {} (planar data)", model_names(model))
+        })?;
         // Jaime et al. stop after eq. 5: diag(σ,1)·R(θ) leaves the frame rotated by θ, which does
         // not change |m| (nor their Fig. 4 circle) but would turn every heading by θ. The matrix
         // handed to the device rotates back: S = R(θ)ᵀ·diag(σ,1)·R(θ) (symmetric, axes kept).
@@ -577,16 +570,9 @@ impl MagProblem {
             let (h, s, f) = unpack(x);
             DVector::from_iterator(m.len(), m.iter().map(|v| (s * (v - h)).norm() - f))
         };
-        let fit = if x0.is_empty() {
-            no_parameters(res)
-        } else {
-            levenberg_marquardt(
-                DVector::from_vec(x0),
-                res,
-                300,
-                &format!("magnetometer {}", names(model)),
-            )?
-        };
+        let fit = fit_model(x0, res, 300, || {
+            format!("magnetometer {}", model_names(model))
+        })?;
         if has_s && fit_f && !(unpack(&fit.x).1.determinant() > 0.0) {
             return Err(CalError::Fit(
                 "soft-iron fit gave a non-positive determinant".into(),
@@ -619,14 +605,6 @@ impl MagProblem {
         );
         let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
         Ok(self.fitted(model, params, sigma, idx, np))
-    }
-}
-
-fn names(model: &[Effect]) -> String {
-    if model.is_empty() {
-        "(no correction)".into()
-    } else {
-        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
     }
 }
 

@@ -53,6 +53,25 @@ where
     }
 }
 
+/// The fit of a model: [`levenberg_marquardt`] from `x0`, or [`no_parameters`] when the model
+/// has no free parameter (`x0` empty). `what` names the fit in errors; it is built only when
+/// there is an iteration to run.
+pub fn fit_model<F>(
+    x0: Vec<f64>,
+    f: F,
+    max_iter: usize,
+    what: impl FnOnce() -> String,
+) -> Result<LmFit, CalError>
+where
+    F: Fn(&DVector<f64>) -> DVector<f64>,
+{
+    if x0.is_empty() {
+        Ok(no_parameters(f))
+    } else {
+        levenberg_marquardt(DVector::from_vec(x0), f, max_iter, &what())
+    }
+}
+
 /// Minimise Σ r_i(x)² by Levenberg–Marquardt (Marquardt 1963, with Nielsen's damping update)
 /// with a central-difference Jacobian, in at most `max_iter` iterations of at most 30 damping
 /// trials each. `f` must return the same number of residuals for every x; non-finite residuals

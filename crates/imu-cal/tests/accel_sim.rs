@@ -48,25 +48,10 @@ fn hidden_misalignment_is_diagnosed_and_recovered() {
     for run in 1..=4 {
         let (p, _) = problem(run, truth);
         let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
-        assert!(
-            !r.model.adequate(),
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
-        assert_eq!(
-            r.diagnosis.missing,
-            Some(Effect::Misalignment),
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::Misalignment, run);
         let step = r.step.as_ref().unwrap();
         assert!(step.after.rms_residual < 0.2 * step.before.rms_residual);
-        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
-        assert!(
-            r2.model.adequate(),
-            "run {run}: {}",
-            r2.diagnosis.explanation
-        );
+        let r2 = next_adequate(&p, &r, run);
         let m = r2.model.fitted.params.misalignment_deg.unwrap();
         let ms = r2.model.fitted.sigma.misalignment_deg.unwrap();
         for k in 0..3 {
@@ -96,7 +81,7 @@ fn control_without_misalignment_is_adequate() {
     for run in 11..=14 {
         let (p, _) = problem(run, [0.0; 3]);
         let r = analyse(&p, &[Effect::Offset, Effect::Scale]).unwrap();
-        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
+        assert_adequate(&r, run);
         assert_eq!(r.diagnosis.missing, None);
         // Residual RMS close to the floor: within a factor 1.5 (40 poses: the RMS of 34 d.o.f.
         // scatters by ≈ ±12 %).
@@ -114,13 +99,7 @@ fn offset_only_model_misses_scale_or_is_flagged() {
     for run in 21..=23 {
         let (p, _) = problem(run, [0.0; 3]);
         let r = analyse(&p, &[Effect::Offset]).unwrap();
-        assert!(!r.model.adequate());
-        assert_eq!(
-            r.diagnosis.missing,
-            Some(Effect::Scale),
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::Scale, run);
     }
 }
 

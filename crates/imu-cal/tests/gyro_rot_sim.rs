@@ -78,19 +78,9 @@ fn hidden_gyro_scale_is_diagnosed_and_recovered() {
             assert!((p.bias[k] - BIAS[k]).abs() < 0.01, "bias {:?}", p.bias);
         }
         let r = analyse(&p, &[]).unwrap();
-        assert!(!r.model.adequate());
-        assert_eq!(
-            r.diagnosis.missing,
-            Some(Effect::Scale),
-            "{}",
-            r.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::Scale, run);
         let r1 = analyse(&p, &[Effect::Scale]).unwrap();
-        assert!(
-            r1.model.adequate(),
-            "run {run}: {}",
-            r1.diagnosis.explanation
-        );
+        assert_adequate(&r1, run);
         let got = r1.model.fitted.params.scale.unwrap();
         for k in 0..3 {
             assert!((got[k] - s[k]).abs() < 3e-3, "run {run}: scale {got:?}");
@@ -105,19 +95,9 @@ fn hidden_gyro_misalignment_is_diagnosed_and_recovered() {
     for run in 11..=13 {
         let p = problem(run, s, m);
         let r = analyse(&p, &[Effect::Scale]).unwrap();
-        assert!(!r.model.adequate(), "run {run}");
-        assert_eq!(
-            r.diagnosis.missing,
-            Some(Effect::Misalignment),
-            "{}",
-            r.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::Misalignment, run);
         let r1 = analyse(&p, &[Effect::Scale, Effect::Misalignment]).unwrap();
-        assert!(
-            r1.model.adequate(),
-            "run {run}: {}",
-            r1.diagnosis.explanation
-        );
+        assert_adequate(&r1, run);
         let got = r1.model.fitted.params.gyro_misalignment_deg.unwrap();
         for k in 0..6 {
             assert!(
@@ -150,7 +130,7 @@ fn control_ideal_gyro_is_adequate_without_effects() {
     for run in 21..=23 {
         let p = problem(run, [1.0; 3], [0.0; 6]);
         let r = analyse(&p, &[]).unwrap();
-        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
+        assert_adequate(&r, run);
     }
 }
 

@@ -34,18 +34,8 @@ fn temperature_dependence_is_diagnosed_and_recovered() {
         let (g, t) = recording(run, k);
         let p = GyroProblem::new([&g[0], &g[1], &g[2]], Some(&t), 50).unwrap();
         let r = analyse(&p, &[Effect::Bias]).unwrap();
-        assert!(
-            !r.model.adequate(),
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
-        assert_eq!(r.diagnosis.missing, Some(Effect::Temperature));
-        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
-        assert!(
-            r2.model.adequate(),
-            "run {run}: {}",
-            r2.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::Temperature, run);
+        let r2 = next_adequate(&p, &r, run);
         let kc = r2.model.fitted.params.temp_coeff.unwrap();
         let b = r2.model.fitted.params.bias.unwrap();
         for j in 0..3 {
@@ -61,7 +51,7 @@ fn control_constant_bias_is_adequate() {
         let (g, t) = recording(run, [0.0; 3]);
         let p = GyroProblem::new([&g[0], &g[1], &g[2]], Some(&t), 50).unwrap();
         let r = analyse(&p, &[Effect::Bias]).unwrap();
-        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
+        assert_adequate(&r, run);
         assert_eq!(r.diagnosis.missing, None);
     }
 }
@@ -71,13 +61,8 @@ fn without_temperature_column_the_effect_is_not_offered() {
     let (g, _) = recording(3, [0.004, 0.0, 0.0]);
     let p = GyroProblem::new([&g[0], &g[1], &g[2]], None, 50).unwrap();
     let r = analyse(&p, &[Effect::Bias]).unwrap();
-    let c = r
-        .diagnosis
-        .not_tried
-        .iter()
-        .find(|c| c.effect == Effect::Temperature)
-        .unwrap();
-    assert_eq!(c.reason, "no temperature column");
+    let c = not_tried_reason(&r, Effect::Temperature);
+    assert_eq!(c, "no temperature column");
     assert!(analyse(&p, &[Effect::Bias, Effect::Temperature]).is_err());
 }
 

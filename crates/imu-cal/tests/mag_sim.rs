@@ -34,27 +34,11 @@ fn hidden_3d_soft_iron_is_diagnosed_and_recovered() {
         let p = MagProblem::new(sphere_data(run, soft(), h), None).unwrap();
         assert!(p.plane.is_none());
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert!(!r.model.adequate(), "run {run}");
-        assert_eq!(
-            r.diagnosis.missing,
-            Some(Effect::SoftIron),
-            "{}",
-            r.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::SoftIron, run);
         // soft_iron_2d must have been refused for 3-D data, with the reason.
-        let c2d = r
-            .diagnosis
-            .not_tried
-            .iter()
-            .find(|c| c.effect == Effect::SoftIron2d)
-            .unwrap();
-        assert!(c2d.reason.contains("3-D"));
-        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
-        assert!(
-            r2.model.adequate(),
-            "run {run}: {}",
-            r2.diagnosis.explanation
-        );
+        let c2d = not_tried_reason(&r, Effect::SoftIron2d);
+        assert!(c2d.contains("3-D"));
+        let r2 = next_adequate(&p, &r, run);
         assert!(r2.model.fitted.rms() < 1.2 * r2.model.expected_rms);
         let hi = r2.model.fitted.params.hard_iron.unwrap();
         for k in 0..3 {
@@ -81,7 +65,7 @@ fn control_hard_iron_only_is_adequate() {
         )
         .unwrap();
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
+        assert_adequate(&r, run);
         assert_eq!(r.diagnosis.missing, None);
         assert!((r.model.fitted.params.field.unwrap() - F).abs() < 0.1);
     }
@@ -135,13 +119,8 @@ fn planar_soft_iron_is_the_papers_2d_effect() {
             "{}",
             r.diagnosis.explanation
         );
-        let c3 = r
-            .diagnosis
-            .not_tried
-            .iter()
-            .find(|c| c.effect == Effect::SoftIron)
-            .unwrap();
-        assert!(c3.reason.contains("planar"));
+        let c3 = not_tried_reason(&r, Effect::SoftIron);
+        assert!(c3.contains("planar"));
         let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
         assert!(r2.model.adequate(), "{}", r2.diagnosis.explanation);
         let e = r2.model.fitted.params.soft_iron_2d.unwrap();
@@ -335,13 +314,7 @@ fn level_turn_with_tilt_wobble_is_tilt_not_soft_iron() {
         let p = MagProblem::new(m, None).unwrap();
         assert_eq!(p.plane, Some([0, 1]));
         let r = analyse(&p, &[Effect::HardIron]).unwrap();
-        assert!(!r.model.adequate());
-        assert_eq!(
-            r.diagnosis.missing,
-            Some(Effect::Tilt),
-            "run {run}: {}",
-            r.diagnosis.explanation
-        );
+        assert_missing(&r, Effect::Tilt, run);
         let c = r
             .diagnosis
             .candidates
@@ -349,12 +322,7 @@ fn level_turn_with_tilt_wobble_is_tilt_not_soft_iron() {
             .find(|c| c.edit.add == [Effect::Tilt])
             .unwrap();
         assert!(c.reason.contains("follows the out-of-plane component mz"));
-        let r2 = analyse(&p, r.next().unwrap().effects()).unwrap();
-        assert!(
-            r2.model.adequate(),
-            "run {run}: {}",
-            r2.diagnosis.explanation
-        );
+        let r2 = next_adequate(&p, &r, run);
         let hi = r2.model.fitted.params.hard_iron.unwrap();
         let hs = r2.model.fitted.sigma.hard_iron.unwrap();
         for k in 0..3 {

@@ -115,12 +115,17 @@ fn multipose_accelerometer_vs_upstream() {
     }
 }
 
-fn tilt_sphere() -> MagProblem {
-    let (_, c) = read_csv("mpu6050-hmc5883l-tilt-sphere/hmc5883l.csv", 0);
+/// The HMC5883L columns of a recording (in G) as a magnetometer problem in µT.
+fn hmc5883l(recording: &str) -> MagProblem {
+    let (_, c) = read_csv(&format!("{recording}/hmc5883l.csv"), 0);
     let m: Vec<Vector3<f64>> = (0..c[0].len())
         .map(|i| Vector3::new(c[1][i], c[2][i], c[3][i]) * 100.0)
         .collect();
     MagProblem::new(m, None).unwrap()
+}
+
+fn tilt_sphere() -> MagProblem {
+    hmc5883l("mpu6050-hmc5883l-tilt-sphere")
 }
 
 /// tilt-sphere: hard iron alone leaves a 3 µT residual; the lab names soft_iron (3-D data, so
@@ -212,11 +217,7 @@ fn multipose_gyro_bias_and_rotations() {
 }
 
 fn rotate_z() -> MagProblem {
-    let (_, c) = read_csv("mpu6050-hmc5883l-rotate-z/hmc5883l.csv", 0);
-    let m: Vec<Vector3<f64>> = (0..c[0].len())
-        .map(|i| Vector3::new(c[1][i], c[2][i], c[3][i]) * 100.0)
-        .collect();
-    MagProblem::new(m, None).unwrap()
+    hmc5883l("mpu6050-hmc5883l-rotate-z")
 }
 
 /// A real hand-held 360° turn: planar data (the x–z plane of this board), whose in-plane

@@ -45,13 +45,7 @@ fn main() {
             }
             _ => eff.push(SimEffect::White { n: 5e-3 }),
         }
-        let cfg = SimConfig {
-            rate_hz: 100.0,
-            n_samples: n,
-            seed: 1000 + seed,
-            effects: eff,
-            lsb: None,
-        };
+        let cfg = SimConfig::new(100.0, n, 1000 + seed, eff);
         let a = cfg.analyse();
         let lab = NoiseLab::new(a.record(None)).unwrap();
         let start = lab.fit(&lab.default_specs()).unwrap();

@@ -68,13 +68,7 @@ fn main() {
     let (mut pvals, mut local) = (Vec::new(), 0);
     let t0 = std::time::Instant::now();
     for seed in 0..seeds {
-        let c = SimConfig {
-            rate_hz: rate,
-            n_samples: n,
-            seed: 9000 + seed,
-            effects: effects.clone(),
-            lsb: None,
-        };
+        let c = SimConfig::new(rate, n, 9000 + seed, effects.clone());
         let y = c.generate();
         let rows = deviation(&y, tau0, Stat::Oadev, &TauSet::Octave).unwrap();
         if ms.is_empty() {

@@ -108,13 +108,7 @@ fn scenario(name: &str, seed: u64) -> SimConfig {
         _ => {}
     }
     effects.extend(extra);
-    SimConfig {
-        rate_hz: rate,
-        n_samples: (rate * secs) as usize,
-        seed,
-        effects,
-        lsb: None,
-    }
+    SimConfig::new(rate, (rate * secs) as usize, seed, effects)
 }
 
 fn main() {

@@ -256,6 +256,17 @@ fn exact_oavar(x: &[f64], m: usize) -> f64 {
 }
 
 impl SimConfig {
+    /// `n_samples` at `rate_hz` of the sum of `effects`, the output not rounded to an LSB.
+    pub fn new(rate_hz: f64, n_samples: usize, seed: u64, effects: Vec<SimEffect>) -> SimConfig {
+        SimConfig {
+            rate_hz,
+            n_samples,
+            seed,
+            effects,
+            lsb: None,
+        }
+    }
+
     pub fn tau0(&self) -> f64 {
         1.0 / self.rate_hz
     }
@@ -607,17 +618,16 @@ mod tests {
     #[test]
     fn second_order_filter_formula_reduces_to_first_order() {
         // the generic autocorrelation path must reproduce the closed AR(1) form for order 1
-        let cfg = SimConfig {
-            rate_hz: 100.0,
-            n_samples: 1000,
-            seed: 1,
-            effects: vec![SimEffect::LowPassWhite {
+        let cfg = SimConfig::new(
+            100.0,
+            1000,
+            1,
+            vec![SimEffect::LowPassWhite {
                 n: 0.01,
                 cutoff_hz: 5.0,
                 order: 1,
             }],
-            lsb: None,
-        };
+        );
         let h = lowpass_impulse(5.0, 0.01, 1);
         for m in [1usize, 2, 5, 40, 300] {
             let a = cfg.avar(m);
@@ -632,13 +642,7 @@ mod tests {
     #[test]
     fn flicker_is_flat_within_ripple() {
         let b = 0.01;
-        let cfg = SimConfig {
-            rate_hz: 100.0,
-            n_samples: 1 << 18,
-            seed: 1,
-            effects: vec![SimEffect::Flicker { b }],
-            lsb: None,
-        };
+        let cfg = SimConfig::new(100.0, 1 << 18, 1, vec![SimEffect::Flicker { b }]);
         let target = 2.0 * std::f64::consts::LN_2 / std::f64::consts::PI * b * b;
         for k in 0..17 {
             let v = cfg.avar(1 << k);

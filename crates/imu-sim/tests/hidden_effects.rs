@@ -16,13 +16,7 @@ use noise_model::{
 use imu_sim::gyro_background as gyro;
 
 fn cfg(rate: f64, secs: f64, seed: u64, effects: Vec<SimEffect>) -> SimConfig {
-    SimConfig {
-        rate_hz: rate,
-        n_samples: (rate * secs) as usize,
-        seed,
-        effects,
-        lsb: None,
-    }
+    SimConfig::new(rate, (rate * secs) as usize, seed, effects)
 }
 
 struct Run {

@@ -110,6 +110,15 @@ impl Blocks {
             .map(|s| s.means.len().saturating_sub(1))
             .sum()
     }
+
+    /// Number of blocks in the longest segment.
+    pub fn longest(&self) -> usize {
+        self.segments
+            .iter()
+            .map(|s| s.means.len())
+            .max()
+            .unwrap_or(0)
+    }
 }
 
 /// A deterministic signal whose amplitude is estimated.
@@ -381,12 +390,7 @@ pub struct Estimate {
 /// The choice of scale for a GLS: the finest block multiple with at most [`MAX_BLOCKS`] blocks
 /// in the longest segment.
 pub fn gls_scale(base: &Blocks) -> Blocks {
-    let longest = base
-        .segments
-        .iter()
-        .map(|s| s.means.len())
-        .max()
-        .unwrap_or(0);
+    let longest = base.longest();
     let mut f = 1;
     while longest / f > MAX_BLOCKS {
         f *= 2;
@@ -456,12 +460,7 @@ pub fn find_steps(
     let mut scales = vec![start.clone()];
     loop {
         let last = scales.last().expect("one scale");
-        let longest = last
-            .segments
-            .iter()
-            .map(|s| s.means.len())
-            .max()
-            .unwrap_or(0);
+        let longest = last.longest();
         if longest < 32 {
             break;
         }

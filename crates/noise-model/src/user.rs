@@ -441,32 +441,24 @@ impl Parser<'_> {
         if depth > 200 {
             return Err("expression nested too deeply".into());
         }
-        let mut l = self.term(depth + 1)?;
-        loop {
-            let op = if self.eat('+') {
-                '+'
-            } else if self.eat('-') {
-                '-'
-            } else {
-                return Ok(l);
-            };
-            let r = self.term(depth + 1)?;
-            l = Expr::Bin(op, Box::new(l), Box::new(r));
-        }
+        self.binary(depth, ['+', '-'], Self::term)
     }
     fn term(&mut self, depth: usize) -> Result<Expr, String> {
-        let mut l = self.unary(depth + 1)?;
-        loop {
-            let op = if self.eat('*') {
-                '*'
-            } else if self.eat('/') {
-                '/'
-            } else {
-                return Ok(l);
-            };
-            let r = self.unary(depth + 1)?;
+        self.binary(depth, ['*', '/'], Self::unary)
+    }
+    /// A left-associative chain of `operand`s joined by either of the operators `ops`.
+    fn binary(
+        &mut self,
+        depth: usize,
+        ops: [char; 2],
+        operand: fn(&mut Self, usize) -> Result<Expr, String>,
+    ) -> Result<Expr, String> {
+        let mut l = operand(self, depth + 1)?;
+        while let Some(&op) = ops.iter().find(|&&c| self.eat(c)) {
+            let r = operand(self, depth + 1)?;
             l = Expr::Bin(op, Box::new(l), Box::new(r));
         }
+        Ok(l)
     }
     fn unary(&mut self, depth: usize) -> Result<Expr, String> {
         if depth > 200 {

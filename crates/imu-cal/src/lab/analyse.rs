@@ -4,9 +4,9 @@
 use model_lab::{Edit, Lab, Summary};
 
 use super::{
-    reading, CalError, Candidate, Diagnosis, Effect, Fitted, Model, NestedTest, NoiseFloor,
-    NotTried, Problem, Report, Step, Verdict, ALPHA_ADEQUATE, ALPHA_EFFECT, DOF_PER_PARAMETER,
-    MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
+    model_names, reading, CalError, Candidate, Diagnosis, Effect, Fitted, Model, NestedTest,
+    NoiseFloor, NotTried, Problem, Report, Step, Verdict, ALPHA_ADEQUATE, ALPHA_EFFECT,
+    DOF_PER_PARAMETER, MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
 };
 use crate::solve::{f_sf, mad_sigma, median};
 
@@ -30,14 +30,6 @@ pub fn normalise_model(p: &dyn Problem, model: &[Effect]) -> Result<Vec<Effect>,
         }
     }
     Ok(m)
-}
-
-fn model_names(model: &[Effect]) -> String {
-    if model.is_empty() {
-        "(no correction)".into()
-    } else {
-        model.iter().map(|e| e.name()).collect::<Vec<_>>().join("+")
-    }
 }
 
 /// Per-item keep flags of a fit (an item is used when all its residuals are).

@@ -1,6 +1,8 @@
 //! Deterministic simulation helpers for the calibration tests (no external RNG crate: the
-//! sequences are fixed by their starting key so every tolerance below is reproducible).
+//! sequences are fixed by their starting key so every tolerance below is reproducible), and the
+//! checks on the lab's reports they share.
 #![allow(dead_code)]
+use imu_cal::lab::{analyse, Effect, Problem, Report};
 use nalgebra::{Matrix3, Vector3};
 
 /// SplitMix64 + Box–Muller Gaussian generator.
@@ -90,4 +92,41 @@ pub fn sphere_spiral(n: usize) -> Vec<Vector3<f64>> {
             Vector3::new(r * phi.cos(), r * phi.sin(), z)
         })
         .collect()
+}
+
+/// `r` judges its model adequate.
+pub fn assert_adequate(r: &Report, run: u64) {
+    assert!(r.model.adequate(), "run {run}: {}", r.diagnosis.explanation);
+}
+
+/// `r` judges its model inadequate and names `missing` as the effect it lacks.
+pub fn assert_missing(r: &Report, missing: Effect, run: u64) {
+    assert!(
+        !r.model.adequate(),
+        "run {run}: {}",
+        r.diagnosis.explanation
+    );
+    assert_eq!(
+        r.diagnosis.missing,
+        Some(missing),
+        "run {run}: {}",
+        r.diagnosis.explanation
+    );
+}
+
+/// The report on the model the lab proposes after `r`, which must be adequate.
+pub fn next_adequate(p: &dyn Problem, r: &Report, run: u64) -> Report {
+    let next = analyse(p, r.next().unwrap().effects()).unwrap();
+    assert_adequate(&next, run);
+    next
+}
+
+/// Why the lab did not try `e` on `r`'s model.
+pub fn not_tried_reason(r: &Report, e: Effect) -> &str {
+    &r.diagnosis
+        .not_tried
+        .iter()
+        .find(|c| c.effect == e)
+        .unwrap()
+        .reason
 }

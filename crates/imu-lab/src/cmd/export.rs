@@ -105,6 +105,21 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
     })
 }
 
+/// One sensor's conversion of (N, K) in the data's unit to Kalibr's units.
+type ToKalibr = fn(f64, f64, &str) -> Result<(f64, f64), String>;
+
+/// The largest noise density and random walk over the axes, each in Kalibr's units by `kalibr`
+/// (one sensor has one entry in Kalibr's file, so its noisiest axis stands for it).
+fn worst(axes: &[Axis], kalibr: ToKalibr) -> Result<(f64, f64)> {
+    let (mut n_max, mut k_max): (f64, f64) = (0.0, 0.0);
+    for x in axes {
+        let (n, k) = kalibr(x.n, x.k, &x.unit).map_err(|e| anyhow!("{}: {e}", x.name))?;
+        n_max = n_max.max(n);
+        k_max = k_max.max(k);
+    }
+    Ok((n_max, k_max))
+}
+
 fn group(input: &InputArgs, cols: &[String], scale: Option<f64>, unit: &str) -> Result<Vec<Axis>> {
     let mut args = input.clone();
     if let Some(s) = scale {
@@ -125,22 +140,8 @@ pub fn run(args: Args) -> Result<()> {
     };
     let gyro = group(&a.input, &a.gyro, a.gyro_scale, "deg/s")?;
     let accel = group(&a.input, &a.accel, a.accel_scale, "m/s²")?;
-    let mut gn: f64 = 0.0;
-    let mut gk: f64 = 0.0;
-    for g in &gyro {
-        let (n, k) =
-            practical::kalibr_gyro(g.n, g.k, &g.unit).map_err(|e| anyhow!("{}: {e}", g.name))?;
-        gn = gn.max(n);
-        gk = gk.max(k);
-    }
-    let mut an: f64 = 0.0;
-    let mut ak: f64 = 0.0;
-    for x in &accel {
-        let (n, k) =
-            practical::kalibr_accel(x.n, x.k, &x.unit).map_err(|e| anyhow!("{}: {e}", x.name))?;
-        an = an.max(n);
-        ak = ak.max(k);
-    }
+    let (gn, gk) = worst(&gyro, practical::kalibr_gyro)?;
+    let (an, ak) = worst(&accel, practical::kalibr_accel)?;
     let imu = noise_model::KalibrImu {
         gyroscope_noise_density: gn,
         gyroscope_random_walk: gk,

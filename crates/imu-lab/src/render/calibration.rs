@@ -33,27 +33,38 @@ fn v3(v: &[f64; 3], s: Option<&[f64; 3]>, prec: usize) -> String {
     )
 }
 
+/// `  name = [x ± σ, y ± σ, z ± σ] unit` for a 3-vector parameter, nothing when it is absent.
+fn vector_line(
+    name: &str,
+    v: Option<&[f64; 3]>,
+    sigma: Option<&[f64; 3]>,
+    prec: usize,
+    unit: &str,
+) -> String {
+    match v {
+        Some(v) => format!("  {name:<17}= {} {unit}\n", v3(v, sigma, prec)),
+        None => String::new(),
+    }
+}
+
 /// The parameters with their 1σ uncertainties, one per line, in `unit` (the data's unit).
 pub fn params_text(p: &Params, sg: &Params, unit: &str) -> String {
     let mut s = String::new();
-    if let Some(v) = &p.offset {
-        s += &format!(
-            "  offset           = {} {unit}\n",
-            v3(v, sg.offset.as_ref(), 5)
-        );
-    }
-    if let Some(v) = &p.scale {
-        s += &format!(
-            "  scale            = {} (dimensionless)\n",
-            v3(v, sg.scale.as_ref(), 6)
-        );
-    }
-    if let Some(v) = &p.misalignment_deg {
-        s += &format!(
-            "  misalignment     = {} deg\n",
-            v3(v, sg.misalignment_deg.as_ref(), 4)
-        );
-    }
+    s += &vector_line("offset", p.offset.as_ref(), sg.offset.as_ref(), 5, unit);
+    s += &vector_line(
+        "scale",
+        p.scale.as_ref(),
+        sg.scale.as_ref(),
+        6,
+        "(dimensionless)",
+    );
+    s += &vector_line(
+        "misalignment",
+        p.misalignment_deg.as_ref(),
+        sg.misalignment_deg.as_ref(),
+        4,
+        "deg",
+    );
     if let Some(v) = &p.gyro_misalignment_deg {
         let e = sg.gyro_misalignment_deg.unwrap_or([f64::NAN; 6]);
         let parts: Vec<String> = (0..6).map(|k| pm(v[k], e[k], 4)).collect();
@@ -62,27 +73,24 @@ pub fn params_text(p: &Params, sg: &Params, unit: &str) -> String {
     if let Some(g) = p.g {
         s += &format!("  g                = {g} {unit} (given)\n");
     }
-    if let Some(v) = &p.bias {
-        s += &format!(
-            "  bias             = {} {unit}\n",
-            v3(v, sg.bias.as_ref(), 5)
-        );
-    }
-    if let Some(v) = &p.temp_coeff {
-        s += &format!(
-            "  temp_coeff       = {} {unit} per °C\n",
-            v3(v, sg.temp_coeff.as_ref(), 6)
-        );
-    }
+    s += &vector_line("bias", p.bias.as_ref(), sg.bias.as_ref(), 5, unit);
+    s += &vector_line(
+        "temp_coeff",
+        p.temp_coeff.as_ref(),
+        sg.temp_coeff.as_ref(),
+        6,
+        &format!("{unit} per °C"),
+    );
     if let Some(t) = p.temp_ref {
         s += &format!("  temp_ref         = {t:.3} °C (mean of the record)\n");
     }
-    if let Some(v) = &p.hard_iron {
-        s += &format!(
-            "  hard_iron        = {} {unit}\n",
-            v3(v, sg.hard_iron.as_ref(), 4)
-        );
-    }
+    s += &vector_line(
+        "hard_iron",
+        p.hard_iron.as_ref(),
+        sg.hard_iron.as_ref(),
+        4,
+        unit,
+    );
     if let Some(m) = &p.soft_iron {
         let e = sg.soft_iron.unwrap_or([[f64::NAN; 3]; 3]);
         s += &format!(

@@ -1,0 +1,185 @@
+//! Per fault: what the device reported, what it lost and how soon it named a stall.
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use imu_proto::{Event, Sensor, SensorState};
+
+use super::*;
+use crate::emu_check::{ImuRaw, MagRaw};
+
+/// Per fault: what the device reported and what it lost (the fault table of docs/firmware.md),
+/// stalls named in time, NACK bursts cheap.
+pub(super) fn check_faults(
+    s: &Session,
+    imu: &[ImuRaw],
+    mag: &[MagRaw],
+    faults: &[Fault],
+    r: &mut Report,
+) {
+    r.text.push_str("\n## Faults: what the device reported, what was lost\n\n| fault | reported by the device | IMU samples lost (cause) | magnetometer samples lost (cause) | model: IMU / magnetometer slots lost |\n|---|---|---|---|---|\n");
+    let imu_slots: Vec<u64> = imu.iter().map(|x| x.slot).collect();
+    let mag_slots: Vec<u64> = mag.iter().map(|x| x.slot).collect();
+    for (i, x) in faults.iter().enumerate() {
+        let from = x.at_s;
+        let until = faults.get(i + 1).map_or(f64::INFINITY, |n| n.at_s);
+        let in_window = |t_us: u64| {
+            let t = t_us as f64 * 1e-6;
+            t >= from && t < until
+        };
+        let mut reported: Vec<String> = Vec::new();
+        let mut lost = [BTreeMap::<String, u64>::new(), BTreeMap::new()];
+        let mut stalled_at = None;
+        for e in &s.all_events {
+            let (t, text) = match e {
+                Event::SensorLost { sensor, t_us } => (*t_us, format!("SensorLost({sensor:?})")),
+                Event::SensorBack {
+                    sensor,
+                    t_us,
+                    down_us,
+                } => (
+                    *t_us,
+                    format!(
+                        "SensorBack({sensor:?}, down {:.0} ms)",
+                        *down_us as f64 * 1e-3
+                    ),
+                ),
+                Event::SensorStalled {
+                    sensor,
+                    t_us,
+                    since_us,
+                } => {
+                    if Some(*sensor) == x.sensor && in_window(*t_us) && stalled_at.is_none() {
+                        stalled_at = Some((*t_us, *since_us));
+                    }
+                    (*t_us, format!("SensorStalled({sensor:?})"))
+                }
+                Event::BusFault { t_us, fault } => (*t_us, format!("BusFault({fault:?})")),
+                Event::BusRecovered {
+                    t_us, sda_released, ..
+                } => (
+                    *t_us,
+                    format!(
+                        "BusRecovered({})",
+                        if *sda_released {
+                            "SDA free"
+                        } else {
+                            "SDA held"
+                        }
+                    ),
+                ),
+                Event::Gap {
+                    sensor,
+                    cause,
+                    lost: n,
+                    t_us,
+                    ..
+                } => {
+                    if in_window(*t_us) && *n > 0 {
+                        *lost[*sensor as usize]
+                            .entry(format!("{cause:?}"))
+                            .or_default() += u64::from(*n);
+                    }
+                    continue;
+                }
+            };
+            if in_window(t) && !reported.contains(&text) {
+                reported.push(text);
+            }
+        }
+        let model = |slots: &[u64], served: &dyn Fn(usize) -> f64| -> u64 {
+            slots
+                .windows(2)
+                .enumerate()
+                .filter(|(i, _)| {
+                    let t = served(i + 1) * 1e-9;
+                    t >= from && t < until
+                })
+                .map(|(_, w)| w[1].saturating_sub(w[0] + 1))
+                .sum()
+        };
+        let mi = model(&imu_slots, &|i| imu[i].served_ns);
+        let mm = model(&mag_slots, &|i| mag[i].served_ns);
+        let show = |m: &BTreeMap<String, u64>| {
+            if m.is_empty() {
+                "0".to_string()
+            } else {
+                m.iter()
+                    .map(|(c, n)| format!("{n} ({c})"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        };
+        let _ = writeln!(
+            r.text,
+            "| `{}` | {} | {} | {} | {mi} / {mm} |",
+            x.spec,
+            if reported.is_empty() {
+                "nothing".to_string()
+            } else {
+                reported.join(", ")
+            },
+            show(&lost[0]),
+            show(&lost[1])
+        );
+        if x.kind == Kind::Stall {
+            match stalled_at {
+                Some((t, _)) if (t as f64 * 1e-6 - from) <= STALL_REPORT_S => {}
+                Some((t, _)) => r.fail(format!(
+                    "`{}`: stall named {:.1} ms after it began (goal ≤ {:.0} ms)",
+                    x.spec,
+                    (t as f64 * 1e-6 - from) * 1e3,
+                    STALL_REPORT_S * 1e3
+                )),
+                None => r.fail(format!("`{}`: the stall was never reported", x.spec)),
+            }
+        }
+        if x.kind == Kind::Nack {
+            let (sensor_lost, period) = match x.sensor {
+                Some(Sensor::Mag) => (mm, 1.0 / 200.0 / 0.987),
+                _ => (mi, 1.0 / 1000.0 / 0.987),
+            };
+            let bound = (x.dur_s / period).ceil() as u64 + 2;
+            if sensor_lost > bound {
+                r.fail(format!(
+                    "`{}`: {sensor_lost} samples lost, more than the fault's {:.0} ms + 2 samples ({bound})",
+                    x.spec,
+                    x.dur_s * 1e3
+                ));
+            }
+        }
+    }
+}
+
+/// A magnetometer that never produces: named within 50 ms of its start, status not "Ok".
+pub(super) fn check_boot_stall(s: &Session, r: &mut Report) {
+    let stalled = s.all_events.iter().chain(&s.events).find_map(|e| match e {
+        Event::SensorStalled {
+            sensor: Sensor::Mag,
+            t_us,
+            since_us,
+        } => Some((*t_us, *since_us)),
+        _ => None,
+    });
+    let _ = writeln!(
+        r.text,
+        "## Magnetometer stalled from boot\n\nSensorStalled: {stalled:?}; status: magnetometer {:?}, IMU {:?}, {} IMU samples\n",
+        s.status.mag, s.status.imu, s.status.samples_taken
+    );
+    match stalled {
+        Some((t, since)) if t.saturating_sub(since) as f64 * 1e-6 <= STALL_REPORT_S => {}
+        Some((t, since)) => r.fail(format!(
+            "the stall was named {:.1} ms after the part started",
+            t.saturating_sub(since) as f64 * 1e-3
+        )),
+        None => r.fail("a magnetometer that never produced was not reported stalled".into()),
+    }
+    if s.status.mag != SensorState::Stalled {
+        r.fail(format!(
+            "status says the magnetometer is {:?}",
+            s.status.mag
+        ));
+    }
+    if s.status.imu != SensorState::Ok || s.status.samples_taken == 0 {
+        r.fail("the IMU did not run beside the stalled magnetometer".into());
+    }
+}
