@@ -7,10 +7,48 @@
 use super::{thumb, DeviceEngine, DEVICE_PARAMS};
 use super::{Engine, Sum128};
 
+/// Which Thumb routines took the samples of an [`Engine::push_pair_traced`] call (`false` and 0
+/// off ARM, without `thumb-asm`, and for engines other than
+/// [`DeviceEngine`](super::DeviceEngine)).
+#[doc(hidden)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ThumbTaken {
+    /// `pico_imu_allan_push_pair_small` took both samples.
+    pub pair: bool,
+    /// Samples `pico_imu_allan_push_small` took one at a time (0, 1 or 2), when the pair
+    /// routine declined them.
+    pub singles: u8,
+}
+
 impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L, R, S> {
     /// Feed one rate sample (already corrected, fixed point).
     #[inline]
     pub fn push(&mut self, y: i32) {
+        self.push_with::<true>(y);
+    }
+
+    /// [`Engine::push`] on the pure-Rust path, never entering the Thumb routines (the same
+    /// state changes on every target): the reference the Thumb differential test
+    /// (crates/allan/thumb-check) compares the firmware's path with.
+    #[doc(hidden)]
+    #[inline]
+    pub fn push_portable(&mut self, y: i32) {
+        self.push_with::<false>(y);
+    }
+
+    /// [`Engine::push`], also saying whether the Thumb routine `pico_imu_allan_push_small` took
+    /// the sample (never off ARM or without `thumb-asm`), so a test can tell that the code it
+    /// checks actually ran.
+    #[doc(hidden)]
+    #[inline]
+    pub fn push_traced(&mut self, y: i32) -> bool {
+        self.push_with::<true>(y)
+    }
+
+    /// `push` (`THUMB`: a [`DeviceEngine`](super::DeviceEngine) may take the Thumb routine) or
+    /// `push_portable`; returns whether the Thumb routine took the sample.
+    #[inline(always)]
+    fn push_with<const THUMB: bool>(&mut self, y: i32) -> bool {
         let gate = self.gate;
         // z = y − c in 32 bits. When the true z does not fit i32, the wrapped one has
         // |z| ≥ 2^31 − 2^30, above any nonzero gate (≤ 2^(30−K0) + 1, the base ring being
@@ -20,10 +58,12 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
                 #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
-                if let Some(e) = self.as_device_engine() {
-                    // SAFETY: the steady, small conditions were just checked.
-                    unsafe { thumb::push_small(e, z) };
-                    return;
+                if THUMB {
+                    if let Some(e) = self.as_device_engine() {
+                        // SAFETY: the steady, small conditions were just checked.
+                        unsafe { thumb::push_small(e, z) };
+                        return true;
+                    }
                 }
                 self.push_steady::<true>(z);
             } else {
@@ -32,6 +72,7 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         } else {
             self.push_general(y);
         }
+        false
     }
 
     /// Feed two consecutive rate samples: exactly `push(y0)` then `push(y1)`.
@@ -44,14 +85,42 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// state take the same Thumb code, one at a time.
     #[inline]
     pub fn push_pair(&mut self, y0: i32, y1: i32) {
+        self.push_pair_with(y0, y1);
+    }
+
+    /// [`Engine::push_pair`] on the pure-Rust path: `push_portable(y0)` then
+    /// `push_portable(y1)` (see [`Engine::push_portable`]).
+    #[doc(hidden)]
+    #[inline]
+    pub fn push_pair_portable(&mut self, y0: i32, y1: i32) {
+        self.push_portable(y0);
+        self.push_portable(y1);
+    }
+
+    /// [`Engine::push_pair`], also saying which Thumb routines took the samples.
+    #[doc(hidden)]
+    #[inline]
+    pub fn push_pair_traced(&mut self, y0: i32, y1: i32) -> ThumbTaken {
+        self.push_pair_with(y0, y1)
+    }
+
+    #[inline(always)]
+    fn push_pair_with(&mut self, y0: i32, y1: i32) -> ThumbTaken {
         #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
         if let Some(e) = self.as_device_engine() {
             if thumb::push_pair_small(e, y0, y1) {
-                return;
+                return ThumbTaken {
+                    pair: true,
+                    singles: 0,
+                };
             }
         }
-        self.push(y0);
-        self.push(y1);
+        let first = self.push_traced(y0);
+        let second = self.push_traced(y1);
+        ThumbTaken {
+            pair: false,
+            singles: first as u8 + second as u8,
+        }
     }
 
     /// `self` as the firmware's [`DeviceEngine`](super::DeviceEngine), whose layout the Thumb
