@@ -80,15 +80,6 @@ impl Sum128 {
     }
 }
 
-/// Whether two equally long arrays of sums differ (see `Engine::first_difference`).
-pub(super) fn differ_sums(a: &[Sum128], b: &[Sum128]) -> bool {
-    let mut acc = 0;
-    for (x, y) in a.iter().zip(b) {
-        acc |= (x.w[0] ^ y.w[0]) | (x.w[1] ^ y.w[1]) | (x.w[2] ^ y.w[2]) | (x.w[3] ^ y.w[3]);
-    }
-    acc != 0
-}
-
 /// Square of |d| for a difference known to fit in i32: three 16×16→32 multiplies.
 #[inline(always)]
 fn square32(a: u32) -> u64 {
