@@ -330,8 +330,8 @@ fn pick_base(rng: &mut Rng) -> i32 {
 /// An episode's largest |z|: mostly in the Thumb routines' range, often at its edges, sometimes
 /// beyond it (the Rust-only steady path, wide levels, the wide base ring).
 fn pick_amp(rng: &mut Rng) -> u32 {
-    const EDGES: [u32; 12] = [
-        0, 1, 2, 1021, 1022, 1023, 1024, 1025, 2045, 2046, 2047, 2048,
+    const EDGES: [u32; 14] = [
+        0, 1, 2, 1021, 1022, 1023, 1024, 1025, 2045, 2046, 2047, 2048, 4095, 4096,
     ];
     match rng.below(100) {
         0..=31 => 1 + rng.below(1023),
