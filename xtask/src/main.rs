@@ -195,6 +195,10 @@ fn test(extra: &[String]) -> Result<()> {
         for scenario in ["faults", "boot-stall", "sine"] {
             e2e::e2e(&["--scenario".to_string(), scenario.to_string()])?;
         }
+        // The Thumb differential test's program, for sim/test/thumb-diff.test.js.
+        run(cargo().args(["build", "--release", "-p", "allan-thumb-check"]))?;
+        let thumb_check = target_dir()?.join("thumbv6m-none-eabi/release/allan-thumb-check");
+        std::env::set_var("PICO_IMU_THUMB_CHECK_ELF", thumb_check);
         emu::harness_tests()
     } else {
         eprintln!(
