@@ -49,6 +49,7 @@ use pico_imu_core::imu::ImuService;
 use pico_imu_core::mag::{MagService, Slots};
 use pico_imu_core::msg::{self, SensorMsg};
 use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::service::Tick;
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
@@ -384,15 +385,25 @@ async fn imu_task(
         let msgs = out.send().await;
         msgs.clear();
         if wait_running(&mut run).await {
-            svc.resume(&mut imu, &mut embassy_time::Delay, &now_us, msgs)
-                .await;
+            svc.resume(&mut Tick {
+                dev: &mut imu,
+                delay: &mut embassy_time::Delay,
+                now: &now_us,
+                out: msgs,
+            })
+            .await;
         } else {
             if svc.wants_recovery(now_us()) {
                 recover_bus(bus, msgs).await;
                 svc.recovered();
             }
-            svc.tick(&mut imu, &mut embassy_time::Delay, &now_us, msgs)
-                .await;
+            svc.tick(&mut Tick {
+                dev: &mut imu,
+                delay: &mut embassy_time::Delay,
+                now: &now_us,
+                out: msgs,
+            })
+            .await;
         }
         if svc.state() != was {
             warn!("imu: {} -> {}", was, svc.state());
@@ -439,8 +450,13 @@ async fn mag_task(
                 recover_bus(bus, msgs).await;
                 svc.recovered();
             }
-            svc.tick(&mut mag, &mut embassy_time::Delay, &now_us, msgs)
-                .await;
+            svc.tick(&mut Tick {
+                dev: &mut mag,
+                delay: &mut embassy_time::Delay,
+                now: &now_us,
+                out: msgs,
+            })
+            .await;
         }
         if svc.state() != was {
             warn!("mag: {} -> {}", was, svc.state());

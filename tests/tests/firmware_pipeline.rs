@@ -19,6 +19,7 @@ use pico_imu_core::mag::{MagService, Slots};
 use pico_imu_core::msg::{self, SensorMsg, BURST_MAX};
 use pico_imu_core::outbox::FrameSink;
 use pico_imu_core::replay;
+use pico_imu_core::service::Tick;
 use pico_imu_core::tables::{TABLE_FRAME_ROOM, TABLE_SPACING_US};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, QmcModel, QmcVariant, SimBus};
@@ -191,19 +192,23 @@ impl Rig {
                 if self.mag_svc.wants_recovery(t) {
                     self.mag_svc.recovered();
                 }
-                block_on(
-                    self.mag_svc
-                        .tick(&mut self.mag, &mut self.bus.delay(), &clock, &mut out),
-                );
+                block_on(self.mag_svc.tick(&mut Tick {
+                    dev: &mut self.mag,
+                    delay: &mut self.bus.delay(),
+                    now: &clock,
+                    out: &mut out,
+                }));
             } else {
                 self.next_imu_us += 10_000;
                 if self.imu_svc.wants_recovery(t) {
                     self.imu_svc.recovered();
                 }
-                block_on(
-                    self.imu_svc
-                        .tick(&mut self.imu, &mut self.bus.delay(), &clock, &mut out),
-                );
+                block_on(self.imu_svc.tick(&mut Tick {
+                    dev: &mut self.imu,
+                    delay: &mut self.bus.delay(),
+                    now: &clock,
+                    out: &mut out,
+                }));
             }
             self.feed(out);
         }

@@ -5,7 +5,7 @@
 //!
 //! By job:
 //! * sensors: [`imu`] and [`mag`], the sensor tasks' ticks (initialisation, draining, faults,
-//!   losses), with [`health`] (the fault state machine), [`clock`] (the sample clocks: the one
+//!   losses), over what they share in [`service`], with [`health`] (the fault state machine), [`clock`] (the sample clocks: the one
 //!   owner of timestamps) and [`bus`] (what a bus must tell them);
 //! * samples: [`pipeline`] (corrections → Allan engines → batches, losses and splits) over
 //!   [`engines`];
@@ -35,5 +35,6 @@ pub mod pipeline;
 #[cfg(feature = "std")]
 pub mod replay;
 pub mod requests;
+pub mod service;
 pub mod stage;
 pub mod tables;

@@ -19,13 +19,13 @@ use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 use imu_drivers::asynch::Qmc5883;
 use imu_drivers::qmc5883 as qmc;
-use imu_proto::{Event, GapCause, Sensor, SensorState, MAG_PERIOD_US};
+use imu_proto::{GapCause, Sensor, SensorState, MAG_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
 use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, US};
 use crate::config::mag_config;
-use crate::health::{Health, STALL_AFTER_US};
-use crate::msg::{Out, Report, SensorMsg};
+use crate::msg::{Out, SensorMsg};
+use crate::service::{delay_until, Core, Phase, Tick, SETUP};
 
 /// How long after the late end of the clock's uncertainty a poll is latched.
 pub const POLL_MARGIN: u64 = 20 * US;
@@ -36,36 +36,10 @@ const READ_MARGIN: u64 = 10 * US;
 const REPOLL_MIN: u64 = 100 * US;
 /// Status polls in one tick (the first and its re-polls).
 const POLLS: u32 = 4;
-/// Time to set up a transfer after a wait, before its first bit.
-const SETUP: u64 = 150 * US;
-/// Margin around the waking write's latch (interrupt-driven transfer).
-const WRITE_MARGIN: u64 = 120 * US;
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Phase {
-    Init,
-    Running,
-    Lost,
-    Stalled,
-}
 
 /// The magnetometer side.
 pub struct MagService {
-    clock: SampleClock,
-    health: Health,
-    timing: BusTiming,
-    phase: Phase,
-    /// Slot of the next sample to read.
-    next_k: u32,
-    /// No reading since the part was started: `next_k − 1` is not a sample of this run.
-    fresh: bool,
-    after: Option<GapCause>,
-    last_growth_us: u64,
-    recovery: bool,
-    errors: u32,
-    bus_faults: u32,
-    /// The state the last report carried.
-    reported: SensorState,
+    core: Core,
     /// When the next tick should start, µs (`None`: the caller's own schedule).
     next_poll_us: Option<u64>,
 }
@@ -73,29 +47,18 @@ pub struct MagService {
 impl MagService {
     pub const fn new(timing: BusTiming) -> Self {
         Self {
-            clock: SampleClock::new(MAG_PERIOD_US as u32),
-            health: Health::new(Sensor::Mag),
-            timing,
-            phase: Phase::Init,
-            next_k: 0,
-            fresh: true,
-            after: None,
-            last_growth_us: 0,
-            recovery: false,
-            errors: 0,
-            bus_faults: 0,
-            reported: SensorState::Unknown,
+            core: Core::new(Sensor::Mag, MAG_PERIOD_US as u32, timing),
             next_poll_us: None,
         }
     }
 
     pub fn state(&self) -> SensorState {
-        self.health.state()
+        self.core.health.state()
     }
 
     /// The magnetometer's sample clock.
     pub fn clock(&self) -> &SampleClock {
-        &self.clock
+        &self.core.clock
     }
 
     /// When the next tick should start, µs since boot (`None`: no grid yet, or the part is out:
@@ -104,124 +67,88 @@ impl MagService {
         self.next_poll_us
     }
 
+    /// The bus needs recovering before the next tick (a bus fault, or a retry of a lost sensor).
     pub fn wants_recovery(&self, t_us: u64) -> bool {
-        self.recovery || (self.phase == Phase::Lost && self.health.retry_due(t_us))
+        self.core.wants_recovery(t_us)
     }
 
+    /// The caller recovered the bus.
     pub fn recovered(&mut self) {
-        self.recovery = false;
+        self.core.recovered();
     }
 
     /// After a pause (flash write): the samples missed meanwhile are counted as lost to it.
     pub fn resume(&mut self) {
-        if self.phase == Phase::Running {
-            self.after.get_or_insert(GapCause::Paused);
+        if self.core.phase == Phase::Running {
+            self.core.after.get_or_insert(GapCause::Paused);
         }
     }
 
     /// One tick at `now()` µs.
-    pub async fn tick<I, D>(
+    pub async fn tick<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
-        mag: &mut Qmc5883<I>,
-        delay: &mut D,
-        now: &impl Fn() -> u64,
-        out: &mut Out,
-    ) where
-        I: I2c + TransferTime,
-        D: DelayNs,
-    {
-        let t = now();
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
+    ) {
+        let t = (cx.now)();
         self.next_poll_us = None;
-        match self.phase {
-            Phase::Init => self.init(mag, delay, now, GapCause::SensorFault, out).await,
-            Phase::Lost if self.health.retry_due(t) => {
-                self.health.retried(t);
-                let intact = match mag.chip_id().await {
-                    Ok(id) if id == mag.variant().chip_id().1 => mag.config_intact().await,
+        match self.core.phase {
+            Phase::Init => self.init(cx, GapCause::SensorFault).await,
+            Phase::Lost if self.core.health.retry_due(t) => {
+                self.core.health.retried(t);
+                let intact = match cx.dev.chip_id().await {
+                    Ok(id) if id == cx.dev.variant().chip_id().1 => cx.dev.config_intact().await,
                     Ok(found) => Err(qmc::Error::WrongChip { found }),
                     Err(e) => Err(e),
                 };
                 match intact {
                     Ok(true) => {
-                        self.health.answered();
-                        self.after.get_or_insert(GapCause::SensorFault);
-                        self.phase = Phase::Running;
-                        self.last_growth_us = t;
+                        self.core.health.answered();
+                        self.core.after.get_or_insert(GapCause::SensorFault);
+                        self.core.phase = Phase::Running;
+                        self.core.last_growth_us = t;
                     }
                     Ok(false) => {
-                        self.health.answered();
-                        self.init(mag, delay, now, GapCause::SensorFault, out).await;
+                        self.core.health.answered();
+                        self.init(cx, GapCause::SensorFault).await;
                     }
-                    Err(e) => self.failed(&e, t, out),
+                    Err(e) => self.failed(&e, t, cx.out),
                 }
             }
             Phase::Lost => {}
-            Phase::Stalled if self.health.retry_due(t) => {
-                self.health.retried(t);
-                self.init(mag, delay, now, GapCause::Stalled, out).await;
-                if self.phase == Phase::Running {
-                    self.phase = Phase::Stalled;
+            Phase::Stalled if self.core.health.retry_due(t) => {
+                self.core.health.retried(t);
+                self.init(cx, GapCause::Stalled).await;
+                if self.core.phase == Phase::Running {
+                    self.core.phase = Phase::Stalled;
                 }
             }
-            Phase::Running | Phase::Stalled => self.read(mag, delay, now, out).await,
+            Phase::Running | Phase::Stalled => self.read(cx).await,
         }
-        if self.errors | self.bus_faults != 0 || self.reported != self.health.state() {
-            self.report(None, out);
-        }
-        if self.next_poll_us.is_none() && matches!(self.phase, Phase::Running | Phase::Stalled) {
-            self.schedule(now());
+        self.core.flush_report(cx.out);
+        if self.next_poll_us.is_none() && matches!(self.core.phase, Phase::Running | Phase::Stalled)
+        {
+            self.schedule((cx.now)());
         }
     }
 
-    async fn init<I, D>(
+    async fn init<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
-        mag: &mut Qmc5883<I>,
-        delay: &mut D,
-        now: &impl Fn() -> u64,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
         cause: GapCause,
-        out: &mut Out,
-    ) where
-        I: I2c + TransferTime,
-        D: DelayNs,
-    {
-        if let Err(e) = mag.prepare(delay, &mag_config()).await {
-            self.failed(&e, now(), out);
+    ) {
+        if let Err(e) = cx.dev.prepare(cx.delay, &mag_config()).await {
+            self.failed(&e, (cx.now)(), cx.out);
             return;
         }
-        self.health.answered();
-        let period = self.clock.period();
-        let latch = self.timing.latch(0, clock::WRITE_DATA_BIT);
-        let keep = self.clock.known();
-        if keep {
-            let earliest = fine(now()) + SETUP + latch + period;
-            let k = self
-                .clock
-                .newest_at(earliest, 0)
-                .unwrap_or(self.next_k)
-                .wrapping_add(1);
-            delay_until(delay, now, self.clock.time(k) - period - latch).await;
-        }
-        if let Err(e) = mag.start().await {
-            self.failed(&e, now(), out);
+        self.core.health.answered();
+        self.core.wait_to_start(cx.delay, cx.now).await;
+        if let Err(e) = cx.dev.start().await {
+            self.failed(&e, (cx.now)(), cx.out);
             return;
         }
-        let first = self
-            .timing
-            .latch(mag.bus().last_start(), clock::WRITE_DATA_BIT)
-            + period;
-        if keep {
-            let k = self.clock.nearest(first);
-            self.clock.start(k, first, true, WRITE_MARGIN);
-            self.next_k = k;
-            self.after.get_or_insert(cause);
-        } else {
-            self.clock.start(0, first, false, 0);
-            self.next_k = 0;
-        }
-        self.fresh = true;
-        self.last_growth_us = now();
-        self.phase = Phase::Running;
-        self.schedule(now());
+        self.core
+            .started(cx.dev.bus().last_start(), cause, (cx.now)());
+        self.schedule((cx.now)());
     }
 
     /// The next tick: the first poll's latch just after the late end of the uncertainty about
@@ -229,133 +156,128 @@ impl MagService {
     /// wide (a probe). A landing already past (samples missed, a stall) gives way to the next
     /// one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
-        let latch = self.timing.latch(0, clock::READ_FIRST_BIT);
-        let offset = if self.clock.probe_after(0).is_some() {
+        let latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
+        let offset = if self.core.clock.probe_after(0).is_some() {
             0
         } else {
-            (self.clock.width() / 2 + POLL_MARGIN) as i64
+            (self.core.clock.width() / 2 + POLL_MARGIN) as i64
         };
-        let due = self.clock.time(self.next_k).wrapping_add(offset as u64);
+        let due = self
+            .core
+            .clock
+            .time(self.core.next_k)
+            .wrapping_add(offset as u64);
         let earliest = fine(now_us) + SETUP + latch;
         let at = if due >= earliest {
             due
         } else {
-            self.clock.instant_after(earliest, offset)
+            self.core.clock.instant_after(earliest, offset)
         };
         self.next_poll_us = Some(whole_us(at - latch));
     }
 
     /// Poll the status (again, up to [`POLLS`] times) and read the sample when DRDY is set.
-    async fn read<I, D>(
-        &mut self,
-        mag: &mut Qmc5883<I>,
-        delay: &mut D,
-        now: &impl Fn() -> u64,
-        out: &mut Out,
-    ) where
-        I: I2c + TransferTime,
-        D: DelayNs,
-    {
-        let status_latch = self.timing.latch(0, clock::READ_FIRST_BIT);
+    async fn read<I: I2c + TransferTime, D: DelayNs>(&mut self, cx: &mut Tick<'_, Qmc5883<I>, D>) {
+        let status_latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
         // A "not yet" seen this tick, kept to be trusted if a later poll finds the sample (the
         // part is producing, so the phase was late, not the part stalled).
         let mut not_yet: Option<Fine> = None;
         for poll in 0..POLLS {
-            let status = mag.status().await;
-            let t = now();
+            let status = cx.dev.status().await;
+            let t = (cx.now)();
             let status = match status {
                 Ok(s) => s,
                 Err(e) => {
-                    self.failed(&e, t, out);
+                    self.failed(&e, t, cx.out);
                     return;
                 }
             };
-            self.health.answered();
             let tau = self
-                .timing
-                .latch(mag.bus().last_start(), clock::READ_FIRST_BIT);
+                .core
+                .answered(cx.dev.bus().last_start(), clock::READ_FIRST_BIT);
             if !status.ready {
-                if !self.fresh {
+                if !self.core.fresh {
                     // Sample `next_k` not yet landed: a lower bound, unless the part stalled.
-                    self.clock
-                        .observe(tau, self.next_k.wrapping_sub(1), true, false);
+                    self.core
+                        .clock
+                        .observe(tau, self.core.next_k.wrapping_sub(1), true, false);
                 }
                 not_yet = Some(tau);
-                if t.saturating_sub(self.last_growth_us) >= STALL_AFTER_US {
-                    if let Some(e) = self.health.stalled(t, self.last_growth_us) {
-                        self.phase = Phase::Stalled;
-                        self.report(Some(e), out);
-                    }
+                if self.core.no_data(t, cx.out) {
                     return;
                 }
                 if poll + 1 == POLLS {
                     return;
                 }
                 // Poll again at the late end of the uncertainty (or a little later).
-                let late = self.clock.time(self.next_k) + self.clock.width() / 2 + POLL_MARGIN;
+                let late = self.core.clock.time(self.core.next_k)
+                    + self.core.clock.width() / 2
+                    + POLL_MARGIN;
                 let at = late.max(tau + REPOLL_MIN);
-                delay_until(delay, now, at - status_latch).await;
+                delay_until(cx.delay, cx.now, at - status_latch).await;
                 continue;
             }
             if let Some(before) = not_yet {
-                if !self.fresh {
-                    self.clock
-                        .observe(before, self.next_k.wrapping_sub(1), true, true);
+                if !self.core.fresh {
+                    self.core
+                        .clock
+                        .observe(before, self.core.next_k.wrapping_sub(1), true, true);
                 }
             }
-            self.clock.observe(tau, self.next_k, false, false);
-            let xyz = match mag.read_data().await {
+            self.core.clock.observe(tau, self.core.next_k, false, false);
+            let xyz = match cx.dev.read_data().await {
                 Ok(xyz) => xyz,
                 Err(e) => {
-                    self.failed(&e, now(), out);
+                    self.failed(&e, (cx.now)(), cx.out);
                     return;
                 }
             };
             let t_data = self
+                .core
                 .timing
-                .latch(mag.bus().last_start(), clock::READ_FIRST_BIT);
+                .latch(cx.dev.bus().last_start(), clock::READ_FIRST_BIT);
             // The slot read. DOR clear: one sample landed since the last read, the next one due,
             // unless the clock says the grid has moved on past it (a part that produced nothing
             // for a while). DOR set (samples overwritten unread): the newest landed before the
             // data read, by the clock.
-            let by_clock = self.clock.newest_at(t_data, READ_MARGIN);
-            let later = |k: u32| k.wrapping_sub(self.next_k).wrapping_sub(1) < 1 << 31;
+            let by_clock = self.core.clock.newest_at(t_data, READ_MARGIN);
+            let later = |k: u32| k.wrapping_sub(self.core.next_k).wrapping_sub(1) < 1 << 31;
             let k = if !status.skipped {
                 match by_clock {
                     Some(k) if later(k) => k,
-                    Some(_) => self.next_k,
+                    Some(_) => self.core.next_k,
                     // Too close to an instant `j` to tell `j − 1` from `j`: only if both are past
                     // the one due does it matter.
-                    None if later(self.clock.nearest(t_data).wrapping_sub(1)) => {
-                        self.resolve(mag, delay, now, t_data).await
+                    None if later(self.core.clock.nearest(t_data).wrapping_sub(1)) => {
+                        self.resolve(cx, t_data).await
                     }
-                    None => self.next_k,
+                    None => self.core.next_k,
                 }
             } else {
                 let k = match by_clock {
                     Some(k) => k,
-                    None => self.resolve(mag, delay, now, t_data).await,
+                    None => self.resolve(cx, t_data).await,
                 };
                 // Never an older slot than the next one due (the sample just read is new).
-                if self.fresh || k.wrapping_sub(self.next_k) < 1 << 31 {
+                if self.core.fresh || k.wrapping_sub(self.core.next_k) < 1 << 31 {
                     k
                 } else {
-                    self.next_k
+                    self.core.next_k
                 }
             };
-            let _ = out.push(SensorMsg::Mag {
-                stamps: self.clock.stamps(k, 1),
+            let _ = cx.out.push(SensorMsg::Mag {
+                stamps: self.core.clock.stamps(k, 1),
                 xyz,
-                after: self.after.take(),
+                after: self.core.after.take(),
             });
-            self.next_k = k.wrapping_add(1);
-            self.fresh = false;
-            self.last_growth_us = t;
-            if self.phase == Phase::Stalled {
-                self.phase = Phase::Running;
+            self.core.next_k = k.wrapping_add(1);
+            self.core.fresh = false;
+            self.core.last_growth_us = t;
+            if self.core.phase == Phase::Stalled {
+                self.core.phase = Phase::Running;
             }
-            if let Some(e) = self.health.delivering(t) {
-                self.report(Some(e), out);
+            if let Some(e) = self.core.health.delivering(t) {
+                self.core.report(Some(e), cx.out);
             }
             return;
         }
@@ -364,67 +286,28 @@ impl MagService {
     /// A data read latched too close to a sample instant `j` to tell whether it read `j − 1`
     /// or `j`: poll once more after the instant. DRDY set again means `j` landed after the
     /// read (the read was `j − 1`); clear means the read took `j`.
-    async fn resolve<I, D>(
+    async fn resolve<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
-        mag: &mut Qmc5883<I>,
-        delay: &mut D,
-        now: &impl Fn() -> u64,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
         t_data: Fine,
-    ) -> u32
-    where
-        I: I2c + TransferTime,
-        D: DelayNs,
-    {
-        let j = self.clock.nearest(t_data);
-        let latch = self.timing.latch(0, clock::READ_FIRST_BIT);
-        let after = self.clock.time(j) + self.clock.width() / 2 + POLL_MARGIN;
-        delay_until(delay, now, after - latch).await;
-        match mag.status().await {
+    ) -> u32 {
+        let j = self.core.clock.nearest(t_data);
+        let latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
+        let after = self.core.clock.time(j) + self.core.clock.width() / 2 + POLL_MARGIN;
+        delay_until(cx.delay, cx.now, after - latch).await;
+        match cx.dev.status().await {
             Ok(s) if s.ready => j.wrapping_sub(1),
             _ => j,
         }
     }
 
+    /// A transfer failed at `t`.
     fn failed<E: embedded_hal::i2c::Error>(&mut self, e: &qmc::Error<E>, t: u64, out: &mut Out) {
         let failure = match e {
             qmc::Error::Bus(b) => Failure::of(b),
             _ => Failure::Other,
         };
-        self.errors += 1;
-        if let Some(fault) = failure.bus_fault() {
-            self.bus_faults += 1;
-            self.recovery = true;
-            self.report(Some(Event::BusFault { t_us: t, fault }), out);
-        }
-        if let Some(lost) = self.health.failed(t) {
-            self.phase = Phase::Lost;
-            self.report(Some(lost), out);
-        }
-    }
-
-    fn report(&mut self, event: Option<Event>, out: &mut Out) {
-        self.reported = self.health.state();
-        let r = Report {
-            sensor: Sensor::Mag,
-            state: self.health.state(),
-            i2c_errors: core::mem::take(&mut self.errors),
-            bus_faults: core::mem::take(&mut self.bus_faults),
-            fifo_overflows: 0,
-            period_ns: self.clock.period_ns(),
-            event,
-        };
-        let _ = out.push(SensorMsg::Report(r));
-    }
-}
-
-/// Sleep until the [`Fine`] instant `t` (at once if it has passed).
-async fn delay_until<D: DelayNs>(delay: &mut D, now: &impl Fn() -> u64, t: Fine) {
-    let at = whole_us(t);
-    let n = now();
-    if at > n {
-        delay
-            .delay_us((at - n).min(u64::from(u32::MAX)) as u32)
-            .await;
+        self.core.failed(failure, t, out);
     }
 }
 

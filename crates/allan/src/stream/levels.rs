@@ -75,7 +75,11 @@ fn terms(t: u64, span: u64, stride: u64) -> u64 {
 impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L, R, S> {
     /// (second, third) differences level `k` has taken in the current segment.
     pub(super) fn segment_terms(&self, k: usize) -> (u64, u64) {
-        let m = if k < 32 { u64::from(1u32 << k) } else { 1u64 << k };
+        let m = if k < 32 {
+            u64::from(1u32 << k)
+        } else {
+            1u64 << k
+        };
         let s = Self::stride(k) as u64;
         (terms(self.t, 2 * m, s), terms(self.t, 3 * m, s))
     }

@@ -1,0 +1,203 @@
+//! What the two sensor services ([`crate::imu`], [`crate::mag`]) share: where the part is
+//! (its [`Phase`]), its sample grid and clock, its health and the failures counted since the
+//! last report, the report itself, and the (re)start of a part in step with its old grid.
+use embedded_hal_async::delay::DelayNs;
+use imu_proto::{Event, GapCause, Sensor, SensorState};
+
+use crate::bus::Failure;
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, US};
+use crate::health::{Health, STALL_AFTER_US};
+use crate::msg::{Out, Report, SensorMsg};
+
+/// Time to set up a transfer after a wait, before its first bit.
+pub const SETUP: u64 = 150 * US;
+/// Margin around the latch of a part's waking write (an interrupt-driven transfer: its latch
+/// varies by this beyond the clock's own uncertainty).
+pub const WRITE_MARGIN: u64 = 120 * US;
+
+/// Where a service is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Never initialised (boot), or its configuration is gone: initialise.
+    Init,
+    /// Delivering samples.
+    Running,
+    /// Not answering: probe with back-off.
+    Lost,
+    /// Answering, no data: wait for it, re-initialise with back-off.
+    Stalled,
+}
+
+/// A sensor service's shared state.
+pub struct Core {
+    sensor: Sensor,
+    pub clock: SampleClock,
+    pub health: Health,
+    pub timing: BusTiming,
+    pub phase: Phase,
+    /// Slot of the next sample to deliver.
+    pub next_k: u32,
+    /// The part (or its FIFO) was (re)started: the first slot of its new run; nothing delivered
+    /// since, so `next_k − 1` is not a sample of this run.
+    pub fresh: bool,
+    /// The cause of the discontinuity before the next samples delivered.
+    pub after: Option<GapCause>,
+    /// When data last came (or the run started), µs.
+    pub last_growth_us: u64,
+    /// Run a bus recovery before the next tick.
+    recovery: bool,
+    errors: u32,
+    bus_faults: u32,
+    /// FIFO overflows since the last report.
+    pub overflows: u32,
+    /// The state the last report carried.
+    reported: SensorState,
+}
+
+impl Core {
+    /// A service of `sensor`, whose nominal sample period is `nominal_us`, over a bus timed as
+    /// `timing`.
+    pub const fn new(sensor: Sensor, nominal_us: u32, timing: BusTiming) -> Self {
+        Core {
+            sensor,
+            clock: SampleClock::new(nominal_us),
+            health: Health::new(sensor),
+            timing,
+            phase: Phase::Init,
+            next_k: 0,
+            fresh: true,
+            after: None,
+            last_growth_us: 0,
+            recovery: false,
+            errors: 0,
+            bus_faults: 0,
+            overflows: 0,
+            reported: SensorState::Unknown,
+        }
+    }
+
+    /// The bus needs recovering before the next tick (a bus fault, or a retry of a lost sensor).
+    pub fn wants_recovery(&self, t_us: u64) -> bool {
+        self.recovery || (self.phase == Phase::Lost && self.health.retry_due(t_us))
+    }
+
+    /// The caller recovered the bus.
+    pub fn recovered(&mut self) {
+        self.recovery = false;
+    }
+
+    /// A transfer that started at `start` went through: the sensor answers. Returns the instant
+    /// its byte at `bit` was latched (the time of what it read).
+    pub fn answered(&mut self, start: Fine, bit: u64) -> Fine {
+        self.health.answered();
+        self.timing.latch(start, bit)
+    }
+
+    /// A transfer failed at `t` (`failure`: what the bus said): counted; a bus fault asks for a
+    /// recovery and is reported; failures for long enough lose the sensor.
+    pub fn failed(&mut self, failure: Failure, t: u64, out: &mut Out) {
+        self.errors += 1;
+        if let Some(fault) = failure.bus_fault() {
+            self.bus_faults += 1;
+            self.recovery = true;
+            self.report(Some(Event::BusFault { t_us: t, fault }), out);
+        }
+        if let Some(lost) = self.health.failed(t) {
+            self.phase = Phase::Lost;
+            self.report(Some(lost), out);
+        }
+    }
+
+    /// No data at `t`: after [`STALL_AFTER_US`] without any the part is stalled (reported the
+    /// first time). Returns whether it is.
+    pub fn no_data(&mut self, t: u64, out: &mut Out) -> bool {
+        if t.saturating_sub(self.last_growth_us) < STALL_AFTER_US {
+            return false;
+        }
+        if let Some(e) = self.health.stalled(t, self.last_growth_us) {
+            self.phase = Phase::Stalled;
+            self.report(Some(e), out);
+        }
+        true
+    }
+
+    /// Queue a report with `event`; it carries the counters since the previous one.
+    pub fn report(&mut self, event: Option<Event>, out: &mut Out) {
+        self.reported = self.health.state();
+        let r = Report {
+            sensor: self.sensor,
+            state: self.health.state(),
+            i2c_errors: core::mem::take(&mut self.errors),
+            bus_faults: core::mem::take(&mut self.bus_faults),
+            fifo_overflows: core::mem::take(&mut self.overflows),
+            period_ns: self.clock.period_ns(),
+            event,
+        };
+        let _ = out.push(SensorMsg::Report(r));
+    }
+
+    /// A report of the counters if any changed, or the state, since the last one.
+    pub fn flush_report(&mut self, out: &mut Out) {
+        if self.errors | self.bus_faults | self.overflows != 0
+            || self.reported != self.health.state()
+        {
+            self.report(None, out);
+        }
+    }
+
+    /// Before the write that wakes the part: a part with a grid is restarted in step with it,
+    /// so wait until that write's latch falls one period before a predicted sample instant
+    /// (its first sample then lands on that instant). Without a grid, at once.
+    pub async fn wait_to_start<D: DelayNs>(&self, delay: &mut D, now: &dyn Fn() -> u64) {
+        if !self.clock.known() {
+            return;
+        }
+        let period = self.clock.period();
+        let latch = self.timing.latch(0, clock::WRITE_DATA_BIT);
+        let earliest = fine(now()) + SETUP + latch + period;
+        let planned = self
+            .clock
+            .newest_at(earliest, 0)
+            .unwrap_or(self.next_k)
+            .wrapping_add(1);
+        delay_until(delay, now, self.clock.time(planned) - period - latch).await;
+    }
+
+    /// The waking write's transfer started at `start`: the part samples from one period after
+    /// its latch. A part that had a grid continues it (the slots since the last delivered
+    /// sample are lost to `cause`); otherwise a new grid starts at slot 0.
+    pub fn started(&mut self, start: Fine, cause: GapCause, now_us: u64) {
+        let first = self.timing.latch(start, clock::WRITE_DATA_BIT) + self.clock.period();
+        if self.clock.known() {
+            let k = self.clock.nearest(first);
+            self.clock.start(k, first, true, WRITE_MARGIN);
+            self.next_k = k;
+            self.after.get_or_insert(cause);
+        } else {
+            self.clock.start(0, first, false, 0);
+            self.next_k = 0;
+        }
+        self.fresh = true;
+        self.last_growth_us = now_us;
+        self.phase = Phase::Running;
+    }
+}
+
+/// One tick's context: the sensor's driver, the delay, the µs clock and the tick's output.
+pub struct Tick<'a, S, D> {
+    pub dev: &'a mut S,
+    pub delay: &'a mut D,
+    pub now: &'a dyn Fn() -> u64,
+    pub out: &'a mut Out,
+}
+
+/// Sleep until the [`Fine`] instant `t` (at once if it has passed).
+pub async fn delay_until<D: DelayNs>(delay: &mut D, now: &dyn Fn() -> u64, t: Fine) {
+    let at = whole_us(t);
+    let n = now();
+    if at > n {
+        delay
+            .delay_us((at - n).min(u64::from(u32::MAX)) as u32)
+            .await;
+    }
+}
