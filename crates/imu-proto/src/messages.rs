@@ -56,25 +56,12 @@ pub struct SampleBatch {
     pub mag: Vec<MagSample, MAX_BATCH_MAG>,
 }
 
-/// One octave level of a device Allan table: the streaming engine's exact integer sums, from
-/// which the host derives the deviation and its bounds (`allan::stream::LevelSums`; overlapping
-/// ADEV `σ² = Σ D2² / (2 n m²)`, NIST SP 1065 eq. 11; bounds from `allan::ci`).
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct AllanLevel {
-    /// Cluster size (samples); τ = m·τ0.
-    pub m: u32,
-    /// Spacing of the second differences that were summed (1 = fully overlapping).
-    pub stride: u32,
-    /// Number of second differences summed.
-    pub n2: u64,
-    /// Σ (θ[k+2m] − 2θ[k+m] + θ[k])², θ the integer phase (cumulative sum of the samples).
-    pub sum2: u128,
-    /// Number of third differences summed.
-    pub n3: u64,
-    /// Σ (θ[k+3m] − 3θ[k+2m] + 3θ[k+m] − θ[k])².
-    pub sum3: u128,
-}
+/// One octave level of a device Allan table: the streaming engine's exact integer sums
+/// ([`allan::stream::LevelSums`], the same type: cluster size `m`, stride, the counts and sums of
+/// squared second and third differences of the integer phase, on the wire in that order), from
+/// which the host derives the deviation and its bounds (overlapping ADEV `σ² = Σ D2² / (2 n m²)`,
+/// NIST SP 1065 eq. 11; bounds from `allan::ci`).
+pub use allan::stream::LevelSums as AllanLevel;
 
 /// The Allan table of one channel, as it stood at its round's snapshot.
 ///

@@ -5,7 +5,7 @@
 //! The device sends only the engines' exact integer sums; the deviation, its EDF and its bounds
 //! are the host's (`allan::ci`), which recomputes them from the sums anyway: on the M0+ each
 //! row's soft-float square roots cost ≈ 0.3 ms.
-use imu_proto::{AllanLevel, AllanTable, Channel, Scales, Sensor, Vec};
+use imu_proto::{AllanTable, Channel, Scales, Sensor, Vec};
 
 use crate::engines::{Engines, Snapshot, CHANNELS};
 use crate::outbox::{FrameSink, Outbox, Sent};
@@ -78,14 +78,7 @@ impl Tables {
         let s = &self.snapshot.channels[c];
         let mut levels = Vec::new();
         for l in &s.levels {
-            let _ = levels.push(AllanLevel {
-                m: l.m,
-                stride: l.stride,
-                n2: l.n2,
-                sum2: l.sum2,
-                n3: l.n3,
-                sum3: l.sum3,
-            });
+            let _ = levels.push(*l);
         }
         AllanTable {
             channel: ch,

@@ -8,6 +8,7 @@ use super::Engine;
 /// Sums of one octave level: everything a deviation, its EDF and its bounds derive from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct LevelSums {
     /// Cluster size in samples (`τ = m·τ0`).
     pub m: u32,

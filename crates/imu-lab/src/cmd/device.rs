@@ -11,9 +11,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
-use imu_proto::{
-    AllanLevel, AllanTable, CalStatus, Channel, DeviceMsg, Reply, Request, Status, StreamMode,
-};
+use imu_proto::{AllanTable, CalStatus, Channel, DeviceMsg, Reply, Request, Status, StreamMode};
 
 use crate::link::{Link, PortArgs};
 
@@ -266,18 +264,6 @@ pub fn fetch_tables(
     Ok(got)
 }
 
-/// The exact engine sums a table row carries.
-fn level_sums(l: &AllanLevel) -> allan::stream::LevelSums {
-    allan::stream::LevelSums {
-        m: l.m,
-        stride: l.stride,
-        n2: l.n2,
-        sum2: l.sum2,
-        n3: l.n3,
-        sum3: l.sum3,
-    }
-}
-
 /// One row of a table as the host derives it from the device's sums.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Row {
@@ -303,7 +289,7 @@ pub fn rows(t: &AllanTable) -> Vec<Row> {
     let devs: Vec<f64> = t
         .levels
         .iter()
-        .map(|l| level_sums(l).oadev(f64::from(t.scale)).unwrap_or(0.0))
+        .map(|l| l.oadev(f64::from(t.scale)).unwrap_or(0.0))
         .collect();
     let n = t.levels.len();
     (0..n)
@@ -319,7 +305,7 @@ pub fn rows(t: &AllanTable) -> Vec<Row> {
             } else {
                 ci::alpha_from_slope(devs[a] * devs[a], devs[b] * devs[b], 2.0, 2)
             };
-            let sums = level_sums(l);
+            let sums = *l;
             let s_factor = f64::from(l.m) / f64::from(l.stride.max(1));
             let edf = ci::edf_greenhall(
                 alpha,
@@ -565,6 +551,7 @@ fn print_cal(cal: &imu_cal::device::Calibration) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use imu_proto::AllanLevel;
 
     #[derive(clap::Parser, Debug)]
     struct Cal {
@@ -642,7 +629,7 @@ mod tests {
             // τ from the measured period, not the nominal 1 ms.
             assert!((r.tau - f64::from(l.m) * 1.013171e-3).abs() < 1e-12);
             assert!(r.lo < r.dev && r.dev < r.hi, "m = {}", l.m);
-            let sums = level_sums(l);
+            let sums = *l;
             let g = allan::ci::edf_greenhall(
                 0,
                 f64::from(l.m),
