@@ -385,24 +385,24 @@ async fn imu_task(
         let msgs = out.send().await;
         msgs.clear();
         if wait_running(&mut run).await {
-            svc.resume(&mut Tick {
-                dev: &mut imu,
-                delay: &mut embassy_time::Delay,
-                now: &now_us,
-                out: msgs,
-            })
+            svc.resume(&mut Tick::new(
+                &mut imu,
+                &mut embassy_time::Delay,
+                &now_us,
+                msgs,
+            ))
             .await;
         } else {
             if svc.wants_recovery(now_us()) {
                 recover_bus(bus, msgs).await;
                 svc.recovered();
             }
-            svc.tick(&mut Tick {
-                dev: &mut imu,
-                delay: &mut embassy_time::Delay,
-                now: &now_us,
-                out: msgs,
-            })
+            svc.tick(&mut Tick::new(
+                &mut imu,
+                &mut embassy_time::Delay,
+                &now_us,
+                msgs,
+            ))
             .await;
         }
         if svc.state() != was {
@@ -450,12 +450,12 @@ async fn mag_task(
                 recover_bus(bus, msgs).await;
                 svc.recovered();
             }
-            svc.tick(&mut Tick {
-                dev: &mut mag,
-                delay: &mut embassy_time::Delay,
-                now: &now_us,
-                out: msgs,
-            })
+            svc.tick(&mut Tick::new(
+                &mut mag,
+                &mut embassy_time::Delay,
+                &now_us,
+                msgs,
+            ))
             .await;
         }
         if svc.state() != was {

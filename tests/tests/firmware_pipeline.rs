@@ -192,23 +192,23 @@ impl Rig {
                 if self.mag_svc.wants_recovery(t) {
                     self.mag_svc.recovered();
                 }
-                block_on(self.mag_svc.tick(&mut Tick {
-                    dev: &mut self.mag,
-                    delay: &mut self.bus.delay(),
-                    now: &clock,
-                    out: &mut out,
-                }));
+                block_on(self.mag_svc.tick(&mut Tick::new(
+                    &mut self.mag,
+                    &mut self.bus.delay(),
+                    &clock,
+                    &mut out,
+                )));
             } else {
                 self.next_imu_us += 10_000;
                 if self.imu_svc.wants_recovery(t) {
                     self.imu_svc.recovered();
                 }
-                block_on(self.imu_svc.tick(&mut Tick {
-                    dev: &mut self.imu,
-                    delay: &mut self.bus.delay(),
-                    now: &clock,
-                    out: &mut out,
-                }));
+                block_on(self.imu_svc.tick(&mut Tick::new(
+                    &mut self.imu,
+                    &mut self.bus.delay(),
+                    &clock,
+                    &mut out,
+                )));
             }
             self.feed(out);
         }

@@ -191,6 +191,22 @@ pub struct Tick<'a, S, D> {
     pub out: &'a mut Out,
 }
 
+impl<'a, S, D> Tick<'a, S, D> {
+    pub fn new(
+        dev: &'a mut S,
+        delay: &'a mut D,
+        now: &'a dyn Fn() -> u64,
+        out: &'a mut Out,
+    ) -> Self {
+        Tick {
+            dev,
+            delay,
+            now,
+            out,
+        }
+    }
+}
+
 /// Sleep until the [`Fine`] instant `t` (at once if it has passed).
 pub async fn delay_until<D: DelayNs>(delay: &mut D, now: &dyn Fn() -> u64, t: Fine) {
     let at = whole_us(t);
