@@ -25,22 +25,14 @@ struct Run {
 }
 
 impl Run {
-    /// The effects the walk added, in order.
-    fn added(&self) -> Vec<Effect> {
-        self.walk
-            .steps
-            .iter()
-            .flat_map(|s| s.edit.add.clone())
-            .collect()
-    }
-
-    /// The effects the walk removed, in order.
-    fn removed(&self) -> Vec<Effect> {
-        self.walk
-            .steps
-            .iter()
-            .flat_map(|s| s.edit.remove.clone())
-            .collect()
+    /// The effects the walk added and those it removed, each in order.
+    fn edits(&self) -> (Vec<Effect>, Vec<Effect>) {
+        let (mut added, mut removed) = (Vec::new(), Vec::new());
+        for s in &self.walk.steps {
+            added.extend(s.edit.add.iter().cloned());
+            removed.extend(s.edit.remove.iter().cloned());
+        }
+        (added, removed)
     }
 
     /// Parameter `i` of `e` in the last model is `truth` (4σ and `rel`, see [`check`]).
@@ -106,8 +98,9 @@ fn check(name: &str, est: f64, sigma: f64, truth: f64, rel: f64, rep: &str) {
 
 /// The walk added exactly `effects` (in order), removed `removed`, and ended adequate.
 fn named(r: &Run, effects: &[Effect], removed: &[Effect]) {
-    assert_eq!(r.added(), effects, "{}", r.report);
-    assert_eq!(r.removed(), removed, "{}", r.report);
+    let (added, gone) = r.edits();
+    assert_eq!(added, effects, "{}", r.report);
+    assert_eq!(gone, removed, "{}", r.report);
     assert_eq!(r.walk.stop, Stop::Adequate, "{}", r.report);
     assert!(r.walk.last().adequate, "{}", r.report);
     for s in &r.walk.steps {
@@ -203,12 +196,8 @@ fn a_warm_up_without_a_temperature_column_is_named() {
             },
             seed,
         );
-        assert_eq!(
-            r.added().first(),
-            Some(&Effect::Temperature),
-            "{}",
-            r.report
-        );
+        let (added, _) = r.edits();
+        assert_eq!(added.first(), Some(&Effect::Temperature), "{}", r.report);
         assert_eq!(r.walk.stop, Stop::Adequate, "{}", r.report);
         r.recovered("warm-up amplitude", &Effect::Temperature, 0, 0.2, 0.15);
         let (tw, _) = param(r.walk.last(), &Effect::Temperature, 1);
