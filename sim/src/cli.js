@@ -113,6 +113,13 @@ async function cmdGen(v) {
   writeFileSync(v.out, streamToCsv(st));
 }
 
+// The options of every subcommand: values given once, flags, and --fault (repeatable).
+const STRING_OPTIONS = [
+  'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock',
+  'served', 'summary', 'log', 'out', 'report', 'json', 'top', 'callers', 'from',
+];
+const BOOLEAN_OPTIONS = ['instant-i2c', 'exit-on-disconnect', 'quiet', 'copies', 'exact'];
+
 async function main() {
   const [cmd, ...rest] = process.argv.slice(2);
   let parsed;
@@ -120,30 +127,9 @@ async function main() {
     parsed = parseArgs({
       args: rest,
       options: {
-        elf: { type: 'string' },
-        seconds: { type: 'string' },
-        stream: { type: 'string' },
-        seed: { type: 'string' },
-        sine: { type: 'string' },
-        port: { type: 'string' },
-        'port-file': { type: 'string' },
-        warmup: { type: 'string' },
+        ...Object.fromEntries(STRING_OPTIONS.map((o) => [o, { type: 'string' }])),
+        ...Object.fromEntries(BOOLEAN_OPTIONS.map((o) => [o, { type: 'boolean' }])),
         fault: { type: 'string', multiple: true },
-        clock: { type: 'string' },
-        'instant-i2c': { type: 'boolean' },
-        'exit-on-disconnect': { type: 'boolean' },
-        served: { type: 'string' },
-        summary: { type: 'string' },
-        log: { type: 'string' },
-        out: { type: 'string' },
-        report: { type: 'string' },
-        json: { type: 'string' },
-        quiet: { type: 'boolean' },
-        top: { type: 'string' },
-        callers: { type: 'string' },
-        copies: { type: 'boolean' },
-        exact: { type: 'boolean' },
-        from: { type: 'string' },
       },
     });
   } catch (e) {

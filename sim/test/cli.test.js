@@ -4,20 +4,13 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawn } from 'node:child_process';
 import { connect } from 'node:net';
-import { mkdtempSync, writeFileSync, readFileSync, existsSync } from 'node:fs';
+import { mkdtempSync, readFileSync, existsSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { dirname, join } from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { buildElf, flashImage } from './helpers.js';
+import { spinElf, until } from './helpers.js';
 
 const cli = fileURLToPath(new URL('../src/cli.js', import.meta.url));
-
-/** A firmware that spins for ever (`b .`), never sleeping: the emulator always has work. */
-function spinElf(dir) {
-  const path = join(dir, 'spin.elf');
-  writeFileSync(path, buildElf([flashImage([0xe7fe])]));
-  return path;
-}
 
 /** Runs cli.js with no defmt-print reachable (PATH has node only, HOME is empty). */
 function runCli(args, dir) {
@@ -29,14 +22,6 @@ function runCli(args, dir) {
   p.stderr.setEncoding('utf8').on('data', (d) => (p.stderrText += d));
   p.exited = new Promise((resolve) => p.on('exit', (code, signal) => resolve({ code, signal })));
   return p;
-}
-
-async function until(what, cond, ms = 10000) {
-  const t0 = Date.now();
-  while (!cond()) {
-    if (Date.now() - t0 > ms) throw new Error(`timed out waiting for ${what}`);
-    await new Promise((r) => setTimeout(r, 10));
-  }
 }
 
 /** Waits for the exit, failing after `ms`; kills the process then so the test run ends. */
@@ -71,7 +56,7 @@ for (const [signal, host] of [['SIGTERM', false], ['SIGINT', true]]) {
     const portFile = join(dir, 'port');
     const summary = join(dir, 'summary.json');
     const p = runCli(['run', '--elf', spinElf(dir), '--seconds', '30', '--port-file', portFile, '--summary', summary, '--quiet'], dir);
-    await until('the port file', () => existsSync(portFile) && readFileSync(portFile, 'utf8').endsWith('\n'));
+    await until('the port file', () => existsSync(portFile) && readFileSync(portFile, 'utf8').endsWith('\n'), 10000);
     let sock = null;
     if (host) {
       // A host busy elsewhere: it does not close its end when the emulator closes the port.

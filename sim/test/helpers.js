@@ -1,3 +1,5 @@
+import { writeFileSync } from 'node:fs';
+import { join } from 'node:path';
 import { Stream, COLUMNS } from '../src/stream.js';
 
 /** A constant stream (every row the same physical values), `seconds` long at `rate`. */
@@ -122,4 +124,20 @@ export function flashImage(code) {
   dv.setUint32(0x104, 0x10000141, true);
   code.forEach((h, i) => dv.setUint16(0x140 + 2 * i, h, true));
   return { paddr: 0x10000000, data: img };
+}
+
+/** Writes, in `dir`, a firmware that spins for ever (`b .`), never sleeping; returns its path. */
+export function spinElf(dir) {
+  const path = join(dir, 'spin.elf');
+  writeFileSync(path, buildElf([flashImage([0xe7fe])]));
+  return path;
+}
+
+/** Polls `cond` every 5 ms until it holds; throws after `ms`, naming `what` it waited for. */
+export async function until(what, cond, ms = 3000) {
+  const t0 = Date.now();
+  while (!cond()) {
+    if (Date.now() - t0 > ms) throw new Error(`timed out waiting for ${what}`);
+    await new Promise((r) => setTimeout(r, 5));
+  }
 }

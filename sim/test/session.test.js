@@ -3,17 +3,15 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { connect } from 'node:net';
-import { mkdtempSync, writeFileSync } from 'node:fs';
+import { mkdtempSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { Session } from '../src/session.js';
 import { generateStream } from '../src/stream.js';
-import { buildElf, flashImage } from './helpers.js';
+import { spinElf, until } from './helpers.js';
 
 function session() {
-  const dir = mkdtempSync(join(tmpdir(), 'sim-session-'));
-  const elf = join(dir, 'spin.elf');
-  writeFileSync(elf, buildElf([flashImage([0xe7fe])]));
+  const elf = spinElf(mkdtempSync(join(tmpdir(), 'sim-session-')));
   return new Session({ elf, stream: generateStream({ seed: 1, seconds: 1 }), defmtPrint: null });
 }
 
@@ -30,14 +28,6 @@ async function host(port, { busy = false } = {}) {
   sock.on('error', () => {});
   await new Promise((r) => sock.on('connect', r));
   return sock;
-}
-
-async function until(what, cond, ms = 3000) {
-  const t0 = Date.now();
-  while (!cond()) {
-    if (Date.now() - t0 > ms) throw new Error(`timed out waiting for ${what}`);
-    await new Promise((r) => setTimeout(r, 5));
-  }
 }
 
 /** The device sends `bytes`; returns once someone (or no one) had the chance to get them. */

@@ -452,6 +452,22 @@ fn sample_bytes(accel: [i16; 3], gyro: [i16; 3]) -> Vec<u8> {
         .collect()
 }
 
+/// Self-test traffic up to the trim reads, on a chip answering `who`: GYRO_CONFIG = XG/YG/ZG_ST
+/// | FS_SEL 0 = 0xE0 and ACCEL_CONFIG = `accel[0]`, 16 sample reads answering `on`, self-test off
+/// (GYRO_CONFIG = 0x00, ACCEL_CONFIG = `accel[1]`), 16 sample reads answering `off`.
+fn self_test_averages(who: u8, accel: [u8; 2], on: &[u8], off: &[u8]) -> Vec<T> {
+    let mut exp = vec![
+        T::write_read(A, vec![0x75], vec![who]),
+        T::write(A, vec![0x1B, 0xE0]),
+        T::write(A, vec![0x1C, accel[0]]),
+    ];
+    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], on.to_vec())));
+    exp.push(T::write(A, vec![0x1B, 0x00]));
+    exp.push(T::write(A, vec![0x1C, accel[1]]));
+    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], off.to_vec())));
+    exp
+}
+
 #[test]
 fn self_test_sequence_mpu6050() {
     // RM 4.1: GYRO_CONFIG = XG/YG/ZG_ST | FS_SEL 0 = 0xE0; ACCEL_CONFIG = XA/YA/ZA_ST | AFS_SEL 2
@@ -460,15 +476,7 @@ fn self_test_sequence_mpu6050() {
     // Trim codes 1 everywhere: FT gyro = 3275 LSB (−3275 for Y), FT accel = 1392.64 LSB.
     let on = sample_bytes([1393, 1393, 1393 + 4096], [3275, -3275, 3275]);
     let off = sample_bytes([0, 0, 4096], [0, 0, 0]);
-    let mut exp = vec![
-        T::write_read(A, vec![0x75], vec![0x68]),
-        T::write(A, vec![0x1B, 0xE0]),
-        T::write(A, vec![0x1C, 0xF0]),
-    ];
-    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], on.clone())));
-    exp.push(T::write(A, vec![0x1B, 0x00]));
-    exp.push(T::write(A, vec![0x1C, 0x10]));
-    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], off.clone())));
+    let mut exp = self_test_averages(0x68, [0xF0, 0x10], &on, &off);
     exp.push(T::write_read(A, vec![0x0D], vec![0x01, 0x01, 0x01, 0x15]));
     exp.push(T::write(A, vec![0x1B, 0x00]));
     exp.push(T::write(A, vec![0x1C, 0x08]));
@@ -509,15 +517,7 @@ fn self_test_sequence_mpu6500() {
     // Responses: gyro 1310 (ratio 0.5 → −50 %, on the limit), accel 3930 (ratio 1.5 → +50 %).
     let on = sample_bytes([3930, 3930, 3930 + 16384], [1310, 2620, 2620]);
     let off = sample_bytes([0, 0, 16384], [0, 0, 0]);
-    let mut exp = vec![
-        T::write_read(A, vec![0x75], vec![0x70]),
-        T::write(A, vec![0x1B, 0xE0]),
-        T::write(A, vec![0x1C, 0xE0]),
-    ];
-    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], on.clone())));
-    exp.push(T::write(A, vec![0x1B, 0x00]));
-    exp.push(T::write(A, vec![0x1C, 0x00]));
-    exp.extend((0..16).map(|_| T::write_read(A, vec![0x3B], off.clone())));
+    let mut exp = self_test_averages(0x70, [0xE0, 0x00], &on, &off);
     exp.push(T::write_read(A, vec![0x00], vec![1, 1, 1]));
     exp.push(T::write_read(A, vec![0x0D], vec![1, 1, 1]));
     exp.push(T::write(A, vec![0x1B, 0x00]));

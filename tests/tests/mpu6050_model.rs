@@ -5,7 +5,9 @@
 use embassy_futures::block_on;
 use embedded_hal::i2c::NoAcknowledgeSource;
 use embedded_hal_mock::eh1::delay::NoopDelay;
-use imu_drivers::mpu6050::{Address, ChipId, Config, Dlpf, Error, FifoFrame, RawSample};
+use imu_drivers::mpu6050::{
+    Address, ChipId, Config, Dlpf, Error, FifoFrame, RawSample, SelfTestReport,
+};
 use imu_drivers::{asynch, blocking};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, SimBus, SimError};
@@ -99,13 +101,20 @@ fn sample_rate_follows_divider_and_dlpf() {
     }
 }
 
+/// A chip answering `who`, initialised with the defaults (1 kHz, accel + gyro frames of 12
+/// bytes), once `frames` samples have filled its FIFO.
+fn fifo_filled(who: u8, frames: u16) -> (SimBus, blocking::Mpu6050<SimBus>) {
+    let bus = bus_with(who);
+    let mut d = init(&bus, &Config::default());
+    bus.advance_us(u64::from(frames) * 1_000);
+    assert_eq!(d.fifo_count().unwrap(), frames * 12);
+    (bus, d)
+}
+
 #[test]
 fn overflow_after_1024_bytes_is_detected_and_recovered() {
-    let bus = bus_with(0x68);
-    let mut d = init(&bus, &Config::default());
     // 85 frames = 1020 bytes fit; the 86th overflows (1032 > 1024).
-    bus.advance_us(85_000);
-    assert_eq!(d.fifo_count().unwrap(), 1020);
+    let (bus, mut d) = fifo_filled(0x68, 85);
     bus.advance_us(1_000);
     assert!(bus.mpu(|m| m.dropped_bytes) == 8);
     let mut out = [RawSample::default(); 128];
@@ -256,18 +265,22 @@ fn trimmed_bus(gyro_factor: [f64; 3], accel_factor: [f64; 3]) -> SimBus {
     bus
 }
 
+/// Every axis's change from trim within `tol` percentage points of `gyro` and `accel` (%).
+#[track_caller]
+fn assert_changes(r: &SelfTestReport, gyro: [f32; 3], accel: [f32; 3], tol: f32) {
+    for i in 0..3 {
+        assert!((r.gyro_change_pct[i] - gyro[i]).abs() < tol, "{r:?}");
+        assert!((r.accel_change_pct[i] - accel[i]).abs() < tol, "{r:?}");
+    }
+}
+
 #[test]
 fn self_test_passes_and_reports_the_deviation() {
     let bus = trimmed_bus([1.05, 0.97, 1.0], [1.10, 0.90, 1.0]);
     let mut d = init(&bus, &Config::default());
     let r = d.self_test(&mut bus.delay()).unwrap();
     // Rounding of the response to whole LSB: ≤ 0.5/1392 = 0.04 %; tolerance 0.05 points.
-    let want_g = [5.0, -3.0, 0.0];
-    let want_a = [10.0, -10.0, 0.0];
-    for i in 0..3 {
-        assert!((r.gyro_change_pct[i] - want_g[i]).abs() < 0.05, "{r:?}");
-        assert!((r.accel_change_pct[i] - want_a[i]).abs() < 0.05, "{r:?}");
-    }
+    assert_changes(&r, [5.0, -3.0, 0.0], [10.0, -10.0, 0.0], 0.05);
     assert!(r.passed());
     // Configured ranges are back.
     bus.mpu(|m| {
@@ -320,12 +333,7 @@ fn self_test_mpu6500_family() {
     assert_eq!(d.chip(), Some(ChipId::Mpu6500));
     let r = d.self_test(&mut bus.delay()).unwrap();
     // Responses are whole LSB of 2620·factor, exact here; tolerance 0.01 points for f32.
-    let want_g = [20.0, -40.0, 0.0];
-    let want_a = [30.0, -30.0, 0.0];
-    for i in 0..3 {
-        assert!((r.gyro_change_pct[i] - want_g[i]).abs() < 0.01, "{r:?}");
-        assert!((r.accel_change_pct[i] - want_a[i]).abs() < 0.01, "{r:?}");
-    }
+    assert_changes(&r, [20.0, -40.0, 0.0], [30.0, -30.0, 0.0], 0.01);
     assert!(r.passed());
     // A weak gyro (ratio 0.4) and a strong accelerometer (ratio 1.6) each fail.
     for (g, a) in [([0.4, 1.0, 1.0], [1.0; 3]), ([1.0; 3], [1.0, 1.6, 1.0])] {
@@ -338,10 +346,7 @@ fn self_test_mpu6500_family() {
 #[test]
 fn mpu6500_overflows_at_512_bytes() {
     // 42 frames (504 bytes) fit the MPU-6500's 512-byte FIFO; the 43rd overflows it.
-    let bus = bus_with(0x70);
-    let mut d = init(&bus, &Config::default());
-    bus.advance_us(42_000);
-    assert_eq!(d.fifo_count().unwrap(), 504);
+    let (bus, mut d) = fifo_filled(0x70, 42);
     let mut out = [RawSample::default(); 64];
     assert_eq!(d.read_fifo(&mut out).unwrap(), 42);
     bus.advance_us(43_000);

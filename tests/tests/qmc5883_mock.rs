@@ -48,17 +48,29 @@ fn init_err(variant: Variant, exp: &[T], cfg: &Config) -> Error<ErrorKind> {
     )
 }
 
-/// QMC5883L default configuration: chip id 0x0D = 0xFF; CONTROL2 (0x0A) = 0x80 soft reset; SET/RESET period
-/// (0x0B) = 0x01; CONTROL2 = 0x00 (DRDY pin on); CONTROL1 (0x09) = OSR 512 (00) | RNG 2 G (00)
-/// | ODR 200 Hz (11) | continuous (01) = 0b0000_1101 = 0x0D.
-fn l_default() -> Vec<T> {
+/// The traffic of `init` on `variant`: the chip id read, a soft reset (CONTROL2 = 0x80), the
+/// variant's one setup write, then CONTROL2 = `control2` and CONTROL1 = `control1`.
+fn init_traffic(variant: Variant, control2: u8, control1: u8) -> Vec<T> {
+    // (address, chip id register and value, CONTROL2, setup write, CONTROL1)
+    let (addr, id, ctrl2, setup, ctrl1) = match variant {
+        // Chip id 0x0D = 0xFF; CONTROL2 0x0A; SET/RESET period (0x0B) = 0x01; CONTROL1 0x09.
+        Variant::L => (L, [0x0D, 0xFF], 0x0A, [0x0B, 0x01], 0x09),
+        // Chip id reg 0x00 = 0x80; CONTROL2 0x0B; axis sign (0x29) = 0x06; CONTROL1 0x0A.
+        Variant::P => (P, [0x00, 0x80], 0x0B, [0x29, 0x06], 0x0A),
+    };
     vec![
-        T::write_read(L, vec![0x0D], vec![0xFF]),
-        T::write(L, vec![0x0A, 0x80]),
-        T::write(L, vec![0x0B, 0x01]),
-        T::write(L, vec![0x0A, 0x00]),
-        T::write(L, vec![0x09, 0x0D]),
+        T::write_read(addr, vec![id[0]], vec![id[1]]),
+        T::write(addr, vec![ctrl2, 0x80]),
+        T::write(addr, setup.to_vec()),
+        T::write(addr, vec![ctrl2, control2]),
+        T::write(addr, vec![ctrl1, control1]),
     ]
+}
+
+/// QMC5883L default configuration: CONTROL2 = 0x00 (DRDY pin on); CONTROL1 = OSR 512 (00) |
+/// RNG 2 G (00) | ODR 200 Hz (11) | continuous (01) = 0b0000_1101 = 0x0D.
+fn l_default() -> Vec<T> {
+    init_traffic(Variant::L, 0x00, 0x0D)
 }
 
 #[test]
@@ -91,28 +103,15 @@ fn l_other_settings() {
         drdy_pin: false,
         roll_over: false,
     };
-    let exp = [
-        T::write_read(L, vec![0x0D], vec![0xFF]),
-        T::write(L, vec![0x0A, 0x80]),
-        T::write(L, vec![0x0B, 0x01]),
-        T::write(L, vec![0x0A, 0x01]),
-        T::write(L, vec![0x09, 0xD0]),
-    ];
+    let exp = init_traffic(Variant::L, 0x01, 0xD0);
     init_ok(Variant::L, &exp, &cfg);
 }
 
 #[test]
 fn p_default_init() {
-    // Chip id reg 0x00 = 0x80; CONTROL2 (0x0B) = 0x80 soft reset; 0x29 = 0x06 (axis sign);
-    // CONTROL2 = RNG ±2 G (11 in bits 3:2) = 0x0C, set/reset on; CONTROL1 (0x0A) =
-    // OSR2 1 (00) | OSR1 8 (00) | ODR 200 Hz (11) | continuous (11) = 0x0F.
-    let exp = [
-        T::write_read(P, vec![0x00], vec![0x80]),
-        T::write(P, vec![0x0B, 0x80]),
-        T::write(P, vec![0x29, 0x06]),
-        T::write(P, vec![0x0B, 0x0C]),
-        T::write(P, vec![0x0A, 0x0F]),
-    ];
+    // CONTROL2 = RNG ±2 G (11 in bits 3:2) = 0x0C, set/reset on; CONTROL1 = OSR2 1 (00) |
+    // OSR1 8 (00) | ODR 200 Hz (11) | continuous (11) = 0x0F.
+    let exp = init_traffic(Variant::P, 0x0C, 0x0F);
     init_ok(Variant::P, &exp, &Config::default());
 }
 
@@ -122,13 +121,8 @@ fn p_30_gauss_range() {
         range: Range::G30,
         ..Config::default()
     };
-    let exp = [
-        T::write_read(P, vec![0x00], vec![0x80]),
-        T::write(P, vec![0x0B, 0x80]),
-        T::write(P, vec![0x29, 0x06]),
-        T::write(P, vec![0x0B, 0x00]),
-        T::write(P, vec![0x0A, 0x0F]),
-    ];
+    // CONTROL2 = RNG ±30 G (00 in bits 3:2), set/reset on.
+    let exp = init_traffic(Variant::P, 0x00, 0x0F);
     let mut d = blocking::Qmc5883::new_variant(Mock::new(&exp), Variant::P);
     d.init(&mut NoopDelay, &cfg).unwrap();
     assert_eq!(d.lsb_per_gauss(), 1000.0);
@@ -219,8 +213,8 @@ fn l_roll_over_read_is_one_transfer() {
         roll_over: true,
         ..Config::default()
     };
-    let mut exp = l_default();
-    exp[3] = T::write(L, vec![0x0A, 0x40]);
+    // CONTROL2 = 0x40: pointer roll-over on, DRDY pin on.
+    let mut exp = init_traffic(Variant::L, 0x40, 0x0D);
     exp.push(T::write_read(
         L,
         vec![0x06],

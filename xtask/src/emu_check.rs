@@ -75,44 +75,63 @@ fn parse_rows(path: &Path, want: &[&str]) -> Result<Vec<Vec<f64>>> {
     Ok(rows)
 }
 
-pub fn read_imu(path: &Path) -> Result<Vec<ImuRaw>> {
-    let cols = [
-        "k",
-        "slot",
-        "t_ns",
-        "ax",
-        "ay",
-        "az",
-        "temp",
-        "gx",
-        "gy",
-        "gz",
-        "served_ns",
-    ];
+/// The columns every served row carries besides its raw counts.
+struct Stamp {
+    k: u64,
+    slot: u64,
+    t_ns: f64,
+    served_ns: f64,
+}
+
+/// The rows of a served-samples CSV, each built from its stamp and the named count columns (in
+/// that order).
+fn read_served<T>(
+    path: &Path,
+    counts: &[&str],
+    row: impl Fn(Stamp, &[f64]) -> T,
+) -> Result<Vec<T>> {
+    let cols: Vec<&str> = ["k", "slot", "t_ns", "served_ns"]
+        .into_iter()
+        .chain(counts.iter().copied())
+        .collect();
     Ok(parse_rows(path, &cols)?
         .into_iter()
-        .map(|r| ImuRaw {
-            k: r[0] as u64,
-            slot: r[1] as u64,
-            t_ns: r[2],
-            accel: [r[3] as i16, r[4] as i16, r[5] as i16],
-            temp: r[6] as i16,
-            gyro: [r[7] as i16, r[8] as i16, r[9] as i16],
-            served_ns: r[10],
+        .map(|r| {
+            let stamp = Stamp {
+                k: r[0] as u64,
+                slot: r[1] as u64,
+                t_ns: r[2],
+                served_ns: r[3],
+            };
+            row(stamp, &r[4..])
         })
         .collect())
 }
 
+/// Three raw counts (one per axis) from the values of their columns.
+fn axes(c: &[f64]) -> [i16; 3] {
+    [c[0] as i16, c[1] as i16, c[2] as i16]
+}
+
+pub fn read_imu(path: &Path) -> Result<Vec<ImuRaw>> {
+    let counts = ["ax", "ay", "az", "temp", "gx", "gy", "gz"];
+    read_served(path, &counts, |s, c| ImuRaw {
+        k: s.k,
+        slot: s.slot,
+        t_ns: s.t_ns,
+        accel: axes(&c[0..3]),
+        temp: c[3] as i16,
+        gyro: axes(&c[4..7]),
+        served_ns: s.served_ns,
+    })
+}
+
 pub fn read_mag(path: &Path) -> Result<Vec<MagRaw>> {
-    let cols = ["k", "slot", "t_ns", "mx", "my", "mz", "served_ns"];
-    Ok(parse_rows(path, &cols)?
-        .into_iter()
-        .map(|r| MagRaw {
-            k: r[0] as u64,
-            slot: r[1] as u64,
-            t_ns: r[2],
-            mag: [r[3] as i16, r[4] as i16, r[5] as i16],
-            served_ns: r[6],
-        })
-        .collect())
+    read_served(path, &["mx", "my", "mz"], |s, c| MagRaw {
+        k: s.k,
+        slot: s.slot,
+        t_ns: s.t_ns,
+        mag: axes(c),
+        served_ns: s.served_ns,
+    })
 }

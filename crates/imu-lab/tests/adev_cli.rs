@@ -1,10 +1,9 @@
 //! `imu-lab adev` end to end: both real recordings read through the documented flags, the JSON
 //! contract, the bounded-memory mode, and refusals that name the line and the field.
-use assert_cmd::Command;
 use serde_json::Value;
 
 mod common;
-use common::{run_ok, static_449s, GZ_RAW};
+use common::{run, run_err, run_ok, static_449s, stdout_json, GZ_RAW};
 
 fn unmoved() -> String {
     format!(
@@ -13,9 +12,11 @@ fn unmoved() -> String {
     )
 }
 
+/// The flags that read its gx: the file's `t_s` and `gx_dps` under the contract's names.
+const UNMOVED_GX: [&str; 4] = ["--column", "gx", "--rename", "t_s=t,gx_dps=gx"];
+
 fn json(args: &[&str]) -> Value {
-    let out = run_ok(args);
-    serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
+    stdout_json(&run_ok(args))
 }
 
 #[test]
@@ -53,19 +54,8 @@ fn raw_counts_with_metadata_lines_json_contract() {
 #[test]
 fn timestamped_recording_with_renamed_columns_derives_the_rate() {
     let f = unmoved();
-    let v = json(&[
-        "adev",
-        &f,
-        "--column",
-        "gx",
-        "--rename",
-        "t_s=t,gx_dps=gx",
-        "--unit",
-        "deg/s",
-        "--json",
-        "--stat",
-        "ohdev",
-    ]);
+    let more = ["--unit", "deg/s", "--json", "--stat", "ohdev"];
+    let v = json(&[&["adev", &f][..], &UNMOVED_GX, &more].concat());
     let rate = v["rate_hz"].as_f64().unwrap();
     // (N − 1)/duration of this file, computed independently here.
     let text = std::fs::read_to_string(&f).unwrap();
@@ -129,11 +119,7 @@ fn malformed_file_is_refused_naming_line_and_field() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("bad.csv");
     std::fs::write(&p, "t,gz\n0,1\n0.01,2\n0.02,oops\n").unwrap();
-    let out = Command::cargo_bin("imu-lab")
-        .unwrap()
-        .args(["adev", p.to_str().unwrap(), "--column", "gz"])
-        .output()
-        .unwrap();
+    let out = run(["adev", p.to_str().unwrap(), "--column", "gz"]);
     assert!(!out.status.success());
     assert!(out.stdout.is_empty());
     let err = String::from_utf8_lossy(&out.stderr);
@@ -146,21 +132,7 @@ fn malformed_file_is_refused_naming_line_and_field() {
 #[test]
 fn bounded_mode_refuses_non_integer_counts() {
     let f = unmoved();
-    let out = Command::cargo_bin("imu-lab")
-        .unwrap()
-        .args([
-            "adev",
-            &f,
-            "--column",
-            "gx",
-            "--rename",
-            "t_s=t,gx_dps=gx",
-            "--bounded",
-        ])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
+    let err = run_err([&["adev", &f][..], &UNMOVED_GX, &["--bounded"]].concat());
     assert!(
         err.contains("line 2") && err.contains("not an integer count"),
         "{err}"

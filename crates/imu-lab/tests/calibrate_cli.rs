@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use serde_json::Value;
 
 mod common;
-use common::{run, run_ok};
+use common::{run_err, run_ok, stdout_json, stdout_text};
 
 fn data(rel: &str) -> String {
     format!("{}/../imu-cal/tests/data/{rel}", env!("CARGO_MANIFEST_DIR"))
@@ -39,10 +39,6 @@ const POSES: [&str; 6] = [
     "0.000598550",
 ];
 
-fn json(out: &std::process::Output) -> Value {
-    serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
-}
-
 /// A copy of the tilt sphere with row `row` (0-based data row) changed by `edit`.
 fn edited_sphere(dir: &Path, row: usize, edit: impl Fn(&mut [String])) -> PathBuf {
     let text = std::fs::read_to_string(tilt_sphere()).unwrap();
@@ -62,10 +58,28 @@ fn edited_sphere(dir: &Path, row: usize, edit: impl Fn(&mut [String])) -> PathBu
     p
 }
 
+/// The arguments of `calibrate SENSOR FILE`: the file's reading flags, then `more`.
+fn calibrate<'a>(
+    sensor: &'a str,
+    file: &'a str,
+    reading: &[&'a str],
+    more: &[&'a str],
+) -> Vec<&'a str> {
+    [&["calibrate", sensor, file][..], reading, more].concat()
+}
+
+/// `calibrate mag` of a copy of the tilt sphere: hard and soft iron, JSON.
+fn iron_fit(file: &str) -> Vec<&str> {
+    calibrate(
+        "mag",
+        file,
+        &SPHERE,
+        &["--model", "hard_iron,soft_iron", "--json"],
+    )
+}
+
 fn fails_with(args: &[&str], needles: &[&str]) {
-    let out = run(args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{args:?} succeeded");
+    let err = run_err(args);
     for n in needles {
         assert!(err.contains(n), "{args:?}: {n:?} not in {err}");
     }
@@ -87,10 +101,8 @@ fn one_hmc5883l_overflow_sample_is_excluded_and_counted() {
     // −4096 counts at the file's gain of 1090 LSB/G.
     let p = edited_sphere(dir.path(), 1234, |f| f[3] = "-3.757798".into());
     let p = p.to_str().unwrap();
-    let mut a = vec!["calibrate", "mag", p];
-    a.extend(SPHERE);
-    a.extend(["--model", "hard_iron,soft_iron", "--json"]);
-    let v = json(&run_ok(&a));
+    let a = iron_fit(p);
+    let v = stdout_json(&run_ok(&a));
     assert_eq!(v["excluded"]["sentinels"], 1);
     assert!(
         v["excluded"]["sentinel_kinds"][0]
@@ -101,7 +113,7 @@ fn one_hmc5883l_overflow_sample_is_excluded_and_counted() {
     );
     hard_iron_is_the_spheres(&v);
     assert!(v["params"]["field"].as_f64().unwrap() < 60.0);
-    let text = String::from_utf8_lossy(&run_ok(&a[..a.len() - 1]).stdout).to_string();
+    let text = stdout_text(&run_ok(&a[..a.len() - 1]));
     assert!(
         text.contains("excluded before fitting: 1 sample(s) excluded as sensor sentinels"),
         "{text}"
@@ -116,10 +128,8 @@ fn one_wild_sample_is_named_as_an_outlier() {
         f[1] = format!("{}", f[1].parse::<f64>().unwrap() + 1.5)
     });
     let p = p.to_str().unwrap();
-    let mut a = vec!["calibrate", "mag", p];
-    a.extend(SPHERE);
-    a.extend(["--model", "hard_iron,soft_iron", "--json"]);
-    let v = json(&run_ok(&a));
+    let a = iron_fit(p);
+    let v = stdout_json(&run_ok(&a));
     assert_eq!(v["excluded"]["outliers"], 1, "{v}");
     hard_iron_is_the_spheres(&v);
     // The residual is the clean file's 0.44 µT, not 2–5 µT.
@@ -135,10 +145,13 @@ fn one_wild_sample_is_named_as_an_outlier() {
 #[test]
 fn ten_poses_cannot_judge_nine_parameters() {
     let f = multipose();
-    let mut a = vec!["calibrate", "accel", f.as_str()];
-    a.extend(POSES);
-    a.extend(["--model", "offset,scale,misalignment"]);
-    let text = String::from_utf8_lossy(&run_ok(&a).stdout).to_string();
+    let mut a = calibrate(
+        "accel",
+        &f,
+        &POSES,
+        &["--model", "offset,scale,misalignment"],
+    );
+    let text = stdout_text(&run_ok(&a));
     assert!(text.contains("verdict: UNDERDETERMINED"), "{text}");
     assert!(!text.contains("ADEQUATE\n"), "{text}");
     assert!(
@@ -146,7 +159,7 @@ fn ten_poses_cannot_judge_nine_parameters() {
         "{text}"
     );
     a.push("--json");
-    let v = json(&run_ok(&a));
+    let v = stdout_json(&run_ok(&a));
     assert_eq!(v["diagnosis"]["underdetermined"], true);
     assert_eq!(v["diagnosis"]["adequate"], false);
     for k in 0..3 {
@@ -173,14 +186,10 @@ fn a_constant_gyro_column_gets_a_clear_answer() {
 #[test]
 fn absurd_gravity_and_field_are_refused() {
     let f = multipose();
-    let mut a = vec!["calibrate", "accel", f.as_str()];
-    a.extend(POSES);
-    a.extend(["--g", "1e300"]);
+    let a = calibrate("accel", &f, &POSES, &["--g", "1e300"]);
     fails_with(&a, &["--g", "9.76–9.84 m/s²"]);
     let s = tilt_sphere();
-    let mut a = vec!["calibrate", "mag", s.as_str()];
-    a.extend(SPHERE);
-    a.extend(["--field", "1e300"]);
+    let a = calibrate("mag", &s, &SPHERE, &["--field", "1e300"]);
     fails_with(&a, &["--field", "22–67 µT"]);
 }
 
@@ -189,11 +198,10 @@ fn absurd_gravity_and_field_are_refused() {
 fn raw_accelerometer_counts_stay_counts() {
     let f = multipose();
     let raw = ["--skip-lines", "4", "--rate", "100"];
-    let mut a = vec!["calibrate", "accel", f.as_str()];
-    a.extend(raw);
+    let mut a = calibrate("accel", &f, &raw, &[]);
     fails_with(&a, &["raw counts (LSB)", "--g 16384"]);
     a.extend(["--g", "16384"]);
-    let text = String::from_utf8_lossy(&run_ok(&a).stdout).to_string();
+    let text = stdout_text(&run_ok(&a));
     assert!(
         text.contains("offset           = [") && text.contains("] LSB"),
         "{text}"
@@ -240,7 +248,7 @@ fn abutting_poses_are_separate_poses() {
         }
     }
     std::fs::write(&p, s).unwrap();
-    let v = json(&run_ok([
+    let v = stdout_json(&run_ok([
         "calibrate",
         "accel",
         p.to_str().unwrap(),
@@ -294,7 +302,7 @@ fn auto_walks_from_hard_iron_to_soft_iron_and_stops_adequate() {
     let dir = tempfile::tempdir().unwrap();
     let f = soft_iron_sphere(dir.path());
     let out = run_ok(["calibrate", "mag", f.to_str().unwrap(), "--auto", "--json"]);
-    let v = json(&out);
+    let v = stdout_json(&out);
     let steps = v["steps"].as_array().expect("steps with --auto");
     assert_eq!(steps.len(), 1, "{v}");
     let s = &steps[0];
@@ -331,7 +339,7 @@ fn auto_walks_from_hard_iron_to_soft_iron_and_stops_adequate() {
         );
     }
     // Without --auto the same file reports the model it was given and no walk.
-    let v = json(&run_ok(["calibrate", "mag", f.to_str().unwrap(), "--json"]));
+    let v = stdout_json(&run_ok(["calibrate", "mag", f.to_str().unwrap(), "--json"]));
     assert!(v.get("steps").is_none() && v.get("stop").is_none());
     assert_eq!(v["model"], serde_json::json!(["hard_iron"]));
     assert_eq!(v["step"]["added"], serde_json::json!(["soft_iron"]));
@@ -339,12 +347,9 @@ fn auto_walks_from_hard_iron_to_soft_iron_and_stops_adequate() {
 
 #[test]
 fn auto_on_the_real_tilt_sphere_names_soft_iron_and_says_what_is_left() {
-    let mut a = vec!["calibrate", "mag"];
     let f = tilt_sphere();
-    a.push(&f);
-    a.extend(SPHERE);
-    a.extend(["--auto", "--json"]);
-    let v = json(&run_ok(a));
+    let a = calibrate("mag", &f, &SPHERE, &["--auto", "--json"]);
+    let v = stdout_json(&run_ok(a));
     let steps = v["steps"].as_array().unwrap();
     assert_eq!(steps[0]["added"], serde_json::json!(["soft_iron"]));
     assert!(

@@ -1,23 +1,29 @@
 //! `imu-lab fit` end to end on the real MPU-6050 recording: the JSON contract, the verdict, and
 //! the pictures in both formats.
 mod common;
-use common::{run, run_ok, static_449s, GZ_RAW};
+use common::{run_err, run_ok, static_449s, stdout_json, GZ_RAW};
+use serde_json::Value;
+
+/// The term of `effect` in a fit's JSON.
+#[track_caller]
+fn term<'a>(v: &'a Value, effect: &str) -> &'a Value {
+    v["terms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["effect"] == effect)
+        .unwrap_or_else(|| panic!("no {effect} term in {v}"))
+}
 
 #[test]
 fn json_contract_and_white_noise_of_the_real_gyro() {
     let f = static_449s();
     let out = run_ok(["fit", &f].into_iter().chain(GZ_RAW).chain(["--json"]));
-    let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).expect("exactly one JSON object");
+    let v = stdout_json(&out);
     assert_eq!(v["unit"], "deg/s");
     assert_eq!(v["diagnosis"]["adequate"], true);
     assert!(v["diagnosis"]["missing"].is_null());
-    let white = v["terms"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|t| t["effect"] == "white")
-        .expect("white term");
+    let white = term(&v, "white");
     // AllanTools: OADEV(1 s) of gz = 1.2093 LSB → N ≈ 1.2093 × 0.0076336 deg/s·√s = 0.00923.
     let n = white["params"]["N"].as_f64().unwrap();
     assert!((n / 0.00923 - 1.0).abs() < 0.03, "N = {n}");
@@ -45,12 +51,13 @@ fn plots_in_svg_and_png_and_refuses_other_names() {
         }
     }
     let jpg = dir.path().join("fit.jpg");
-    let out = run(["fit", &f]
-        .into_iter()
-        .chain(GZ_RAW)
-        .chain(["--plot", jpg.to_str().unwrap()]));
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains(".svg or .png"));
+    let err = run_err(
+        ["fit", &f]
+            .into_iter()
+            .chain(GZ_RAW)
+            .chain(["--plot", jpg.to_str().unwrap()]),
+    );
+    assert!(err.contains(".svg or .png"), "{err}");
 }
 
 /// Simulated gyro data through a one-pole 5 Hz low-pass (the MPU-6050's DLPF), 30 min at 100 Hz.
@@ -95,7 +102,7 @@ fn auto_walk_names_the_filter_and_the_json_reproduces_the_model() {
     let dir = tempfile::tempdir().unwrap();
     let f = dlpf_file(dir.path());
     let out = run_ok(["fit", &f, "--column", "gz", "--auto", "--json"]);
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let v = stdout_json(&out);
     let steps = v["steps"].as_array().unwrap();
     assert_eq!(
         steps[0]["added"],
@@ -180,13 +187,8 @@ fn a_user_effect_file_is_fitted_and_reported_by_its_name() {
         "quantization,bartlett_decimation,flicker,rate_random_walk",
         "--json",
     ]);
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let t = v["terms"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|t| t["effect"] == "bartlett_decimation")
-        .expect("user term");
+    let v = stdout_json(&out);
+    let t = term(&v, "bartlett_decimation");
     assert!(
         t["params"]["N"].as_f64().unwrap() > 0.0 && t["params"]["L"].as_f64().unwrap() >= 1.0,
         "{t}"
@@ -198,7 +200,7 @@ fn a_user_effect_file_is_fitted_and_reported_by_its_name() {
         "name = \"x\"\nphysics = \"p\"\namplitude = \"a\"\nautocovariance = \"a * exp(-k)\"\n",
     )
     .unwrap();
-    let out = run([
+    let err = run_err([
         "fit",
         &f,
         "--column",
@@ -206,8 +208,6 @@ fn a_user_effect_file_is_fitted_and_reported_by_its_name() {
         "--effect",
         bad.to_str().unwrap(),
     ]);
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         err.contains("bad.toml") && err.contains("proportional to a²"),
         "{err}"
@@ -227,13 +227,8 @@ fn the_temperature_coefficient_is_the_calibration_labs() {
         &["--columns", "gx,gy,gz", "--temperature", "0.02,25,15,900"],
     );
     let out = run_ok(["fit", f, "--column", "gz", "--auto", "--json"]);
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let t = v["terms"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|t| t["effect"] == "temperature")
-        .expect("temperature named");
+    let v = stdout_json(&out);
+    let t = term(&v, "temperature");
     let (c, s) = (
         t["params"]["coefficient"].as_f64().unwrap(),
         t["sigma"]["coefficient"].as_f64().unwrap(),
@@ -247,7 +242,7 @@ fn the_temperature_coefficient_is_the_calibration_labs() {
         "bias,temperature",
         "--json",
     ]);
-    let cal: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cal = stdout_json(&out);
     let k = cal["params"]["temp_coeff"][2].as_f64().unwrap();
     assert!(
         (k - c).abs() < 3.0 * s,

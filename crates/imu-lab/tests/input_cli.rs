@@ -4,10 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use serde_json::Value;
-
 mod common;
-use common::{run, run_ok, static_449s};
+use common::{run, run_ok, static_449s, stdout_json, stdout_text};
 
 /// A 100 Hz gz recording with `t`, written by `shift(row)` added to each stamp.
 fn clock_file(dir: &Path, name: &str, rows: usize, shift: impl Fn(usize) -> f64) -> PathBuf {
@@ -25,8 +23,9 @@ fn clock_file(dir: &Path, name: &str, rows: usize, shift: impl Fn(usize) -> f64)
     p
 }
 
-fn json(out: &std::process::Output) -> Value {
-    serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
+/// A `shift` for [`clock_file`]: the stamps from row `row` on moved `by` seconds later.
+fn shifted_from(row: usize, by: f64) -> impl Fn(usize) -> f64 {
+    move |i| if i >= row { by } else { 0.0 }
 }
 
 fn fails_with(args: &[&str], needles: &[&str]) -> String {
@@ -71,11 +70,11 @@ fn a_rate_that_disagrees_with_t_is_refused() {
         );
     }
     // Within 1 % it is the user's nominal rate; with --ignore-time any rate is taken as said.
-    let v = json(&run_ok([
+    let v = stdout_json(&run_ok([
         "adev", f, "--column", "gz", "--rate", "100.4", "--json",
     ]));
     assert_eq!(v["rate_hz"], 100.4);
-    let v = json(&run_ok([
+    let v = stdout_json(&run_ok([
         "adev",
         f,
         "--column",
@@ -92,16 +91,10 @@ fn a_rate_that_disagrees_with_t_is_refused() {
 fn a_long_gap_splits_the_record_and_the_rate_stays() {
     let dir = tempfile::tempdir().unwrap();
     // 50 s of data at 100 Hz with a 1000 s hole in the middle.
-    let f = clock_file(dir.path(), "gap.csv", 5000, |i| {
-        if i >= 2500 {
-            1000.0
-        } else {
-            0.0
-        }
-    });
+    let f = clock_file(dir.path(), "gap.csv", 5000, shifted_from(2500, 1000.0));
     let f = f.to_str().unwrap();
     let out = run_ok(["adev", f, "--column", "gz", "--unit", "deg/s", "--json"]);
-    let v = json(&out);
+    let v = stdout_json(&out);
     assert!((v["rate_hz"].as_f64().unwrap() - 100.0).abs() < 1e-6, "{v}");
     assert_eq!(v["timing"]["gaps"], 1);
     assert!((v["timing"]["largest_gap_s"].as_f64().unwrap() - 1000.0).abs() < 1e-3);
@@ -116,7 +109,7 @@ fn a_long_gap_splits_the_record_and_the_rate_stays() {
     );
     // fit names the data's own length, 50 s, not the 1050 s span.
     let out = run_ok(["fit", f, "--column", "gz", "--unit", "deg/s"]);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = stdout_text(&out);
     assert!(
         text.contains("5000 samples at 100.000 Hz (50.0 s)"),
         "{text}"
@@ -126,14 +119,8 @@ fn a_long_gap_splits_the_record_and_the_rate_stays() {
 #[test]
 fn a_short_gap_leaves_every_tau_exact() {
     let dir = tempfile::tempdir().unwrap();
-    let f = clock_file(dir.path(), "g.csv", 4000, |i| {
-        if i >= 1000 {
-            0.49
-        } else {
-            0.0
-        }
-    });
-    let v = json(&run_ok([
+    let f = clock_file(dir.path(), "g.csv", 4000, shifted_from(1000, 0.49));
+    let v = stdout_json(&run_ok([
         "adev",
         f.to_str().unwrap(),
         "--column",
@@ -184,7 +171,7 @@ fn a_recorded_gap_round_trips() {
         }
         let p = dir.path().join(format!("rec{with_column}.csv"));
         std::fs::write(&p, s).unwrap();
-        let v = json(&run_ok([
+        let v = stdout_json(&run_ok([
             "adev",
             p.to_str().unwrap(),
             "--column",
@@ -220,7 +207,7 @@ fn duplicated_stamps_are_reported_and_duplicated_names_refused() {
     let p = dir.path().join("dup.csv");
     std::fs::write(&p, s).unwrap();
     let out = run_ok(["adev", p.to_str().unwrap(), "--column", "gz", "--json"]);
-    assert_eq!(json(&out)["timing"]["duplicates"], 2);
+    assert_eq!(stdout_json(&out)["timing"]["duplicates"], 2);
     assert!(String::from_utf8_lossy(&out.stderr).contains("2 duplicated stamps"));
     let p = dir.path().join("names.csv");
     std::fs::write(&p, "t,gx,gx\n0,1,2\n0.01,2,3\n0.02,1,1\n").unwrap();
@@ -254,20 +241,20 @@ fn raw_counts_are_labelled_in_counts() {
         a.extend(extra);
         run_ok(a)
     };
-    assert_eq!(json(&adev(&["--json"]))["unit"], "LSB");
-    let text = String::from_utf8_lossy(&adev(&[]).stdout).to_string();
+    assert_eq!(stdout_json(&adev(&["--json"]))["unit"], "LSB");
+    let text = stdout_text(&adev(&[]));
     assert!(text.contains("[LSB]") && !text.contains("deg/s"), "{text}");
     let mut a = vec!["fit", f.as_str()];
     a.extend(raw);
-    let v = json(&run_ok(a.iter().chain(&["--json"])));
+    let v = stdout_json(&run_ok(a.iter().chain(&["--json"])));
     assert_eq!(v["unit"], "LSB");
-    let text = String::from_utf8_lossy(&run_ok(a).stdout).to_string();
+    let text = stdout_text(&run_ok(a));
     assert!(
         text.contains("gz [LSB]") && !text.contains("deg/s"),
         "{text}"
     );
     // The same file with --scale: deg/s (the contract's unit for gz).
-    let v = json(&run_ok(["adev", f.as_str()].iter().chain(&raw).chain(&[
+    let v = stdout_json(&run_ok(["adev", f.as_str()].iter().chain(&raw).chain(&[
         "--scale",
         "0.0076336",
         "--json",

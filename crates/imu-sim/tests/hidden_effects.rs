@@ -24,6 +24,24 @@ struct Run {
     report: String,
 }
 
+impl Run {
+    /// The effects the walk added and those it removed, each in order.
+    fn edits(&self) -> (Vec<Effect>, Vec<Effect>) {
+        let (mut added, mut removed) = (Vec::new(), Vec::new());
+        for s in &self.walk.steps {
+            added.extend(s.edit.add.iter().cloned());
+            removed.extend(s.edit.remove.iter().cloned());
+        }
+        (added, removed)
+    }
+
+    /// Parameter `i` of `e` in the last model is `truth` (4σ and `rel`, see [`check`]).
+    fn recovered(&self, name: &str, e: &Effect, i: usize, truth: f64, rel: f64) {
+        let (est, sigma) = param(self.walk.last(), e, i);
+        check(name, est, sigma, truth, rel, &self.report);
+    }
+}
+
 fn run_with(c: &SimConfig, timing: Option<Timing>) -> Run {
     run_full(c, timing).0
 }
@@ -63,11 +81,11 @@ fn run(c: &SimConfig) -> Run {
     run_with(c, None)
 }
 
-/// The gyro background (with its white noise) plus `extra`, `secs` at 100 Hz.
-fn hidden(extra: SimEffect, secs: f64, seed: u64) -> Run {
+/// The gyro background (with its white noise) plus `extra`, an hour at 100 Hz.
+fn hidden(extra: SimEffect, seed: u64) -> Run {
     let mut e = gyro(true);
     e.push(extra);
-    run(&cfg(100.0, secs, seed, e))
+    run(&cfg(100.0, 3600.0, seed, e))
 }
 
 /// `est` within 4σ of `truth` and within `rel` of it.
@@ -80,18 +98,7 @@ fn check(name: &str, est: f64, sigma: f64, truth: f64, rel: f64, rep: &str) {
 
 /// The walk added exactly `effects` (in order), removed `removed`, and ended adequate.
 fn named(r: &Run, effects: &[Effect], removed: &[Effect]) {
-    let added: Vec<Effect> = r
-        .walk
-        .steps
-        .iter()
-        .flat_map(|s| s.edit.add.clone())
-        .collect();
-    let gone: Vec<Effect> = r
-        .walk
-        .steps
-        .iter()
-        .flat_map(|s| s.edit.remove.clone())
-        .collect();
+    let (added, gone) = r.edits();
     assert_eq!(added, effects, "{}", r.report);
     assert_eq!(gone, removed, "{}", r.report);
     assert_eq!(r.walk.stop, Stop::Adequate, "{}", r.report);
@@ -145,7 +152,7 @@ fn controls_stay_silent() {
 #[test]
 fn a_bias_step_is_named_and_no_longer_read_as_random_walk() {
     for (seed, size, at) in [(1u64, 0.1, 1800.0), (2, 0.03, 1234.5)] {
-        let r = hidden(SimEffect::BiasStep { at_s: at, size }, 3600.0, seed);
+        let r = hidden(SimEffect::BiasStep { at_s: at, size }, seed);
         named(&r, &[Effect::BiasStep], &[]);
         let m = r.walk.last();
         let (s, ss) = param(m, &Effect::BiasStep, 0);
@@ -172,12 +179,10 @@ fn a_temperature_driven_bias_is_named_in_place_of_the_ramp() {
                 rise_c: 15.0,
                 tau_s: 900.0,
             },
-            3600.0,
             seed,
         );
         named(&r, &[Effect::Temperature], &[Effect::RateRamp]);
-        let (c, cs) = param(r.walk.last(), &Effect::Temperature, 0);
-        check("coefficient", c, cs, 0.02, 0.1, &r.report);
+        r.recovered("coefficient", &Effect::Temperature, 0, 0.02, 0.1);
     }
 }
 
@@ -189,19 +194,12 @@ fn a_warm_up_without_a_temperature_column_is_named() {
                 amplitude: 0.2,
                 tau_s: 600.0,
             },
-            3600.0,
             seed,
         );
-        let added: Vec<Effect> = r
-            .walk
-            .steps
-            .iter()
-            .flat_map(|s| s.edit.add.clone())
-            .collect();
+        let (added, _) = r.edits();
         assert_eq!(added.first(), Some(&Effect::Temperature), "{}", r.report);
         assert_eq!(r.walk.stop, Stop::Adequate, "{}", r.report);
-        let (a, s) = param(r.walk.last(), &Effect::Temperature, 0);
-        check("warm-up amplitude", a, s, 0.2, 0.15, &r.report);
+        r.recovered("warm-up amplitude", &Effect::Temperature, 0, 0.2, 0.15);
         let (tw, _) = param(r.walk.last(), &Effect::Temperature, 1);
         assert!((tw / 600.0 - 1.0).abs() < 0.35, "τ_w {tw}\n{}", r.report);
     }
@@ -216,7 +214,6 @@ fn spectral_lines_are_named_sinusoid_not_markov() {
                 amplitude: amp,
                 freq_hz: f,
             },
-            3600.0,
             seed,
         );
         named(&r, &[Effect::Sinusoid], &[]);
@@ -243,8 +240,7 @@ fn the_sensors_own_filters_are_named() {
     });
     let r = run(&lp);
     named(&r, &[Effect::Lowpass], &[Effect::White]);
-    let (fc, s) = param(r.walk.last(), &Effect::Lowpass, 1);
-    check("cutoff", fc, s, 5.0, 0.1, &r.report);
+    r.recovered("cutoff", &Effect::Lowpass, 1, 5.0, 0.1);
     for (seed, length, bartlett) in [(10u64, 4usize, true), (11, 8, false)] {
         let mut e = gyro(false);
         e.push(SimEffect::Decimated {
@@ -259,10 +255,8 @@ fn the_sensors_own_filters_are_named() {
             Effect::Boxcar
         };
         named(&r, std::slice::from_ref(&eff), &[Effect::White]);
-        let (l, s) = param(r.walk.last(), &eff, 1);
-        check("length", l, s, length as f64, 0.05, &r.report);
-        let (n, s) = param(r.walk.last(), &eff, 0);
-        check("N", n, s, 5e-3, 0.02, &r.report);
+        r.recovered("length", &eff, 1, length as f64, 0.05);
+        r.recovered("N", &eff, 0, 5e-3, 0.02);
     }
 }
 
@@ -337,12 +331,10 @@ fn correlated_noise_is_named_markov() {
                 sigma: 0.01,
                 tau_c: 2.0,
             },
-            3600.0,
             seed,
         );
         named(&r, &[Effect::Markov], &[]);
-        let (tc, s) = param(r.walk.last(), &Effect::Markov, 1);
-        check("τ_c", tc, s, 2.0, 0.4, &r.report);
+        r.recovered("τ_c", &Effect::Markov, 1, 2.0, 0.4);
     }
 }
 

@@ -69,6 +69,30 @@ pub struct Assessment {
     pub adequate: bool,
 }
 
+/// Where one point of an assessment stands, worst first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Standing {
+    /// Inside a failing run.
+    Failing,
+    /// Outside its 68.3 % interval (|r| > 1) but in no failing run.
+    Outside,
+    /// Within its interval.
+    Fine,
+}
+
+impl Assessment {
+    /// The standing of point `i`.
+    pub fn standing(&self, i: usize) -> Standing {
+        if self.failing.iter().any(|r| i >= r.first && i <= r.last) {
+            Standing::Failing
+        } else if self.residuals[i].abs() > 1.0 {
+            Standing::Outside
+        } else {
+            Standing::Fine
+        }
+    }
+}
+
 /// Normalised residual of one point (see module docs).
 pub fn residual(dev: f64, lo: f64, hi: f64, model_dev: f64) -> f64 {
     let diff = dev - model_dev;

@@ -37,7 +37,7 @@ pub mod psd;
 pub mod structure;
 pub mod user;
 
-pub use assess::{assess, assess_at, Assessment, TauRange};
+pub use assess::{assess, assess_at, Assessment, Standing, TauRange};
 pub use diagnose::{diagnose, Diagnosis};
 pub use effect::{Context, Effect, UnitFamily, ALL_EFFECTS, DEFAULT_TERMS};
 pub use fit::{

@@ -7,7 +7,7 @@
 
 use super::esc;
 pub use super::svg_to_png;
-use noise_model::{Assessment, Effect, Fit};
+use noise_model::{Assessment, Effect, Fit, Standing};
 use std::fmt::Write;
 
 pub const W: f64 = 640.0;
@@ -189,14 +189,10 @@ pub fn figure(
     );
     legend.insert(0, ("model (total)".into(), "black".into(), false));
     // measurement with CI bars
-    let status = |i: usize| -> &'static str {
-        if a.failing.iter().any(|f| i >= f.first && i <= f.last) {
-            "#c00"
-        } else if a.residuals[i].abs() > 1.0 {
-            "#e08000"
-        } else {
-            "#333"
-        }
+    let status = |i: usize| match a.standing(i) {
+        Standing::Failing => "#c00",
+        Standing::Outside => "#e08000",
+        Standing::Fine => "#333",
     };
     for (i, p) in pts.iter().enumerate() {
         let (x, y, ylo, yhi) = (px(p.tau), py(p.dev), py(p.lo.max(1e-300)), py(p.hi));

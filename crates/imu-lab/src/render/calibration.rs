@@ -316,15 +316,6 @@ fn circle(r: f64) -> Vec<(f64, f64)> {
 
 const AX: [&str; 3] = ["X", "Y", "Z"];
 
-/// Without an "after" model, keep one copy of each residual set.
-fn residual_series(has_after: bool, before: Series, after: Series) -> Vec<Series> {
-    if has_after {
-        vec![before, after]
-    } else {
-        vec![before]
-    }
-}
-
 /// The figure of a run (an SVG document): the `before` model against `after` (the model after
 /// the step or the walk) when there is one.
 pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String {
@@ -338,6 +329,15 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
         "no correction".to_string()
     } else {
         before_name
+    };
+    // The residuals of the `before` model (orange) and, when there is one, the after model
+    // (green).
+    let residuals = |before: Vec<(f64, f64)>, after: Vec<(f64, f64)>| {
+        let mut s = vec![Series::dots(before_name.clone(), "#ff7f0e", before)];
+        if has_after {
+            s.push(Series::dots(after_name.clone(), "#2ca02c", after));
+        }
+        s
     };
     match data {
         Data::Mag(m) => {
@@ -367,50 +367,48 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
             let mut panels = Vec::new();
             for &(i, j) in &pairs {
                 let (ni, nj) = (AX[i].to_lowercase(), AX[j].to_lowercase());
-                panels.push(Panel {
-                    title: format!("{}{} before (raw) with the fitted ellipse", AX[i], AX[j]),
+                // Components i and j of the field, at one scale.
+                let plane = |title: String, series: Vec<Series>| Panel {
+                    title,
                     xlabel: format!("m{ni} ({unit})"),
                     ylabel: format!("m{nj} ({unit})"),
-                    series: vec![
-                        Series {
-                            label: "measured".into(),
-                            color: "#1f77b4",
-                            points: m.m.iter().map(|v| (v[i], v[j])).collect(),
-                            line: false,
-                        },
-                        Series {
-                            label: format!("fitted ({after_name}) section"),
-                            color: "#d62728",
-                            points: section(after, i, j, f),
-                            line: true,
-                        },
-                    ],
+                    series,
                     equal: true,
-                });
-                panels.push(Panel {
-                    title: format!("{}{} after ({after_name})", AX[i], AX[j]),
-                    xlabel: format!("m{ni} ({unit})"),
-                    ylabel: format!("m{nj} ({unit})"),
-                    series: vec![
-                        Series {
-                            label: "corrected".into(),
-                            color: "#2ca02c",
-                            points: corr.iter().map(|v| (v[i], v[j])).collect(),
-                            line: false,
-                        },
-                        Series {
-                            label: if after_tilt && m.plane.is_some() {
+                };
+                panels.push(plane(
+                    format!("{}{} before (raw) with the fitted ellipse", AX[i], AX[j]),
+                    vec![
+                        Series::dots(
+                            "measured",
+                            "#1f77b4",
+                            m.m.iter().map(|v| (v[i], v[j])).collect(),
+                        ),
+                        Series::line(
+                            format!("fitted ({after_name}) section"),
+                            "#d62728",
+                            section(after, i, j, f),
+                        ),
+                    ],
+                ));
+                panels.push(plane(
+                    format!("{}{} after ({after_name})", AX[i], AX[j]),
+                    vec![
+                        Series::dots(
+                            "corrected",
+                            "#2ca02c",
+                            corr.iter().map(|v| (v[i], v[j])).collect(),
+                        ),
+                        Series::line(
+                            if after_tilt && m.plane.is_some() {
                                 format!("in-plane field {f:.2} {unit}")
                             } else {
                                 format!("circle F = {f:.2} {unit}")
                             },
-                            color: "#d62728",
-                            points: circle(f),
-                            line: true,
-                        },
+                            "#d62728",
+                            circle(f),
+                        ),
                     ],
-                    equal: true,
-                });
+                ));
             }
             // Residuals on the lab's basis (the problem's own residual: in-plane magnitude for
             // planar data, full magnitude in 3-D or with tilt) against the orientation of the
@@ -447,28 +445,16 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
                     title: format!("residual |m| − F against {name}"),
                     xlabel: format!("{name} of the corrected field (deg)"),
                     ylabel: format!("|m| − F ({unit})"),
-                    series: residual_series(
-                        has_after,
-                        Series {
-                            label: before_name.clone(),
-                            color: "#ff7f0e",
-                            points: before_corr
-                                .iter()
-                                .zip(&res_before)
-                                .map(|(v, e)| (ang(v), *e))
-                                .collect(),
-                            line: false,
-                        },
-                        Series {
-                            label: after_name.clone(),
-                            color: "#2ca02c",
-                            points: corr
-                                .iter()
-                                .zip(&res_after)
-                                .map(|(v, e)| (ang(v), *e))
-                                .collect(),
-                            line: false,
-                        },
+                    series: residuals(
+                        before_corr
+                            .iter()
+                            .zip(&res_before)
+                            .map(|(v, e)| (ang(v), *e))
+                            .collect(),
+                        corr.iter()
+                            .zip(&res_after)
+                            .map(|(v, e)| (ang(v), *e))
+                            .collect(),
                     ),
                     equal: false,
                 });
@@ -494,24 +480,13 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
                     xlabel: format!("a{} ({unit})", AX[i].to_lowercase()),
                     ylabel: format!("a{} ({unit})", AX[j].to_lowercase()),
                     series: vec![
-                        Series {
-                            label: "raw".into(),
-                            color: "#1f77b4",
-                            points: raw.iter().map(|v| (v[i], v[j])).collect(),
-                            line: false,
-                        },
-                        Series {
-                            label: format!("corrected ({after_name})"),
-                            color: "#2ca02c",
-                            points: corr.iter().map(|v| (v[i], v[j])).collect(),
-                            line: false,
-                        },
-                        Series {
-                            label: format!("circle g = {g} {unit}"),
-                            color: "#d62728",
-                            points: circle(g),
-                            line: true,
-                        },
+                        Series::dots("raw", "#1f77b4", raw.iter().map(|v| (v[i], v[j])).collect()),
+                        Series::dots(
+                            format!("corrected ({after_name})"),
+                            "#2ca02c",
+                            corr.iter().map(|v| (v[i], v[j])).collect(),
+                        ),
+                        Series::line(format!("circle g = {g} {unit}"), "#d62728", circle(g)),
                     ],
                     equal: true,
                 });
@@ -526,26 +501,13 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
                     title: format!("pose residual |a| − g against {name}"),
                     xlabel: format!("{name} of gravity in the sensor frame (deg)"),
                     ylabel: format!("|a| − g ({unit})"),
-                    series: residual_series(
-                        has_after,
-                        Series {
-                            label: before_name.clone(),
-                            color: "#ff7f0e",
-                            points: bef
-                                .iter()
-                                .map(|v| (ang(v), Vector3::from(*v).norm() - g))
-                                .collect(),
-                            line: false,
-                        },
-                        Series {
-                            label: after_name.clone(),
-                            color: "#2ca02c",
-                            points: corr
-                                .iter()
-                                .map(|v| (ang(v), Vector3::from(*v).norm() - g))
-                                .collect(),
-                            line: false,
-                        },
+                    series: residuals(
+                        bef.iter()
+                            .map(|v| (ang(v), Vector3::from(*v).norm() - g))
+                            .collect(),
+                        corr.iter()
+                            .map(|v| (ang(v), Vector3::from(*v).norm() - g))
+                            .collect(),
                     ),
                     equal: false,
                 });
@@ -567,19 +529,13 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
             } else {
                 vec![]
             };
-            let mut series = vec![Series {
-                label: before_name.clone(),
-                color: "#ff7f0e",
-                points: pts(&before.fitted.residuals),
-                line: false,
-            }];
+            let mut series = vec![Series::dots(
+                before_name.clone(),
+                "#ff7f0e",
+                pts(&before.fitted.residuals),
+            )];
             if after_res.len() == before.fitted.residuals.len() {
-                series.push(Series {
-                    label: after_name.clone(),
-                    color: "#2ca02c",
-                    points: pts(&after_res),
-                    line: false,
-                });
+                series.push(Series::dots(after_name.clone(), "#2ca02c", pts(&after_res)));
             }
             let panels = vec![Panel {
                 title: "gravity-direction residual per move".into(),
@@ -614,21 +570,7 @@ pub fn plot(data: &Data, before: &Model, after_model: Option<&Model>) -> String 
                     title: format!("g{} residual against temperature", AX[j].to_lowercase()),
                     xlabel: xl.into(),
                     ylabel: format!("block-mean residual ({})", gp.unit),
-                    series: residual_series(
-                        has_after,
-                        Series {
-                            label: before_name.clone(),
-                            color: "#ff7f0e",
-                            points: resid(&before.fitted.params, j),
-                            line: false,
-                        },
-                        Series {
-                            label: after_name.clone(),
-                            color: "#2ca02c",
-                            points: resid(after, j),
-                            line: false,
-                        },
-                    ),
+                    series: residuals(resid(&before.fitted.params, j), resid(after, j)),
                     equal: false,
                 })
                 .collect();

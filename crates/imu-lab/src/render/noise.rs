@@ -5,7 +5,7 @@
 
 use super::esc;
 pub use super::sig;
-use noise_model::{Assessment, Diagnosis, Effect, Fit, Step, UnitFamily};
+use noise_model::{Assessment, Diagnosis, Effect, Fit, Standing, Step, UnitFamily};
 use std::fmt::Write;
 
 fn pm(v: f64, s: f64) -> String {
@@ -184,12 +184,10 @@ pub fn tau_table(fit: &Fit, a: &Assessment, unit: &str) -> String {
             p.hi,
             fit.model_avar[i].max(0.0).sqrt(),
             a.residuals[i],
-            if a.failing.iter().any(|r| i >= r.first && i <= r.last) {
-                "!"
-            } else if a.residuals[i].abs() > 1.0 {
-                "*"
-            } else {
-                " "
+            match a.standing(i) {
+                Standing::Failing => "!",
+                Standing::Outside => "*",
+                Standing::Fine => " ",
             },
             sig(p.edf, 3)
         );

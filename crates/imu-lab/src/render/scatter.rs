@@ -16,6 +16,28 @@ pub struct Series {
     pub line: bool,
 }
 
+impl Series {
+    /// Points drawn as dots.
+    pub fn dots(label: impl Into<String>, color: &'static str, points: Vec<(f64, f64)>) -> Series {
+        Series {
+            label: label.into(),
+            color,
+            points,
+            line: false,
+        }
+    }
+
+    /// Points joined by a polyline.
+    pub fn line(label: impl Into<String>, color: &'static str, points: Vec<(f64, f64)>) -> Series {
+        Series {
+            label: label.into(),
+            color,
+            points,
+            line: true,
+        }
+    }
+}
+
 /// One panel of a figure.
 pub struct Panel {
     /// Title above the panel.

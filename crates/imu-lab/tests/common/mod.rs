@@ -1,9 +1,10 @@
 //! Helpers shared by the CLI tests (each test binary uses a subset).
 #![allow(dead_code)]
-use std::ffi::OsStr;
+use std::ffi::{OsStr, OsString};
 use std::process::Output;
 
 use assert_cmd::Command;
+use serde_json::Value;
 
 /// The real MPU-6050 recording: raw counts, 4 metadata lines, 100 Hz.
 pub fn static_449s() -> String {
@@ -45,4 +46,23 @@ pub fn run_ok<I: IntoIterator<Item = S>, S: AsRef<OsStr>>(args: I) -> Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// Runs `imu-lab` with `args`, asserts that it failed, and returns its stderr.
+pub fn run_err<I: IntoIterator<Item = S>, S: AsRef<OsStr>>(args: I) -> String {
+    let args: Vec<OsString> = args.into_iter().map(|a| a.as_ref().to_owned()).collect();
+    let out = run(&args);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(!out.status.success(), "{args:?} succeeded: {err}");
+    err
+}
+
+/// A run's stdout, which must be exactly one JSON object.
+pub fn stdout_json(out: &Output) -> Value {
+    serde_json::from_slice(&out.stdout).expect("stdout is exactly one JSON object")
+}
+
+/// A run's stdout as text.
+pub fn stdout_text(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stdout).to_string()
 }
