@@ -233,9 +233,20 @@ fn check(y: &[f64], tau0: f64) -> Result<(), AllanError> {
     if !(tau0 > 0.0 && tau0.is_finite()) {
         return Err(AllanError::BadTau0(tau0));
     }
-    if let Some(index) = y.iter().position(|v| !v.is_finite()) {
-        return Err(AllanError::NotFinite { index });
+    all_finite(y)?;
+    long_enough(y)
+}
+
+/// `NotFinite` at the first sample that is NaN or infinite.
+fn all_finite(y: &[f64]) -> Result<(), AllanError> {
+    match y.iter().position(|v| !v.is_finite()) {
+        Some(index) => Err(AllanError::NotFinite { index }),
+        None => Ok(()),
     }
+}
+
+/// `TooShort` below three samples (no second difference).
+fn long_enough(y: &[f64]) -> Result<(), AllanError> {
     if y.len() < 3 {
         return Err(AllanError::TooShort {
             samples: y.len(),

@@ -614,17 +614,25 @@ mod tests {
         assert!(mid.abs_diff(fine(7500)) < 20 * US, "{}", mid / US);
     }
 
-    #[test]
-    fn a_restart_on_the_old_grid_keeps_phase_and_period() {
+    /// A 1 ms clock started at 2000 µs whose samples 0..n (exactly on the grid) were each seen
+    /// `us` µs after they landed, and each but the first also `us` µs before (`trust_late` as
+    /// given).
+    pub(super) fn bracketed(n: u32, us: u64, trust_late: bool) -> SampleClock {
         let mut c = SampleClock::new(1000);
         c.start(0, fine(2000), false, 0);
-        for k in 0..5000u32 {
+        for k in 0..n {
             let t = 2000 + u64::from(k) * 1000;
-            c.observe(fine(t + 1), k, false, false);
+            c.observe(fine(t + us), k, false, trust_late);
             if k > 0 {
-                c.observe(fine(t - 1), k - 1, true, false);
+                c.observe(fine(t - us), k - 1, true, trust_late);
             }
         }
+        c
+    }
+
+    #[test]
+    fn a_restart_on_the_old_grid_keeps_phase_and_period() {
+        let mut c = bracketed(5000, 1, false);
         let before = c.time(9000);
         c.start(9000, before + 5 * US, true, 4 * US);
         assert!((c.time(9000) as i64 - before as i64).unsigned_abs() <= 5 * US);
@@ -650,21 +658,14 @@ mod tests {
 
 #[cfg(test)]
 mod stall_tests {
+    use super::tests::bracketed;
     use super::*;
 
     /// A part that stops producing says "not yet" where the clock expects a sample: without
     /// `trust_late` that is not taken for a phase change, so the grid survives the stall.
     #[test]
     fn a_stall_does_not_move_the_grid() {
-        let mut c = SampleClock::new(1000);
-        c.start(0, fine(2000), false, 0);
-        for k in 0..3000u32 {
-            let t = 2000 + u64::from(k) * 1000;
-            c.observe(fine(t + 2), k, false, true);
-            if k > 0 {
-                c.observe(fine(t - 2), k - 1, true, true);
-            }
-        }
+        let mut c = bracketed(3000, 2, true);
         let before = c.time(3100);
         // 100 reads during a stall: sample 3000 never comes.
         for i in 0..100u64 {

@@ -83,9 +83,7 @@ impl Health {
         if !lose {
             return None;
         }
-        self.state = SensorState::Missing;
-        self.out_since = since;
-        self.schedule_first(t_us);
+        self.went_out(SensorState::Missing, since, t_us);
         Some(Event::SensorLost {
             sensor: self.sensor,
             t_us,
@@ -98,9 +96,7 @@ impl Health {
         if matches!(self.state, SensorState::Stalled | SensorState::Missing) {
             return None;
         }
-        self.state = SensorState::Stalled;
-        self.out_since = since_us;
-        self.schedule_first(t_us);
+        self.went_out(SensorState::Stalled, since_us, t_us);
         Some(Event::SensorStalled {
             sensor: self.sensor,
             t_us,
@@ -108,7 +104,11 @@ impl Health {
         })
     }
 
-    fn schedule_first(&mut self, t_us: u64) {
+    /// The sensor went out (`state`: missing or stalled) at `since`, found at `t_us`: the first
+    /// retry is [`RETRY_FIRST_MS`] later.
+    fn went_out(&mut self, state: SensorState, since: u64, t_us: u64) {
+        self.state = state;
+        self.out_since = since;
         self.retry_ms = RETRY_FIRST_MS;
         self.retry_at = t_us.saturating_add(RETRY_FIRST_MS * 1000);
     }

@@ -58,16 +58,9 @@ pub(super) fn phase_from_rate_checked(y: &[f64]) -> Result<Vec<f64>, AllanError>
     };
     let total: f64 = sums.iter().sum();
     if !(total.is_finite() && shift.is_finite()) {
-        if let Some(index) = y.iter().position(|v| !v.is_finite()) {
-            return Err(AllanError::NotFinite { index });
-        }
+        super::all_finite(y)?;
     }
-    if y.len() < 3 {
-        return Err(AllanError::TooShort {
-            samples: y.len(),
-            needed: 3,
-        });
-    }
+    super::long_enough(y)?;
     let mean = shift + total / y.len() as f64;
     let mut x = vec![0.0f64; y.len() + 1];
     advise_huge_pages(&mut x);
