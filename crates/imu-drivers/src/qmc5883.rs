@@ -7,7 +7,7 @@
 //!   set-up example.
 //! - Honeywell HMC5883L datasheet (2013), register map table 2 (identification registers 10-12).
 
-use crate::register::{flag, Register};
+use crate::register::{flag, flags_register, Register};
 
 /// QMC5883L 7-bit I²C address (QMC-L 9.1, register map).
 pub const QMC5883L_ADDR: u8 = 0x0D;
@@ -328,16 +328,16 @@ impl Config {
     }
 }
 
-/// QMC5883L CONTROL2 (QMC-L 9.2.3).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Control2L {
-    /// SOFT_RST: restores every register's default; self-clearing.
-    pub soft_reset: bool,
-    /// ROL_PNT: a read that starts in 00H–06H rolls over from 06H to 00H.
-    pub roll_over: bool,
-    /// INT_ENB: 1 disables the DRDY pin.
-    pub drdy_pin_off: bool,
+flags_register! {
+    /// QMC5883L CONTROL2 (QMC-L 9.2.3).
+    Control2L at reg_l::CONTROL2 => {
+        /// SOFT_RST: restores every register's default; self-clearing.
+        soft_reset: bits::SOFT_RST,
+        /// ROL_PNT: a read that starts in 00H–06H rolls over from 06H to 00H.
+        roll_over: bits::ROL_PNT,
+        /// INT_ENB: 1 disables the DRDY pin.
+        drdy_pin_off: bits::INT_DISABLE,
+    }
 }
 
 impl Control2L {
@@ -347,22 +347,6 @@ impl Control2L {
         roll_over: false,
         drdy_pin_off: false,
     };
-}
-
-impl Register for Control2L {
-    const ADDR: u8 = reg_l::CONTROL2;
-    fn bits(self) -> u8 {
-        flag(self.soft_reset, bits::SOFT_RST)
-            | flag(self.roll_over, bits::ROL_PNT)
-            | flag(self.drdy_pin_off, bits::INT_DISABLE)
-    }
-    fn from_bits(b: u8) -> Self {
-        Control2L {
-            soft_reset: b & bits::SOFT_RST != 0,
-            roll_over: b & bits::ROL_PNT != 0,
-            drdy_pin_off: b & bits::INT_DISABLE != 0,
-        }
-    }
 }
 
 /// QMC5883P CONTROL2 (QMC-P register map): SOFT_RST and `RNG[3:2]`.

@@ -21,3 +21,34 @@ pub(crate) const fn flag(on: bool, mask: u8) -> u8 {
         0
     }
 }
+
+/// A register made only of flags: the struct (one `bool` per field, each with its mask; a
+/// multi-bit mask reads as set only when all its bits are) and its [`Register`] impl.
+macro_rules! flags_register {
+    (
+        $(#[$doc:meta])*
+        $name:ident at $addr:expr => {
+            $( $(#[$fdoc:meta])* $field:ident: $mask:expr ),+ $(,)?
+        }
+    ) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+        #[cfg_attr(feature = "defmt", derive(defmt::Format))]
+        pub struct $name {
+            $( $(#[$fdoc])* pub $field: bool, )+
+        }
+
+        impl $crate::register::Register for $name {
+            const ADDR: u8 = $addr;
+            fn bits(self) -> u8 {
+                0 $( | $crate::register::flag(self.$field, $mask) )+
+            }
+            fn from_bits(b: u8) -> Self {
+                $name {
+                    $( $field: b & $mask == $mask, )+
+                }
+            }
+        }
+    };
+}
+pub(crate) use flags_register;

@@ -1,7 +1,7 @@
 //! The control and status registers the driver writes and reads, each a type with its fields
 //! ([`Register`]: address and byte), and the bit shared by GYRO_CONFIG and ACCEL_CONFIG.
 use super::reg;
-use crate::register::{flag, Register};
+use crate::register::{flag, flags_register, Register};
 
 /// GYRO_CONFIG XG_ST|YG_ST|ZG_ST and ACCEL_CONFIG XA_ST|YA_ST|ZA_ST (RM 4.4, 4.5).
 pub const SELF_TEST_XYZ: u8 = 0xE0;
@@ -54,19 +54,17 @@ impl Register for PwrMgmt1 {
     }
 }
 
-/// USER_CTRL (RM 4.27), the FIFO bits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct UserCtrl {
-    /// FIFO_EN: the FIFO fills.
-    pub fifo_en: bool,
-    /// FIFO_RESET: empties the FIFO; acts only while FIFO_EN = 0, self-clearing.
-    pub fifo_reset: bool,
+flags_register! {
+    /// USER_CTRL (RM 4.27), the FIFO bits.
+    UserCtrl at reg::USER_CTRL => {
+        /// FIFO_EN: the FIFO fills.
+        fifo_en: 1 << 6,
+        /// FIFO_RESET: empties the FIFO; acts only while FIFO_EN = 0, self-clearing.
+        fifo_reset: 1 << 2,
+    }
 }
 
 impl UserCtrl {
-    const FIFO_EN: u8 = 1 << 6;
-    const FIFO_RESET: u8 = 1 << 2;
     /// FIFO filling.
     pub const FIFO_ON: Self = UserCtrl {
         fifo_en: true,
@@ -79,146 +77,50 @@ impl UserCtrl {
     };
 }
 
-impl Register for UserCtrl {
-    const ADDR: u8 = reg::USER_CTRL;
-    fn bits(self) -> u8 {
-        flag(self.fifo_en, Self::FIFO_EN) | flag(self.fifo_reset, Self::FIFO_RESET)
-    }
-    fn from_bits(b: u8) -> Self {
-        UserCtrl {
-            fifo_en: b & Self::FIFO_EN != 0,
-            fifo_reset: b & Self::FIFO_RESET != 0,
-        }
-    }
-}
-
-/// FIFO_EN (RM 4.6): which outputs go into the FIFO, in frame order accel, temperature, gyro.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct FifoEn {
-    /// TEMP_FIFO_EN.
-    pub temp: bool,
-    /// XG_FIFO_EN, YG_FIFO_EN and ZG_FIFO_EN together.
-    pub gyro: bool,
-    /// ACCEL_FIFO_EN.
-    pub accel: bool,
-}
-
-impl FifoEn {
-    const TEMP: u8 = 1 << 7;
-    const GYRO_XYZ: u8 = (1 << 6) | (1 << 5) | (1 << 4);
-    const ACCEL: u8 = 1 << 3;
-}
-
-impl Register for FifoEn {
-    const ADDR: u8 = reg::FIFO_EN;
-    fn bits(self) -> u8 {
-        flag(self.temp, Self::TEMP)
-            | flag(self.gyro, Self::GYRO_XYZ)
-            | flag(self.accel, Self::ACCEL)
-    }
-    fn from_bits(b: u8) -> Self {
-        FifoEn {
-            temp: b & Self::TEMP != 0,
-            gyro: b & Self::GYRO_XYZ == Self::GYRO_XYZ,
-            accel: b & Self::ACCEL != 0,
-        }
+flags_register! {
+    /// FIFO_EN (RM 4.6): which outputs go into the FIFO, in frame order accel, temperature,
+    /// gyro.
+    FifoEn at reg::FIFO_EN => {
+        /// TEMP_FIFO_EN.
+        temp: 1 << 7,
+        /// XG_FIFO_EN, YG_FIFO_EN and ZG_FIFO_EN together.
+        gyro: (1 << 6) | (1 << 5) | (1 << 4),
+        /// ACCEL_FIFO_EN.
+        accel: 1 << 3,
     }
 }
 
-/// INT_PIN_CFG (RM 4.14).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct IntPinCfg {
-    /// INT_LEVEL: active low.
-    pub active_low: bool,
-    /// INT_OPEN: open drain.
-    pub open_drain: bool,
-    /// LATCH_INT_EN: held until cleared instead of a 50 µs pulse.
-    pub latch: bool,
-    /// INT_RD_CLEAR: any read clears the status.
-    pub clear_on_any_read: bool,
-}
-
-impl IntPinCfg {
-    const LEVEL_LOW: u8 = 1 << 7;
-    const OPEN_DRAIN: u8 = 1 << 6;
-    const LATCH: u8 = 1 << 5;
-    const RD_CLEAR: u8 = 1 << 4;
-}
-
-impl Register for IntPinCfg {
-    const ADDR: u8 = reg::INT_PIN_CFG;
-    fn bits(self) -> u8 {
-        flag(self.active_low, Self::LEVEL_LOW)
-            | flag(self.open_drain, Self::OPEN_DRAIN)
-            | flag(self.latch, Self::LATCH)
-            | flag(self.clear_on_any_read, Self::RD_CLEAR)
-    }
-    fn from_bits(b: u8) -> Self {
-        IntPinCfg {
-            active_low: b & Self::LEVEL_LOW != 0,
-            open_drain: b & Self::OPEN_DRAIN != 0,
-            latch: b & Self::LATCH != 0,
-            clear_on_any_read: b & Self::RD_CLEAR != 0,
-        }
+flags_register! {
+    /// INT_PIN_CFG (RM 4.14).
+    IntPinCfg at reg::INT_PIN_CFG => {
+        /// INT_LEVEL: active low.
+        active_low: 1 << 7,
+        /// INT_OPEN: open drain.
+        open_drain: 1 << 6,
+        /// LATCH_INT_EN: held until cleared instead of a 50 µs pulse.
+        latch: 1 << 5,
+        /// INT_RD_CLEAR: any read clears the status.
+        clear_on_any_read: 1 << 4,
     }
 }
 
-/// FIFO_OFLOW and DATA_RDY: the same bits in INT_ENABLE (RM 4.15) and INT_STATUS (RM 4.16).
-const INT_FIFO_OFLOW: u8 = 1 << 4;
-const INT_DATA_RDY: u8 = 1 << 0;
-
-/// INT_ENABLE (RM 4.15).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct IntEnable {
-    /// FIFO_OFLOW_EN.
-    pub fifo_overflow: bool,
-    /// DATA_RDY_EN.
-    pub data_ready: bool,
-}
-
-impl Register for IntEnable {
-    const ADDR: u8 = reg::INT_ENABLE;
-    fn bits(self) -> u8 {
-        flag(self.fifo_overflow, INT_FIFO_OFLOW) | flag(self.data_ready, INT_DATA_RDY)
-    }
-    fn from_bits(b: u8) -> Self {
-        IntEnable {
-            fifo_overflow: b & INT_FIFO_OFLOW != 0,
-            data_ready: b & INT_DATA_RDY != 0,
-        }
+flags_register! {
+    /// INT_ENABLE (RM 4.15).
+    IntEnable at reg::INT_ENABLE => {
+        /// FIFO_OFLOW_EN.
+        fifo_overflow: 1 << 4,
+        /// DATA_RDY_EN.
+        data_ready: 1 << 0,
     }
 }
 
-/// INT_STATUS (RM 4.16), cleared by reading it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct IntStatus {
-    /// FIFO_OFLOW_INT.
-    pub fifo_overflow: bool,
-    /// DATA_RDY_INT.
-    pub data_ready: bool,
-}
-
-impl IntStatus {
-    /// Decode INT_STATUS.
-    pub const fn from_bits(b: u8) -> Self {
-        IntStatus {
-            fifo_overflow: b & INT_FIFO_OFLOW != 0,
-            data_ready: b & INT_DATA_RDY != 0,
-        }
-    }
-}
-
-impl Register for IntStatus {
-    const ADDR: u8 = reg::INT_STATUS;
-    fn bits(self) -> u8 {
-        flag(self.fifo_overflow, INT_FIFO_OFLOW) | flag(self.data_ready, INT_DATA_RDY)
-    }
-    fn from_bits(b: u8) -> Self {
-        IntStatus::from_bits(b)
+flags_register! {
+    /// INT_STATUS (RM 4.16, the bits of INT_ENABLE), cleared by reading it.
+    IntStatus at reg::INT_STATUS => {
+        /// FIFO_OFLOW_INT.
+        fifo_overflow: 1 << 4,
+        /// DATA_RDY_INT.
+        data_ready: 1 << 0,
     }
 }
 
