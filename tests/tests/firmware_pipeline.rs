@@ -24,6 +24,10 @@ use pico_imu_core::tables::{TABLE_FRAME_ROOM, TABLE_SPACING_US};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, QmcModel, QmcVariant, SimBus};
 
+/// The same board under faults.
+#[path = "firmware_pipeline/faults.rs"]
+mod faults;
+
 /// Frames the device sent, with a configurable amount of room.
 struct Sink {
     bytes: Vec<u8>,
@@ -509,171 +513,13 @@ fn every_delivered_sample_reaches_the_host_once_in_order() {
 
 /// A CPU held up for 150 ms: the FIFO overflows; the device restarts it at a known slot and
 /// counts exactly the samples that never reached it.
-#[test]
-fn a_fifo_overflow_is_counted_exactly_and_marked_as_a_gap() {
-    let mut rig = Rig::new();
-    rig.run(3000);
-    let before = rig.imu_out.len();
-    rig.bus.advance_us(150_000);
-    rig.next_imu_us = rig.now_us();
-    rig.run(500);
-    let ev = rig.events();
-    let st = rig.dev.status(0, 0);
-    assert_eq!(st.fifo_overflows, 1);
-    let truth = rig.bus.mpu(|m| m.slots());
-    let times: Vec<u64> = rig.imu_out.iter().map(|d| truth[d.k as usize].1).collect();
-    let truly = truth_lost(&truth, &times);
-    assert!(truly > 140, "{truly}");
-    assert_eq!(st.samples_dropped, truly);
-    assert_eq!(lost(&ev, Sensor::Imu), truly);
-    assert_eq!(
-        gap_positions(&ev, Sensor::Imu),
-        BTreeSet::from([before as u64])
-    );
-    assert!(ev.iter().any(|e| matches!(
-        e,
-        Event::Gap {
-            cause: GapCause::FifoOverflow,
-            ..
-        }
-    )));
-    // No Allan difference straddles the overflow: the replay split there agrees.
-    let t = rig.table(Channel::Gz);
-    let r = replay_imu(
-        &rig.imu_out,
-        Channel::Gz,
-        t.pushed,
-        &gap_positions(&ev, Sensor::Imu),
-        &imu_cal::device::Calibration::identity(),
-    );
-    assert!(replay::compare(&t, &r).mismatches.is_empty());
-}
-
 /// NACKs for 50 ms: the transfers are retried on the next ticks; the FIFO holds 73 ms, so not a
 /// sample is lost and the sensor is never declared lost.
-#[test]
-fn a_nack_burst_shorter_than_the_fifo_costs_nothing() {
-    let mut rig = Rig::new();
-    rig.run(1000);
-    let until = rig.bus.now_ns() + 50_000_000;
-    rig.bus.with_world(|w| w.nack_until = Some((0x68, until)));
-    rig.run(1000);
-    let ev = rig.events();
-    let st = rig.dev.status(0, 0);
-    assert!(st.i2c_errors >= 4, "{}", st.i2c_errors);
-    assert_eq!(st.samples_dropped, 0);
-    assert_eq!(st.imu, SensorState::Ok);
-    assert!(
-        !ev.iter().any(|e| matches!(e, Event::SensorLost { .. })),
-        "{ev:?}"
-    );
-    assert!(rig.imu_out.windows(2).all(|w| w[1].k == w[0].k + 1));
-}
-
 /// Unpowered for 200 ms: lost after the retries, back from its power-on state (asleep,
 /// configuration gone) and re-initialised in step with its old grid: the slots and the loss
 /// count match the model's, and the grid continues.
-#[test]
-fn a_power_cycled_sensor_is_reinitialised_on_its_old_grid_and_the_loss_counted() {
-    let mut rig = Rig::new();
-    rig.run(1000);
-    rig.bus.mpu(|m| m.present = false);
-    rig.run(200);
-    // Power comes back: the chip restarts from its power-on state; keep its sample log.
-    let log = rig.bus.mpu(|m| std::mem::take(&mut m.log));
-    let mut fresh = noisy_mpu();
-    fresh.log = log;
-    rig.bus.with_world(|w| w.mpu = Some(fresh));
-    rig.run(1500);
-    let ev = rig.events();
-    let st = rig.dev.status(0, 0);
-    assert_eq!(st.imu, SensorState::Ok);
-    assert!(ev.iter().any(|e| matches!(
-        e,
-        Event::SensorLost {
-            sensor: Sensor::Imu,
-            ..
-        }
-    )));
-    assert!(ev.iter().any(|e| matches!(
-        e,
-        Event::SensorBack {
-            sensor: Sensor::Imu,
-            ..
-        }
-    )));
-    let truth = rig.bus.mpu(|m| m.slots());
-    let times: Vec<u64> = rig
-        .imu_out
-        .iter()
-        .map(|d| truth.iter().find(|(s, _)| *s == u64::from(d.k)).unwrap().1)
-        .collect();
-    let truly = truth_lost(&truth, &times);
-    assert!(truly > 250, "{truly}");
-    assert_eq!(st.samples_dropped, truly);
-    // The values of each delivered slot are the model's: the re-initialised part is on the
-    // old grid.
-    let log = rig.bus.mpu(|m| m.log.clone());
-    for d in rig.imu_out.iter().step_by(97) {
-        let i = truth
-            .iter()
-            .position(|(s, _)| *s == u64::from(d.k))
-            .unwrap();
-        assert_eq!(d.raw.gyro, [log[i].1[4], log[i].1[5], log[i].1[6]]);
-    }
-}
-
 /// A part that answers but stops producing: named within 50 ms, re-initialised with back-off,
 /// its recovery reported, the stalled slots counted.
-#[test]
-fn a_stalled_sensor_is_named_within_50_ms_and_its_recovery_reported() {
-    let mut rig = Rig::new();
-    rig.run(2000);
-    let from = rig.bus.now_ns();
-    rig.bus.mag(|q| q.stall = Some((from, from + 300_000_000)));
-    rig.run(1000);
-    let ev = rig.events();
-    let stalled = ev.iter().find_map(|e| match e {
-        Event::SensorStalled {
-            sensor: Sensor::Mag,
-            t_us,
-            ..
-        } => Some(*t_us),
-        _ => None,
-    });
-    let at = stalled.expect("SensorStalled");
-    assert!(
-        at * 1000 - from <= 50_000_000,
-        "named {} ms after",
-        (at * 1000 - from) / 1_000_000
-    );
-    assert!(ev.iter().any(|e| matches!(
-        e,
-        Event::SensorBack {
-            sensor: Sensor::Mag,
-            ..
-        }
-    )));
-    let st = rig.dev.status(0, 0);
-    assert_eq!(st.mag, SensorState::Ok);
-    // ≈ 60 slots of 5 ms in the 300 ms stall, counted from the slots.
-    assert!((58..=62).contains(&st.mag_dropped), "{}", st.mag_dropped);
-    assert_eq!(lost(&ev, Sensor::Mag), st.mag_dropped);
-}
-
-#[test]
-fn a_missing_magnetometer_at_boot_is_reported_and_found_later() {
-    let mut rig = Rig::new();
-    rig.bus.mag(|q| q.present = false);
-    rig.run(300);
-    assert_eq!(rig.dev.status(0, 0).mag, SensorState::Missing);
-    assert_eq!(rig.dev.status(0, 0).imu, SensorState::Ok);
-    rig.bus.mag(|q| q.present = true);
-    rig.run(800);
-    assert_eq!(rig.dev.status(0, 0).mag, SensorState::Ok);
-    assert!(rig.dev.status(0, 0).mag_samples > 50);
-}
-
 #[test]
 fn persisting_a_calibration_waits_for_the_flash_write() {
     let mut dev = Device::new(config::scales(), "test");
@@ -822,15 +668,6 @@ fn get_tables_answers_one_snapshot_spaced_out_and_waiting_for_room() {
 /// A stall between the FIFO-count transfer and the data transfer: the count (taken before it)
 /// cannot show the overflow the stall causes, and the frames read after it would be
 /// misaligned; the count is then treated as stale.
-#[test]
-fn a_count_made_stale_by_a_hold_up_is_an_overflow() {
-    assert!(!count_may_be_stale(140, 300, 1024));
-    assert!(count_may_be_stale(140, 80_000, 1024));
-    // Within two frames of the 512-byte FIFO of the 6500 family.
-    assert!(count_may_be_stale(500, 300, 512));
-    assert!(!count_may_be_stale(476, 0, 512));
-}
-
 /// The magnetometer's reads come just after its samples land, one status poll per reading once
 /// the clock has settled.
 #[test]
