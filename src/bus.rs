@@ -9,7 +9,7 @@
 //! from what the controller reports.
 use core::future::Future;
 use core::pin::Pin;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::Ordering;
 use core::task::{Context, Poll};
 use embassy_rp::gpio::{Level, OutputOpenDrain};
 use embassy_rp::i2c::{self, AbortReason, I2c};
@@ -19,11 +19,11 @@ use embassy_rp::pac;
 use embassy_rp::peripherals::{I2C0, PIN_4, PIN_5};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::mutex::Mutex;
-use embassy_sync::waitqueue::AtomicWaker;
 use embassy_time::{Duration, Instant};
 use embedded_hal_async::i2c::{ErrorType, I2c as AsyncI2c, Operation};
 
 use crate::i2c_dma::I2cDma;
+use crate::shared::{DEADLINE_PASSED, DEADLINE_WAKER};
 use pico_imu_core::bus::TransferTime;
 use pico_imu_core::clock::{fine, Fine};
 
@@ -221,10 +221,6 @@ impl AsyncI2c for BusDevice {
 const DEADLINE_ALARM: usize = 1;
 // The deadline is programmed into a TIMER alarm in embassy-time ticks: they must be the TIMER's µs.
 const _: () = assert!(embassy_time::TICK_HZ == 1_000_000);
-
-static DEADLINE_WAKER: AtomicWaker = AtomicWaker::new();
-/// Set by the deadline alarm's interrupt, cleared when the alarm is armed.
-static DEADLINE_PASSED: AtomicBool = AtomicBool::new(false);
 
 /// TIMER_IRQ_1: a transaction's deadline passed; wake its task, which abandons it.
 pub struct DeadlineHandler;

@@ -5,17 +5,12 @@
 //! FIFO refills, USB endpoint events), so this slightly under-reads; the emulator benchmark
 //! counts every executed cycle and is the reference figure (docs/firmware.md).
 //!
-//! These two words are the firmware's only statics beyond embassy's own: the hooks are free
-//! functions called by the executor, so the state cannot be passed to them.
-use core::sync::atomic::{AtomicU32, Ordering};
+//! The hooks are free functions called by the executor, so their state is in `crate::shared`.
+use core::sync::atomic::Ordering;
 
 use embassy_time::Instant;
 
-/// When the executor last started polling, µs (low 32 bits; differences wrap correctly for
-/// intervals under 71 minutes).
-static SINCE: AtomicU32 = AtomicU32::new(0);
-/// Busy µs, wrapping.
-static BUSY: AtomicU32 = AtomicU32::new(0);
+use crate::shared::{CPU_BUSY, CPU_SINCE};
 
 fn now() -> u32 {
     Instant::now().as_ticks() as u32
@@ -26,14 +21,14 @@ fn now() -> u32 {
 // critical section per poll cost more than the measurement is worth).
 #[unsafe(no_mangle)]
 fn _embassy_trace_poll_start(_executor_id: u32) {
-    SINCE.store(now(), Ordering::Relaxed);
+    CPU_SINCE.store(now(), Ordering::Relaxed);
 }
 
 #[unsafe(no_mangle)]
 fn _embassy_trace_executor_idle(_executor_id: u32) {
-    let busy = now().wrapping_sub(SINCE.load(Ordering::Relaxed));
-    BUSY.store(
-        BUSY.load(Ordering::Relaxed).wrapping_add(busy),
+    let busy = now().wrapping_sub(CPU_SINCE.load(Ordering::Relaxed));
+    CPU_BUSY.store(
+        CPU_BUSY.load(Ordering::Relaxed).wrapping_add(busy),
         Ordering::Relaxed,
     );
 }
@@ -86,5 +81,5 @@ impl Meter {
 }
 
 fn busy_ticks() -> u32 {
-    BUSY.load(Ordering::Relaxed)
+    CPU_BUSY.load(Ordering::Relaxed)
 }

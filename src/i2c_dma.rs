@@ -15,7 +15,7 @@
 //! a buffer that is gone — provided the future is dropped or completed, never leaked: hence
 //! [`I2cDma::write_read`] is `unsafe`, with that as its contract.
 use core::future::poll_fn;
-use core::sync::atomic::{compiler_fence, AtomicBool, Ordering};
+use core::sync::atomic::{compiler_fence, Ordering};
 use core::task::Poll;
 
 use embassy_rp::i2c::{AbortReason, Error};
@@ -25,8 +25,9 @@ use embassy_rp::pac;
 use embassy_rp::pac::dma::vals::{DataSize, TreqSel};
 use embassy_rp::peripherals::{DMA_CH0, DMA_CH1};
 use embassy_rp::Peri;
-use embassy_sync::waitqueue::AtomicWaker;
 use embassy_time::{Duration, Instant};
+
+use crate::shared::{DMA_WAITING, DMA_WAKER};
 
 /// Longest read done by DMA; longer ones go through embassy's path. The MPU-6050 driver reads
 /// the FIFO in chunks of at most 16 frames × 14 bytes.
@@ -47,10 +48,6 @@ const STOP_WAIT_US: u64 = 200;
 const TX_CH: usize = 0;
 const RX_CH: usize = 1;
 
-static WAKER: AtomicWaker = AtomicWaker::new();
-/// A DMA transfer is waiting on `WAKER` (else the I2C interrupt is embassy's path's alone).
-static WAITING: AtomicBool = AtomicBool::new(false);
-
 /// I2C0 interrupt, next to embassy's `i2c::InterruptHandler` (which masks every source and wakes
 /// its own transfer): wakes a DMA transfer, if one is waiting (for TX_ABRT).
 pub struct I2cAbortHandler;
@@ -60,8 +57,8 @@ impl Handler<I2C0_IRQ> for I2cAbortHandler {
         pac::I2C0
             .ic_intr_mask()
             .write_value(pac::i2c::regs::IcIntrMask(0));
-        if WAITING.load(Ordering::Relaxed) {
-            WAKER.wake();
+        if DMA_WAITING.load(Ordering::Relaxed) {
+            DMA_WAKER.wake();
         }
     }
 }
@@ -74,7 +71,7 @@ impl Handler<DMA_IRQ_0> for DmaDoneHandler {
         let ints = pac::DMA.ints(0);
         if ints.read() & (1 << RX_CH) != 0 {
             ints.write_value(1 << RX_CH);
-            WAKER.wake();
+            DMA_WAKER.wake();
         }
     }
 }
@@ -112,7 +109,7 @@ impl I2cDma {
         pac::DMA.inte(0).modify(|v| *v |= 1 << RX_CH);
         embassy_rp::interrupt::DMA_IRQ_0.unpend();
         // SAFETY: the handler bound to DMA_IRQ_0 (`DmaDoneHandler`) touches only the RX
-        // channel's status bit and `WAKER`.
+        // channel's status bit and `DMA_WAKER`.
         unsafe { embassy_rp::interrupt::DMA_IRQ_0.enable() };
         Self {
             _tx: tx,
@@ -268,19 +265,19 @@ impl I2cDma {
     }
 }
 
-/// Sets `WAITING` while it lives.
+/// Sets `DMA_WAITING` while it lives.
 struct Waiting;
 
 impl Waiting {
     fn new() -> Self {
-        WAITING.store(true, Ordering::Relaxed);
+        DMA_WAITING.store(true, Ordering::Relaxed);
         Self
     }
 }
 
 impl Drop for Waiting {
     fn drop(&mut self) {
-        WAITING.store(false, Ordering::Relaxed);
+        DMA_WAITING.store(false, Ordering::Relaxed);
     }
 }
 
@@ -308,7 +305,7 @@ impl Drop for Running {
 async fn wait_end(rx: pac::dma::Channel) -> Ending {
     let i2c = pac::I2C0;
     poll_fn(|cx| {
-        WAKER.register(cx.waker());
+        DMA_WAKER.register(cx.waker());
         if i2c.ic_raw_intr_stat().read().tx_abrt() {
             let source = i2c.ic_tx_abrt_source().read().0;
             i2c.ic_clr_tx_abrt().read();

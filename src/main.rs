@@ -19,6 +19,7 @@
 mod bus;
 mod cpu;
 mod i2c_dma;
+mod shared;
 mod storage;
 
 use core::cell::Cell;

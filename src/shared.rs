@@ -1,0 +1,25 @@
+//! The firmware's statics: the only state shared between tasks and the code that cannot be
+//! handed a reference (interrupt handlers and the executor's trace hooks, which are free
+//! functions). Each is an atomic or a waker with one writer per side, named after its owner;
+//! everything else a task needs it is given at spawn (`StaticCell`s in `main.rs`, initialised
+//! once).
+use core::sync::atomic::{AtomicBool, AtomicU32};
+
+use embassy_sync::waitqueue::AtomicWaker;
+
+/// `crate::cpu`: when the executor last started polling, µs (low 32 bits; differences wrap
+/// correctly for intervals under 71 minutes).
+pub static CPU_SINCE: AtomicU32 = AtomicU32::new(0);
+/// `crate::cpu`: busy µs, wrapping.
+pub static CPU_BUSY: AtomicU32 = AtomicU32::new(0);
+
+/// `crate::bus`: the task whose transaction has a deadline armed.
+pub static DEADLINE_WAKER: AtomicWaker = AtomicWaker::new();
+/// `crate::bus`: set by the deadline alarm's interrupt, cleared when the alarm is armed.
+pub static DEADLINE_PASSED: AtomicBool = AtomicBool::new(false);
+
+/// `crate::i2c_dma`: the task whose DMA transfer is in flight.
+pub static DMA_WAKER: AtomicWaker = AtomicWaker::new();
+/// `crate::i2c_dma`: a DMA transfer is waiting on [`DMA_WAKER`] (else the I2C interrupt is
+/// embassy's path's alone).
+pub static DMA_WAITING: AtomicBool = AtomicBool::new(false);
