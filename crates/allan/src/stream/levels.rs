@@ -55,34 +55,38 @@ impl LevelSums {
     }
 }
 
-/// Multiples of `stride` (a power of two) in `[span, t]`: the differences a segment of `t`
-/// samples contributes when each needs `span` samples of history.
-fn terms(t: u64, span: u64, stride: u64) -> u64 {
+/// Multiples of the stride `2^shift` in `[span, t]`: the differences a segment of `t` samples
+/// contributes when each needs `span` samples of history (every span is a multiple of its
+/// stride).
+fn terms(t: u64, span: u64, shift: u32) -> u64 {
     if t < span {
         return 0;
-    }
-    // Strides are powers of two and every span a multiple of its stride: shifts, not the
-    // 64-bit divisions the Cortex-M0+ does in software (a table snapshot asks for 480 of these).
-    debug_assert!(stride.is_power_of_two() && span.is_multiple_of(stride));
-    let shift = stride.trailing_zeros();
-    if t >> 32 == 0 {
-        // A variable 64-bit shift is a library call on the Cortex-M0+; a 32-bit one is one
-        // instruction (and span ≤ t fits too).
-        return u64::from(((t as u32) >> shift) - ((span as u32) >> shift) + 1);
     }
     (t >> shift) - (span >> shift) + 1
 }
 
 impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L, R, S> {
     /// (second, third) differences level `k` has taken in the current segment.
+    ///
+    /// A table snapshot asks this of every level of every engine. The Cortex-M0+ has no
+    /// divide, no count-trailing-zeros and no 64-bit shift instruction, so the stride is a shift
+    /// known from `k` (1 up to m = P, then m / P, P a power of two), and a segment shorter than
+    /// 2^32 samples takes 32-bit shifts.
     pub(super) fn segment_terms(&self, k: usize) -> (u64, u64) {
-        let m = if k < 32 {
-            u64::from(1u32 << k)
-        } else {
-            1u64 << k
-        };
-        let s = Self::stride(k) as u64;
-        (terms(self.t, 2 * m, s), terms(self.t, 3 * m, s))
+        let shift = k.saturating_sub(P.trailing_zeros() as usize) as u32;
+        if self.t >> 32 == 0 && k < 30 {
+            let (t, m) = (self.t as u32, 1u32 << k);
+            let terms = |span: u32| {
+                if t < span {
+                    0
+                } else {
+                    u64::from((t >> shift) - (span >> shift) + 1)
+                }
+            };
+            return (terms(2 * m), terms(3 * m));
+        }
+        let m = 1u64 << k;
+        (terms(self.t, 2 * m, shift), terms(self.t, 3 * m, shift))
     }
 
     pub(super) fn stride(k: usize) -> u32 {
