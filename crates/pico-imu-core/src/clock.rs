@@ -168,6 +168,18 @@ impl Stamps {
     }
 }
 
+/// How an observation fitted the clock's interval.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fit {
+    /// Within it (it narrowed the interval).
+    Fits,
+    /// A sample came earlier than the interval allows: the phase was wrong, the interval
+    /// replaced.
+    Early,
+    /// A sample came later than the interval allows (replaced only if trusted).
+    Late,
+}
+
 /// A sensor's sample clock.
 #[derive(Debug, Clone)]
 pub struct SampleClock {
@@ -298,17 +310,12 @@ impl SampleClock {
     /// An observation that contradicts the interval replaces it when it says a sample came
     /// *earlier* than thought (only a wrong phase explains that). One that says a sample came
     /// *later* is also explained by a part that stopped producing (a stall, a lost sample): it
-    /// replaces the interval only with `trust_late` (the caller saw samples flowing), and is
-    /// otherwise ignored. Returns whether the observation fitted.
-    pub fn observe(
-        &mut self,
-        tau: Fine,
-        newest: u32,
-        next_not_yet: bool,
-        trust_late: bool,
-    ) -> bool {
+    /// replaces the interval only with `trust_late` (the caller has seen the part go on
+    /// producing since) and when it is late by at most a period beyond the interval, and
+    /// otherwise only bounds it. Returns how the observation fitted.
+    pub fn observe(&mut self, tau: Fine, newest: u32, next_not_yet: bool, trust_late: bool) -> Fit {
         if !self.known {
-            return true;
+            return Fit::Fits;
         }
         // The drift the period's uncertainty allows since the last observation.
         let gap = u64::from((newest.wrapping_sub(self.last_k) as i32).unsigned_abs()).min(1 << 20);
@@ -327,24 +334,28 @@ impl SampleClock {
         let j = JITTER as i64;
         let upper = tau as i64 - self.t_at as i64 + j;
         let lower = next_not_yet.then(|| upper - p - 2 * j);
-        let fits;
+        let fit;
         if upper <= lo {
             // Produced earlier than the interval allows: the phase was wrong.
             self.contradictions = self.contradictions.saturating_add(1);
-            fits = false;
+            fit = Fit::Early;
             hi = upper;
             lo = lower.unwrap_or(upper - p - 2 * j);
         } else if lower.is_some_and(|l| l >= hi) {
             self.contradictions = self.contradictions.saturating_add(1);
-            fits = false;
-            if trust_late {
+            fit = Fit::Late;
+            // Later than the interval allows by more than a period is a part that stopped
+            // producing (a stall beginning right after the samples counted), not a phase that
+            // wrong: trusting it would move the whole grid by the stall's length so far.
+            let beyond = lower.map_or(0, |l| l - hi);
+            if trust_late && beyond <= p {
                 hi = upper;
                 lo = lower.unwrap_or(upper - p - 2 * j);
             } else {
                 hi = hi.min(upper);
             }
         } else {
-            fits = true;
+            fit = Fit::Fits;
             hi = hi.min(upper);
             lo = lower.map_or(lo, |l| lo.max(l));
         }
@@ -353,11 +364,11 @@ impl SampleClock {
         self.last_k = newest;
         // Only an observation that brackets τ between two samples says how far τ is from the
         // newest (less than a period): the coarse period needs that.
-        if next_not_yet && fits {
+        if next_not_yet && fit == Fit::Fits {
             self.coarse(newest, tau);
         }
         self.recentre();
-        fits
+        fit
     }
 
     /// Put the line in the middle of the interval; once it is narrow, use the located instant
@@ -628,6 +639,27 @@ mod tests {
             }
         }
         c
+    }
+
+    /// A read that counts the last samples before a stall says "the next one has not come"
+    /// long after it was due: even when trusted, that is not a phase error of more than a
+    /// period, and the grid stays where it was.
+    #[test]
+    fn a_late_sample_beyond_a_period_does_not_move_the_grid_even_when_trusted() {
+        let mut c = bracketed(3000, 1, false);
+        let before = c.time(3000);
+        // Sample 2999 came at 3001 ms; the read 8 ms later says 3000 has not.
+        assert_eq!(c.observe(fine(3_009_000), 2999, true, true), Fit::Late);
+        assert!(
+            c.time(3000).abs_diff(before) < US,
+            "moved {} µs",
+            c.time(3000).abs_diff(before) / US
+        );
+        // A late sample within a period is a phase to correct when trusted.
+        let mut c = bracketed(3000, 1, false);
+        let hi = c.time(3000) + c.width() / 2;
+        c.observe(hi + 200 * US, 2999, true, true);
+        assert!(c.time(3000) > before + 100 * US);
     }
 
     #[test]

@@ -26,7 +26,7 @@ use imu_drivers::mpu6050 as mpu;
 use imu_proto::{GapCause, Sensor, SensorState, Vec, IMU_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
-use crate::clock::{self, fine, whole_us, BusTiming, SampleClock, US};
+use crate::clock::{self, fine, whole_us, BusTiming, Fit, SampleClock, US};
 use crate::config::imu_config;
 use crate::msg::{Out, SensorMsg, BURST_MAX};
 use crate::service::{delay_until, Core, Phase, Tick, SETUP, WRITE_MARGIN};
@@ -45,6 +45,8 @@ pub struct ImuService {
     core: Core,
     /// A FIFO read was abandoned part-way: the frames in the FIFO are not aligned.
     misaligned: bool,
+    /// The last count read, with frames, found a sample later than the clock allowed.
+    late_before: bool,
     capacity: u16,
 }
 
@@ -55,6 +57,7 @@ impl ImuService {
         Self {
             core: Core::new(Sensor::Imu, IMU_PERIOD_US as u32, timing),
             misaligned: false,
+            late_before: false,
             capacity: 1024,
         }
     }
@@ -99,8 +102,10 @@ impl ImuService {
             Phase::Lost if self.core.health.retry_due(t) => self.retry_lost(cx).await,
             Phase::Lost => {}
             Phase::Stalled if self.core.health.retry_due(t) => {
-                self.core.health.retried(t);
                 self.init(cx, GapCause::Stalled).await;
+                // The back-off counts from the end of the re-initialisation (its reset alone
+                // takes 100 ms): the next tick drains what the restarted part produced.
+                self.core.health.retried((cx.now)());
                 // Still stalled until data comes.
                 self.core.phase = Phase::Stalled;
             }
@@ -212,14 +217,23 @@ impl ImuService {
                     .wrapping_sub(1);
                 // A count that crossed 255 between its two bytes is not trusted for timing.
                 if count < 256 {
-                    self.core.clock.observe(tau, newest, true, frames > 0);
+                    // A sample later than the clock allows, with frames flowing, is a phase to
+                    // correct only if the read before saw the same: a stall that began right
+                    // after the frames of this read looks the same once, and then the next read
+                    // finds none.
+                    let trust = frames > 0 && self.late_before;
+                    let fit = self.core.clock.observe(tau, newest, true, trust);
+                    self.late_before = frames > 0 && fit == Fit::Late;
                 }
             }
             if frames == 0 {
                 self.core.no_data(read_at, cx.out);
                 return;
             }
-            self.core.last_growth_us = read_at;
+            // The part last produced when its newest frame was sampled (a stall is timed from
+            // there, not from this read, which may come up to a burst later).
+            let newest = self.core.next_k.wrapping_add(u32::from(frames) - 1);
+            self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
             if self.core.phase == Phase::Stalled {
                 // Data again after a stall: the frames' slots are not known by counting (the
                 // part produced nothing for a while); restart the FIFO to know them.

@@ -116,8 +116,9 @@ impl MagService {
             }
             Phase::Lost => {}
             Phase::Stalled if self.core.health.retry_due(t) => {
-                self.core.health.retried(t);
                 self.init(cx, GapCause::Stalled).await;
+                // The back-off counts from the end of the re-initialisation.
+                self.core.health.retried((cx.now)());
                 if self.core.phase == Phase::Running {
                     self.core.phase = Phase::Stalled;
                 }
@@ -265,14 +266,16 @@ impl MagService {
                     self.core.next_k
                 }
             };
+            let stamps = self.core.clock.stamps(k, 1);
             let _ = cx.out.push(SensorMsg::Mag {
-                stamps: self.core.clock.stamps(k, 1),
+                stamps,
                 xyz,
                 after: self.core.after.take(),
             });
             self.core.next_k = k.wrapping_add(1);
             self.core.fresh = false;
-            self.core.last_growth_us = t;
+            // A stall is timed from when the part last produced, not from this read.
+            self.core.last_growth_us = stamps.us(0).min(t);
             if self.core.phase == Phase::Stalled {
                 self.core.phase = Phase::Running;
             }

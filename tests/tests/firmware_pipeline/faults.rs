@@ -148,6 +148,65 @@ fn a_stalled_sensor_is_named_within_50_ms_and_its_recovery_reported() {
     assert_eq!(lost(&ev, Sensor::Mag), st.mag_dropped);
 }
 
+/// An IMU stall that begins anywhere between two FIFO reads, even right after the frames one
+/// of them counts: named within 50 ms of its start, re-initialised once, the stalled slots
+/// counted exactly, and the grid unmoved (every delivered slot holds the model's sample).
+#[test]
+fn an_imu_stall_at_any_phase_is_named_in_time_counted_exactly_and_keeps_the_grid() {
+    for step in 0..14u64 {
+        let mut rig = Rig::new();
+        rig.run(1500);
+        let from = rig.bus.now_ns() + step * 730_000;
+        rig.bus.mpu(|m| m.stall = Some((from, from + 200_000_000)));
+        rig.run(1000);
+        let ev = rig.events();
+        let named = ev.iter().find_map(|e| match e {
+            Event::SensorStalled {
+                sensor: Sensor::Imu,
+                t_us,
+                ..
+            } => Some(*t_us * 1000),
+            _ => None,
+        });
+        let named = named.unwrap_or_else(|| panic!("phase {step}: no SensorStalled"));
+        assert!(
+            named.saturating_sub(from) <= 50_000_000,
+            "phase {step}: named {} µs after the stall began",
+            named.saturating_sub(from) / 1000
+        );
+        let truth = rig.bus.mpu(|m| m.slots());
+        let times: Vec<u64> = rig
+            .imu_out
+            .iter()
+            .map(|d| {
+                let at = truth.iter().find(|(s, _)| *s == u64::from(d.k));
+                at.unwrap_or_else(|| panic!("phase {step}: slot {} was never produced", d.k))
+                    .1
+            })
+            .collect();
+        let st = rig.dev.status(0, 0);
+        assert_eq!(st.imu, SensorState::Ok, "phase {step}");
+        assert_eq!(
+            st.samples_dropped,
+            truth_lost(&truth, &times),
+            "phase {step}: lost"
+        );
+        let log = rig.bus.mpu(|m| m.log.clone());
+        for d in rig.imu_out.iter() {
+            let i = truth
+                .iter()
+                .position(|(s, _)| *s == u64::from(d.k))
+                .unwrap();
+            assert_eq!(
+                d.raw.gyro,
+                [log[i].1[4], log[i].1[5], log[i].1[6]],
+                "phase {step}: slot {} is not the model's sample",
+                d.k
+            );
+        }
+    }
+}
+
 #[test]
 fn a_missing_magnetometer_at_boot_is_reported_and_found_later() {
     let mut rig = Rig::new();
