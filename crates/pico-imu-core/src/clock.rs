@@ -98,6 +98,11 @@ pub const READ_FIRST_BIT: u64 = 29;
 /// Bit of the second byte of a register read.
 pub const READ_SECOND_BIT: u64 = 38;
 
+/// SCL periods of a whole register read of `n` bytes, to its STOP.
+pub const fn read_bits(n: u64) -> u64 {
+    READ_FIRST_BIT + 9 * n
+}
+
 /// `n / p` (`p > 0`). The clock divides times up to a few dozen periods apart by a period, so
 /// the quotient is nearly always below 256: then eight shift-and-subtract steps give it, where
 /// a 64-bit division is a library call of about 450 cycles on the Cortex-M0+.

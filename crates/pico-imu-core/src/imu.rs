@@ -39,6 +39,8 @@ const FRAME: u16 = 14;
 const PROBE_WAIT: u64 = 1200 * US;
 /// Messages kept free in a tick's output for reports.
 const REPORT_ROOM: usize = 3;
+/// Count reads of one tick that may be repeated because the bus held them.
+const HELD_REREADS: u32 = 3;
 
 /// The IMU side.
 pub struct ImuService {
@@ -185,6 +187,7 @@ impl ImuService {
                 delay_until(cx.delay, cx.now, p - count_latch).await;
             }
         }
+        let mut held = 0;
         while cx.out.len() + REPORT_ROOM <= cx.out.capacity() {
             stage::enter(Stage::I2c);
             let count = cx.dev.fifo_count().await;
@@ -197,9 +200,20 @@ impl ImuService {
                     return;
                 }
             };
-            let tau = self
-                .core
-                .answered(cx.dev.bus().last_start(), clock::READ_SECOND_BIT);
+            let start = cx.dev.bus().last_start();
+            let tau = self.core.answered(start, clock::READ_SECOND_BIT);
+            let timely = self.core.latch_if_timely(
+                start,
+                clock::READ_SECOND_BIT,
+                clock::read_bits(2),
+                read_at,
+            );
+            if timely.is_none() && held < HELD_REREADS {
+                // When this count was latched is not known (the bus was held): it says nothing
+                // about the clock, and would pass for stale. Read it again.
+                held += 1;
+                continue;
+            }
             if count >= self.capacity
                 || count_may_be_stale(count, read_at.saturating_sub(whole_us(tau)), self.capacity)
             {

@@ -193,17 +193,23 @@ impl MagService {
                     return;
                 }
             };
-            let tau = self
+            let start = cx.dev.bus().last_start();
+            let tau = self.core.answered(start, clock::READ_FIRST_BIT);
+            // A status read the bus held says nothing about when the sample landed.
+            let timely = self
                 .core
-                .answered(cx.dev.bus().last_start(), clock::READ_FIRST_BIT);
+                .latch_if_timely(start, clock::READ_FIRST_BIT, clock::read_bits(1), t)
+                .is_some();
             if !status.ready {
-                if !self.core.fresh {
+                if timely && !self.core.fresh {
                     // Sample `next_k` not yet landed: a lower bound, unless the part stalled.
                     self.core
                         .clock
                         .observe(tau, self.core.next_k.wrapping_sub(1), true, false);
                 }
-                not_yet = Some(tau);
+                if timely {
+                    not_yet = Some(tau);
+                }
                 if self.core.no_data(t, cx.out) {
                     return;
                 }
@@ -225,7 +231,9 @@ impl MagService {
                         .observe(before, self.core.next_k.wrapping_sub(1), true, true);
                 }
             }
-            self.core.clock.observe(tau, self.core.next_k, false, false);
+            if timely {
+                self.core.clock.observe(tau, self.core.next_k, false, false);
+            }
             let xyz = match cx.dev.read_data().await {
                 Ok(xyz) => xyz,
                 Err(e) => {
@@ -233,10 +241,15 @@ impl MagService {
                     return;
                 }
             };
+            let end = (cx.now)();
+            let start = cx.dev.bus().last_start();
+            // A data read the bus held moved its bytes at its end, not its start.
             let t_data = self
                 .core
-                .timing
-                .latch(cx.dev.bus().last_start(), clock::READ_FIRST_BIT);
+                .latch_if_timely(start, clock::READ_FIRST_BIT, clock::read_bits(6), end)
+                .unwrap_or_else(|| {
+                    fine(end) - (clock::read_bits(6) - clock::READ_FIRST_BIT) * self.core.timing.bit
+                });
             // The slot read. DOR clear: one sample landed since the last read, the next one due,
             // unless the clock says the grid has moved on past it (a part that produced nothing
             // for a while). DOR set (samples overwritten unread): the newest landed before the

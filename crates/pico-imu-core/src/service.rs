@@ -15,6 +15,10 @@ pub const SETUP: u64 = 150 * US;
 /// varies by this beyond the clock's own uncertainty).
 pub const WRITE_MARGIN: u64 = 120 * US;
 
+/// How much longer than its bits a transfer may take (set-up, the task being polled late) before
+/// it counts as held on the bus.
+pub const HELD_MARGIN: u64 = 1500 * US;
+
 /// Where a service is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Phase {
@@ -91,6 +95,15 @@ impl Core {
     pub fn answered(&mut self, start: Fine, bit: u64) -> Fine {
         self.health.answered();
         self.timing.latch(start, bit)
+    }
+
+    /// The instant a transfer that started at `start` latched its byte at `bit`, if known. A
+    /// transfer of `bits` SCL periods seen done at `end_us` more than [`HELD_MARGIN`] after it
+    /// should have ended was held on the bus (a START that could not be sent while a slave held
+    /// SDA, a slave stretching SCL): when its bytes moved is not known.
+    pub fn latch_if_timely(&self, start: Fine, bit: u64, bits: u64, end_us: u64) -> Option<Fine> {
+        let due = self.timing.latch(start, bits) + HELD_MARGIN;
+        (fine(end_us) <= due).then(|| self.timing.latch(start, bit))
     }
 
     /// A transfer failed at `t` (`failure`: what the bus said): counted; a bus fault asks for a

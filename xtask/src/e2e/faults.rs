@@ -133,6 +133,19 @@ pub(super) fn check_faults(
                 None => r.fail(format!("`{}`: the stall was never reported", x.spec)),
             }
         }
+        // A held bus is a bus fault: reported as one, with its recovery; it may cost the
+        // magnetometer the samples it overwrote meanwhile, never the IMU's FIFO.
+        if matches!(x.kind, Kind::Stuck | Kind::Hang) && x.dur_s < 0.07 {
+            if let Some(n) = lost[0].get("FifoOverflow") {
+                r.fail(format!(
+                    "`{}`: a held bus cost {n} IMU samples as a FIFO overflow (its FIFO holds 73 ms)",
+                    x.spec
+                ));
+            }
+            if !reported.iter().any(|e| e.starts_with("BusFault")) {
+                r.fail(format!("`{}`: no BusFault reported", x.spec));
+            }
+        }
         if x.kind == Kind::Nack {
             let (sensor_lost, period) = match x.sensor {
                 Some(Sensor::Mag) => (mm, 1.0 / 200.0 / 0.987),
