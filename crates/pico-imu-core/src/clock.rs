@@ -87,7 +87,17 @@ impl BusTiming {
     /// 19; a repeated START (1) and the address again (9) put the first byte read at 29, the
     /// second at 38.
     pub const fn latch(&self, start: Fine, bits: u64) -> Fine {
-        start + bits * self.bit
+        start + self.duration(bits)
+    }
+
+    /// `bits` SCL periods, [`Fine`]. A 32-bit multiply whenever it fits (any bus of 62.5 kHz or
+    /// more and a transfer under 2,048 bits): a 64-bit one is a library call on the M0+.
+    pub const fn duration(&self, bits: u64) -> Fine {
+        if self.bit >> 20 == 0 && bits >> 11 == 0 {
+            ((bits as u32) * (self.bit as u32)) as u64
+        } else {
+            bits * self.bit
+        }
     }
 }
 
@@ -431,11 +441,17 @@ impl SampleClock {
         }
     }
 
+    /// Whether the interval is wide enough for a placed observation to narrow it (see
+    /// [`Self::probe_after`]).
+    pub fn wants_probe(&self) -> bool {
+        self.known && self.width() > PROBE_WIDTH
+    }
+
     /// When to latch the next observation, at or after `earliest`, so that it halves the
     /// interval: the middle of the interval around the first predicted instant after
     /// `earliest`. `None` when the interval is already narrow (observe whenever convenient).
     pub fn probe_after(&self, earliest: Fine) -> Option<Fine> {
-        if !self.known || self.width() <= PROBE_WIDTH {
+        if !self.wants_probe() {
             return None;
         }
         let mid = (self.lo + self.hi) / 2;

@@ -158,7 +158,7 @@ impl MagService {
     /// one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
         let latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
-        let offset = if self.core.clock.probe_after(0).is_some() {
+        let offset = if self.core.clock.wants_probe() {
             0
         } else {
             (self.core.clock.width() / 2 + POLL_MARGIN) as i64
@@ -248,7 +248,11 @@ impl MagService {
                 .core
                 .latch_if_timely(start, clock::READ_FIRST_BIT, clock::read_bits(6), end)
                 .unwrap_or_else(|| {
-                    fine(end) - (clock::read_bits(6) - clock::READ_FIRST_BIT) * self.core.timing.bit
+                    fine(end)
+                        - self
+                            .core
+                            .timing
+                            .duration(clock::read_bits(6) - clock::READ_FIRST_BIT)
                 });
             // The slot read. DOR clear: one sample landed since the last read, the next one due,
             // unless the clock says the grid has moved on past it (a part that produced nothing

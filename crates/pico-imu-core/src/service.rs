@@ -102,8 +102,8 @@ impl Core {
     /// should have ended was held on the bus (a START that could not be sent while a slave held
     /// SDA, a slave stretching SCL): when its bytes moved is not known.
     pub fn latch_if_timely(&self, start: Fine, bit: u64, bits: u64, end_us: u64) -> Option<Fine> {
-        let due = self.timing.latch(start, bits) + HELD_MARGIN;
-        (fine(end_us) <= due).then(|| self.timing.latch(start, bit))
+        let took = fine(end_us).wrapping_sub(start);
+        (took <= self.timing.duration(bits) + HELD_MARGIN).then(|| self.timing.latch(start, bit))
     }
 
     /// A transfer failed at `t` (`failure`: what the bus said): counted; a bus fault asks for a
