@@ -385,26 +385,16 @@ async fn imu_task(
         last_us = now_us();
         let msgs = out.send().await;
         msgs.clear();
+        let mut delay = embassy_time::Delay;
+        let cx = &mut Tick::new(&mut imu, &mut delay, &now_us, msgs);
         if wait_running(&mut run).await {
-            svc.resume(&mut Tick::new(
-                &mut imu,
-                &mut embassy_time::Delay,
-                &now_us,
-                msgs,
-            ))
-            .await;
+            svc.resume(cx).await;
         } else {
             if svc.wants_recovery(now_us()) {
-                recover_bus(bus, msgs).await;
+                recover_bus(bus, cx.out).await;
                 svc.recovered();
             }
-            svc.tick(&mut Tick::new(
-                &mut imu,
-                &mut embassy_time::Delay,
-                &now_us,
-                msgs,
-            ))
-            .await;
+            svc.tick(cx).await;
         }
         if svc.state() != was {
             warn!("imu: {} -> {}", was, svc.state());

@@ -112,6 +112,16 @@ fn a_power_cycled_sensor_is_reinitialised_on_its_old_grid_and_the_loss_counted()
     }
 }
 
+/// When the device first named `sensor` stalled, ns.
+fn stalled_at(ev: &[Event], sensor: Sensor) -> Option<u64> {
+    ev.iter().find_map(|e| match e {
+        Event::SensorStalled {
+            sensor: s, t_us, ..
+        } if *s == sensor => Some(*t_us * 1000),
+        _ => None,
+    })
+}
+
 #[test]
 fn a_stalled_sensor_is_named_within_50_ms_and_its_recovery_reported() {
     let mut rig = Rig::new();
@@ -120,19 +130,11 @@ fn a_stalled_sensor_is_named_within_50_ms_and_its_recovery_reported() {
     rig.bus.mag(|q| q.stall = Some((from, from + 300_000_000)));
     rig.run(1000);
     let ev = rig.events();
-    let stalled = ev.iter().find_map(|e| match e {
-        Event::SensorStalled {
-            sensor: Sensor::Mag,
-            t_us,
-            ..
-        } => Some(*t_us),
-        _ => None,
-    });
-    let at = stalled.expect("SensorStalled");
+    let at = stalled_at(&ev, Sensor::Mag).expect("SensorStalled");
     assert!(
-        at * 1000 - from <= 50_000_000,
+        at - from <= 50_000_000,
         "named {} ms after",
-        (at * 1000 - from) / 1_000_000
+        (at - from) / 1_000_000
     );
     assert!(ev.iter().any(|e| matches!(
         e,
@@ -160,15 +162,8 @@ fn an_imu_stall_at_any_phase_is_named_in_time_counted_exactly_and_keeps_the_grid
         rig.bus.mpu(|m| m.stall = Some((from, from + 200_000_000)));
         rig.run(1000);
         let ev = rig.events();
-        let named = ev.iter().find_map(|e| match e {
-            Event::SensorStalled {
-                sensor: Sensor::Imu,
-                t_us,
-                ..
-            } => Some(*t_us * 1000),
-            _ => None,
-        });
-        let named = named.unwrap_or_else(|| panic!("phase {step}: no SensorStalled"));
+        let named = stalled_at(&ev, Sensor::Imu)
+            .unwrap_or_else(|| panic!("phase {step}: no SensorStalled"));
         assert!(
             named.saturating_sub(from) <= 50_000_000,
             "phase {step}: named {} µs after the stall began",
