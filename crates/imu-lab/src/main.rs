@@ -2,6 +2,7 @@
 //! over the library crates.
 use clap::{Parser, Subcommand};
 
+mod calibration;
 mod cmd;
 mod input;
 mod link;

@@ -18,7 +18,8 @@
 //! points' own and T = Σz²/[`CORRELATION_INFLATION`], an allowance for the unmodelled correlation.
 use crate::cov::correlation_factor;
 use crate::fit::{Fit, Weighting};
-use allan::ci::{chi2_cdf, chi2_sf, norm_ppf as normal_quantile};
+pub use crate::zscore::{correlated_chi2, z_score, CORRELATION_INFLATION};
+use allan::ci::{chi2_sf, norm_ppf as normal_quantile};
 use nalgebra::{DMatrix, DVector};
 
 /// Level of the verdict's global test (the local test runs at a tenth of it).
@@ -27,9 +28,6 @@ pub const ALPHA: f64 = 1e-3;
 pub const P_GLOBAL: f64 = ALPHA;
 /// Family-wise false-alarm probability of the per-point test at the default α.
 pub const P_LOCAL: f64 = ALPHA / 10.0;
-/// Points-only fits: the χ² of correlated octave-spaced OADEV points is larger than that of
-/// independent points by about this factor under the null; Σz² is divided by it.
-pub const CORRELATION_INFLATION: f64 = 1.5;
 
 /// A contiguous range of τ where the model is outside the measurement's 68.3 % interval.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -103,39 +101,6 @@ pub fn residual(dev: f64, lo: f64, hi: f64, model_dev: f64) -> f64 {
         0.0
     } else {
         diff.signum() * f64::INFINITY
-    }
-}
-
-/// Exact z-score of a measured deviation with `edf` degrees of freedom against a model deviation.
-pub fn z_score(dev: f64, edf: f64, model_dev: f64) -> f64 {
-    if !(model_dev > 0.0) {
-        return f64::INFINITY;
-    }
-    let x = edf * (dev / model_dev).powi(2);
-    if edf > 2e4 {
-        // Wilson–Hilferty: (χ²_ν/ν)^{1/3} is normal with mean 1 − 2/(9ν), variance 2/(9ν)
-        // (relative error of the quantile below 1e-4 at this ν, where the series for the
-        // incomplete gamma function would need ~√ν terms)
-        let v = 2.0 / (9.0 * edf);
-        return (((x / edf).cbrt() - (1.0 - v)) / v.sqrt()).clamp(-38.0, 38.0);
-    }
-    let c = chi2_cdf(x, edf);
-    let z = if c <= 0.5 {
-        normal_quantile(c)
-    } else {
-        -normal_quantile(chi2_sf(x, edf))
-    };
-    z.clamp(-38.0, 38.0)
-}
-
-/// The generalised statistic zᵀ ρ⁻¹ z for z-scores with correlation matrix ρ (from a covariance).
-pub fn correlated_chi2(z: &[f64], cov: &DMatrix<f64>) -> f64 {
-    let zv = DVector::from_column_slice(z);
-    match correlation_factor(cov).1 {
-        Some(l) => l
-            .solve_lower_triangular(&zv)
-            .map_or(f64::NAN, |w| w.norm_squared()),
-        None => zv.norm_squared(),
     }
 }
 
@@ -219,24 +184,9 @@ pub fn max_z_quantile(cov: &DMatrix<f64>, q: f64) -> f64 {
     *maxima.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
-/// z-scores of a fit's points and the statistic T (see module docs).
+/// z-scores of a fit's points and the statistic T (see module docs): [`Fit::statistic`].
 pub fn statistic(fit: &Fit) -> (Vec<f64>, f64) {
-    let edf: Vec<f64> = match fit.weighting {
-        Weighting::Model => fit.model_edf.clone(),
-        Weighting::Diagonal => fit.points.iter().map(|p| p.edf).collect(),
-    };
-    let z: Vec<f64> = fit
-        .points
-        .iter()
-        .zip(&fit.model_avar)
-        .zip(&edf)
-        .map(|((p, &m), &nu)| z_score(p.dev, nu, m.max(0.0).sqrt()))
-        .collect();
-    let t = match fit.weighting {
-        Weighting::Model => correlated_chi2(&z, &fit.point_cov),
-        Weighting::Diagonal => z.iter().map(|v| v * v).sum::<f64>() / CORRELATION_INFLATION,
-    };
-    (z, t)
+    fit.statistic()
 }
 
 /// Assess a fit at the default level [`ALPHA`].

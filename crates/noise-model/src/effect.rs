@@ -15,7 +15,6 @@
 //! and the covariance of the Allan estimates ([`crate::cov`]). Deterministic effects (a ramp, a
 //! sinusoid, a bias step, a temperature-driven bias) have their exact expected Allan variance
 //! computed over the record's own segments.
-use crate::user::UserEffect;
 use core::fmt;
 use std::sync::Arc;
 
@@ -23,12 +22,14 @@ mod avar;
 mod params;
 mod text;
 mod units;
+pub mod user;
 use avar::octaves;
 pub use avar::{
     markov_avar_continuous, markov_avar_unit, sinusoid_avar_unit, step_avar, warmup_avar, Basis,
 };
 pub use params::{Context, ParamSpec};
 pub use units::{DisplayUnit, UnitFamily, G0};
+use user::UserEffect;
 
 /// An effect of the vocabulary. Built-ins are named in [`Effect::name`]; user effects come from a
 /// description file ([`crate::user`]).

@@ -347,6 +347,25 @@ impl PartialEq for Fit {
 }
 
 impl Fit {
+    /// z-scores of the points against the model and the statistic T ([`crate::zscore`]): with
+    /// the model's EDFs and the estimates' correlation under model weighting, the points' own
+    /// EDFs and no correlation under diagonal weighting.
+    pub fn statistic(&self) -> (Vec<f64>, f64) {
+        let dev = self.points.iter().map(|p| p.dev);
+        match self.weighting {
+            Weighting::Model => crate::zscore::t_statistic(
+                dev,
+                &self.model_edf,
+                &self.model_avar,
+                Some(&self.point_cov),
+            ),
+            Weighting::Diagonal => {
+                let edf: Vec<f64> = self.points.iter().map(|p| p.edf).collect();
+                crate::zscore::t_statistic(dev, &edf, &self.model_avar, None)
+            }
+        }
+    }
+
     pub fn chi2_dof(&self) -> f64 {
         self.chi2 / self.dof.max(1.0)
     }

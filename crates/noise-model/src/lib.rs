@@ -35,7 +35,9 @@ pub mod nonstat;
 pub mod practical;
 pub mod psd;
 pub mod structure;
-pub mod user;
+/// User-defined effects (their own module under [`effect`]).
+pub use effect::user;
+pub mod zscore;
 
 pub use assess::{assess, assess_at, Assessment, Standing, TauRange};
 pub use diagnose::{diagnose, Diagnosis};

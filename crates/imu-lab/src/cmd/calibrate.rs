@@ -10,10 +10,10 @@ use imu_cal::accel::{detect_static_masked, AccelProblem, StaticDetect, G_STANDAR
 use imu_cal::file::CalFile;
 use imu_cal::gyro::GyroProblem;
 use imu_cal::gyro_rot::GyroRotProblem;
-use imu_cal::lab::{CalLab, Effect, Model, Params, Problem, Report, Step};
+use imu_cal::lab::{CalLab, Effect, Params, Problem};
 use imu_cal::mag::MagProblem;
 use imu_cal::sentinel::{self, Part, Sentinels};
-use model_lab::{walk, Stop};
+use model_lab::walk;
 use nalgebra::Vector3;
 use serde::Serialize;
 
@@ -95,51 +95,8 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-/// The prepared data of one run (kept for the report and the figures), with what was excluded
-/// before fitting.
-pub enum Data {
-    /// Static poses.
-    Accel(AccelProblem),
-    /// Block means at rest.
-    Gyro(GyroProblem),
-    /// Moves between static poses.
-    GyroRot(GyroRotProblem),
-    /// Samples of the field.
-    Mag(MagProblem),
-}
+pub use crate::calibration::{Data, Loaded, Outcome};
 
-impl Data {
-    /// The problem behind it.
-    pub fn problem(&self) -> &dyn Problem {
-        match self {
-            Data::Accel(p) => p,
-            Data::Gyro(p) => p,
-            Data::GyroRot(p) => p,
-            Data::Mag(p) => p,
-        }
-    }
-}
-
-/// A loaded run: the data, the sentinels excluded, and notes about the input for the report.
-pub struct Loaded {
-    /// The problem's data.
-    pub data: Data,
-    /// Sentinels found (and excluded) in the sensor's columns.
-    pub sentinels: Sentinels,
-    /// Other notes on the input (gaps, missing temperature, …).
-    pub notes: Vec<String>,
-}
-/// What a run produced: the report on the last model, and for `--auto` the walk that led to it.
-pub struct Outcome {
-    /// The model the run started from (`--model`).
-    pub start: Model,
-    /// The steps of the walk (`--auto`), in order.
-    pub steps: Vec<Step>,
-    /// Why the walk ended (`None` without `--auto`).
-    pub stop: Option<Stop>,
-    /// The last model's report: verdict, candidates, diagnosis, the next step.
-    pub report: Report,
-}
 /// Fit `model`, and with `auto` walk from it; the report is on the last model.
 fn outcome(p: &dyn Problem, model: &[Effect], auto: bool, max_steps: usize) -> Result<Outcome> {
     let lab = CalLab::new(p);

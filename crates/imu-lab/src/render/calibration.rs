@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::esc;
 use super::scatter::{figure, Panel, Series};
-use crate::cmd::calibrate::{Data, Loaded, Outcome};
+use crate::calibration::{Data, Loaded, Outcome};
 
 /// `v ± s` with `prec` decimals (the σ to two significant digits when it needs more).
 fn pm(v: f64, s: f64, prec: usize) -> String {

@@ -660,6 +660,6 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
         param_index: index,
         per_term_basis,
     };
-    out.chi2 = crate::assess::statistic(&out).1;
+    out.chi2 = out.statistic().1;
     Ok(out)
 }

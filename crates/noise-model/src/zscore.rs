@@ -1,0 +1,63 @@
+//! The z-score of a measured deviation against a model's, and the statistic T the points' z-scores
+//! add up to (the verdict's global test, [`crate::assess`]): T = zᵀ ρ⁻¹ z with the estimates'
+//! correlation ρ, or Σz²/[`CORRELATION_INFLATION`] when only the points are known.
+use crate::cov::correlation_factor;
+use allan::ci::{chi2_cdf, chi2_sf, norm_ppf as normal_quantile};
+use nalgebra::{DMatrix, DVector};
+
+/// Points-only fits: the χ² of correlated octave-spaced OADEV points is larger than that of
+/// independent points by about this factor under the null; Σz² is divided by it.
+pub const CORRELATION_INFLATION: f64 = 1.5;
+
+/// Exact z-score of a measured deviation with `edf` degrees of freedom against a model deviation.
+pub fn z_score(dev: f64, edf: f64, model_dev: f64) -> f64 {
+    if !(model_dev > 0.0) {
+        return f64::INFINITY;
+    }
+    let x = edf * (dev / model_dev).powi(2);
+    if edf > 2e4 {
+        // Wilson–Hilferty: (χ²_ν/ν)^{1/3} is normal with mean 1 − 2/(9ν), variance 2/(9ν)
+        // (relative error of the quantile below 1e-4 at this ν, where the series for the
+        // incomplete gamma function would need ~√ν terms)
+        let v = 2.0 / (9.0 * edf);
+        return (((x / edf).cbrt() - (1.0 - v)) / v.sqrt()).clamp(-38.0, 38.0);
+    }
+    let c = chi2_cdf(x, edf);
+    let z = if c <= 0.5 {
+        normal_quantile(c)
+    } else {
+        -normal_quantile(chi2_sf(x, edf))
+    };
+    z.clamp(-38.0, 38.0)
+}
+
+/// The generalised statistic zᵀ ρ⁻¹ z for z-scores with correlation matrix ρ (from a covariance).
+pub fn correlated_chi2(z: &[f64], cov: &DMatrix<f64>) -> f64 {
+    let zv = DVector::from_column_slice(z);
+    match correlation_factor(cov).1 {
+        Some(l) => l
+            .solve_lower_triangular(&zv)
+            .map_or(f64::NAN, |w| w.norm_squared()),
+        None => zv.norm_squared(),
+    }
+}
+
+/// The z-scores of deviations `dev` with `edf` degrees of freedom against the model variances
+/// `model_avar`, and T: correlated through `cov` when given, else Σz²/[`CORRELATION_INFLATION`].
+pub fn t_statistic(
+    dev: impl Iterator<Item = f64>,
+    edf: &[f64],
+    model_avar: &[f64],
+    cov: Option<&DMatrix<f64>>,
+) -> (Vec<f64>, f64) {
+    let z: Vec<f64> = dev
+        .zip(model_avar)
+        .zip(edf)
+        .map(|((d, &m), &nu)| z_score(d, nu, m.max(0.0).sqrt()))
+        .collect();
+    let t = match cov {
+        Some(c) => correlated_chi2(&z, c),
+        None => z.iter().map(|v| v * v).sum::<f64>() / CORRELATION_INFLATION,
+    };
+    (z, t)
+}
