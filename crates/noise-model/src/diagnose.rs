@@ -217,7 +217,7 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
                 if e.kind() == crate::effect::Kind::Signal {
                     "a non-stationary"
                 } else {
-                    "a"
+                    "an"
                 },
                 if c.edit.remove.is_empty() {
                     format!(" ({e})")
