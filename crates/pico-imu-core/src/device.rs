@@ -32,12 +32,10 @@ pub struct Device {
     pub(crate) tables_ms: u32,
     pub counters: Counters,
     state: [SensorState; 2],
-    /// The sensors' sample periods from their clocks as the samples carry them ([`Fine`]; 0:
-    /// none yet), converted to ns only for a report: the per-message path does no 64-bit
-    /// multiply.
+    /// The sensors' sample periods from their clocks, [`Fine`] (0: not known yet): as the
+    /// latest samples carry them, or the latest report gives them. Converted to ns only for a
+    /// report, so the per-message path does no 64-bit multiply.
     period: [Fine; 2],
-    /// The periods the sensor services last reported, ns (0: not known yet).
-    period_ns: [u32; 2],
     pub(crate) firmware: &'static str,
 }
 
@@ -58,7 +56,6 @@ impl Device {
             counters: Counters::default(),
             state: [SensorState::Unknown; 2],
             period: [0; 2],
-            period_ns: [0; 2],
             firmware,
         }
     }
@@ -141,9 +138,9 @@ impl Device {
         let i = r.sensor as usize;
         self.state[i] = r.state;
         if r.period_ns != 0 {
-            self.period_ns[i] = r.period_ns;
-            // The report is newer than the last samples' period.
-            self.period[i] = 0;
+            // Exact back through `period_ns` (the ns → Fine rounding loses less than 1/1000 of
+            // a Fine unit per ns).
+            self.period[i] = u64::from(r.period_ns) * crate::clock::US / 1000;
         }
         if let Some(e) = r.event {
             self.send(&DeviceMsg::Event(e), sink);
@@ -167,6 +164,7 @@ impl Device {
     /// Counters and health now.
     pub fn status(&self, uptime_us: u64, cpu_load_permille: u16) -> Status {
         let p = &self.pipeline;
+        let periods = self.periods_ns();
         let s = p.scales;
         let n = &p.counts;
         Status {
@@ -187,8 +185,8 @@ impl Device {
                 .map(|t| ((f32::from(t) * s.temp + s.temp_offset) * 1000.0) as i32),
             imu: self.state[0],
             mag: self.state[1],
-            imu_period_ns: self.periods_ns()[0],
-            mag_period_ns: self.periods_ns()[1],
+            imu_period_ns: periods[0],
+            mag_period_ns: periods[1],
             cal: self.cal_status,
             mode: p.mode,
         }
@@ -205,12 +203,9 @@ impl Device {
         self.outbox.send(&DeviceMsgRef::Status(&st), sink)
     }
 
-    /// Each sensor's period, ns: from its latest samples, or its latest report when newer.
+    /// Each sensor's period, ns (0: not known yet).
     fn periods_ns(&self) -> [u32; 2] {
-        [0, 1].map(|i| match self.period[i] {
-            0 => self.period_ns[i],
-            p => period_ns(p),
-        })
+        self.period.map(period_ns)
     }
 
     /// Whether the magnetometer is delivering samples (table work is then scheduled right
@@ -259,4 +254,21 @@ impl Device {
 /// A [`Fine`] period in ns.
 fn period_ns(p: Fine) -> u32 {
     ((p * 1000 + (crate::clock::US >> 1)) >> crate::clock::FINE_BITS) as u32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reported period stored in Fine units reads back as the same ns.
+    #[test]
+    fn reported_periods_round_trip_through_fine_units() {
+        for ns in (1..=20_000_000u32).step_by(997) {
+            assert_eq!(
+                period_ns(u64::from(ns) * crate::clock::US / 1000),
+                ns,
+                "{ns}"
+            );
+        }
+    }
 }

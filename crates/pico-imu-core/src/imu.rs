@@ -202,13 +202,8 @@ impl ImuService {
             };
             let start = cx.dev.bus().last_start();
             let tau = self.core.answered(start, clock::READ_SECOND_BIT);
-            let timely = self.core.latch_if_timely(
-                start,
-                clock::READ_SECOND_BIT,
-                clock::read_bits(2),
-                read_at,
-            );
-            if timely.is_none() && held < HELD_REREADS {
+            let held_read = self.core.held(start, clock::read_bits(2), read_at);
+            if held_read && held < HELD_REREADS {
                 // When this count was latched is not known (the bus was held): it says nothing
                 // about the clock, and would pass for stale. Read it again.
                 held += 1;
@@ -223,22 +218,21 @@ impl ImuService {
             }
             let frames = frames_in(count);
             // Sample `next_k + frames − 1` was produced by the latch, `next_k + frames` not.
-            if frames > 0 || !self.core.fresh {
-                let newest = self
-                    .core
-                    .next_k
-                    .wrapping_add(u32::from(frames))
-                    .wrapping_sub(1);
-                // A count that crossed 255 between its two bytes is not trusted for timing.
-                if count < 256 {
-                    // A sample later than the clock allows, with frames flowing, is a phase to
-                    // correct only if the read before saw the same: a stall that began right
-                    // after the frames of this read looks the same once, and then the next read
-                    // finds none.
-                    let trust = frames > 0 && self.late_before;
-                    let fit = self.core.clock.observe(tau, newest, true, trust);
-                    self.late_before = frames > 0 && fit == Fit::Late;
-                }
+            let newest = self
+                .core
+                .next_k
+                .wrapping_add(u32::from(frames))
+                .wrapping_sub(1);
+            // A count that crossed 255 between its two bytes, or one the bus held, is not
+            // trusted for timing.
+            if (frames > 0 || !self.core.fresh) && count < 256 && !held_read {
+                // A sample later than the clock allows, with frames flowing, is a phase to
+                // correct only if the read before saw the same: a stall that began right after
+                // the frames of this read looks the same once, and then the next read finds
+                // none.
+                let trust = frames > 0 && self.late_before;
+                let fit = self.core.clock.observe(tau, newest, true, trust);
+                self.late_before = frames > 0 && fit == Fit::Late;
             }
             if frames == 0 {
                 self.core.no_data(read_at, cx.out);
@@ -246,7 +240,6 @@ impl ImuService {
             }
             // The part last produced when its newest frame was sampled (a stall is timed from
             // there, not from this read, which may come up to a burst later).
-            let newest = self.core.next_k.wrapping_add(u32::from(frames) - 1);
             self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
             if self.core.phase == Phase::Stalled {
                 // Data again after a stall: the frames' slots are not known by counting (the

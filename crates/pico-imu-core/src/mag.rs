@@ -196,10 +196,7 @@ impl MagService {
             let start = cx.dev.bus().last_start();
             let tau = self.core.answered(start, clock::READ_FIRST_BIT);
             // A status read the bus held says nothing about when the sample landed.
-            let timely = self
-                .core
-                .latch_if_timely(start, clock::READ_FIRST_BIT, clock::read_bits(1), t)
-                .is_some();
+            let timely = !self.core.held(start, clock::read_bits(1), t);
             if !status.ready {
                 if timely && !self.core.fresh {
                     // Sample `next_k` not yet landed: a lower bound, unless the part stalled.
@@ -244,16 +241,12 @@ impl MagService {
             let end = (cx.now)();
             let start = cx.dev.bus().last_start();
             // A data read the bus held moved its bytes at its end, not its start.
-            let t_data = self
-                .core
-                .latch_if_timely(start, clock::READ_FIRST_BIT, clock::read_bits(6), end)
-                .unwrap_or_else(|| {
-                    fine(end)
-                        - self
-                            .core
-                            .timing
-                            .duration(clock::read_bits(6) - clock::READ_FIRST_BIT)
-                });
+            let t_data = if self.core.held(start, clock::read_bits(6), end) {
+                let after = clock::read_bits(6) - clock::READ_FIRST_BIT;
+                fine(end) - self.core.timing.duration(after)
+            } else {
+                self.core.timing.latch(start, clock::READ_FIRST_BIT)
+            };
             // The slot read. DOR clear: one sample landed since the last read, the next one due,
             // unless the clock says the grid has moved on past it (a part that produced nothing
             // for a while). DOR set (samples overwritten unread): the newest landed before the

@@ -97,13 +97,12 @@ impl Core {
         self.timing.latch(start, bit)
     }
 
-    /// The instant a transfer that started at `start` latched its byte at `bit`, if known. A
-    /// transfer of `bits` SCL periods seen done at `end_us` more than [`HELD_MARGIN`] after it
-    /// should have ended was held on the bus (a START that could not be sent while a slave held
-    /// SDA, a slave stretching SCL): when its bytes moved is not known.
-    pub fn latch_if_timely(&self, start: Fine, bit: u64, bits: u64, end_us: u64) -> Option<Fine> {
-        let took = fine(end_us).wrapping_sub(start);
-        (took <= self.timing.duration(bits) + HELD_MARGIN).then(|| self.timing.latch(start, bit))
+    /// Whether a transfer of `bits` SCL periods that started at `start`, seen done at `end_us`,
+    /// was held on the bus: it took more than [`HELD_MARGIN`] beyond its bits (a START that could
+    /// not be sent while a slave held SDA, a slave stretching SCL), so when its bytes moved is not
+    /// known from its start.
+    pub fn held(&self, start: Fine, bits: u64, end_us: u64) -> bool {
+        fine(end_us).wrapping_sub(start) > self.timing.duration(bits) + HELD_MARGIN
     }
 
     /// A transfer failed at `t` (`failure`: what the bus said): counted; a bus fault asks for a
