@@ -9,21 +9,17 @@
 //! from what the controller reports.
 use core::future::Future;
 use core::pin::Pin;
-use core::sync::atomic::Ordering;
 use core::task::{Context, Poll};
 use embassy_rp::gpio::{Level, OutputOpenDrain};
 use embassy_rp::i2c::{self, AbortReason, I2c};
-use embassy_rp::interrupt::typelevel::{Binding, Handler, TIMER_IRQ_1};
-use embassy_rp::interrupt::InterruptExt;
-use embassy_rp::pac;
 use embassy_rp::peripherals::{I2C0, PIN_4, PIN_5};
 use embassy_sync::blocking_mutex::raw::NoopRawMutex;
 use embassy_sync::mutex::Mutex;
 use embassy_time::{Duration, Instant};
 use embedded_hal_async::i2c::{ErrorType, I2c as AsyncI2c, Operation};
 
+use crate::alarm;
 use crate::i2c_dma::I2cDma;
-use crate::shared::{DEADLINE_PASSED, DEADLINE_WAKER};
 use pico_imu_core::bus::TransferTime;
 use pico_imu_core::clock::{fine, Fine};
 
@@ -216,44 +212,15 @@ impl AsyncI2c for BusDevice {
     }
 }
 
-/// TIMER alarm used for the transaction deadline; embassy-rp's time driver uses alarm 0 only.
-/// One alarm serves both sensors' devices: transactions hold the bus mutex, so one runs at a time.
-const DEADLINE_ALARM: usize = 1;
-// The deadline is programmed into a TIMER alarm in embassy-time ticks: they must be the TIMER's µs.
-const _: () = assert!(embassy_time::TICK_HZ == 1_000_000);
-
-/// TIMER_IRQ_1: a transaction's deadline passed; wake its task, which abandons it.
-pub struct DeadlineHandler;
-
-impl Handler<TIMER_IRQ_1> for DeadlineHandler {
-    unsafe fn on_interrupt() {
-        pac::TIMER
-            .intr()
-            .write(|w| w.set_alarm(DEADLINE_ALARM, true));
-        DEADLINE_PASSED.store(true, Ordering::Relaxed);
-        DEADLINE_WAKER.wake();
-    }
-}
-
-/// Enable the deadline alarm's interrupt (once, at boot; `DeadlineHandler` must be bound).
-pub fn init_deadline_alarm(_irqs: impl Binding<TIMER_IRQ_1, DeadlineHandler>) {
-    pac::TIMER
-        .inte()
-        .modify(|w| w.set_alarm(DEADLINE_ALARM, true));
-    embassy_rp::interrupt::TIMER_IRQ_1.unpend();
-    // SAFETY: its handler (`DeadlineHandler`) only clears the alarm and wakes a waker.
-    unsafe { embassy_rp::interrupt::TIMER_IRQ_1.enable() };
-}
-
 /// `fut`, abandoned (`None`) once `deadline` has passed: a cheap `embassy_time::with_timeout`.
 ///
 /// `with_timeout` polls a `Timer` on every poll, and each poll re-registers the task with
 /// embassy's timer queue, which walks the queue and re-arms the time driver's alarm; even one
 /// registration per transaction cost ≈ 550 cycles (emulator). Here the deadline goes straight
-/// into TIMER alarm 1 on the first poll (one register write); its interrupt sets
-/// `DEADLINE_PASSED` and wakes the task, and later polls only look at that flag. The alarm is
-/// disarmed when the future ends or is dropped (a wake that races with the end is a harmless
-/// extra poll of that task; the flag is cleared again when the next transaction arms the alarm).
+/// into its own TIMER alarm ([`alarm::DEADLINE`]) on the first poll; its interrupt flags it and
+/// wakes the task, and later polls only look at that flag. The alarm is disarmed when the future
+/// ends or is dropped (a wake that races with the end is a harmless extra poll of that task; the
+/// flag is cleared again when the next transaction arms the alarm).
 struct Deadline<'a, F> {
     fut: Pin<&'a mut F>,
     deadline: Instant,
@@ -271,9 +238,7 @@ impl<'a, F> Deadline<'a, F> {
 
     fn disarm(&mut self) {
         if self.armed {
-            pac::TIMER
-                .armed()
-                .write(|w| w.set_armed(1 << DEADLINE_ALARM));
+            alarm::DEADLINE.disarm();
             self.armed = false;
         }
     }
@@ -295,18 +260,14 @@ impl<F: Future> Future for Deadline<'_, F> {
             return Poll::Ready(Some(r));
         }
         if this.armed {
-            if DEADLINE_PASSED.load(Ordering::Relaxed) {
+            if alarm::DEADLINE.fired() {
                 this.disarm();
                 return Poll::Ready(None);
             }
-        } else {
-            DEADLINE_WAKER.register(cx.waker());
-            DEADLINE_PASSED.store(false, Ordering::Relaxed);
-            // The alarm fires when the low 32 bits of the µs counter equal the value.
-            pac::TIMER
-                .alarm(DEADLINE_ALARM)
-                .write_value(this.deadline.as_ticks() as u32);
+        } else if alarm::DEADLINE.arm(this.deadline, cx.waker()) {
             this.armed = true;
+        } else {
+            return Poll::Ready(None);
         }
         Poll::Pending
     }

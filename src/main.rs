@@ -16,6 +16,7 @@
 #![no_std]
 #![no_main]
 
+mod alarm;
 mod bus;
 mod cpu;
 mod i2c_dma;
@@ -59,7 +60,9 @@ use crate::bus::{BusDevice, SharedBus};
 bind_interrupts!(struct Irqs {
     I2C0_IRQ => i2c::InterruptHandler<I2C0>, i2c_dma::I2cAbortHandler;
     DMA_IRQ_0 => i2c_dma::DmaDoneHandler;
-    TIMER_IRQ_1 => bus::DeadlineHandler;
+    TIMER_IRQ_1 => alarm::AlarmHandler;
+    TIMER_IRQ_2 => alarm::AlarmHandler;
+    TIMER_IRQ_3 => alarm::AlarmHandler;
     USBCTRL_IRQ => usb::InterruptHandler<USB>;
 });
 
@@ -86,8 +89,8 @@ unsafe fn make_i2c(config: i2c::Config) -> I2c<'static, I2C0, i2c::Async> {
 /// magnetometer read never queues behind it. The magnetometer task ticks every 5 ms also while
 /// its sensor is missing; only if it stops ticking (a flash-write pause, a transfer running into
 /// its 25 ms deadline) does a burst come this long after the previous one, well within the
-/// FIFO's 73 ms. (A short fallback costs a spurious wake-up per burst: a timer that lost the
-/// race stays in embassy's timer queue and wakes the task when it expires.)
+/// FIFO's 73 ms. (The fallback waits on a TIMER alarm of its own, `alarm::IMU_FALLBACK`,
+/// disarmed when the signal wins: no timer is left behind to wake the task later.)
 const IMU_FALLBACK_US: u64 = 50_000;
 /// Until the magnetometer service knows the sensor's phase (at boot, while it is out), its ticks
 /// come on a 5 ms grid, 2.75 ms past whole multiples.
@@ -210,7 +213,7 @@ async fn main(spawner: Spawner) {
     // The bus re-creates the controller from the stolen peripherals (`make_i2c`): these are
     // not used again.
     let _ = (p.I2C0, p.PIN_4, p.PIN_5);
-    bus::init_deadline_alarm(Irqs);
+    alarm::init(Irqs);
     let dma = i2c_dma::I2cDma::new(p.DMA_CH0, p.DMA_CH1, Irqs);
     let bus: &'static SharedBus = BUS.init(Mutex::new(bus::Bus::new(make_i2c, dma, i2c_config)));
 
@@ -381,7 +384,7 @@ async fn imu_task(
         // 64-bit division to get there.
         let fallback = Instant::from_micros((last_us + IMU_FALLBACK_US) | 1);
         // Either result starts a burst.
-        let _ = select(mag_read.wait(), Timer::at(fallback)).await;
+        let _ = select(mag_read.wait(), alarm::IMU_FALLBACK.wait_until(fallback)).await;
         last_us = now_us();
         let msgs = out.send().await;
         msgs.clear();
@@ -427,7 +430,7 @@ async fn mag_task(
             Some(t) => Instant::from_micros(t),
             None => Instant::from_micros(slots.next_after(now_us())),
         };
-        Timer::at(at).await;
+        alarm::MAG_TICK.wait_until(at).await;
         // Two ticks' messages share a slot, so the processing task wakes once per 10 ms for the
         // magnetometer: the slot stays ours until `send_done`.
         let msgs = out.send().await;

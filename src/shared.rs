@@ -13,10 +13,10 @@ pub static CPU_SINCE: AtomicU32 = AtomicU32::new(0);
 /// `crate::cpu`: busy µs, wrapping.
 pub static CPU_BUSY: AtomicU32 = AtomicU32::new(0);
 
-/// `crate::bus`: the task whose transaction has a deadline armed.
-pub static DEADLINE_WAKER: AtomicWaker = AtomicWaker::new();
-/// `crate::bus`: set by the deadline alarm's interrupt, cleared when the alarm is armed.
-pub static DEADLINE_PASSED: AtomicBool = AtomicBool::new(false);
+/// `crate::alarm`: the task waiting on each TIMER alarm (index = alarm; 0 is embassy's).
+pub static ALARM_WAKERS: [AtomicWaker; 4] = [const { AtomicWaker::new() }; 4];
+/// `crate::alarm`: set by an alarm's interrupt, cleared when the alarm is armed.
+pub static ALARM_FIRED: [AtomicBool; 4] = [const { AtomicBool::new(false) }; 4];
 
 /// `crate::i2c_dma`: the task whose DMA transfer is in flight.
 pub static DMA_WAKER: AtomicWaker = AtomicWaker::new();

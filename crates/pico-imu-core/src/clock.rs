@@ -90,14 +90,9 @@ impl BusTiming {
         start + self.duration(bits)
     }
 
-    /// `bits` SCL periods, [`Fine`]. A 32-bit multiply whenever it fits (any bus of 62.5 kHz or
-    /// more and a transfer under 2,048 bits): a 64-bit one is a library call on the M0+.
+    /// `bits` SCL periods, [`Fine`].
     pub const fn duration(&self, bits: u64) -> Fine {
-        if self.bit >> 20 == 0 && bits >> 11 == 0 {
-            ((bits as u32) * (self.bit as u32)) as u64
-        } else {
-            bits * self.bit
-        }
+        mul(bits, self.bit)
     }
 }
 
@@ -111,6 +106,42 @@ pub const READ_SECOND_BIT: u64 = 38;
 /// SCL periods of a whole register read of `n` bytes, to its STOP.
 pub const fn read_bits(n: u64) -> u64 {
     READ_FIRST_BIT + 9 * n
+}
+
+/// `a · b` (wrapping). Operands below 2^32 — the clock's periods, indices and spans — take
+/// four 16 × 16-bit products: the Cortex-M0+ has no 32 × 32 → 64-bit multiply, and a 64-bit
+/// product is a library call (≈ 55 cycles, emulated).
+#[inline]
+pub(crate) const fn mul(a: u64, b: u64) -> u64 {
+    if (a | b) >> 32 != 0 {
+        return mul_full(a, b);
+    }
+    let (a, b) = (a as u32, b as u32);
+    let (al, ah) = (a & 0xffff, a >> 16);
+    let (bl, bh) = (b & 0xffff, b >> 16);
+    let mid = (al * bh) as u64 + (ah * bl) as u64;
+    ((al * bl) as u64)
+        .wrapping_add(mid << 16)
+        .wrapping_add(((ah * bh) as u64) << 32)
+}
+
+/// [`mul`]'s rare path, out of line: inline, the compiler computes the library call's product
+/// on every path and then picks one.
+#[cold]
+#[inline(never)]
+const fn mul_full(a: u64, b: u64) -> u64 {
+    a.wrapping_mul(b)
+}
+
+/// `d · p` for a signed `d` (wrapping), by [`mul`].
+#[inline]
+const fn mul_signed(d: i64, p: u64) -> u64 {
+    let m = mul(d.unsigned_abs(), p);
+    if d < 0 {
+        m.wrapping_neg()
+    } else {
+        m
+    }
 }
 
 /// `n / p` (`p > 0`). The clock divides times up to a few dozen periods apart by a period, so
@@ -137,7 +168,7 @@ fn quot(n: u64, p: u64) -> u64 {
 /// `ceil(n / p)` (`p > 0`).
 fn quot_ceil(n: u64, p: u64) -> u64 {
     let q = quot(n, p);
-    if q.wrapping_mul(p) == n {
+    if mul(q, p) == n {
         q
     } else {
         q + 1
@@ -169,7 +200,7 @@ impl Stamps {
     /// Time of sample `k0 + i`, whole µs.
     #[inline]
     pub fn us(&self, i: u32) -> u64 {
-        whole_us(self.t0 + u64::from(i) * self.period)
+        whole_us(self.t0 + mul(u64::from(i), self.period))
     }
 
     /// The stamps of samples `k0 + i`, `k0 + i + 1`, … in whole µs, one addition each.
@@ -282,7 +313,7 @@ impl SampleClock {
     /// Predicted time of sample `k`, [`Fine`].
     pub fn time(&self, k: u32) -> Fine {
         let d = i64::from(k.wrapping_sub(self.k_at) as i32);
-        self.t_at.wrapping_add((d * self.period as i64) as u64)
+        self.t_at.wrapping_add(mul_signed(d, self.period))
     }
 
     /// The part's sample clock (re)started so that its first sample, index `k`, comes at about
@@ -334,7 +365,7 @@ impl SampleClock {
         }
         // The drift the period's uncertainty allows since the last observation.
         let gap = u64::from((newest.wrapping_sub(self.last_k) as i32).unsigned_abs()).min(1 << 20);
-        let relax = (gap * self.period_err) as i64;
+        let relax = mul(gap, self.period_err) as i64;
         self.rebase(newest);
         let mut lo = self.lo - relax;
         let mut hi = self.hi + relax;
@@ -464,10 +495,10 @@ impl SampleClock {
         let base = self.t_at.wrapping_add(offset as u64);
         if earliest <= base {
             let back = quot(base - earliest, p);
-            return base - back * p;
+            return base - mul(back, p);
         }
         let ahead = quot_ceil(earliest - base, p);
-        base + ahead * p
+        base + mul(ahead, p)
     }
 
     /// A time ≥ `earliest` halfway between two predicted sample instants: a write that must not
@@ -515,7 +546,7 @@ impl SampleClock {
         }
         let period = self.period;
         if n > 0 {
-            self.issued = Some(t0 + u64::from(n - 1) * period);
+            self.issued = Some(t0 + mul(u64::from(n - 1), period));
         }
         Stamps { k0, t0, period }
     }
@@ -524,6 +555,37 @@ impl SampleClock {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn products_by_halves_equal_multiplication() {
+        let mut x = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let edges = [0, 1, 0xffff, 0x1_0000, 0xffff_ffff, 0x1_0000_0000, u64::MAX];
+        for &a in &edges {
+            for &b in &edges {
+                assert_eq!(mul(a, b), a.wrapping_mul(b), "{a} · {b}");
+            }
+        }
+        for i in 0..100_000 {
+            let (a, b) = match i % 3 {
+                0 => (next() >> 32, next() >> 32),
+                1 => (next() >> 48, next() >> 33),
+                _ => (next(), next() >> 40),
+            };
+            assert_eq!(mul(a, b), a.wrapping_mul(b), "{a} · {b}");
+            let d = (next() >> 33) as i64 - (1 << 30);
+            assert_eq!(
+                mul_signed(d, b),
+                (d.wrapping_mul(b as i64)) as u64,
+                "{d} · {b}"
+            );
+        }
+    }
 
     #[test]
     fn quotients_by_subtraction_equal_division() {

@@ -378,7 +378,7 @@ fn frames_in(count: u16) -> u16 {
 /// such an overflow, and the frames read after it would be misaligned. The FIFO gains at most
 /// one frame per 512 µs (1 kHz with margin for the part's clock) plus one in progress.
 pub fn count_may_be_stale(count: u16, dt_us: u64, capacity: u16) -> bool {
-    u64::from(count) + u64::from(FRAME) * ((dt_us >> 9) + 1) >= u64::from(capacity)
+    u64::from(count) + clock::mul(u64::from(FRAME), (dt_us >> 9) + 1) >= u64::from(capacity)
 }
 
 #[cfg(test)]
