@@ -90,9 +90,14 @@ impl BusTiming {
         start + self.duration(bits)
     }
 
-    /// `bits` SCL periods, [`Fine`].
+    /// `bits` SCL periods, [`Fine`]: one 32-bit multiply whenever the product fits (any bus of
+    /// 62.5 kHz or more and a transfer under 2,048 bits).
     pub const fn duration(&self, bits: u64) -> Fine {
-        mul(bits, self.bit)
+        if self.bit >> 20 == 0 && bits >> 11 == 0 {
+            ((bits as u32) * (self.bit as u32)) as u64
+        } else {
+            mul(bits, self.bit)
+        }
     }
 }
 
