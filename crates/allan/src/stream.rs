@@ -49,7 +49,7 @@ mod sum;
 #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
 mod thumb;
 
-pub use levels::LevelSums;
+pub use levels::{Frozen, LevelSums};
 #[doc(hidden)]
 pub use steady::ThumbTaken;
 use sum::Sum128;
@@ -334,6 +334,44 @@ fn words<T: Words>(s: &[T]) -> &[u32] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_frozen_engine_keeps_its_levels_samples_and_gaps() {
+        let mut e = MagEngine::new();
+        let mut x = 0x1234_5678u32;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            (x % 4001) as i32 - 2000
+        };
+        for i in 0..5000 {
+            if i == 1700 {
+                e.gap();
+            }
+            e.push(next());
+        }
+        let mut wide = Frozen::<8, 24>::EMPTY;
+        let mut narrow = Frozen::<8, 4>::EMPTY;
+        e.freeze(&mut wide);
+        e.freeze(&mut narrow);
+        let levels: std::vec::Vec<_> = e.levels().collect();
+        let (samples, gaps) = (e.samples(), e.gaps());
+        // The engine goes on; the frozen copies do not.
+        for _ in 0..3000 {
+            e.push(next());
+        }
+        assert_eq!((wide.samples(), wide.gaps()), (samples, gaps));
+        assert_eq!((samples, gaps), (5000, 1));
+        for (k, l) in levels.iter().enumerate() {
+            assert_eq!(wide.level(k).as_ref(), Some(l), "level {k}");
+            assert_eq!(narrow.level(k).as_ref(), (k < 4).then_some(l), "level {k}");
+        }
+        assert!(levels.iter().any(|l| l.sum3 > 0 && l.n3 > 0));
+        assert_eq!(levels.len(), MAG_PARAMS[1]);
+        assert_eq!(wide.level(MAG_PARAMS[1]), None);
+        assert_ne!(e.level(3), wide.level(3));
+    }
 
     #[test]
     fn constant_rate_gives_zero_sums_and_right_counts() {

@@ -1,5 +1,5 @@
 //! The ten streaming Allan engines and their snapshots.
-use allan::stream::{DeviceEngine, LevelSums, MagEngine};
+use allan::stream::{DeviceEngine, Frozen, LevelSums, MagEngine, DEVICE_PARAMS, MAG_PARAMS};
 use imu_proto::{Channel, Sensor, MAX_LEVELS};
 
 /// Channels with an Allan engine (ax ay az gx gy gz mx my mz temp).
@@ -52,20 +52,21 @@ pub struct Engines {
 pub const ALLAN_STATE_BYTES: usize = core::mem::size_of::<Engines>();
 const _: () = assert!(ALLAN_STATE_BYTES <= 32 * 1024, "Allan state over 32 KiB");
 
-/// One channel's table as it stood at a snapshot: the engine's count, gaps and level sums.
-#[derive(Clone)]
-pub struct ChannelSnapshot {
-    pub pushed: u64,
-    pub gaps: u32,
-    pub levels: heapless::Vec<LevelSums, MAX_LEVELS>,
-}
+/// One channel's engine as it stood at a snapshot: its count, gaps and level sums, frozen (a
+/// copy of a few words per level, taken between two samples); the levels are worked out when
+/// the channel's table is sent ([`ChannelSnapshot::levels`]).
+pub type ChannelSnapshot = Frozen<{ DEVICE_PARAMS[0] }, MAX_LEVELS>;
+// Every engine freezes into the same type.
+const _: () = assert!(DEVICE_PARAMS[0] == MAG_PARAMS[0]);
+const _: () = assert!(DEVICE_PARAMS[1] <= MAX_LEVELS && MAG_PARAMS[1] <= MAX_LEVELS);
 
-impl ChannelSnapshot {
-    const EMPTY: ChannelSnapshot = ChannelSnapshot {
-        pushed: 0,
-        gaps: 0,
-        levels: heapless::Vec::new(),
-    };
+/// A snapshot's levels as a table lists them: level 0 up, ending at the first without second
+/// differences (a level has differences only if every level below it has: each needs more
+/// history than the one below).
+pub fn table_levels(s: &ChannelSnapshot) -> impl Iterator<Item = LevelSums> + '_ {
+    (0..MAX_LEVELS)
+        .map_while(|k| s.level(k))
+        .take_while(|l| l.n2 > 0)
 }
 
 /// Every channel at one instant.
@@ -76,7 +77,7 @@ pub struct Snapshot {
 impl Snapshot {
     pub const fn new() -> Self {
         Snapshot {
-            channels: [const { ChannelSnapshot::EMPTY }; CHANNELS],
+            channels: [ChannelSnapshot::EMPTY; CHANNELS],
         }
     }
 }
@@ -175,46 +176,18 @@ impl Engines {
         }
     }
 
-    /// (samples pushed, gaps) and the level sums of one channel.
-    fn channel(&self, ch: Channel) -> (u64, u32, impl Iterator<Item = LevelSums> + '_) {
-        enum E<'a> {
-            Imu(&'a DeviceEngine),
-            Mag(&'a MagEngine),
-        }
-        let e = match ch {
-            Channel::Mx => E::Mag(&self.mag[0]),
-            Channel::My => E::Mag(&self.mag[1]),
-            Channel::Mz => E::Mag(&self.mag[2]),
-            _ => {
-                let i = IMU_CHANNELS.iter().position(|c| *c == ch).unwrap_or(0);
-                E::Imu(&self.imu[i])
-            }
-        };
-        let (pushed, gaps) = match &e {
-            E::Imu(x) => (x.samples(), x.gaps()),
-            E::Mag(x) => (x.samples(), x.gaps()),
-        };
-        let levels = (0..MAX_LEVELS)
-            .map_while(move |k| match &e {
-                E::Imu(x) => x.level(k),
-                E::Mag(x) => x.level(k),
-            })
-            // A level has differences only if every level below it has (each needs more
-            // history than the one below): the first empty level ends the table.
-            .take_while(|l| l.n2 > 0);
-        (pushed, gaps, levels)
-    }
-
-    /// Every channel's count, gaps and non-empty levels now, into `snap` (one instant: the
-    /// caller runs this between two samples).
+    /// Every channel's engine frozen now, into `snap` (one instant: the caller runs this between
+    /// two samples).
     pub fn snapshot(&self, snap: &mut Snapshot) {
         for (ch, out) in Channel::ALL.iter().zip(snap.channels.iter_mut()) {
-            let (pushed, gaps, levels) = self.channel(*ch);
-            out.pushed = pushed;
-            out.gaps = gaps;
-            out.levels.clear();
-            for l in levels {
-                let _ = out.levels.push(l);
+            match ch {
+                Channel::Mx => self.mag[0].freeze(out),
+                Channel::My => self.mag[1].freeze(out),
+                Channel::Mz => self.mag[2].freeze(out),
+                _ => {
+                    let i = IMU_CHANNELS.iter().position(|c| c == ch).unwrap_or(0);
+                    self.imu[i].freeze(out);
+                }
             }
         }
     }

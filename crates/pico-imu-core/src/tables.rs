@@ -7,7 +7,7 @@
 //! row's soft-float square roots cost ≈ 0.3 ms.
 use imu_proto::{AllanTable, Channel, Scales, Sensor, Vec};
 
-use crate::engines::{Engines, Snapshot, CHANNELS};
+use crate::engines::{table_levels, Engines, Snapshot, CHANNELS};
 use crate::outbox::{FrameSink, Outbox, Sent};
 
 /// Least time between a round's snapshot and its first table frame, and between two table
@@ -77,8 +77,9 @@ impl Tables {
         let ch = Channel::ALL[c];
         let s = &self.snapshot.channels[c];
         let mut levels = Vec::new();
-        for l in &s.levels {
-            let _ = levels.push(*l);
+        for l in table_levels(s) {
+            // At most MAX_LEVELS: never full.
+            let _ = levels.push(l);
         }
         AllanTable {
             channel: ch,
@@ -89,8 +90,8 @@ impl Tables {
                 Sensor::Mag => self.period_ns[1],
             },
             scale: scales.of(ch),
-            pushed: s.pushed,
-            gaps: s.gaps,
+            pushed: s.samples(),
+            gaps: s.gaps(),
             levels,
         }
     }
@@ -114,10 +115,7 @@ impl Tables {
             return None;
         }
         let t = self.table(c, scales);
-        if matches!(
-            outbox.send(&imu_proto::DeviceMsgRef::Table(&t), sink),
-            Sent::Dropped
-        ) {
+        if matches!(outbox.send_table(&t, sink), Sent::Dropped) {
             return None;
         }
         self.last_sent_us = Some(now_us);

@@ -3,6 +3,7 @@
 //! The counts of the current segment are not kept per sample: they follow from its length and
 //! each level's stride, and are added to the closed segments' counts here.
 
+use super::sum::Sum128;
 use super::Engine;
 
 /// Sums of one octave level: everything a deviation, its EDF and its bounds derive from.
@@ -65,56 +66,123 @@ fn terms(t: u64, span: u64, shift: u32) -> u64 {
     (t >> shift) - (span >> shift) + 1
 }
 
+/// (second, third) differences level `k` has taken in the current segment.
+///
+/// A device's table asks this of every level of every engine. The Cortex-M0+ has no
+/// divide, no count-trailing-zeros and no 64-bit shift instruction, so the stride is a shift
+/// known from `k` (1 up to m = P, then m / P, P a power of two), and a segment shorter than
+/// 2^32 samples takes 32-bit shifts.
+fn segment_terms<const P: usize>(t: u64, k: usize) -> (u64, u64) {
+    let shift = k.saturating_sub(P.trailing_zeros() as usize) as u32;
+    if t >> 32 == 0 && k < 30 {
+        let (t, m) = (t as u32, 1u32 << k);
+        let terms = |span: u32| {
+            if t < span {
+                0
+            } else {
+                u64::from((t >> shift) - (span >> shift) + 1)
+            }
+        };
+        return (terms(2 * m), terms(3 * m));
+    }
+    let m = 1u64 << k;
+    (terms(t, 2 * m, shift), terms(t, 3 * m, shift))
+}
+
+/// Level `k` from its sums and its closed segments' counts, in a segment of `t` samples.
+fn level_of<const P: usize>(k: usize, t: u64, sums: &[Sum128; 2], counts: &[u64; 2]) -> LevelSums {
+    let (n2, n3) = segment_terms::<P>(t, k);
+    LevelSums {
+        m: 1u32 << k,
+        stride: stride::<P>(k),
+        n2: counts[0] + n2,
+        sum2: sums[0].get(),
+        n3: counts[1] + n3,
+        sum3: sums[1].get(),
+    }
+}
+
+/// Stride between the differences of level `k`: 1 up to m = P, then m / P.
+fn stride<const P: usize>(k: usize) -> u32 {
+    let m = 1u32 << k;
+    if m as usize <= P {
+        1
+    } else {
+        m / P as u32
+    }
+}
+
 impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L, R, S> {
     /// (second, third) differences level `k` has taken in the current segment.
-    ///
-    /// A table snapshot asks this of every level of every engine. The Cortex-M0+ has no
-    /// divide, no count-trailing-zeros and no 64-bit shift instruction, so the stride is a shift
-    /// known from `k` (1 up to m = P, then m / P, P a power of two), and a segment shorter than
-    /// 2^32 samples takes 32-bit shifts.
     pub(super) fn segment_terms(&self, k: usize) -> (u64, u64) {
-        let shift = k.saturating_sub(P.trailing_zeros() as usize) as u32;
-        if self.t >> 32 == 0 && k < 30 {
-            let (t, m) = (self.t as u32, 1u32 << k);
-            let terms = |span: u32| {
-                if t < span {
-                    0
-                } else {
-                    u64::from((t >> shift) - (span >> shift) + 1)
-                }
-            };
-            return (terms(2 * m), terms(3 * m));
-        }
-        let m = 1u64 << k;
-        (terms(self.t, 2 * m, shift), terms(self.t, 3 * m, shift))
-    }
-
-    pub(super) fn stride(k: usize) -> u32 {
-        let m = 1u32 << k;
-        if m as usize <= P {
-            1
-        } else {
-            m / P as u32
-        }
+        segment_terms::<P>(self.t, k)
     }
 
     /// The sums of level `k` (m = 2^k), or `None` past the last level.
     pub fn level(&self, k: usize) -> Option<LevelSums> {
-        let [s2, s3] = self.sums.get(k)?;
-        let [c2, c3] = self.counts[k];
-        let (n2, n3) = self.segment_terms(k);
-        Some(LevelSums {
-            m: 1u32 << k,
-            stride: Self::stride(k),
-            n2: c2 + n2,
-            sum2: s2.get(),
-            n3: c3 + n3,
-            sum3: s3.get(),
-        })
+        Some(level_of::<P>(k, self.t, self.sums.get(k)?, &self.counts[k]))
     }
 
     /// The per-level sums, level 0 (m = 1) first.
     pub fn levels(&self) -> impl Iterator<Item = LevelSums> + '_ {
         (0..L).filter_map(|k| self.level(k))
+    }
+
+    /// Copy what the levels derive from into `out` (its first `min(L, N)` levels): a snapshot
+    /// of a few words per level, where working the [`LevelSums`] out costs 64-bit and 128-bit
+    /// arithmetic per level (a device freezes every engine between two samples and derives the
+    /// levels later, [`Frozen::level`]).
+    pub fn freeze<const N: usize>(&self, out: &mut Frozen<P, N>) {
+        let depth = L.min(N);
+        out.t = self.t;
+        out.closed = self.closed;
+        out.gaps = self.gaps;
+        out.depth = depth as u8;
+        out.sums[..depth].copy_from_slice(&self.sums[..depth]);
+        out.counts[..depth].copy_from_slice(&self.counts[..depth]);
+    }
+}
+
+/// An engine's level sums frozen at one instant ([`Engine::freeze`]): the same
+/// [`Frozen::level`]s, [`Frozen::samples`] and [`Frozen::gaps`] as the engine had then, up to
+/// `N` levels.
+#[derive(Clone, Debug)]
+pub struct Frozen<const P: usize, const N: usize> {
+    t: u64,
+    closed: u64,
+    gaps: u32,
+    /// Levels copied (the engine's, at most `N`).
+    depth: u8,
+    sums: [[Sum128; 2]; N],
+    counts: [[u64; 2]; N],
+}
+
+impl<const P: usize, const N: usize> Frozen<P, N> {
+    /// Nothing frozen yet: no samples, no levels.
+    pub const EMPTY: Self = Frozen {
+        t: 0,
+        closed: 0,
+        gaps: 0,
+        depth: 0,
+        sums: [[Sum128::ZERO; 2]; N],
+        counts: [[0; 2]; N],
+    };
+
+    /// [`Engine::samples`] when frozen.
+    pub fn samples(&self) -> u64 {
+        self.closed + self.t
+    }
+
+    /// [`Engine::gaps`] when frozen.
+    pub fn gaps(&self) -> u32 {
+        self.gaps
+    }
+
+    /// [`Engine::level`] when frozen.
+    pub fn level(&self, k: usize) -> Option<LevelSums> {
+        if k >= usize::from(self.depth) {
+            return None;
+        }
+        Some(level_of::<P>(k, self.t, &self.sums[k], &self.counts[k]))
     }
 }
