@@ -15,17 +15,8 @@
 //! # The hand-written encoder
 //!
 //! The firmware frames a [`SampleBatch`] every 32 ms. Through serde, postcard writes every
-//! varint with its own small copy into the output; this writer produces the very same bytes
-//! (postcard wire format, <https://postcard.jamesmunns.com/wire-format>) in one straight pass:
-//!
-//! * an enum variant is its index as a varint (`DeviceMsg::Samples` = 1, one byte);
-//! * a struct is its fields in declaration order, nothing around them;
-//! * `bool` is one byte 0/1, `f32` its four bytes little-endian;
-//! * `u32`/`u64`/`usize` are LEB128 varints (7 bits a byte, least significant group first, the
-//!   high bit set on every byte but the last); `i32` is zig-zag mapped first
-//!   (`(n << 1) ^ (n >> 31)`);
-//! * a `heapless::Vec` is its length (varint) followed by its elements; an array (`[i32; 3]`) is
-//!   its elements alone.
+//! varint with its own small copy into the output; this writer produces the very same bytes in
+//! one straight pass (`crate::wire`, which lists the rules of postcard's wire format).
 //!
 //! The proptests in `tests/batch.rs` check the bytes against the serde path for arbitrary
 //! batches, extreme values included.
@@ -35,6 +26,7 @@ use core::marker::PhantomData;
 use serde::de::{self, Deserialize, Deserializer, SeqAccess, Visitor};
 use serde::ser::{Serialize, SerializeSeq, SerializeTuple, Serializer};
 
+use crate::wire::Cursor;
 use crate::{
     ImuSample, MagSample, SampleBatch, Scales, Vec, IMU_PERIOD_US, MAG_PERIOD_US, MAX_BATCH_IMU,
     MAX_BATCH_MAG,
@@ -213,82 +205,7 @@ const MAG_SAMPLE_MAX: usize = 5 + 10 + 3 * 5;
 pub(crate) const MAX_SAMPLES_POSTCARD: usize =
     1 + 1 + 5 * 4 + 1 + MAX_BATCH_IMU * IMU_SAMPLE_MAX + 1 + MAX_BATCH_MAG * MAG_SAMPLE_MAX;
 
-/// Output cursor. `CHECKED`: a byte past the end of `buf` is not stored, but still counted, so
-/// a buffer that was too small shows as `pos > buf.len()` at the end (no check can panic).
-/// Unchecked: the caller has made sure `buf` holds the longest encoding of what it writes
-/// ([`write`] checks the bound of the batch first), so no byte can fall past the end and none is
-/// compared (≈ 70 cycles per sample set less on the M0+, `cargo xtask bench-emu`).
-struct Cursor<'a, const CHECKED: bool> {
-    buf: &'a mut [u8],
-    pos: usize,
-}
-
 impl<const CHECKED: bool> Cursor<'_, CHECKED> {
-    #[inline(always)]
-    fn byte(&mut self, b: u8) {
-        if CHECKED {
-            if let Some(slot) = self.buf.get_mut(self.pos) {
-                *slot = b;
-            }
-        } else {
-            debug_assert!(self.pos < self.buf.len());
-            // SAFETY: unchecked cursors are only made by `write` for a batch whose longest
-            // encoding (`bound`, exact: see the test below) fits `buf`, and every byte written
-            // is part of that encoding, so `pos < buf.len()` here.
-            unsafe { *self.buf.get_unchecked_mut(self.pos) = b };
-        }
-        self.pos += 1;
-    }
-
-    #[inline(always)]
-    fn varint(&mut self, mut v: u32) {
-        while v >= 0x80 {
-            self.byte(v as u8 | 0x80);
-            v >>= 7;
-        }
-        self.byte(v as u8);
-    }
-
-    /// A `u64` varint with 32-bit arithmetic wherever the value allows (the M0+ has no 64-bit
-    /// shifts); the common case (below 2^32 µs, 71 minutes of uptime) inline.
-    #[inline(always)]
-    fn varint_u64(&mut self, v: u64) {
-        match u32::try_from(v) {
-            Ok(small) => self.varint(small),
-            Err(_) => self.varint_u64_long(v),
-        }
-    }
-
-    /// `v` ≥ 2^32: the low 28 bits make the first four bytes, all with the high bit set.
-    #[inline(never)]
-    fn varint_u64_long(&mut self, v: u64) {
-        let lo = v as u32;
-        self.byte(lo as u8 | 0x80);
-        self.byte((lo >> 7) as u8 | 0x80);
-        self.byte((lo >> 14) as u8 | 0x80);
-        self.byte((lo >> 21) as u8 | 0x80);
-        let mut rest = v >> 28;
-        if let Ok(small) = u32::try_from(rest) {
-            return self.varint(small);
-        }
-        while rest >= 0x80 {
-            self.byte(rest as u8 | 0x80);
-            rest >>= 7;
-        }
-        self.byte(rest as u8);
-    }
-
-    #[inline(always)]
-    fn zigzag(&mut self, n: i32) {
-        self.varint(((n << 1) ^ (n >> 31)) as u32);
-    }
-
-    fn f32(&mut self, x: f32) {
-        for b in x.to_le_bytes() {
-            self.byte(b);
-        }
-    }
-
     fn scales(&mut self, s: &Scales) {
         self.f32(s.accel);
         self.f32(s.gyro);

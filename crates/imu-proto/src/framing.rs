@@ -2,7 +2,7 @@
 //! device uses and the reader both sides use.
 use serde::{de::DeserializeOwned, Serialize};
 
-use crate::{batch, SampleBatch};
+use crate::{batch, table, AllanTable, SampleBatch};
 
 /// Wire-format version carried in the first byte of every frame.
 pub const PROTOCOL_VERSION: u8 = 4;
@@ -281,6 +281,20 @@ impl FrameEncoder {
     ) -> Result<usize, EncodeError> {
         self.scratch[0] = PROTOCOL_VERSION;
         let body = batch::write(batch, &mut self.scratch[1..MAX_PAYLOAD - 4])
+            .ok_or(EncodeError::TooLarge)?;
+        frame(&self.scratch[..1 + body], out)
+    }
+
+    /// Encode `DeviceMsg::Table(table)` as one frame into `out`, byte for byte what
+    /// [`FrameEncoder::encode`] writes for it (tested), without serde: the firmware's table
+    /// path (`table.rs` writes the postcard bytes).
+    pub fn encode_table(
+        &mut self,
+        table: &AllanTable,
+        out: &mut [u8],
+    ) -> Result<usize, EncodeError> {
+        self.scratch[0] = PROTOCOL_VERSION;
+        let body = table::write(table, &mut self.scratch[1..MAX_PAYLOAD - 4])
             .ok_or(EncodeError::TooLarge)?;
         frame(&self.scratch[..1 + body], out)
     }

@@ -28,6 +28,8 @@ mod contract;
 pub mod csv;
 mod framing;
 mod messages;
+mod table;
+mod wire;
 
 pub use contract::*;
 pub use framing::*;

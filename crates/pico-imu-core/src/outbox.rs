@@ -1,6 +1,6 @@
 //! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
 //! split and never waited for, so a host that stops reading cannot stall the sampling path.
-use imu_proto::{EncodeError, FrameEncoder, SampleBatch, MAX_FRAME};
+use imu_proto::{AllanTable, EncodeError, FrameEncoder, SampleBatch, MAX_FRAME};
 use serde::Serialize;
 
 /// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
@@ -64,6 +64,13 @@ impl Outbox {
     /// as [`Outbox::send`], a fraction of the cycles) and queue it if it fits whole.
     pub fn send_samples(&mut self, batch: &SampleBatch, sink: &mut impl FrameSink) -> Sent {
         let encoded = self.enc.encode_samples(batch, &mut self.buf.0[..MAX_FRAME]);
+        self.queue(encoded, sink)
+    }
+
+    /// Encode `DeviceMsg::Table(table)` with the hand-written table encoder (the same bytes as
+    /// [`Outbox::send`]) and queue it if it fits whole.
+    pub fn send_table(&mut self, table: &AllanTable, sink: &mut impl FrameSink) -> Sent {
+        let encoded = self.enc.encode_table(table, &mut self.buf.0[..MAX_FRAME]);
         self.queue(encoded, sink)
     }
 

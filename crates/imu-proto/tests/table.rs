@@ -1,0 +1,132 @@
+//! The hand-written Allan-table encoder (`FrameEncoder::encode_table`) against the serde path
+//! (`FrameEncoder::encode(&DeviceMsg::Table(..))`): the same bytes for any table, extreme and
+//! varint-boundary values included, and frames the host decoder reads back.
+use imu_proto::*;
+use proptest::prelude::*;
+
+fn frame_of(t: &AllanTable, direct: bool) -> Result<std::vec::Vec<u8>, EncodeError> {
+    let mut out = std::vec![0u8; MAX_FRAME];
+    let mut enc = FrameEncoder::new();
+    let n = if direct {
+        enc.encode_table(t, &mut out)?
+    } else {
+        enc.encode(&DeviceMsg::Table(t.clone()), &mut out)?
+    };
+    out.truncate(n);
+    Ok(out)
+}
+
+/// Unsigned values of `bits` bits weighted towards the varint boundaries and the extremes.
+fn arb_bits(bits: u32) -> impl Strategy<Value = u128> {
+    let max = if bits == 128 {
+        u128::MAX
+    } else {
+        (1u128 << bits) - 1
+    };
+    prop_oneof![
+        any::<u128>().prop_map(move |v| v & max),
+        Just(max),
+        Just(0u128),
+        (0..bits).prop_map(|k| 1u128 << k),
+        (1..bits).prop_map(|k| (1u128 << k) - 1),
+        (0..bits).prop_flat_map(move |k| (0u128..=(1 << 20)).prop_map(move |v| v << k & max)),
+    ]
+}
+
+fn arb_level() -> impl Strategy<Value = AllanLevel> {
+    (
+        arb_bits(32),
+        arb_bits(32),
+        arb_bits(64),
+        arb_bits(128),
+        arb_bits(64),
+        arb_bits(128),
+    )
+        .prop_map(|(m, stride, n2, sum2, n3, sum3)| AllanLevel {
+            m: m as u32,
+            stride: stride as u32,
+            n2: n2 as u64,
+            sum2,
+            n3: n3 as u64,
+            sum3,
+        })
+}
+
+fn arb_table() -> impl Strategy<Value = AllanTable> {
+    (
+        0..Channel::ALL.len(),
+        arb_bits(32),
+        arb_bits(64),
+        arb_bits(32),
+        prop_oneof![any::<f32>(), Just(0.0f32), Just(1e-9f32), Just(f32::NAN)],
+        arb_bits(64),
+        arb_bits(32),
+        prop::collection::vec(arb_level(), 0..=MAX_LEVELS),
+    )
+        .prop_map(
+            |(c, snapshot, t_us, tau0_ns, scale, pushed, gaps, levels)| AllanTable {
+                channel: Channel::ALL[c],
+                snapshot: snapshot as u32,
+                t_us: t_us as u64,
+                tau0_ns: tau0_ns as u32,
+                scale,
+                pushed: pushed as u64,
+                gaps: gaps as u32,
+                levels: levels.into_iter().collect(),
+            },
+        )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+    #[test]
+    fn encode_table_writes_the_serde_paths_bytes_and_the_host_reads_them(t in arb_table()) {
+        let serde = frame_of(&t, false);
+        let direct = frame_of(&t, true);
+        prop_assert_eq!(&direct, &serde);
+        let mut bytes = direct.unwrap();
+        bytes.pop(); // the delimiter
+        match decode::<DeviceMsg>(&mut bytes).unwrap() {
+            DeviceMsg::Table(back) => {
+                prop_assert_eq!(back.levels, t.levels);
+                prop_assert_eq!((back.channel, back.pushed, back.gaps), (t.channel, t.pushed, t.gaps));
+                prop_assert_eq!(back.scale.to_bits(), t.scale.to_bits());
+            }
+            other => prop_assert!(false, "decoded {:?}", other),
+        }
+    }
+}
+
+/// Every channel, each at its own variant index; and a buffer one byte short fails, not
+/// truncates.
+#[test]
+fn every_channel_and_a_short_buffer() {
+    for ch in Channel::ALL {
+        let t = AllanTable {
+            channel: ch,
+            snapshot: 3,
+            t_us: 10_000_123,
+            tau0_ns: 1_000_000,
+            scale: 0.061,
+            pushed: 9_000,
+            gaps: 1,
+            levels: (0..20)
+                .map(|k| AllanLevel {
+                    m: 1 << k,
+                    stride: (1u32 << k).div_ceil(8),
+                    n2: 9_000 - (2 << k).min(9_000),
+                    sum2: 1u128 << (40 + 3 * k),
+                    n3: 9_000 - (3 << k).min(9_000),
+                    sum3: (1u128 << (41 + 3 * k)) - 1,
+                })
+                .collect(),
+        };
+        let direct = frame_of(&t, true).unwrap();
+        assert_eq!(direct, frame_of(&t, false).unwrap(), "{ch:?}");
+        let mut out = std::vec![0u8; direct.len() - 1];
+        assert_eq!(
+            FrameEncoder::new().encode_table(&t, &mut out),
+            Err(EncodeError::TooLarge)
+        );
+    }
+}
