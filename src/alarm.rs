@@ -18,7 +18,8 @@ use core::task::{Context, Poll, Waker};
 use embassy_rp::interrupt::typelevel::{Binding, Handler, TIMER_IRQ_1, TIMER_IRQ_2, TIMER_IRQ_3};
 use embassy_rp::interrupt::InterruptExt;
 use embassy_rp::pac;
-use embassy_time::Instant;
+use embassy_time::{Duration, Instant};
+use embedded_hal_async::delay::DelayNs;
 
 use crate::shared::{ALARM_FIRED, ALARM_WAKERS};
 
@@ -83,21 +84,23 @@ impl Future for Wait {
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
         let this = self.get_mut();
-        if this.armed {
-            // The task's waker, registered when armed, stays the same (an embassy task's).
-            if this.alarm.fired() || Instant::now() >= this.at {
+        if Instant::now() >= this.at {
+            if this.armed {
                 this.alarm.disarm();
                 this.armed = false;
+            }
+            return Poll::Ready(());
+        }
+        // Armed on the first poll, and again if the alarm fired before `at` (the 32-bit compare
+        // matched a wrap of the counter: a wait over 71 minutes). The task's waker, registered
+        // when armed, stays the same (an embassy task's).
+        if !this.armed || this.alarm.fired() {
+            this.armed = this.alarm.arm(this.at, cx.waker());
+            if !this.armed {
                 return Poll::Ready(());
             }
-            return Poll::Pending;
         }
-        if this.alarm.arm(this.at, cx.waker()) {
-            this.armed = true;
-            Poll::Pending
-        } else {
-            Poll::Ready(())
-        }
+        Poll::Pending
     }
 }
 
@@ -106,6 +109,27 @@ impl Drop for Wait {
         if self.armed {
             self.alarm.disarm();
         }
+    }
+}
+
+/// `DelayNs` on one of these alarms: the sensor tasks' waits within a tick (a probe instant, a
+/// status re-poll, a part's start-up) stay off embassy's timer queue too. Its alarm must not be
+/// waited on otherwise meanwhile (each task lends its own tick alarm, idle during a tick).
+pub struct Delay(pub Alarm);
+
+impl DelayNs for Delay {
+    async fn delay_ns(&mut self, ns: u32) {
+        self.delay_us(ns.div_ceil(1000)).await;
+    }
+
+    async fn delay_us(&mut self, us: u32) {
+        let at = Instant::now() + Duration::from_micros(u64::from(us));
+        self.0.wait_until(at).await;
+    }
+
+    async fn delay_ms(&mut self, ms: u32) {
+        let at = Instant::now() + Duration::from_millis(u64::from(ms));
+        self.0.wait_until(at).await;
     }
 }
 

@@ -245,7 +245,11 @@ impl I2cDma {
         });
 
         let ending = wait_end(rx).await;
-        drop(running);
+        match ending {
+            // Both channels have run their counts out: only the DMA requests to turn off.
+            Ending::Done => running.finished(),
+            Ending::Abort(_) => drop(running),
+        }
         i2c.ic_intr_mask()
             .write_value(pac::i2c::regs::IcIntrMask(0));
         compiler_fence(Ordering::SeqCst);
@@ -284,6 +288,18 @@ impl Drop for Waiting {
 /// Aborts both channels and turns the I2C DMA requests off when dropped.
 struct Running;
 
+impl Running {
+    /// The transfer completed (the RX channel copied its last byte, so the TX channel had
+    /// sent every command before): the channels are idle, nothing to abort.
+    fn finished(self) {
+        pac::I2C0
+            .ic_dma_cr()
+            .write_value(pac::i2c::regs::IcDmaCr(0));
+        core::mem::forget(self);
+        compiler_fence(Ordering::SeqCst);
+    }
+}
+
 impl Drop for Running {
     fn drop(&mut self) {
         pac::I2C0
@@ -304,15 +320,23 @@ impl Drop for Running {
 /// and cleared (which also ends its hold on the TX FIFO).
 async fn wait_end(rx: pac::dma::Channel) -> Ending {
     let i2c = pac::I2C0;
-    poll_fn(|cx| {
-        DMA_WAKER.register(cx.waker());
+    let ended = || {
         if i2c.ic_raw_intr_stat().read().tx_abrt() {
             let source = i2c.ic_tx_abrt_source().read().0;
             i2c.ic_clr_tx_abrt().read();
-            return Poll::Ready(Ending::Abort(source));
+            return Some(Ending::Abort(source));
         }
-        if !rx.ctrl_trig().read().busy() {
-            return Poll::Ready(Ending::Done);
+        (!rx.ctrl_trig().read().busy()).then_some(Ending::Done)
+    };
+    poll_fn(|cx| {
+        if let Some(e) = ended() {
+            return Poll::Ready(e);
+        }
+        // Registered only while the transfer runs (the poll that finds it ended does not), and
+        // checked again after: an end between the first check and the registration is seen.
+        DMA_WAKER.register(cx.waker());
+        if let Some(e) = ended() {
+            return Poll::Ready(e);
         }
         // Raised after the check: the unmasked source interrupts at once.
         i2c.ic_intr_mask().write(|w| w.set_m_tx_abrt(true));
