@@ -156,7 +156,64 @@ impl TransferTime for BusDevice {
     }
 }
 
+impl Bus {
+    /// Ready for a transaction: the previous DMA read's STOP over (or the controller
+    /// re-created); the controller, if there is one.
+    fn ready(&mut self) -> Result<&mut I2c<'static, I2C0, i2c::Async>, BusError> {
+        if self.wedged || self.i2c.is_none() || !self.dma.settle() {
+            self.reset_controller();
+        }
+        self.i2c
+            .as_mut()
+            .ok_or(BusError::Hal(i2c::Error::Abort(AbortReason::Other(0))))
+    }
+
+    /// A transaction's result (`None`: abandoned at its deadline, the controller's state
+    /// unknown).
+    fn ended(&mut self, result: Option<Result<(), i2c::Error>>) -> Result<(), BusError> {
+        match result {
+            Some(r) => r.map_err(BusError::Hal),
+            None => {
+                self.wedged = true;
+                Err(BusError::Timeout)
+            }
+        }
+    }
+}
+
+/// When a transaction started now must be abandoned.
+fn deadline() -> Instant {
+    Instant::now() + Duration::from_millis(TRANSACTION_TIMEOUT_MS)
+}
+
 impl AsyncI2c for BusDevice {
+    /// A register read (every read the drivers make) goes straight to the DMA path: one
+    /// wake-up per transfer, and none of `transaction`'s matching of an operation list.
+    async fn write_read(
+        &mut self,
+        address: u8,
+        write: &[u8],
+        read: &mut [u8],
+    ) -> Result<(), Self::Error> {
+        if !I2cDma::fits(write, read) {
+            let ops = &mut [Operation::Write(write), Operation::Read(read)];
+            return self.transaction(address, ops).await;
+        }
+        let mut guard = self.bus.lock().await;
+        let bus = &mut *guard;
+        bus.ready()?;
+        let deadline = deadline();
+        // SAFETY: the transfer is pinned on this future's stack and driven here to its end or
+        // dropped by `Deadline` (which aborts the channels) before this future returns; the
+        // sensor tasks await this future to completion, never leak it.
+        let r = {
+            let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, write, read) });
+            Deadline::new(deadline, transfer).await
+        };
+        self.last_start_us = bus.dma.last_start_us();
+        bus.ended(r)
+    }
+
     async fn transaction(
         &mut self,
         address: u8,
@@ -164,31 +221,14 @@ impl AsyncI2c for BusDevice {
     ) -> Result<(), Self::Error> {
         let mut guard = self.bus.lock().await;
         let bus = &mut *guard;
-        // The previous DMA read's STOP must be over before the controller is re-programmed.
-        if bus.wedged || bus.i2c.is_none() || !bus.dma.settle() {
-            bus.reset_controller();
-        }
-        let Some(i2c) = bus.i2c.as_mut() else {
-            return Err(BusError::Hal(i2c::Error::Abort(AbortReason::Other(0))));
-        };
+        bus.ready()?;
         let now = Instant::now();
-        let deadline = now + Duration::from_millis(TRANSACTION_TIMEOUT_MS);
-        // Register reads (the drivers' `write_read` and plain reads) go through DMA: one wake-up
-        // per transfer. Anything else (register writes) takes embassy's interrupt path.
+        let deadline = deadline();
+        // Plain reads go through DMA too; anything else (register writes) takes embassy's
+        // interrupt path.
         let result = match operations {
-            [Operation::Write(w), Operation::Read(r)] if I2cDma::fits(w, r) => {
-                // SAFETY: the transfer is pinned on this future's stack and driven here to its
-                // end or dropped by `Deadline` (which aborts the channels) before this future
-                // returns; the sensor tasks await this future to completion, never leak it.
-                let r = {
-                    let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, w, r) });
-                    Deadline::new(deadline, transfer).await
-                };
-                self.last_start_us = bus.dma.last_start_us();
-                r
-            }
             [Operation::Read(r)] if I2cDma::fits(&[], r) => {
-                // SAFETY: as above.
+                // SAFETY: as in `write_read`.
                 let r = {
                     let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, &[], r) });
                     Deadline::new(deadline, transfer).await
@@ -197,18 +237,16 @@ impl AsyncI2c for BusDevice {
                 r
             }
             _ => {
+                // `ready` above made sure of a controller.
+                let Some(i2c) = bus.i2c.as_mut() else {
+                    return Err(BusError::Hal(i2c::Error::Abort(AbortReason::Other(0))));
+                };
                 self.last_start_us = now.as_micros();
                 let transfer = core::pin::pin!(i2c.transaction(address, operations));
                 Deadline::new(deadline, transfer).await
             }
         };
-        match result {
-            Some(r) => r.map_err(BusError::Hal),
-            None => {
-                bus.wedged = true;
-                Err(BusError::Timeout)
-            }
-        }
+        bus.ended(result)
     }
 }
 
