@@ -199,7 +199,11 @@ impl AsyncI2c for BusDevice {
             let ops = &mut [Operation::Write(write), Operation::Read(read)];
             return self.transaction(address, ops).await;
         }
-        let mut guard = self.bus.lock().await;
+        // Uncontended nearly always (the two tasks take turns): no lock future to poll then.
+        let mut guard = match self.bus.try_lock() {
+            Ok(g) => g,
+            Err(_) => self.bus.lock().await,
+        };
         let bus = &mut *guard;
         bus.ready()?;
         let deadline = deadline();
