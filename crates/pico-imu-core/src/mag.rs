@@ -231,6 +231,22 @@ impl MagService {
             if timely {
                 self.core.clock.observe(tau, self.core.next_k, false, false);
             }
+            // A data read that a landing may fall inside would be torn (the part rewrites its
+            // data registers, the bytes already read belong to the sample before): wait for
+            // that landing, then read; the read takes the sample that landed. Only with a
+            // located clock (while it is wide, any read window may hold a landing).
+            let now = fine((cx.now)());
+            let window = SETUP + self.core.timing.duration(clock::read_bits(6));
+            let half = window / 2;
+            let clock = &self.core.clock;
+            if clock.known()
+                && clock.width() <= clock::LOCKED_WIDTH
+                && clock.newest_at(now + half, half + READ_MARGIN).is_none()
+            {
+                let late = self.core.clock.width() / 2 + POLL_MARGIN;
+                let after = self.core.clock.instant_after(now, late as i64);
+                delay_until(cx.delay, cx.now, after).await;
+            }
             let xyz = match cx.dev.read_data().await {
                 Ok(xyz) => xyz,
                 Err(e) => {
@@ -240,10 +256,8 @@ impl MagService {
             };
             let end = (cx.now)();
             let start = cx.dev.bus().last_start();
-            // A data read the bus held moved its bytes at its end, not its start.
             let t_data = if self.core.held(start, clock::read_bits(6), end) {
-                let after = clock::read_bits(6) - clock::READ_FIRST_BIT;
-                fine(end) - self.core.timing.duration(after)
+                self.held_read(cx, start, end).await
             } else {
                 self.core.timing.latch(start, clock::READ_FIRST_BIT)
             };
@@ -293,6 +307,43 @@ impl MagService {
                 self.core.report(Some(e), cx.out);
             }
             return;
+        }
+    }
+
+    /// When a data read that took too long (started at `start`, seen done at `end_us`) moved
+    /// its bytes. Either the bus held it (a START that could not be sent, a slave stretching
+    /// SCL): its bytes moved at its end. Or the task was held after it (a CPU stall): they moved
+    /// at its start. A status poll tells the two apart: DRDY set again, with no landing
+    /// between the end and the poll, means a sample landed after the bytes moved, before the
+    /// end: they moved at the start.
+    async fn held_read<I: I2c + TransferTime, D: DelayNs>(
+        &mut self,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
+        start: Fine,
+        end_us: u64,
+    ) -> Fine {
+        let after = clock::read_bits(6) - clock::READ_FIRST_BIT;
+        let at_end = fine(end_us) - self.core.timing.duration(after);
+        let at_start = self.core.timing.latch(start, clock::READ_FIRST_BIT);
+        let Ok(status) = cx.dev.status().await else {
+            return at_end;
+        };
+        let poll = self
+            .core
+            .timing
+            .latch(cx.dev.bus().last_start(), clock::READ_FIRST_BIT);
+        let clock = &self.core.clock;
+        let none_since_end = match (
+            clock.newest_at(fine(end_us), READ_MARGIN),
+            clock.newest_at(poll, READ_MARGIN),
+        ) {
+            (Some(a), Some(b)) => a == b,
+            _ => false,
+        };
+        if status.ready && none_since_end {
+            at_start
+        } else {
+            at_end
         }
     }
 
