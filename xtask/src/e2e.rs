@@ -97,7 +97,22 @@ const STAMPS_FROM_S: f64 = 10.0;
 /// A stall must be named within this long, s.
 const STALL_REPORT_S: f64 = 0.050;
 
-/// `cargo xtask e2e [--scenario faults|boot-stall|sine] [--seconds S] [--out DIR]`.
+/// The fault's `--fault` spec for the emulator with its time moved to `at_s`.
+fn spec_at(spec: &str, at_s: f64) -> String {
+    match spec.split_once('@') {
+        Some((head, rest)) => {
+            let tail = rest.find('s').map_or("", |i| &rest[i + 1..]);
+            format!("{head}@{at_s}s{tail}")
+        }
+        None => spec.to_string(),
+    }
+}
+
+/// `cargo xtask e2e [--scenario faults|boot-stall|sine] [--seconds S] [--shift-ms MS] [--out DIR]`.
+///
+/// `--shift-ms` moves every fault of the scenario later by MS milliseconds (0 to 1000): the
+/// firmware's fault handling must not depend on where in its cycle of bus transfers and ticks
+/// a fault begins.
 pub fn e2e(args: &[String]) -> Result<()> {
     let scenario = arg_value(args, "--scenario").unwrap_or_else(|| "faults".into());
     let (default_s, faults, clock, sine, stall_from_boot): (f64, &[Fault], Option<&str>, _, bool) =
@@ -112,9 +127,21 @@ pub fn e2e(args: &[String]) -> Result<()> {
         .transpose()
         .context("--seconds")?
         .unwrap_or(default_s);
+    let shift_ms: f64 = arg_value(args, "--shift-ms")
+        .map(|s| s.parse())
+        .transpose()
+        .context("--shift-ms")?
+        .unwrap_or(0.0);
+    if !(0.0..=1000.0).contains(&shift_ms) {
+        bail!("--shift-ms {shift_ms}: from 0 to 1000 ms");
+    }
     let faults: Vec<Fault> = faults
         .iter()
         .copied()
+        .map(|mut x| {
+            x.at_s += shift_ms / 1000.0;
+            x
+        })
         .filter(|x| x.at_s + x.dur_s + 1.0 < seconds)
         .collect();
     let wall = Instant::now();
@@ -152,7 +179,7 @@ pub fn e2e(args: &[String]) -> Result<()> {
     }
     for x in &faults {
         sim_args.push("--fault".into());
-        sim_args.push(x.spec.into());
+        sim_args.push(spec_at(x.spec, x.at_s));
     }
     if stall_from_boot {
         sim_args.push("--fault".into());
@@ -173,9 +200,14 @@ pub fn e2e(args: &[String]) -> Result<()> {
     let mut r = Report::default();
     writeln!(
         r.text,
-        "# End-to-end emulator test: scenario `{scenario}`\n\n{seconds} s of emulated time, firmware {}{}\n",
+        "# End-to-end emulator test: scenario `{scenario}`\n\n{seconds} s of emulated time, firmware {}{}{}\n",
         elf.display(),
-        clock.map(|c| format!(", part clocks {c}")).unwrap_or_default()
+        clock.map(|c| format!(", part clocks {c}")).unwrap_or_default(),
+        if shift_ms > 0.0 {
+            format!(", every fault {shift_ms} ms later than listed")
+        } else {
+            String::new()
+        }
     )?;
     if stall_from_boot {
         check_boot_stall(&session, &mut r);
