@@ -279,10 +279,7 @@ impl FrameEncoder {
         batch: &SampleBatch,
         out: &mut [u8],
     ) -> Result<usize, EncodeError> {
-        self.scratch[0] = PROTOCOL_VERSION;
-        let body = batch::write(batch, &mut self.scratch[1..MAX_PAYLOAD - 4])
-            .ok_or(EncodeError::TooLarge)?;
-        frame(&self.scratch[..1 + body], out)
+        self.encode_by(out, |buf| batch::write(batch, buf))
     }
 
     /// Encode `DeviceMsg::Table(table)` as one frame into `out`, byte for byte what
@@ -293,9 +290,19 @@ impl FrameEncoder {
         table: &AllanTable,
         out: &mut [u8],
     ) -> Result<usize, EncodeError> {
+        self.encode_by(out, |buf| table::write(table, buf))
+    }
+
+    /// One frame whose postcard bytes `write` puts into the buffer it is given (returning
+    /// their length, `None` if they do not fit).
+    #[inline(always)]
+    fn encode_by(
+        &mut self,
+        out: &mut [u8],
+        write: impl FnOnce(&mut [u8]) -> Option<usize>,
+    ) -> Result<usize, EncodeError> {
         self.scratch[0] = PROTOCOL_VERSION;
-        let body = table::write(table, &mut self.scratch[1..MAX_PAYLOAD - 4])
-            .ok_or(EncodeError::TooLarge)?;
+        let body = write(&mut self.scratch[1..MAX_PAYLOAD - 4]).ok_or(EncodeError::TooLarge)?;
         frame(&self.scratch[..1 + body], out)
     }
 
