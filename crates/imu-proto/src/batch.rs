@@ -14,7 +14,7 @@
 //!
 //! # The hand-written encoder
 //!
-//! The firmware frames a [`SampleBatch`] every 32 ms. Through serde, postcard writes every
+//! The firmware frames a [`SampleBatch`] every 25 ms. Through serde, postcard writes every
 //! varint with its own small copy into the output; this writer produces the very same bytes in
 //! one straight pass (`crate::wire`, which lists the rules of postcard's wire format).
 //!

@@ -5,7 +5,7 @@ use crate::{Channel, Scales, Sensor, String, Vec};
 
 /// Octave levels in a device Allan table (m = 1, 2, 4, … 2^23).
 pub const MAX_LEVELS: usize = 24;
-/// IMU samples per [`SampleBatch`] (32 ms of data at 1 kHz).
+/// Most IMU samples in one [`SampleBatch`] (32 ms of data at 1 kHz; the firmware sends 25).
 pub const MAX_BATCH_IMU: usize = 32;
 /// Magnetometer samples per [`SampleBatch`].
 pub const MAX_BATCH_MAG: usize = 16;
