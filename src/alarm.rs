@@ -2,8 +2,8 @@
 //! 1–3 each serve one waiting future at a time, without embassy's timer queue.
 //!
 //! A wait on embassy's queue (`Timer::at`) registers the task in the queue, whose every change
-//! walks all its timers and re-arms alarm 0, and each expiry walks it again from the interrupt:
-//! ≈ 1,000 emulated cycles per wait. The sensor tasks wait hundreds of times a second (the
+//! walks all its timers and re-arms alarm 0, and each expiry walks it again from the interrupt
+//! (the cost is in docs/benchmarks.md). The sensor tasks wait hundreds of times a second (the
 //! magnetometer's ticks, the IMU's burst fallback, every transfer's deadline), so each has an
 //! alarm of its own: arming is one register write, the interrupt sets a flag and wakes the task.
 //!
@@ -84,23 +84,27 @@ impl Future for Wait {
 
     fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
         let this = self.get_mut();
-        if Instant::now() >= this.at {
-            if this.armed {
-                this.alarm.disarm();
-                this.armed = false;
+        if this.armed {
+            // Woken by something else (a `select`'s other branch): still waiting. The task's
+            // waker, registered when armed, stays the same (an embassy task's).
+            if !this.alarm.fired() {
+                return Poll::Pending;
             }
-            return Poll::Ready(());
-        }
-        // Armed on the first poll, and again if the alarm fired before `at` (the 32-bit compare
-        // matched a wrap of the counter: a wait over 71 minutes). The task's waker, registered
-        // when armed, stays the same (an embassy task's).
-        if !this.armed || this.alarm.fired() {
-            this.armed = this.alarm.arm(this.at, cx.waker());
-            if !this.armed {
+            // A fired alarm disarms itself.
+            this.armed = false;
+            if Instant::now() >= this.at {
                 return Poll::Ready(());
             }
+            // Fired before `at`: the 32-bit compare matched a wrap of the counter (a wait over
+            // 71 minutes). Armed again below.
         }
-        Poll::Pending
+        // `arm` finds an instant already passed (and leaves the alarm disarmed).
+        this.armed = this.alarm.arm(this.at, cx.waker());
+        if this.armed {
+            Poll::Pending
+        } else {
+            Poll::Ready(())
+        }
     }
 }
 

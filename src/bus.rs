@@ -181,14 +181,15 @@ impl Bus {
     }
 }
 
-/// When a transaction started now must be abandoned.
-fn deadline() -> Instant {
-    Instant::now() + Duration::from_millis(TRANSACTION_TIMEOUT_MS)
+/// When a transaction started at `now` must be abandoned.
+fn deadline(now: Instant) -> Instant {
+    now + Duration::from_millis(TRANSACTION_TIMEOUT_MS)
 }
 
 impl AsyncI2c for BusDevice {
-    /// A register read (every read the drivers make) goes straight to the DMA path: one
-    /// wake-up per transfer, and none of `transaction`'s matching of an operation list.
+    /// A register read (every read the drivers make, and a plain read: `write` empty) goes
+    /// straight to the DMA path: one wake-up per transfer, and none of `transaction`'s matching
+    /// of an operation list.
     async fn write_read(
         &mut self,
         address: u8,
@@ -197,7 +198,7 @@ impl AsyncI2c for BusDevice {
     ) -> Result<(), Self::Error> {
         if !I2cDma::fits(write, read) {
             let ops = &mut [Operation::Write(write), Operation::Read(read)];
-            return self.transaction(address, ops).await;
+            return self.embassy_path(address, ops).await;
         }
         // Uncontended nearly always (the two tasks take turns): no lock future to poll then.
         let mut guard = match self.bus.try_lock() {
@@ -206,7 +207,7 @@ impl AsyncI2c for BusDevice {
         };
         let bus = &mut *guard;
         bus.ready()?;
-        let deadline = deadline();
+        let deadline = deadline(Instant::now());
         // SAFETY: the transfer is pinned on this future's stack and driven here to its end or
         // dropped by `Deadline` (which aborts the channels) before this future returns; the
         // sensor tasks await this future to completion, never leak it.
@@ -223,32 +224,32 @@ impl AsyncI2c for BusDevice {
         address: u8,
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
+        match operations {
+            [Operation::Write(w), Operation::Read(r)] if I2cDma::fits(w, r) => {
+                self.write_read(address, w, r).await
+            }
+            [Operation::Read(r)] if I2cDma::fits(&[], r) => self.write_read(address, &[], r).await,
+            _ => self.embassy_path(address, operations).await,
+        }
+    }
+}
+
+impl BusDevice {
+    /// Anything but a register read (the configuration's register writes): embassy-rp's
+    /// interrupt-driven path, under the same deadline.
+    async fn embassy_path(
+        &mut self,
+        address: u8,
+        operations: &mut [Operation<'_>],
+    ) -> Result<(), BusError> {
         let mut guard = self.bus.lock().await;
         let bus = &mut *guard;
-        bus.ready()?;
+        let i2c = bus.ready()?;
         let now = Instant::now();
-        let deadline = deadline();
-        // Plain reads go through DMA too; anything else (register writes) takes embassy's
-        // interrupt path.
-        let result = match operations {
-            [Operation::Read(r)] if I2cDma::fits(&[], r) => {
-                // SAFETY: as in `write_read`.
-                let r = {
-                    let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, &[], r) });
-                    Deadline::new(deadline, transfer).await
-                };
-                self.last_start_us = bus.dma.last_start_us();
-                r
-            }
-            _ => {
-                // `ready` above made sure of a controller.
-                let Some(i2c) = bus.i2c.as_mut() else {
-                    return Err(BusError::Hal(i2c::Error::Abort(AbortReason::Other(0))));
-                };
-                self.last_start_us = now.as_micros();
-                let transfer = core::pin::pin!(i2c.transaction(address, operations));
-                Deadline::new(deadline, transfer).await
-            }
+        self.last_start_us = now.as_micros();
+        let result = {
+            let transfer = core::pin::pin!(i2c.transaction(address, operations));
+            Deadline::new(deadline(now), transfer).await
         };
         bus.ended(result)
     }

@@ -125,9 +125,9 @@ type TickSignal = Signal<NoopRawMutex, ()>;
 /// ≈ 4.5 ms.
 type MagReadSignal = Signal<NoopRawMutex, ()>;
 /// Magnetometer ticks whose messages share one slot of its channel: the processing task wakes
-/// once per 20 ms for the magnetometer (once per 10 ms cost 50 cycles per sample set more,
-/// `cargo xtask bench-emu`). Events carry their own
-/// time, so a report waiting up to 20 ms in the slot is still dated when it happened.
+/// once per 20 ms for the magnetometer, each wake-up a poll of all its inputs (docs/benchmarks.md
+/// has the cost). Events carry their own time, so a report waiting up to 20 ms in the slot is
+/// still dated when it happened.
 const MAG_TICKS_PER_SLOT: u32 = 4;
 /// Housekeeping period.
 const TICK_MS: u64 = 100;

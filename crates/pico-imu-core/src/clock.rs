@@ -115,7 +115,7 @@ pub const fn read_bits(n: u64) -> u64 {
 
 /// `a · b` (wrapping). Operands below 2^32 — the clock's periods, indices and spans — take
 /// four 16 × 16-bit products: the Cortex-M0+ has no 32 × 32 → 64-bit multiply, and a 64-bit
-/// product is a library call (≈ 55 cycles, emulated).
+/// product is a library call.
 #[inline]
 pub(crate) const fn mul(a: u64, b: u64) -> u64 {
     if (a | b) >> 32 != 0 {
@@ -561,15 +561,19 @@ impl SampleClock {
 mod tests {
     use super::*;
 
-    #[test]
-    fn products_by_halves_equal_multiplication() {
-        let mut x = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
+    /// A xorshift64 stream from `seed`.
+    fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
+        move || {
             x ^= x << 13;
             x ^= x >> 7;
             x ^= x << 17;
             x
-        };
+        }
+    }
+
+    #[test]
+    fn products_by_halves_equal_multiplication() {
+        let mut next = xorshift(0x2545_F491_4F6C_DD1D);
         let edges = [0, 1, 0xffff, 0x1_0000, 0xffff_ffff, 0x1_0000_0000, u64::MAX];
         for &a in &edges {
             for &b in &edges {
@@ -594,13 +598,7 @@ mod tests {
 
     #[test]
     fn quotients_by_subtraction_equal_division() {
-        let mut x = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
         for i in 0..200_000u64 {
             let p = match i % 4 {
                 0 => next() % (1 << 28) + 1,

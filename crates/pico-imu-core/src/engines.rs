@@ -54,7 +54,7 @@ const _: () = assert!(ALLAN_STATE_BYTES <= 32 * 1024, "Allan state over 32 KiB")
 
 /// One channel's engine as it stood at a snapshot: its count, gaps and level sums, frozen (a
 /// copy of a few words per level, taken between two samples); the levels are worked out when
-/// the channel's table is sent ([`ChannelSnapshot::levels`]).
+/// the channel's table is sent ([`table_levels`]).
 pub type ChannelSnapshot = Frozen<{ DEVICE_PARAMS[0] }, MAX_LEVELS>;
 // Every engine freezes into the same type.
 const _: () = assert!(DEVICE_PARAMS[0] == MAG_PARAMS[0]);

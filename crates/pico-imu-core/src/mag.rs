@@ -243,8 +243,8 @@ impl MagService {
                 && clock.width() <= clock::LOCKED_WIDTH
                 && clock.newest_at(now + half, half + READ_MARGIN).is_none()
             {
-                let late = self.core.clock.width() / 2 + POLL_MARGIN;
-                let after = self.core.clock.instant_after(now, late as i64);
+                let late = clock.width() / 2 + POLL_MARGIN;
+                let after = clock.instant_after(now, late as i64);
                 delay_until(cx.delay, cx.now, after).await;
             }
             let xyz = match cx.dev.read_data().await {

@@ -18,9 +18,9 @@ use crate::outbox::{FrameSink, Outbox};
 use crate::stage::{self, Stage};
 
 /// IMU samples per batch frame: 25, so that every 100 ms carries the same four batch encodings
-/// (with full 32-sample batches one window in eight carried four and the others three, and the
-/// CPU's worst 100 ms window was that one's, ≈ 250 cycles per sample set over the rest). Below
-/// [`imu_proto::MAX_BATCH_IMU`]: a batch of any length up to it is the same message.
+/// (with full 32-sample batches one window in eight carried four and the others three, and was
+/// the CPU's worst 100 ms window; docs/benchmarks.md). Below [`imu_proto::MAX_BATCH_IMU`]: a
+/// batch of any length up to it is the same message.
 pub const BATCH_IMU: usize = 25;
 const _: () = assert!(BATCH_IMU <= imu_proto::MAX_BATCH_IMU && 100 % BATCH_IMU == 0);
 
