@@ -59,8 +59,11 @@ pub const JITTER: u64 = 3 * US;
 /// The interval is narrow enough to measure the period from located sample instants.
 pub const LOCKED_WIDTH: u64 = 64 * US;
 
-/// Below this width a reader need not place its observations (no probes).
-pub const PROBE_WIDTH: u64 = 16 * US;
+/// Below this width a reader need not place its observations (no probes). A probe costs its
+/// reader an extra wait (a task wake-up, on the device); at this width a stamp is still within
+/// 16 µs of the line's best estimate, and probes come only as the drift allowance widens the
+/// interval again (docs/firmware.md, "Timestamps", gives the measured stamp error).
+pub const PROBE_WIDTH: u64 = 32 * US;
 
 /// Where in a transfer a register is latched: the bus's bit period and the start of the
 /// transfer, from which a sensor service derives the latch instant of the byte it reads.
