@@ -24,7 +24,7 @@ mod shared;
 mod storage;
 
 use core::cell::Cell;
-use defmt::{info, warn};
+use defmt::{debug, info, warn};
 use embassy_executor::Spawner;
 use embassy_futures::select::{select, select4, Either4};
 use embassy_rp::bind_interrupts;
@@ -43,7 +43,7 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::UsbDevice;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::Address;
-use imu_proto::{DecodeError, FrameReader, HostFrame, MAG_PERIOD_US};
+use imu_proto::{DecodeError, FrameReader, HostFrame, SensorState, MAG_PERIOD_US};
 use pico_imu_core::clock::BusTiming;
 use pico_imu_core::config;
 use pico_imu_core::device::Device;
@@ -485,6 +485,40 @@ struct Inputs {
     tick: &'static TickSignal,
 }
 
+/// Status frames between two status lines in the defmt log when nothing changed.
+const STATUS_LOG_EVERY: u32 = 10;
+
+/// When the status frame is also logged: at once when a count or state it reports changed (a
+/// loss, an overflow, a bus error, a sensor's state), otherwise every [`STATUS_LOG_EVERY`]
+/// frames. A defmt line with a dozen fields costs as much CPU as the status frame itself, so a
+/// quiet device logs it rarely; the host gets every frame.
+#[derive(Default)]
+struct StatusLog {
+    last: Option<(u64, u64, u32, u32, u32, SensorState, SensorState)>,
+    quiet: u32,
+}
+
+impl StatusLog {
+    fn due(&mut self, st: &imu_proto::Status) -> bool {
+        let key = (
+            st.samples_dropped,
+            st.mag_dropped,
+            st.fifo_overflows,
+            st.i2c_errors,
+            st.bus_faults,
+            st.imu,
+            st.mag,
+        );
+        self.quiet += 1;
+        if self.last == Some(key) && self.quiet < STATUS_LOG_EVERY {
+            return false;
+        }
+        self.last = Some(key);
+        self.quiet = 0;
+        true
+    }
+}
+
 /// The pipeline, host requests, periodic status/tables, and flash writes on request.
 #[embassy_executor::task]
 async fn process_task(
@@ -503,6 +537,7 @@ async fn process_task(
     let mut last_status = Instant::now();
     let mut last_tables = Instant::now();
     let mut cpu = cpu::Meter::new();
+    let mut status_log = StatusLog::default();
     loop {
         // A table frame (its encoding) runs right after a magnetometer reading, so it cannot
         // hold up the next one. Without a working magnetometer it runs on the 100 ms tick.
@@ -559,12 +594,13 @@ async fn process_task(
                 if status_ms > 0 && (now - last_status).as_millis() >= status_ms {
                     last_status = now;
                     let load = cpu.sample();
-                    device.send_status(now.as_micros(), load, &mut sink);
-                    let st = device.status(now.as_micros(), load);
-                    info!(
-                        "status: {} samples, {} lost, {} overflows, {} I2C errors, cpu {}‰, imu {} ({} ns), mag {} ({} ns, {} lost)",
-                        st.samples_taken, st.samples_dropped, st.fifo_overflows, st.i2c_errors, load, st.imu, st.imu_period_ns, st.mag, st.mag_period_ns, st.mag_dropped
-                    );
+                    let st = device.send_status(now.as_micros(), load, &mut sink);
+                    if status_log.due(&st) {
+                        info!(
+                            "status: {} samples, {} lost, {} overflows, {} I2C errors, cpu {}‰, imu {} ({} ns), mag {} ({} ns, {} lost)",
+                            st.samples_taken, st.samples_dropped, st.fifo_overflows, st.i2c_errors, load, st.imu, st.imu_period_ns, st.mag, st.mag_period_ns, st.mag_dropped
+                        );
+                    }
                 }
                 let tables_ms = u64::from(device.tables_interval_ms());
                 if tables_ms > 0
@@ -584,9 +620,10 @@ async fn process_task(
         if !table_turn {
             continue;
         }
-        // One table frame per turn at most, spaced out (`pico_imu_core::tables`).
+        // One table frame per turn at most, spaced out (`pico_imu_core::tables`); each frame
+        // is logged at debug level only (ten lines a round would cost more than the frames).
         if let Some(ch) = device.tables_step(now_us(), &mut sink) {
-            info!("table {} sent", ch.name());
+            debug!("table {} sent", ch.name());
         }
     }
 }

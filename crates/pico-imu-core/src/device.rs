@@ -192,15 +192,16 @@ impl Device {
         }
     }
 
-    /// Send a status frame.
+    /// Send a status frame; returns the status sent.
     pub fn send_status(
         &mut self,
         uptime_us: u64,
         cpu_load_permille: u16,
         sink: &mut impl FrameSink,
-    ) -> Sent {
+    ) -> Status {
         let st = self.status(uptime_us, cpu_load_permille);
-        self.outbox.send(&DeviceMsgRef::Status(&st), sink)
+        self.outbox.send(&DeviceMsgRef::Status(&st), sink);
+        st
     }
 
     /// Each sensor's period, ns (0: not known yet).
