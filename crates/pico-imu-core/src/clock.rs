@@ -59,6 +59,12 @@ pub const JITTER: u64 = 3 * US;
 /// The interval is narrow enough to measure the period from located sample instants.
 pub const LOCKED_WIDTH: u64 = 64 * US;
 
+/// Fewest samples between two located instants for a fine period: its error bound (the two
+/// intervals' widths over the span, at most 1 µs per sample at [`LOCKED_WIDTH`]) then already
+/// beats the coarse one's, so the drift allowance, and with it the probing, falls off within
+/// a fraction of a second of the phase being found; longer spans refine it as they come.
+const FINE_SPAN_MIN: u32 = 64;
+
 /// Below this width a reader need not place its observations (no probes). A probe costs its
 /// reader an extra wait (a task wake-up, on the device); at this width a stamp is still within
 /// 16 µs of the line's best estimate, and probes come only as the drift allowance widens the
@@ -449,7 +455,7 @@ impl SampleClock {
             return;
         }
         let span = self.k_at.wrapping_sub(k0);
-        if span >= 256 && span >= 2 * self.fine_span && span < 1 << 30 {
+        if span >= FINE_SPAN_MIN && span >= 2 * self.fine_span && span < 1 << 30 {
             let dt = self.t_at.wrapping_sub(t0);
             self.period = dt / u64::from(span);
             // Both ends located within their intervals: the period to within that per sample.
