@@ -65,11 +65,10 @@ pub const LOCKED_WIDTH: u64 = 64 * US;
 /// a fraction of a second of the phase being found; longer spans refine it as they come.
 const FINE_SPAN_MIN: u32 = 64;
 
-/// Below this width a reader need not place its observations (no probes). A probe costs its
-/// reader an extra wait (a task wake-up, on the device); at this width a stamp is still within
-/// 16 µs of the line's best estimate, and probes come only as the drift allowance widens the
-/// interval again (docs/firmware.md, "Timestamps", gives the measured stamp error).
-pub const PROBE_WIDTH: u64 = 32 * US;
+/// Below this width a reader need not place its observations (no probes). A probe that lands
+/// where it is aimed (`service::Lead`) halves the interval, which then takes many reads to widen
+/// past this again, so probes are rare once the clock is found.
+pub const PROBE_WIDTH: u64 = 16 * US;
 
 /// Where in a transfer a register is latched: the bus's bit period and the start of the
 /// transfer, from which a sensor service derives the latch instant of the byte it reads.

@@ -182,9 +182,13 @@ impl ImuService {
         // uncertainty about where the samples fall.
         let count_latch = self.core.timing.latch(0, clock::READ_SECOND_BIT);
         let t0 = fine((cx.now)());
+        // The count read's start if it is placed (begun early by the learnt lead).
+        let mut aimed = None;
         if let Some(p) = self.core.clock.probe_after(t0 + SETUP + count_latch) {
             if p - t0 < PROBE_WAIT + SETUP + count_latch {
-                delay_until(cx.delay, cx.now, p - count_latch).await;
+                let start = p - count_latch;
+                delay_until(cx.delay, cx.now, self.core.lead.begin(start)).await;
+                aimed = Some(start);
             }
         }
         let mut held = 0;
@@ -201,6 +205,9 @@ impl ImuService {
                 }
             };
             let start = cx.dev.bus().last_start();
+            if let Some(a) = aimed.take() {
+                self.core.lead.learn(a, start);
+            }
             let tau = self.core.answered(start, clock::READ_SECOND_BIT);
             let held_read = self.core.held(start, clock::read_bits(2), read_at);
             if held_read && held < HELD_REREADS {
