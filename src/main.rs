@@ -591,7 +591,8 @@ async fn process_task(
                 table_turn = !device.mag_ok();
                 let now = Instant::now();
                 let status_ms = u64::from(device.status_interval_ms());
-                if status_ms > 0 && (now - last_status).as_millis() >= status_ms {
+                let status_due = status_ms > 0 && (now - last_status).as_millis() >= status_ms;
+                if status_due {
                     last_status = now;
                     let load = cpu.sample();
                     let st = device.send_status(now.as_micros(), load, &mut sink);
@@ -602,8 +603,11 @@ async fn process_task(
                         );
                     }
                 }
+                // A round's snapshot waits for the next tick rather than share one with a
+                // status frame.
                 let tables_ms = u64::from(device.tables_interval_ms());
                 if tables_ms > 0
+                    && !status_due
                     && (now - last_tables).as_millis() >= tables_ms
                     && !device.tables_pending()
                 {

@@ -368,6 +368,13 @@ mod tests {
             assert_eq!(narrow.level(k).as_ref(), (k < 4).then_some(l), "level {k}");
         }
         assert!(levels.iter().any(|l| l.sum3 > 0 && l.n3 > 0));
+        // The levels with terms: those up to m = 1024 (a segment of 3300 samples since the gap,
+        // 1700 before it: levels up to m = 1024 have second differences, m = 2048 needs 4096).
+        let with_terms = levels.iter().take_while(|l| l.n2 > 0).count();
+        assert_eq!(with_terms, 11);
+        assert_eq!(wide.levels_with_terms(), with_terms);
+        assert_eq!(narrow.levels_with_terms(), 4);
+        assert_eq!(Frozen::<8, 24>::EMPTY.levels_with_terms(), 0);
         assert_eq!(levels.len(), MAG_PARAMS[1]);
         assert_eq!(wide.level(MAG_PARAMS[1]), None);
         assert_ne!(e.level(3), wide.level(3));

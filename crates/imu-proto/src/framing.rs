@@ -241,6 +241,77 @@ fn frame(content: &[u8], out: &mut [u8]) -> Result<usize, EncodeError> {
     Ok(n + 1)
 }
 
+/// A frame built a piece at a time, in its own buffer of `N` bytes: each piece of the content
+/// (the postcard bytes of one message, in order) is checksummed and stuffed as it comes, so a
+/// long message (an Allan table) can be framed over several calls, with other frames encoded
+/// in between. [`FrameBuilder::finish`] closes it: the same bytes as [`FrameEncoder`] writes for
+/// the whole message (tested).
+#[repr(C, align(4))]
+pub struct FrameBuilder<const N: usize> {
+    /// Word-aligned, so the finished frame is copied out a word at a time.
+    buf: [u8; N],
+    /// Where the current COBS block's code byte goes.
+    code_at: usize,
+    /// Where the next stuffed byte goes (past `N`: the frame does not fit).
+    out: usize,
+    /// The running CRC of the content so far.
+    crc: u32,
+}
+
+impl<const N: usize> Default for FrameBuilder<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> FrameBuilder<N> {
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            code_at: 0,
+            out: 1,
+            crc: u32::MAX,
+        }
+    }
+
+    /// Start a new frame (the version byte); whatever was built before is forgotten.
+    pub fn start(&mut self) {
+        self.code_at = 0;
+        self.out = 1;
+        self.crc = u32::MAX;
+        self.push(&[PROTOCOL_VERSION]);
+    }
+
+    /// Append the next postcard bytes of the message.
+    pub fn push(&mut self, bytes: &[u8]) {
+        let mut s = Stuffer {
+            dst: &mut self.buf,
+            code_at: self.code_at,
+            out: self.out,
+        };
+        self.crc = s.extend::<true>(bytes, self.crc);
+        (self.code_at, self.out) = (s.code_at, s.out);
+    }
+
+    /// Close the frame (CRC, last code byte, the `0x00` delimiter) and pad it with zero bytes
+    /// (empty frames, which every reader skips) to a multiple of `align` bytes; the frame, or
+    /// [`EncodeError::TooLarge`] if it did not fit the buffer. The builder must be started again
+    /// before the next frame.
+    pub fn finish(&mut self, align: usize) -> Result<&[u8], EncodeError> {
+        let mut s = Stuffer {
+            dst: &mut self.buf,
+            code_at: self.code_at,
+            out: self.out,
+        };
+        s.extend::<false>(&(!self.crc).to_le_bytes(), 0);
+        let n = s.finish().ok_or(EncodeError::TooLarge)?;
+        let padded = (n + 1).next_multiple_of(align.max(1));
+        let frame = self.buf.get_mut(..padded).ok_or(EncodeError::TooLarge)?;
+        frame[n..].fill(0);
+        Ok(frame)
+    }
+}
+
 /// Serialises messages into frames; owns the scratch buffer for the un-stuffed payload.
 pub struct FrameEncoder {
     scratch: [u8; MAX_PAYLOAD],

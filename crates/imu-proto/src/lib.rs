@@ -28,7 +28,8 @@ mod contract;
 pub mod csv;
 mod framing;
 mod messages;
-mod table;
+/// The hand-written postcard bytes of an Allan table, whole or a level at a time.
+pub mod table;
 mod wire;
 
 pub use contract::*;

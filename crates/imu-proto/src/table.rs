@@ -7,14 +7,35 @@
 //! `gaps`, and `levels` as a length and that many [`AllanLevel`]s (`m`, `stride`, `n2`, `sum2`,
 //! `n3`, `sum3`).
 use crate::wire::Cursor;
-use crate::AllanTable;
+use crate::{AllanLevel, AllanTable, MAX_LEVELS};
 
 /// Index of `DeviceMsg::Table` among `DeviceMsg`'s variants (tested against the serde path).
 pub(crate) const TABLE_VARIANT: u8 = 2;
 
+/// Most bytes of [`write_head`]: variant, channel, snapshot (5), `t_us` (10), `tau0_ns` (5),
+/// scale (4), pushed (10), gaps (5), the number of levels (1: at most [`MAX_LEVELS`] < 128).
+pub const HEAD_MAX: usize = 1 + 1 + 5 + 10 + 5 + 4 + 10 + 5 + 1;
+/// Most bytes of [`write_level`]: `m` and `stride` (5 each), `n2` and `n3` (10 each), `sum2`
+/// and `sum3` (19 each).
+pub const LEVEL_MAX: usize = 5 + 5 + 10 + 19 + 10 + 19;
+const _: () = assert!(MAX_LEVELS < 128);
+
 /// Write the postcard encoding of `DeviceMsg::Table(table)` into `buf`; returns its length, or
 /// `None` if `buf` is too small.
 pub fn write(table: &AllanTable, buf: &mut [u8]) -> Option<usize> {
+    let mut n = write_head(table, table.levels.len(), buf)?;
+    for l in &table.levels {
+        n += write_level(l, buf.get_mut(n..)?)?;
+    }
+    Some(n)
+}
+
+/// The bytes of `DeviceMsg::Table` that come before its levels: the variant, `table`'s fields
+/// up to its levels, and the number of levels `levels` that follow (each then written by
+/// [`write_level`]; `table.levels` itself is not read). Returns the length, `None` if `buf` is
+/// too small ([`HEAD_MAX`] bytes always suffice). With the levels written one at a time, a
+/// device can encode a table a few levels at a time.
+pub fn write_head(table: &AllanTable, levels: usize, buf: &mut [u8]) -> Option<usize> {
     let len = buf.len();
     let mut c = Cursor::<true> { buf, pos: 0 };
     c.byte(TABLE_VARIANT);
@@ -26,14 +47,20 @@ pub fn write(table: &AllanTable, buf: &mut [u8]) -> Option<usize> {
     c.f32(table.scale);
     c.varint_u64(table.pushed);
     c.varint(table.gaps);
-    c.varint(table.levels.len() as u32);
-    for l in &table.levels {
-        c.varint(l.m);
-        c.varint(l.stride);
-        c.varint_u64(l.n2);
-        c.varint_u128(l.sum2);
-        c.varint_u64(l.n3);
-        c.varint_u128(l.sum3);
-    }
+    c.varint(levels as u32);
+    Some(c.pos).filter(|&n| n <= len)
+}
+
+/// The bytes of one level of a table; the length, `None` if `buf` is too small ([`LEVEL_MAX`]
+/// bytes always suffice).
+pub fn write_level(l: &AllanLevel, buf: &mut [u8]) -> Option<usize> {
+    let len = buf.len();
+    let mut c = Cursor::<true> { buf, pos: 0 };
+    c.varint(l.m);
+    c.varint(l.stride);
+    c.varint_u64(l.n2);
+    c.varint_u128(l.sum2);
+    c.varint_u64(l.n3);
+    c.varint_u128(l.sum3);
     Some(c.pos).filter(|&n| n <= len)
 }

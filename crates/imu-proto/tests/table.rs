@@ -97,6 +97,78 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(500))]
+    /// A table framed a few levels at a time (`FrameBuilder`, the parts of `table`), with the
+    /// builder reused from a previous frame: the same frame as `encode_table`, padded with zero
+    /// bytes to the alignment asked for.
+    #[test]
+    fn a_table_framed_in_pieces_is_the_whole_tables_frame(
+        t in arb_table(),
+        before in arb_table(),
+        per_piece in 1usize..6,
+        align in 1usize..9,
+    ) {
+        let whole = frame_of(&t, true).unwrap();
+        let mut b = FrameBuilder::<{ 4 * 1024 }>::new();
+        // A frame built before and never finished, or finished: nothing of it is left.
+        b.start();
+        let mut buf = [0u8; table::LEVEL_MAX];
+        let n = table::write_head(&before, before.levels.len(), &mut buf).unwrap();
+        b.push(&buf[..n]);
+        b.start();
+        let mut head = [0u8; table::HEAD_MAX];
+        let n = table::write_head(&t, t.levels.len(), &mut head).unwrap();
+        b.push(&head[..n]);
+        for piece in t.levels.chunks(per_piece) {
+            for l in piece {
+                let n = table::write_level(l, &mut buf).unwrap();
+                b.push(&buf[..n]);
+            }
+        }
+        let framed = b.finish(align).unwrap();
+        prop_assert_eq!(&framed[..whole.len()], &whole[..]);
+        prop_assert_eq!(framed.len(), whole.len().next_multiple_of(align));
+        prop_assert!(framed[whole.len()..].iter().all(|&x| x == 0));
+    }
+}
+
+/// A builder too small for the frame says so, never panics.
+#[test]
+fn a_frame_builder_too_small_is_an_error() {
+    let t = AllanTable {
+        channel: Channel::Gx,
+        snapshot: 1,
+        t_us: 1,
+        tau0_ns: 1_000_000,
+        scale: 1.0,
+        pushed: 100,
+        gaps: 0,
+        levels: (0..5)
+            .map(|k| AllanLevel {
+                m: 1 << k,
+                stride: 1,
+                n2: 90,
+                sum2: 1 << 50,
+                n3: 80,
+                sum3: 1 << 51,
+            })
+            .collect(),
+    };
+    let whole = frame_of(&t, true).unwrap();
+    let mut b = FrameBuilder::<64>::new();
+    b.start();
+    let mut buf = [0u8; table::LEVEL_MAX];
+    let n = table::write_head(&t, t.levels.len(), &mut buf).unwrap();
+    b.push(&buf[..n]);
+    for l in &t.levels {
+        let n = table::write_level(l, &mut buf).unwrap();
+        b.push(&buf[..n]);
+    }
+    assert!(whole.len() > 64);
+    assert_eq!(b.finish(4), Err(EncodeError::TooLarge));
+}
+
 /// Every channel, each at its own variant index; and a buffer one byte short fails, not
 /// truncates.
 #[test]

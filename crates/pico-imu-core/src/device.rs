@@ -10,7 +10,7 @@ use crate::clock::Fine;
 use crate::msg::{Report, SensorMsg};
 use crate::outbox::{FrameSink, Outbox, Sent};
 use crate::pipeline::Pipeline;
-use crate::tables::Tables;
+use crate::tables::{Tables, TABLE_SPACING_US};
 
 /// Counters reported in [`Status`] besides the sample path's.
 #[derive(Debug, Clone, Copy, Default)]
@@ -37,6 +37,8 @@ pub struct Device {
     /// report, so the per-message path does no 64-bit multiply.
     period: [Fine; 2],
     pub(crate) firmware: &'static str,
+    /// When the last periodic status frame went out, µs.
+    last_status_us: Option<u64>,
 }
 
 impl Device {
@@ -57,6 +59,7 @@ impl Device {
             state: [SensorState::Unknown; 2],
             period: [0; 2],
             firmware,
+            last_status_us: None,
         }
     }
 
@@ -201,6 +204,7 @@ impl Device {
     ) -> Status {
         let st = self.status(uptime_us, cpu_load_permille);
         self.outbox.send(&DeviceMsgRef::Status(&st), sink);
+        self.last_status_us = Some(uptime_us);
         st
     }
 
@@ -227,12 +231,26 @@ impl Device {
         self.tables.pending()
     }
 
-    /// Send the round's next table when it is time and there is room; returns its table.
+    /// Run the table round's next step when it is time; returns the channel whose table was
+    /// queued. No step runs within [`TABLE_SPACING_US`] of a periodic status frame, before or
+    /// after it ([`Device::send_status`] at its interval), so the two never share 100 ms of
+    /// CPU, unless status frames come so often (under 4 spacings apart) that steps would
+    /// hardly ever run.
     pub fn tables_step(
         &mut self,
         now_us: u64,
         sink: &mut impl FrameSink,
     ) -> Option<imu_proto::Channel> {
+        let interval = u64::from(self.status_ms) * 1000;
+        if let Some(last) = self
+            .last_status_us
+            .filter(|_| interval >= 4 * TABLE_SPACING_US)
+        {
+            let next = last + interval;
+            if now_us < last + TABLE_SPACING_US || now_us + TABLE_SPACING_US > next {
+                return None;
+            }
+        }
         self.tables
             .step(now_us, &self.pipeline.scales, &mut self.outbox, sink)
     }

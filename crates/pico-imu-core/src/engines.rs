@@ -64,9 +64,7 @@ const _: () = assert!(DEVICE_PARAMS[1] <= MAX_LEVELS && MAG_PARAMS[1] <= MAX_LEV
 /// differences (a level has differences only if every level below it has: each needs more
 /// history than the one below).
 pub fn table_levels(s: &ChannelSnapshot) -> impl Iterator<Item = LevelSums> + '_ {
-    (0..MAX_LEVELS)
-        .map_while(|k| s.level(k))
-        .take_while(|l| l.n2 > 0)
+    (0..s.levels_with_terms()).filter_map(|k| s.level(k))
 }
 
 /// Every channel at one instant.

@@ -74,6 +74,25 @@ impl Outbox {
         self.queue(encoded, sink)
     }
 
+    /// Queue a frame built elsewhere ([`imu_proto::FrameBuilder`], padded to a multiple of 4
+    /// bytes) if it fits whole.
+    pub fn queue_built(
+        &mut self,
+        frame: Result<&[u8], EncodeError>,
+        sink: &mut impl FrameSink,
+    ) -> Sent {
+        let Ok(frame) = frame else {
+            self.unsent = self.unsent.saturating_add(1);
+            return Sent::TooLarge;
+        };
+        if frame.len() > sink.room() {
+            self.unsent = self.unsent.saturating_add(1);
+            return Sent::Dropped;
+        }
+        sink.put(frame);
+        Sent::Queued(frame.len())
+    }
+
     fn queue(&mut self, encoded: Result<usize, EncodeError>, sink: &mut impl FrameSink) -> Sent {
         let Ok(n) = encoded else {
             self.unsent = self.unsent.saturating_add(1);

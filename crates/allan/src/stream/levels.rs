@@ -178,6 +178,15 @@ impl<const P: usize, const N: usize> Frozen<P, N> {
         self.gaps
     }
 
+    /// How many levels, from level 0 up, have second differences (each needs more history
+    /// than the one below, so these are the levels with any terms), without working out their
+    /// sums.
+    pub fn levels_with_terms(&self) -> usize {
+        (0..usize::from(self.depth))
+            .take_while(|&k| self.counts[k][0] + segment_terms::<P>(self.t, k).0 > 0)
+            .count()
+    }
+
     /// [`Engine::level`] when frozen.
     pub fn level(&self, k: usize) -> Option<LevelSums> {
         if k >= usize::from(self.depth) {
