@@ -491,11 +491,21 @@ const STATUS_LOG_EVERY: u32 = 10;
 /// When the status frame is also logged: at once when a count or state it reports changed (a
 /// loss, an overflow, a bus error, a sensor's state), otherwise every [`STATUS_LOG_EVERY`]
 /// frames. A defmt line with a dozen fields costs as much CPU as the status frame itself, so a
-/// quiet device logs it rarely; the host gets every frame.
-#[derive(Default)]
+/// quiet device logs it rarely; the host gets every frame. Before the first line the reference
+/// is a device with nothing lost and both sensors delivering: a healthy start is logged with the
+/// tenth frame, anything else at once.
 struct StatusLog {
-    last: Option<(u64, u64, u32, u32, u32, SensorState, SensorState)>,
+    last: (u64, u64, u32, u32, u32, SensorState, SensorState),
     quiet: u32,
+}
+
+impl Default for StatusLog {
+    fn default() -> Self {
+        Self {
+            last: (0, 0, 0, 0, 0, SensorState::Ok, SensorState::Ok),
+            quiet: 0,
+        }
+    }
 }
 
 impl StatusLog {
@@ -510,10 +520,10 @@ impl StatusLog {
             st.mag,
         );
         self.quiet += 1;
-        if self.last == Some(key) && self.quiet < STATUS_LOG_EVERY {
+        if self.last == key && self.quiet < STATUS_LOG_EVERY {
             return false;
         }
-        self.last = Some(key);
+        self.last = key;
         self.quiet = 0;
         true
     }
@@ -613,7 +623,9 @@ async fn process_task(
                 {
                     last_tables = now;
                     let round = device.start_tables(now.as_micros());
-                    info!(
+                    // Debug level: the host sees every table, and a line would cost as much as
+                    // the snapshot.
+                    debug!(
                         "tables: round {} (snapshot at {} µs)",
                         round,
                         now.as_micros()

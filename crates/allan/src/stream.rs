@@ -378,6 +378,16 @@ mod tests {
         assert_eq!(levels.len(), MAG_PARAMS[1]);
         assert_eq!(wide.level(MAG_PARAMS[1]), None);
         assert_ne!(e.level(3), wide.level(3));
+        // Frozen again after a reset: nothing of the deeper levels frozen before is left.
+        e.reset();
+        for _ in 0..100 {
+            e.push(next());
+        }
+        e.freeze(&mut wide);
+        assert_eq!(wide.levels_with_terms(), 6);
+        for (k, l) in e.levels().enumerate() {
+            assert_eq!(wide.level(k), Some(l), "level {k} after the reset");
+        }
     }
 
     #[test]

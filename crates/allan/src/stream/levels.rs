@@ -129,17 +129,22 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     }
 
     /// Copy what the levels derive from into `out` (its first `min(L, N)` levels): a snapshot
-    /// of a few words per level, where working the [`LevelSums`] out costs 64-bit and 128-bit
-    /// arithmetic per level (a device freezes every engine between two samples and derives the
-    /// levels later, [`Frozen::level`]).
+    /// of a few words per level with terms (the others are all zeros, and not copied), where
+    /// working the [`LevelSums`] out costs 64-bit and 128-bit arithmetic per level (a device
+    /// freezes every engine between two samples and derives the levels later,
+    /// [`Frozen::level`]).
     pub fn freeze<const N: usize>(&self, out: &mut Frozen<P, N>) {
         let depth = L.min(N);
+        let filled = (0..depth)
+            .take_while(|&k| self.counts[k][0] + self.segment_terms(k).0 > 0)
+            .count();
         out.t = self.t;
         out.closed = self.closed;
         out.gaps = self.gaps;
         out.depth = depth as u8;
-        out.sums[..depth].copy_from_slice(&self.sums[..depth]);
-        out.counts[..depth].copy_from_slice(&self.counts[..depth]);
+        out.filled = filled as u8;
+        out.sums[..filled].copy_from_slice(&self.sums[..filled]);
+        out.counts[..filled].copy_from_slice(&self.counts[..filled]);
     }
 }
 
@@ -151,8 +156,12 @@ pub struct Frozen<const P: usize, const N: usize> {
     t: u64,
     closed: u64,
     gaps: u32,
-    /// Levels copied (the engine's, at most `N`).
+    /// Levels frozen (the engine's, at most `N`).
     depth: u8,
+    /// Of these, the levels with terms, the only ones copied: the others have no differences
+    /// yet, so their sums and counts are zero (a level has terms only if every level below it
+    /// has: each needs more history than the one below).
+    filled: u8,
     sums: [[Sum128; 2]; N],
     counts: [[u64; 2]; N],
 }
@@ -164,6 +173,7 @@ impl<const P: usize, const N: usize> Frozen<P, N> {
         closed: 0,
         gaps: 0,
         depth: 0,
+        filled: 0,
         sums: [[Sum128::ZERO; 2]; N],
         counts: [[0; 2]; N],
     };
@@ -182,15 +192,16 @@ impl<const P: usize, const N: usize> Frozen<P, N> {
     /// than the one below, so these are the levels with any terms), without working out their
     /// sums.
     pub fn levels_with_terms(&self) -> usize {
-        (0..usize::from(self.depth))
-            .take_while(|&k| self.counts[k][0] + segment_terms::<P>(self.t, k).0 > 0)
-            .count()
+        self.filled.into()
     }
 
     /// [`Engine::level`] when frozen.
     pub fn level(&self, k: usize) -> Option<LevelSums> {
         if k >= usize::from(self.depth) {
             return None;
+        }
+        if k >= usize::from(self.filled) {
+            return Some(level_of::<P>(k, self.t, &[Sum128::ZERO; 2], &[0; 2]));
         }
         Some(level_of::<P>(k, self.t, &self.sums[k], &self.counts[k]))
     }
