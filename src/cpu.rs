@@ -1,52 +1,41 @@
-//! CPU load: the executor's busy time (from each `poll_start` to the following
-//! `executor_idle`, via embassy-executor's `trace` hooks) over wall time.
+//! CPU load, and the executor's run loop that measures it: the thread-mode executor polls its
+//! tasks, then sleeps in `WFE` until an interrupt or a task's wake-up (`SEV`) ends the sleep; the
+//! time asleep is idle, everything else busy (over wall time).
 //!
-//! Interrupt handlers that run while the executor sleeps are not counted (they are short: I2C
-//! FIFO refills, USB endpoint events), so this slightly under-reads; the emulator benchmark
-//! counts every executed cycle and is the reference figure (docs/firmware.md).
-//!
-//! The hooks are free functions called by the executor, so their state is in `crate::shared`.
+//! Interrupt handlers that run while the executor sleeps are counted as idle (they are short:
+//! I2C and DMA completions, USB endpoint events), so this slightly under-reads; the emulator
+//! benchmark counts every executed cycle and is the reference figure (docs/firmware.md).
+//! (embassy's `trace` hooks would measure the same per poll, at a call per task wake-up and
+//! poll; two timer reads per sleep are cheaper.)
 use core::sync::atomic::Ordering;
 
+use embassy_executor::raw;
 use embassy_time::Instant;
 
-use crate::shared::{CPU_BUSY, CPU_SINCE};
+use crate::shared::CPU_IDLE;
 
 fn now() -> u32 {
     Instant::now().as_ticks() as u32
 }
 
-// The hooks run only in thread mode, on the one executor, so each word has a single writer:
-// plain atomic loads and stores suffice (the M0+ has no atomic read-modify-write, and a
-// critical section per poll cost more than the measurement is worth).
-#[unsafe(no_mangle)]
-fn _embassy_trace_poll_start(_executor_id: u32) {
-    CPU_SINCE.store(now(), Ordering::Relaxed);
+/// Run `executor` for ever in thread mode: poll, then sleep until there is work again, adding
+/// the time asleep to the idle count. (embassy's thread executor without the count: its pender
+/// for thread mode, `SEV`, ends the `WFE`.)
+pub fn run(executor: &'static raw::Executor) -> ! {
+    loop {
+        // SAFETY: the executor is polled from this one thread-mode loop only.
+        unsafe { executor.poll() };
+        let t0 = now();
+        cortex_m::asm::wfe();
+        // A single writer (this loop): a plain load and store (the M0+ has no atomic add).
+        let idle = CPU_IDLE.load(Ordering::Relaxed);
+        CPU_IDLE.store(idle.wrapping_add(now().wrapping_sub(t0)), Ordering::Relaxed);
+    }
 }
-
-#[unsafe(no_mangle)]
-fn _embassy_trace_executor_idle(_executor_id: u32) {
-    let busy = now().wrapping_sub(CPU_SINCE.load(Ordering::Relaxed));
-    CPU_BUSY.store(
-        CPU_BUSY.load(Ordering::Relaxed).wrapping_add(busy),
-        Ordering::Relaxed,
-    );
-}
-
-#[unsafe(no_mangle)]
-fn _embassy_trace_task_new(_executor_id: u32, _task_id: u32) {}
-#[unsafe(no_mangle)]
-fn _embassy_trace_task_end(_executor_id: u32, _task_id: u32) {}
-#[unsafe(no_mangle)]
-fn _embassy_trace_task_exec_begin(_executor_id: u32, _task_id: u32) {}
-#[unsafe(no_mangle)]
-fn _embassy_trace_task_exec_end(_executor_id: u32, _task_id: u32) {}
-#[unsafe(no_mangle)]
-fn _embassy_trace_task_ready_begin(_executor_id: u32, _task_id: u32) {}
 
 /// Busy fraction between successive [`Meter::sample`] calls.
 pub struct Meter {
-    last_busy: u32,
+    last_idle: u32,
     last_at: u32,
     last_permille: u16,
 }
@@ -54,7 +43,7 @@ pub struct Meter {
 impl Meter {
     pub fn new() -> Self {
         Self {
-            last_busy: busy_ticks(),
+            last_idle: idle_ticks(),
             last_at: now(),
             last_permille: 0,
         }
@@ -62,14 +51,14 @@ impl Meter {
 
     /// Load since the previous sample, ‰ of wall time.
     pub fn sample(&mut self) -> u16 {
-        let (busy, at) = (busy_ticks(), now());
+        let (idle, at) = (idle_ticks(), now());
         let dt = at.wrapping_sub(self.last_at);
-        let db = busy.wrapping_sub(self.last_busy);
+        let db = dt.saturating_sub(idle.wrapping_sub(self.last_idle));
         self.last_permille = (u64::from(db) * 1000)
             .checked_div(u64::from(dt))
             .unwrap_or(0)
             .min(1000) as u16;
-        self.last_busy = busy;
+        self.last_idle = idle;
         self.last_at = at;
         self.last_permille
     }
@@ -80,6 +69,6 @@ impl Meter {
     }
 }
 
-fn busy_ticks() -> u32 {
-    CPU_BUSY.load(Ordering::Relaxed)
+fn idle_ticks() -> u32 {
+    CPU_IDLE.load(Ordering::Relaxed)
 }

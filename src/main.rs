@@ -183,8 +183,22 @@ static OUT_QUEUED: StaticCell<OutQueued> = StaticCell::new();
 static BUS: StaticCell<SharedBus> = StaticCell::new();
 static DEVICE: StaticCell<Device> = StaticCell::new();
 
-#[embassy_executor::main]
-async fn main(spawner: Spawner) {
+/// The thread-mode executor, run by `crate::cpu::run` (which counts its idle time).
+static EXECUTOR: StaticCell<embassy_executor::raw::Executor> = StaticCell::new();
+
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    // The context embassy's pender takes for the thread-mode executor: it then ends a `WFE`
+    // with `SEV` (embassy-executor's `platform-cortex-m`).
+    let executor = EXECUTOR.init(embassy_executor::raw::Executor::new(usize::MAX as *mut ()));
+    let spawner = executor.spawner();
+    spawner.spawn(start(spawner).expect("spawn start"));
+    cpu::run(executor)
+}
+
+/// Start-up: the peripherals, USB, the sensors' bus and every task.
+#[embassy_executor::task]
+async fn start(spawner: Spawner) {
     let p = embassy_rp::init(Default::default());
     info!("pico-imu {} booting", env!("CARGO_PKG_VERSION"));
 

@@ -1,17 +1,14 @@
 //! The firmware's statics: the only state shared between tasks and the code that cannot be
-//! handed a reference (interrupt handlers and the executor's trace hooks, which are free
-//! functions). Each is an atomic or a waker with one writer per side, named after its owner;
+//! handed a reference (interrupt handlers, and the executor's run loop for the CPU meter). Each is an atomic or a waker with one writer per side, named after its owner;
 //! everything else a task needs it is given at spawn (`StaticCell`s in `main.rs`, initialised
 //! once).
 use core::sync::atomic::{AtomicBool, AtomicU32};
 
 use embassy_sync::waitqueue::AtomicWaker;
 
-/// `crate::cpu`: when the executor last started polling, µs (low 32 bits; differences wrap
-/// correctly for intervals under 71 minutes).
-pub static CPU_SINCE: AtomicU32 = AtomicU32::new(0);
-/// `crate::cpu`: busy µs, wrapping.
-pub static CPU_BUSY: AtomicU32 = AtomicU32::new(0);
+/// `crate::cpu`: µs the executor has slept, wrapping (differences are right for intervals under
+/// 71 minutes).
+pub static CPU_IDLE: AtomicU32 = AtomicU32::new(0);
 
 /// `crate::alarm`: the task waiting on each TIMER alarm (index = alarm; 0 is embassy's).
 pub static ALARM_WAKERS: [AtomicWaker; 4] = [const { AtomicWaker::new() }; 4];
