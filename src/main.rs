@@ -2,6 +2,9 @@
 //! QMC5883L (200 Hz) on I2C0, corrects them in fixed point, runs the streaming Allan engines for
 //! ten channels, and reports over USB CDC-ACM (imu-proto frames) and defmt-RTT.
 //!
+//! `main` hands the executor to its run loop (`cpu::run`, which also measures the CPU load) with
+//! one task, `start`: the peripherals, USB, the sensors' bus, then the tasks.
+//!
 //! Tasks (docs/firmware.md has the diagram):
 //! * `imu_task`     — MPU-6050 FIFO bursts every 10 ms, right after every second magnetometer
 //!   tick, fault handling;
