@@ -665,6 +665,51 @@ fn get_tables_answers_one_snapshot_spaced_out_and_waiting_for_room() {
     }
 }
 
+/// A table round beside the 1 s status frames: every table still arrives, whole and from the
+/// round's snapshot, and none is queued within a spacing of a status frame, before or after it
+/// (the two never share 100 ms of CPU).
+#[test]
+fn table_steps_keep_clear_of_the_status_frames() {
+    let mut rig = Rig::new();
+    rig.run(2000);
+    let Reply::Tables { snapshot } = rig.request(Request::GetTables) else {
+        panic!("GetTables")
+    };
+    let mut statuses = Vec::new();
+    let mut queued = Vec::new();
+    let mut got = 0;
+    let mut next_status = rig.now_us() + 30_000;
+    while rig.dev.tables_pending() {
+        rig.run(10);
+        let now = rig.now_us();
+        assert!(now < 60_000_000, "the round did not end");
+        if now >= next_status {
+            rig.dev.send_status(now, 0, &mut rig.sink);
+            statuses.push(now);
+            next_status = now + 1_000_000;
+        }
+        if rig.dev.tables_step(now, &mut rig.sink).is_some() {
+            queued.push(now);
+        }
+        for m in rig.sink.messages() {
+            if let DeviceMsg::Table(t) = m {
+                assert_eq!(t.snapshot, snapshot);
+                got += 1;
+            }
+        }
+    }
+    assert_eq!(got, Channel::ALL.len());
+    assert!(statuses.len() >= 2, "{} status frames", statuses.len());
+    for t in &queued {
+        for s in &statuses {
+            assert!(
+                t.abs_diff(*s) >= TABLE_SPACING_US,
+                "table at {t} µs, status at {s} µs"
+            );
+        }
+    }
+}
+
 /// A stall between the FIFO-count transfer and the data transfer: the count (taken before it)
 /// cannot show the overflow the stall causes, and the frames read after it would be
 /// misaligned; the count is then treated as stale.

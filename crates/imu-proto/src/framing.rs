@@ -164,8 +164,18 @@ impl<'a> Stuffer<'a> {
         crc
     }
 
+    /// Close a frame whose content's (not finalised) CRC is `crc`: the CRC's four bytes, the
+    /// last block, the `0x00` delimiter. Its length with the delimiter, or `None` if it did not
+    /// fit `dst`.
+    fn close(mut self, crc: u32) -> Option<usize> {
+        self.extend::<false>(&(!crc).to_le_bytes(), 0);
+        let n = self.finish()?;
+        *self.dst.get_mut(n)? = 0;
+        Some(n + 1)
+    }
+
     /// Close the last block; the encoded length, or `None` if it did not fit `dst`.
-    fn finish(mut self) -> Option<usize> {
+    fn finish(&mut self) -> Option<usize> {
         self.put(self.code_at, (self.out - self.code_at) as u8);
         (self.out <= self.dst.len()).then_some(self.out)
     }
@@ -234,11 +244,8 @@ fn crc_copy_run(window: &[u8], dst: &mut [u8], crc: &mut u32) -> usize {
 /// length (delimiter included).
 fn frame(content: &[u8], out: &mut [u8]) -> Result<usize, EncodeError> {
     let mut s = Stuffer::new(out);
-    let crc = !s.extend::<true>(content, u32::MAX);
-    s.extend::<false>(&crc.to_le_bytes(), 0);
-    let n = s.finish().ok_or(EncodeError::TooLarge)?;
-    *out.get_mut(n).ok_or(EncodeError::TooLarge)? = 0;
-    Ok(n + 1)
+    let crc = s.extend::<true>(content, u32::MAX);
+    s.close(crc).ok_or(EncodeError::TooLarge)
 }
 
 /// A frame built a piece at a time, in its own buffer of `N` bytes: each piece of the content
@@ -284,13 +291,20 @@ impl<const N: usize> FrameBuilder<N> {
 
     /// Append the next postcard bytes of the message.
     pub fn push(&mut self, bytes: &[u8]) {
-        let mut s = Stuffer {
+        let crc = self.crc;
+        let mut s = self.stuffer();
+        let crc = s.extend::<true>(bytes, crc);
+        (self.code_at, self.out) = (s.code_at, s.out);
+        self.crc = crc;
+    }
+
+    /// The COBS state where the last piece left it.
+    fn stuffer(&mut self) -> Stuffer<'_> {
+        Stuffer {
             dst: &mut self.buf,
             code_at: self.code_at,
             out: self.out,
-        };
-        self.crc = s.extend::<true>(bytes, self.crc);
-        (self.code_at, self.out) = (s.code_at, s.out);
+        }
     }
 
     /// Close the frame (CRC, last code byte, the `0x00` delimiter) and pad it with zero bytes
@@ -298,14 +312,9 @@ impl<const N: usize> FrameBuilder<N> {
     /// [`EncodeError::TooLarge`] if it did not fit the buffer. The builder must be started again
     /// before the next frame.
     pub fn finish(&mut self, align: usize) -> Result<&[u8], EncodeError> {
-        let mut s = Stuffer {
-            dst: &mut self.buf,
-            code_at: self.code_at,
-            out: self.out,
-        };
-        s.extend::<false>(&(!self.crc).to_le_bytes(), 0);
-        let n = s.finish().ok_or(EncodeError::TooLarge)?;
-        let padded = (n + 1).next_multiple_of(align.max(1));
+        let crc = self.crc;
+        let n = self.stuffer().close(crc).ok_or(EncodeError::TooLarge)?;
+        let padded = n.next_multiple_of(align.max(1));
         let frame = self.buf.get_mut(..padded).ok_or(EncodeError::TooLarge)?;
         frame[n..].fill(0);
         Ok(frame)

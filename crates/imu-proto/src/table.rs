@@ -6,7 +6,7 @@
 //! order — `channel` (its variant index), `snapshot`, `t_us`, `tau0_ns`, `scale` (f32), `pushed`,
 //! `gaps`, and `levels` as a length and that many [`AllanLevel`]s (`m`, `stride`, `n2`, `sum2`,
 //! `n3`, `sum3`).
-use crate::wire::Cursor;
+use crate::wire::write_checked;
 use crate::{AllanLevel, AllanTable, MAX_LEVELS};
 
 /// Index of `DeviceMsg::Table` among `DeviceMsg`'s variants (tested against the serde path).
@@ -36,31 +36,29 @@ pub fn write(table: &AllanTable, buf: &mut [u8]) -> Option<usize> {
 /// too small ([`HEAD_MAX`] bytes always suffice). With the levels written one at a time, a
 /// device can encode a table a few levels at a time.
 pub fn write_head(table: &AllanTable, levels: usize, buf: &mut [u8]) -> Option<usize> {
-    let len = buf.len();
-    let mut c = Cursor::<true> { buf, pos: 0 };
-    c.byte(TABLE_VARIANT);
-    // A fieldless enum: its discriminant is its variant index (tested for every channel).
-    c.varint(table.channel as u32);
-    c.varint(table.snapshot);
-    c.varint_u64(table.t_us);
-    c.varint(table.tau0_ns);
-    c.f32(table.scale);
-    c.varint_u64(table.pushed);
-    c.varint(table.gaps);
-    c.varint(levels as u32);
-    Some(c.pos).filter(|&n| n <= len)
+    write_checked(buf, |c| {
+        c.byte(TABLE_VARIANT);
+        // A fieldless enum: its discriminant is its variant index (tested for every channel).
+        c.varint(table.channel as u32);
+        c.varint(table.snapshot);
+        c.varint_u64(table.t_us);
+        c.varint(table.tau0_ns);
+        c.f32(table.scale);
+        c.varint_u64(table.pushed);
+        c.varint(table.gaps);
+        c.varint(levels as u32);
+    })
 }
 
 /// The bytes of one level of a table; the length, `None` if `buf` is too small ([`LEVEL_MAX`]
 /// bytes always suffice).
 pub fn write_level(l: &AllanLevel, buf: &mut [u8]) -> Option<usize> {
-    let len = buf.len();
-    let mut c = Cursor::<true> { buf, pos: 0 };
-    c.varint(l.m);
-    c.varint(l.stride);
-    c.varint_u64(l.n2);
-    c.varint_u128(l.sum2);
-    c.varint_u64(l.n3);
-    c.varint_u128(l.sum3);
-    Some(c.pos).filter(|&n| n <= len)
+    write_checked(buf, |c| {
+        c.varint(l.m);
+        c.varint(l.stride);
+        c.varint_u64(l.n2);
+        c.varint_u128(l.sum2);
+        c.varint_u64(l.n3);
+        c.varint_u128(l.sum3);
+    })
 }

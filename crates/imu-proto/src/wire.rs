@@ -66,15 +66,11 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
         self.byte((lo >> 7) as u8 | 0x80);
         self.byte((lo >> 14) as u8 | 0x80);
         self.byte((lo >> 21) as u8 | 0x80);
-        let mut rest = v >> 28;
-        if let Ok(small) = u32::try_from(rest) {
-            return self.varint(small);
+        let rest = v >> 28;
+        match u32::try_from(rest) {
+            Ok(small) => self.varint(small),
+            Err(_) => self.varint_wide(rest.into()),
         }
-        while rest >= 0x80 {
-            self.byte(rest as u8 | 0x80);
-            rest >>= 7;
-        }
-        self.byte(rest as u8);
     }
 
     #[inline(always)]
@@ -90,14 +86,31 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
 
     /// A `u128` varint; a value below 2^64 as a `u64` (32-bit steps where it allows).
     pub(crate) fn varint_u128(&mut self, v: u128) {
-        if let Ok(v) = u64::try_from(v) {
-            return self.varint_u64(v);
+        match u64::try_from(v) {
+            Ok(v) => self.varint_u64(v),
+            Err(_) => self.varint_wide(v),
         }
-        let mut rest = v;
+    }
+
+    /// Any varint, in 128-bit steps: the rare values at or above 2^60.
+    #[inline(never)]
+    fn varint_wide(&mut self, mut rest: u128) {
         while rest >= 0x80 {
             self.byte(rest as u8 | 0x80);
             rest >>= 7;
         }
         self.byte(rest as u8);
     }
+}
+
+/// Write a message's bytes with `write` through a checked cursor on `buf`: their length, or
+/// `None` if `buf` is too small for them.
+pub(crate) fn write_checked(
+    buf: &mut [u8],
+    write: impl FnOnce(&mut Cursor<'_, true>),
+) -> Option<usize> {
+    let len = buf.len();
+    let mut c = Cursor::<true> { buf, pos: 0 };
+    write(&mut c);
+    Some(c.pos).filter(|&n| n <= len)
 }

@@ -29,7 +29,7 @@ use crate::bus::{Failure, TransferTime};
 use crate::clock::{self, fine, whole_us, BusTiming, Fit, SampleClock, US};
 use crate::config::imu_config;
 use crate::msg::{Out, SensorMsg, BURST_MAX};
-use crate::service::{delay_until, Core, Phase, Tick, SETUP, WRITE_MARGIN};
+use crate::service::{delay_until, Core, Lead, Phase, Tick, SETUP, WRITE_MARGIN};
 use crate::stage::{self, Stage};
 
 /// Bytes of one FIFO frame (accel, temperature, gyro).
@@ -50,6 +50,8 @@ pub struct ImuService {
     /// The last count read, with frames, found a sample later than the clock allowed.
     late_before: bool,
     capacity: u16,
+    /// How much earlier than its target a probe's count read is begun.
+    lead: Lead,
 }
 
 impl ImuService {
@@ -61,6 +63,7 @@ impl ImuService {
             misaligned: false,
             late_before: false,
             capacity: 1024,
+            lead: Lead::new(),
         }
     }
 
@@ -187,7 +190,7 @@ impl ImuService {
         if let Some(p) = self.core.clock.probe_after(t0 + SETUP + count_latch) {
             if p - t0 < PROBE_WAIT + SETUP + count_latch {
                 let start = p - count_latch;
-                delay_until(cx.delay, cx.now, self.core.lead.begin(start)).await;
+                delay_until(cx.delay, cx.now, self.lead.begin(start)).await;
                 aimed = Some(start);
             }
         }
@@ -206,7 +209,7 @@ impl ImuService {
             };
             let start = cx.dev.bus().last_start();
             if let Some(a) = aimed.take() {
-                self.core.lead.learn(a, start);
+                self.lead.learn(a, start);
             }
             let tau = self.core.answered(start, clock::READ_SECOND_BIT);
             let held_read = self.core.held(start, clock::read_bits(2), read_at);

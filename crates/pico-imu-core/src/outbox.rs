@@ -22,8 +22,13 @@ pub enum Sent {
     TooLarge,
 }
 
-/// Room for a frame and its padding to a multiple of 4 bytes.
-const PADDED_FRAME: usize = (MAX_FRAME + 3) & !3;
+/// Frames are queued padded with zero bytes to a multiple of this: empty frames between
+/// delimiters, which every reader skips (`imu_proto::FrameReader`). Unaligned copies of the
+/// short frames (byte by byte on the M0+) cost ≈ 200 cycles per sample set more.
+pub const FRAME_ALIGN: usize = 4;
+
+/// Room for a frame and its padding to a multiple of [`FRAME_ALIGN`] bytes.
+const PADDED_FRAME: usize = MAX_FRAME.next_multiple_of(FRAME_ALIGN);
 
 /// The frame buffer, word-aligned: frames are queued in multiples of 4 bytes from here, so the
 /// copies into the output pipe and from it into the USB buffers are word copies.
@@ -74,40 +79,42 @@ impl Outbox {
         self.queue(encoded, sink)
     }
 
-    /// Queue a frame built elsewhere ([`imu_proto::FrameBuilder`], padded to a multiple of 4
-    /// bytes) if it fits whole.
+    /// Queue a frame built elsewhere ([`imu_proto::FrameBuilder`], padded to a multiple of
+    /// [`FRAME_ALIGN`] bytes) if it fits whole.
     pub fn queue_built(
         &mut self,
         frame: Result<&[u8], EncodeError>,
         sink: &mut impl FrameSink,
     ) -> Sent {
-        let Ok(frame) = frame else {
-            self.unsent = self.unsent.saturating_add(1);
-            return Sent::TooLarge;
-        };
-        if frame.len() > sink.room() {
-            self.unsent = self.unsent.saturating_add(1);
-            return Sent::Dropped;
-        }
-        sink.put(frame);
-        Sent::Queued(frame.len())
+        put_whole(&mut self.unsent, frame, sink)
     }
 
+    /// Queue the frame of `encoded` bytes in the frame buffer, padded.
     fn queue(&mut self, encoded: Result<usize, EncodeError>, sink: &mut impl FrameSink) -> Sent {
-        let Ok(n) = encoded else {
-            self.unsent = self.unsent.saturating_add(1);
-            return Sent::TooLarge;
-        };
-        // Padded with zero bytes to a multiple of 4: empty frames between delimiters, which
-        // every reader skips (`imu_proto::FrameReader`). Unaligned copies of these short frames
-        // (byte by byte on the M0+) cost ≈ 200 cycles per sample set more.
-        let padded = (n + 3) & !3;
-        if padded > sink.room() {
-            self.unsent = self.unsent.saturating_add(1);
-            return Sent::Dropped;
-        }
-        self.buf.0[n..padded].fill(0);
-        sink.put(&self.buf.0[..padded]);
-        Sent::Queued(padded)
+        let frame = encoded.map(|n| {
+            let padded = n.next_multiple_of(FRAME_ALIGN);
+            self.buf.0[n..padded].fill(0);
+            &self.buf.0[..padded]
+        });
+        put_whole(&mut self.unsent, frame, sink)
     }
+}
+
+/// Put `frame` on `sink` if it fits whole; otherwise (or if it did not encode) count it in
+/// `unsent`.
+fn put_whole(
+    unsent: &mut u32,
+    frame: Result<&[u8], EncodeError>,
+    sink: &mut impl FrameSink,
+) -> Sent {
+    let Ok(frame) = frame else {
+        *unsent = unsent.saturating_add(1);
+        return Sent::TooLarge;
+    };
+    if frame.len() > sink.room() {
+        *unsent = unsent.saturating_add(1);
+        return Sent::Dropped;
+    }
+    sink.put(frame);
+    Sent::Queued(frame.len())
 }

@@ -56,8 +56,6 @@ pub struct Core {
     pub overflows: u32,
     /// The state the last report carried.
     reported: SensorState,
-    /// How much earlier than its target a placed transfer is started.
-    pub lead: Lead,
 }
 
 /// How much earlier than the instant it should start a placed transfer (a probe) must be begun:
@@ -71,6 +69,10 @@ pub struct Lead(Fine);
 impl Lead {
     /// The largest lead learnt (a wait that ended late by more is an outlier, not latency).
     pub const MAX: Fine = 200 * US;
+
+    pub const fn new() -> Self {
+        Lead(0)
+    }
 
     /// When to begin a transfer that should start at `start`.
     pub fn begin(&self, start: Fine) -> Fine {
@@ -108,7 +110,6 @@ impl Core {
             bus_faults: 0,
             overflows: 0,
             reported: SensorState::Unknown,
-            lead: Lead(0),
         }
     }
 

@@ -10,7 +10,7 @@
 use imu_proto::{table, AllanTable, Channel, FrameBuilder, Scales, Sensor, Vec};
 
 use crate::engines::{table_levels, Engines, Snapshot, CHANNELS};
-use crate::outbox::{FrameSink, Outbox, Sent};
+use crate::outbox::{FrameSink, Outbox, Sent, FRAME_ALIGN};
 
 /// Least time between a round's snapshot and its first table step, and between two steps, µs.
 pub const TABLE_SPACING_US: u64 = 100_000;
@@ -160,21 +160,17 @@ impl Tables {
                 }
             }
             done = to;
-            self.progress = Some((done, total));
-            if done < total {
-                return None;
-            }
         }
-        // Every level is in: queue the frame once there is room (checked first, so that the
-        // frame is finished only once).
         self.progress = Some((done, total));
-        if sink.room() < TABLE_FRAME_ROOM {
+        // Once every level is in, the frame is queued when there is room (checked first, so
+        // that the frame is finished only once).
+        if done < total || sink.room() < TABLE_FRAME_ROOM {
             return None;
         }
         self.last_step_us = Some(now_us);
         self.progress = None;
         self.next = (c + 1 < CHANNELS).then_some(c + 1);
-        match outbox.queue_built(self.frame.finish(4), sink) {
+        match outbox.queue_built(self.frame.finish(FRAME_ALIGN), sink) {
             Sent::Queued(_) => Some(Channel::ALL[c]),
             // Too large for its buffer (a firmware bug, counted): the table is skipped.
             _ => None,
