@@ -37,8 +37,9 @@
 //! # The hot path
 //! `push` takes a straight steady-state path (no per-level checks) once the base ring is full and
 //! the unit-stride levels are narrow, for every |y| not above the segment's largest so far (in a
-//! copy without range tests on the unit-stride squares while that largest |y| is small); the
-//! rest goes through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
+//! copy without range tests on the unit-stride squares while that largest |y| is small), and
+//! for a new largest |y| that keeps them narrow, after raising that bound; the rest goes
+//! through a general path. docs/allan.md ("Cost on the Cortex-M0+") explains the
 //! choices and gives the measured cycles.
 
 mod general;

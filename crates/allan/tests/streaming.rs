@@ -191,6 +191,47 @@ fn no_accumulator_overflows_in_30_days_at_1khz_full_scale_16_bit() {
     );
 }
 
+/// New extremes after the base ring is full raise the gate and stay on the steady path while
+/// the base ring stays narrow; the strided levels that can no longer be summed in 32-bit words
+/// must then leave it. Steps to just below 2^(30 − K0) after small noise (all one sign for
+/// hundreds of samples, so the strided differences exceed 2^31), and a ramp on which every
+/// sample is a new extreme, must match the host bit for bit.
+#[test]
+fn late_extremes_in_the_steady_state() {
+    fn check<const P: usize, const L: usize, const R: usize, const S: usize>(limit: i32) {
+        let mut s = 0x9e37_79b9u32;
+        let mut noise = |n: usize| -> Vec<i32> {
+            (0..n)
+                .map(|_| {
+                    s ^= s << 13;
+                    s ^= s >> 17;
+                    s ^= s << 5;
+                    (s >> 22) as i32 - 512
+                })
+                .collect()
+        };
+        let mut step = noise(100);
+        step.extend(std::iter::repeat_n(limit - 1, 700));
+        step.extend(noise(50));
+        step.extend(std::iter::repeat_n(1 - limit, 900));
+        step.extend(noise(300));
+        let ramp: Vec<i32> = (0..3000).map(|i| i * (limit / 3000)).collect();
+        for (name, y) in [("step", step), ("ramp", ramp)] {
+            let segments = vec![y.clone(), y];
+            assert_eq!(
+                &run::<P, L, R, S>(&segments).levels().collect::<Vec<_>>()[..],
+                &host::<P>(&segments, L)[..],
+                "{name}, P = {P}"
+            );
+        }
+    }
+    // 2^(30 − K0): K0 = 4, 3, 2 for P = 8, 4, 2.
+    check::<8, 12, 12, 8>(1 << 26);
+    check::<8, 24, 12, 20>(1 << 26);
+    check::<4, 11, 6, 8>(1 << 27);
+    check::<2, 10, 3, 8>(1 << 28);
+}
+
 /// A square wave of amplitude `a` and half-period `h` about `mid` (starting at phase `phase`),
 /// `n` samples, after one sample of `mid` (the engine subtracts a segment's first sample from
 /// all of them, so the wave's amplitude is what it sees).

@@ -1,11 +1,11 @@
-//! The general path and the base ring: the start of a segment, a new largest |y|, wide inputs,
-//! and the base ring's two forms (mirrored low words while narrow, full i64 values when wide).
+//! The general path and the base ring: the start of a segment, a new largest |y| (raising the
+//! gate), wide inputs, and the base ring's two forms (mirrored low words while narrow, full i64 values when wide).
 
 use super::Engine;
 
 impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L, R, S> {
-    /// Everything else: the start of a segment (t < 3P), a new largest |y|, or inputs so large
-    /// that the unit-stride levels need 64-bit differences.
+    /// Everything else: the start of a segment (t < 3P), or inputs so large that the
+    /// unit-stride levels need 64-bit differences.
     #[inline(never)]
     pub(super) fn push_general(&mut self, y: i32) {
         if self.t == 0 {
@@ -43,6 +43,32 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         } else {
             0
         };
+    }
+
+    /// A sample at or above the gate in the steady state: when it is a new largest |y| that
+    /// keeps the base ring narrow, nothing but `amax`, `narrow` and the gate depends on the
+    /// largest |y| (the sums' form does not, and the steady path reads `narrow` for the strided
+    /// levels), so they are raised here and the sample takes the steady path; `true` then.
+    /// Otherwise (before the steady state, or an input that widens the base ring) nothing
+    /// changes and the general path takes the sample. Without this a signal that drifts, or
+    /// the noise's first seconds, would send every new extreme through the general path.
+    #[cold]
+    #[inline(never)]
+    pub(super) fn raise_gate(&mut self, y: i32) -> bool {
+        if self.gate == 0 {
+            return false;
+        }
+        let z = y as i64 - self.offset as i64;
+        // |z| ≤ 2^31 + 2^30 < 2^32, and above amax (|z| ≥ gate = amax + 1).
+        let a = z.unsigned_abs() as u32;
+        let narrow = Self::narrow_levels(a);
+        if (narrow as usize) < Self::K0 {
+            return false;
+        }
+        self.amax = a;
+        self.narrow = narrow;
+        self.gate = a + 1;
+        true
     }
 
     /// Whether the base ring holds mirrored low words (see [`Engine::base`]): exactly when

@@ -54,7 +54,8 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         // |z| ≥ 2^31 − 2^30, above any nonzero gate (≤ 2^(30−K0) + 1, the base ring being
         // narrow), so only exact values pass; the general path recomputes z in i64.
         let z = y.wrapping_sub(self.offset);
-        if z.unsigned_abs() < gate {
+        if z.unsigned_abs() < gate || self.raise_gate(y) {
+            let gate = self.gate;
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
                 #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]

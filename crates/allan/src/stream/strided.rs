@@ -107,36 +107,48 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     }
 
     /// Strided levels from level `from` on at sample count `t`, any state (start of a segment,
-    /// wide levels).
+    /// wide levels). Level `K0 + j` works when t is a multiple of its stride 2^(j+1) (strides
+    /// are below 2^32, so the low word decides), i.e. the levels below K0 + tz(t) do.
     #[cold]
     #[inline(never)]
     pub(super) fn strided_general(&mut self, t: u64, from: usize) {
+        let working = (Self::K0 + (t as u32).trailing_zeros() as usize).min(L);
         let mut k = from;
-        while k < L {
-            let stride_mask = (1u32 << (k + 1 - Self::K0)) - 1;
-            if t as u32 & stride_mask != 0 {
-                return;
-            }
-            let tm = if k == Self::K0 {
-                self.base_at_age(2 * P)
-            } else {
-                self.ring_back(k - 1, Self::BACK)
-            };
-            let t2m = self.ring_back(k, Self::BACK);
-            let t3m = self.ring_back(k, R - 1);
-            let m = 1u64 << k;
-            if t < 2 * m {
-                // No higher level has a difference yet either.
-                return;
-            }
-            let has3 = t >= 3 * m;
-            if has3 && k >= self.full as usize {
+        while k < working && self.strided_general_level(t, k) {
+            k += 1;
+        }
+    }
+
+    /// Level `k`'s differences at `t` (a multiple of its stride), any state; `false` when it
+    /// has none yet (t < 2m), and then no higher level has either.
+    #[inline(always)]
+    fn strided_general_level(&mut self, t: u64, k: usize) -> bool {
+        // ⌊t / m⌋, saturated, with a 32-bit shift unless t ≥ 2^32 (k < L ≤ 32).
+        let whole = if t >> 32 == 0 {
+            (t as u32) >> k
+        } else {
+            (t >> k).min(u32::MAX as u64) as u32
+        };
+        if whole < 2 {
+            return false;
+        }
+        let tm = if k == Self::K0 {
+            self.base_at_age(2 * P)
+        } else {
+            self.ring_back(k - 1, Self::BACK)
+        };
+        let t2m = self.ring_back(k, Self::BACK);
+        let t3m = if whole >= 3 {
+            if k >= self.full as usize {
                 // The levels below worked at this t too and became full first.
                 self.full = (k + 1) as u8;
             }
-            self.accumulate(k, tm, t2m, has3.then_some(t3m));
-            k += 1;
-        }
+            Some(self.ring_back(k, R - 1))
+        } else {
+            None
+        };
+        self.accumulate(k, tm, t2m, t3m);
+        true
     }
 
     /// Move θ[index] (which just left the base ring) into the strided levels' rings: it enters

@@ -49,7 +49,7 @@ pub const ROUTINE_SINGLE: u32 = 2;
 pub mod edge {
     /// A steady small sample with |z| = gate − 1 (the largest the Thumb routines take).
     pub const GATE_MINUS_ONE: usize = 0;
-    /// A sample with |z| = gate (the general path; the gate grows by one).
+    /// A sample with |z| = gate (a new largest |z|: the gate grows by one).
     pub const AT_GATE: usize = 1;
     /// A steady sample with gate = 2^11 − 1 (the largest small gate).
     pub const GATE_BELOW_2_11: usize = 2;
@@ -217,10 +217,19 @@ impl Mirror {
         (y as i64 - offset as i64).unsigned_abs() as u32
     }
 
-    /// Whether the Thumb single routine must take `y` now.
-    fn small(&self, y: i32) -> bool {
+    /// Whether `y` is a steady, small sample under the current gate (what the pair routine
+    /// checks of both its samples).
+    fn inside(&self, y: i32) -> bool {
         let gate = self.gate();
         gate != 0 && gate < 1 << 11 && self.z_abs(y) < gate
+    }
+
+    /// Whether the Thumb single routine must take `y` now: a steady, small sample, or a new
+    /// largest |z| in the steady state that leaves the gate small (the engine raises the gate
+    /// first).
+    fn small(&self, y: i32) -> bool {
+        let gate = self.gate();
+        gate != 0 && self.z_abs(y).max(gate - 1) < (1 << 11) - 1
     }
 
     fn push(&mut self, y: i32) {
@@ -427,15 +436,15 @@ pub fn run(report: &mut Report, a: &mut DeviceEngine, b: &mut DeviceEngine, case
             let t = mirror.t;
             if pair {
                 let y0 = source.next(&mut rng, &mirror);
-                let small0 = mirror.small(y0);
+                let (inside0, small0) = (mirror.inside(y0), mirror.small(y0));
                 note_edges(report, &mirror, y0, matches!(wave, Wave::Square { .. }));
                 mirror.push(y0);
                 let y1 = source.next(&mut rng, &mirror);
-                let small1 = mirror.small(y1);
+                let (inside1, small1) = (mirror.inside(y1), mirror.small(y1));
                 note_edges(report, &mirror, y1, matches!(wave, Wave::Square { .. }));
                 mirror.push(y1);
-                let pair_small = small0 && small1 && t & 1 == 0;
-                if small0 && small1 && t & 1 == 1 {
+                let pair_small = inside0 && inside1 && t & 1 == 0;
+                if inside0 && inside1 && t & 1 == 1 {
                     report.edges[edge::ODD_PAIR] += 1;
                 }
                 report.pair_predicted += pair_small as u32;
