@@ -2,7 +2,7 @@
 //! device uses and the reader both sides use.
 use serde::{de::DeserializeOwned, Serialize};
 
-use crate::{batch, table, AllanTable, SampleBatch};
+use crate::{batch, status, table, AllanTable, SampleBatch, Status};
 
 /// Wire-format version carried in the first byte of every frame.
 pub const PROTOCOL_VERSION: u8 = 4;
@@ -371,6 +371,13 @@ impl FrameEncoder {
         out: &mut [u8],
     ) -> Result<usize, EncodeError> {
         self.encode_by(out, |buf| table::write(table, buf))
+    }
+
+    /// Encode `DeviceMsg::Status(status)` as one frame into `out`, byte for byte what
+    /// [`FrameEncoder::encode`] writes for it (tested), without serde: the firmware's status
+    /// frame (`status.rs` writes the postcard bytes).
+    pub fn encode_status(&mut self, status: &Status, out: &mut [u8]) -> Result<usize, EncodeError> {
+        self.encode_by(out, |buf| status::write(status, buf))
     }
 
     /// One frame whose postcard bytes `write` puts into the buffer it is given (returning

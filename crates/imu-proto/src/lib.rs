@@ -28,6 +28,7 @@ mod contract;
 pub mod csv;
 mod framing;
 mod messages;
+mod status;
 /// The hand-written postcard bytes of an Allan table, whole or a level at a time.
 pub mod table;
 mod wire;

@@ -2,9 +2,7 @@
 //! ([`crate::pipeline`]), the table rounds ([`crate::tables`]), host requests
 //! ([`crate::requests`]), counters and the status report.
 use imu_cal::device::Calibration;
-use imu_proto::{
-    CalSource, CalStatus, DeviceMsg, DeviceMsgRef, Event, Scales, Sensor, SensorState, Status,
-};
+use imu_proto::{CalSource, CalStatus, DeviceMsg, Event, Scales, Sensor, SensorState, Status};
 
 use crate::clock::Fine;
 use crate::msg::{Report, SensorMsg};
@@ -203,7 +201,7 @@ impl Device {
         sink: &mut impl FrameSink,
     ) -> Status {
         let st = self.status(uptime_us, cpu_load_permille);
-        self.outbox.send(&DeviceMsgRef::Status(&st), sink);
+        self.outbox.send_status(&st, sink);
         self.last_status_us = Some(uptime_us);
         st
     }

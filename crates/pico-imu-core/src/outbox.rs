@@ -1,6 +1,6 @@
 //! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
 //! split and never waited for, so a host that stops reading cannot stall the sampling path.
-use imu_proto::{AllanTable, EncodeError, FrameEncoder, SampleBatch, MAX_FRAME};
+use imu_proto::{AllanTable, EncodeError, FrameEncoder, SampleBatch, Status, MAX_FRAME};
 use serde::Serialize;
 
 /// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
@@ -76,6 +76,13 @@ impl Outbox {
     /// [`Outbox::send`]) and queue it if it fits whole.
     pub fn send_table(&mut self, table: &AllanTable, sink: &mut impl FrameSink) -> Sent {
         let encoded = self.enc.encode_table(table, &mut self.buf.0[..MAX_FRAME]);
+        self.queue(encoded, sink)
+    }
+
+    /// Encode `DeviceMsg::Status(status)` with the hand-written status encoder (the same bytes
+    /// as [`Outbox::send`]) and queue it if it fits whole.
+    pub fn send_status(&mut self, status: &Status, sink: &mut impl FrameSink) -> Sent {
+        let encoded = self.enc.encode_status(status, &mut self.buf.0[..MAX_FRAME]);
         self.queue(encoded, sink)
     }
 
