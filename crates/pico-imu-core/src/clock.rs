@@ -441,10 +441,11 @@ impl SampleClock {
     /// Between two instants located to [`LOCKED_WIDTH`] the re-measurement always replaces
     /// the period: a longer span dilutes an interval that missed the truth by a few µs (the
     /// smallest of many bounds would keep the luckiest, and its error). Any two intervals
-    /// bound the period, though, so a wider edge gives a period too when its bound beats the
-    /// current one: while the coarse period's allowance (T/span per sample) keeps the interval
-    /// a few hundred µs wide, such an edge over 64 samples bounds T to a few µs, and the
-    /// interval, and the probing it causes, shrinks within a fraction of a second instead of
+    /// bound the period, though, so a wider edge gives a period too, from
+    /// [`FINE_SPAN_FIRST`] samples apart on, when its bound beats the current one: while the
+    /// nominal or coarse period's allowance (T/32 or T/span per sample) keeps the interval a few
+    /// hundred µs wide, such an edge bounds T to a few µs within tens of samples, and the
+    /// interval, and the probing it causes, shrinks within a few tenths of a second instead of
     /// waiting for the coarse period to get there. An instant located four times more
     /// precisely replaces the edge.
     fn recentre(&mut self) {
