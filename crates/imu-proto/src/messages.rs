@@ -395,27 +395,3 @@ pub enum DeviceMsg {
     Status(Status),
     Event(Event),
 }
-
-/// A borrowed view of [`DeviceMsg`] with the same wire encoding (postcard writes a variant as
-/// its index and a reference as its referent), so the device frames a batch or a table without
-/// copying it first. The variant order must stay that of [`DeviceMsg`] (tested).
-#[derive(Serialize, Debug, Clone, Copy)]
-pub enum DeviceMsgRef<'a> {
-    Reply { id: u16, reply: &'a Reply },
-    Samples(&'a SampleBatch),
-    Table(&'a AllanTable),
-    Status(&'a Status),
-    Event(&'a Event),
-}
-
-impl<'a> From<&'a DeviceMsg> for DeviceMsgRef<'a> {
-    fn from(m: &'a DeviceMsg) -> Self {
-        match m {
-            DeviceMsg::Reply { id, reply } => DeviceMsgRef::Reply { id: *id, reply },
-            DeviceMsg::Samples(b) => DeviceMsgRef::Samples(b),
-            DeviceMsg::Table(t) => DeviceMsgRef::Table(t),
-            DeviceMsg::Status(s) => DeviceMsgRef::Status(s),
-            DeviceMsg::Event(e) => DeviceMsgRef::Event(e),
-        }
-    }
-}

@@ -1,7 +1,6 @@
 //! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
 //! split and never waited for, so a host that stops reading cannot stall the sampling path.
-use imu_proto::{AllanTable, EncodeError, FrameEncoder, SampleBatch, Status, MAX_FRAME};
-use serde::Serialize;
+use imu_proto::{AllanTable, DeviceMsg, EncodeError, FrameEncoder, SampleBatch, Status, MAX_FRAME};
 
 /// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
 pub trait FrameSink {
@@ -58,9 +57,9 @@ impl Outbox {
         }
     }
 
-    /// Encode `msg` (a `DeviceMsg` or its borrowed view `DeviceMsgRef`) and queue it on
-    /// `sink` if it fits whole.
-    pub fn send<T: Serialize>(&mut self, msg: &T, sink: &mut impl FrameSink) -> Sent {
+    /// Encode `msg` (through serde: the rarer messages) and queue it on `sink` if it fits
+    /// whole.
+    pub fn send(&mut self, msg: &DeviceMsg, sink: &mut impl FrameSink) -> Sent {
         let encoded = self.enc.encode(msg, &mut self.buf.0[..MAX_FRAME]);
         self.queue(encoded, sink)
     }
