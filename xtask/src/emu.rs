@@ -227,15 +227,24 @@ impl Drop for Sim {
     }
 }
 
-/// `cargo xtask bench-emu [--seconds S]`: cycle budget report in out/emu-bench.md.
+/// `cargo xtask bench-emu [--seconds S] [--seed N] [--clock mpu:±P%,qmc:±P%]`: cycle budget
+/// report in out/emu/bench.md (the stream's seed and the parts' oscillator errors as for the
+/// emulator's `run`; the goal is checked with the defaults, nominal parts).
 pub fn bench(args: &[String]) -> Result<()> {
     let elf = build_firmware()?;
     let sim = ensure_sim()?;
     let seconds = arg_value(args, "--seconds").unwrap_or_else(|| "12".into());
     let out = out_dir("emu")?;
-    run(Command::new("node")
-        .arg(sim.join("src/cli.js"))
-        .args(["bench", "--quiet", "--seconds", &seconds, "--elf"])
+    let mut node = Command::new("node");
+    node.arg(sim.join("src/cli.js"))
+        .args(["bench", "--quiet", "--seconds", &seconds]);
+    for opt in ["--seed", "--clock"] {
+        if let Some(v) = arg_value(args, opt) {
+            node.args([opt, &v]);
+        }
+    }
+    run(node
+        .arg("--elf")
         .arg(&elf)
         .arg("--report")
         .arg(out.join("bench.md"))
