@@ -1,5 +1,6 @@
 //! The general path and the base ring: the start of a segment, a new largest |y| (raising the
-//! gate), wide inputs, and the base ring's two forms (mirrored low words while narrow, full i64 values when wide).
+//! gate), wide inputs, and the base ring's two forms (mirrored low words while narrow, full i64
+//! values when wide).
 
 use super::Engine;
 
