@@ -1,7 +1,7 @@
 //! The firmware's statics: the only state shared between tasks and the code that cannot be
-//! handed a reference (interrupt handlers, and the executor's run loop for the CPU meter). Each is an atomic or a waker with one writer per side, named after its owner;
-//! everything else a task needs it is given at spawn (`StaticCell`s in `main.rs`, initialised
-//! once).
+//! handed a reference (interrupt handlers, and the executor's run loop for the CPU meter). Each
+//! is an atomic or a waker with one writer per side, named after its owner; everything else a
+//! task needs it is given at spawn (`StaticCell`s in `main.rs`, initialised once).
 use core::sync::atomic::{AtomicBool, AtomicU32};
 
 use embassy_sync::waitqueue::AtomicWaker;

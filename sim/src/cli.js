@@ -22,7 +22,8 @@ const usage = `usage:
                    [--instant-i2c] [--served DIR] [--summary F.json]
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
-  pico-imu-sim bench --elf FW.elf [--seconds S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%] [--report F.md] [--json F.json]
+  pico-imu-sim bench --elf FW.elf [--seconds S] [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]
+                   [--report F.md] [--json F.json]
   pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact [--from S]]
                    (PC samples by function; callers of leaf functions matching RE; memcpy/memset
                    calls by caller; --exact: every instruction's cycles by function per sample set)

@@ -28,6 +28,14 @@ fn host<const P: usize>(segments: &[Vec<i32>], levels: usize) -> Vec<LevelSums> 
     stride_sums(&refs, P, levels)
 }
 
+/// The next word of a xorshift32 generator (deterministic pseudo-random inputs).
+fn xorshift(s: &mut u32) -> u32 {
+    *s ^= *s << 13;
+    *s ^= *s >> 17;
+    *s ^= *s << 5;
+    *s
+}
+
 fn sample() -> impl Strategy<Value = i32> {
     prop_oneof![
         4 => -2000i32..2000,
@@ -124,11 +132,9 @@ fn long_stream_reaches_high_levels_and_matches() {
     let mut drift = 0i32;
     let y: Vec<i32> = (0..1 << 18)
         .map(|_| {
-            s ^= s << 13;
-            s ^= s >> 17;
-            s ^= s << 5;
-            drift += (s % 3) as i32 - 1;
-            (s >> 20) as i32 - 2048 + drift
+            let r = xorshift(&mut s);
+            drift += (r % 3) as i32 - 1;
+            (r >> 20) as i32 - 2048 + drift
         })
         .collect();
     let e = run::<8, 24, 12, 20>(std::slice::from_ref(&y));
@@ -202,12 +208,7 @@ fn late_extremes_in_the_steady_state() {
         let mut s = 0x9e37_79b9u32;
         let mut noise = |n: usize| -> Vec<i32> {
             (0..n)
-                .map(|_| {
-                    s ^= s << 13;
-                    s ^= s >> 17;
-                    s ^= s << 5;
-                    (s >> 22) as i32 - 512
-                })
+                .map(|_| (xorshift(&mut s) >> 22) as i32 - 512)
                 .collect()
         };
         let mut step = noise(100);

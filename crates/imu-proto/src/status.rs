@@ -1,6 +1,7 @@
 //! The postcard bytes of `DeviceMsg::Status(status)`, written by hand: the same bytes as the
 //! serde path (tested, `tests/status.rs`), for the device's once-a-second status frame, where
-//! serde costs ≈ 2,200 cycles on the M0+ (each of its u64 counters a 64-bit varint loop).
+//! serde writes each of its u64 counters in a 64-bit varint loop (the M0+ has no 64-bit shifts;
+//! docs/benchmarks.md has the cycles).
 //!
 //! Layout (`crate::wire` has the rules): the variant (3), then [`Status`]'s fields in order;
 //! `u16` is a varint, `u8` one byte, an `Option` a 0/1 byte before its value, a fieldless enum
@@ -36,13 +37,7 @@ pub fn write(s: &Status, buf: &mut [u8]) -> Option<usize> {
         ] {
             c.varint(n);
         }
-        match s.temp_milli_c {
-            None => c.byte(0),
-            Some(t) => {
-                c.byte(1);
-                c.zigzag(t);
-            }
-        }
+        c.option(s.temp_milli_c, Cursor::zigzag);
         // Fieldless enums: the discriminant is the variant index (tested for every variant).
         c.varint(s.imu as u32);
         c.varint(s.mag as u32);
@@ -55,18 +50,13 @@ pub fn write(s: &Status, buf: &mut [u8]) -> Option<usize> {
 
 fn cal(c: &mut Cursor<'_, true>, cal: &CalStatus) {
     c.varint(cal.source as u32);
-    match cal.fault {
-        None => c.byte(0),
-        Some(CalFault::Flash) => {
-            c.byte(1);
-            c.varint(0);
-        }
-        Some(CalFault::Rejected(p)) => {
-            c.byte(1);
+    c.option(cal.fault, |c, f| match f {
+        CalFault::Flash => c.varint(0),
+        CalFault::Rejected(p) => {
             c.varint(1);
             problem(c, p);
         }
-    }
+    });
 }
 
 fn problem(c: &mut Cursor<'_, true>, p: CalProblem) {

@@ -5,7 +5,8 @@
 //!
 //! * an enum variant is its index as a varint;
 //! * a struct is its fields in declaration order, nothing around them;
-//! * `bool` is one byte 0/1, `f32` its four bytes little-endian;
+//! * `bool` is one byte 0/1, `f32` its four bytes little-endian, an `Option` a 0/1 byte before
+//!   its value;
 //! * `u32`/`u64`/`u128`/`usize` are LEB128 varints (7 bits a byte, least significant group
 //!   first, the high bit set on every byte but the last); `i32` is zig-zag mapped first
 //!   (`(n << 1) ^ (n >> 31)`);
@@ -70,6 +71,19 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
         match u32::try_from(rest) {
             Ok(small) => self.varint(small),
             Err(_) => self.varint_wide(rest.into()),
+        }
+    }
+
+    /// An `Option`: a 0 byte for `None`, a 1 byte and then the value (written by `write`) for
+    /// `Some`.
+    #[inline(always)]
+    pub(crate) fn option<T>(&mut self, v: Option<T>, write: impl FnOnce(&mut Self, T)) {
+        match v {
+            Some(x) => {
+                self.byte(1);
+                write(self, x);
+            }
+            None => self.byte(0),
         }
     }
 

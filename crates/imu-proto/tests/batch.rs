@@ -5,22 +5,14 @@ use imu_proto::*;
 use proptest::prelude::*;
 
 mod common;
-use common::{batch_of, imu_sample, same_batch};
+use common::{batch_of, frame_with, imu_sample, same_batch};
 
 fn serde_frame(b: &SampleBatch) -> std::vec::Vec<u8> {
-    let mut out = std::vec![0u8; MAX_FRAME];
-    let n = FrameEncoder::new()
-        .encode(&DeviceMsg::Samples(b.clone()), &mut out)
-        .unwrap();
-    out.truncate(n);
-    out
+    frame_with(|e, out| e.encode(&DeviceMsg::Samples(b.clone()), out)).unwrap()
 }
 
 fn direct_frame(b: &SampleBatch) -> std::vec::Vec<u8> {
-    let mut out = std::vec![0u8; MAX_FRAME];
-    let n = FrameEncoder::new().encode_samples(b, &mut out).unwrap();
-    out.truncate(n);
-    out
+    frame_with(|e, out| e.encode_samples(b, out)).unwrap()
 }
 
 /// Integers weighted towards the varint boundaries and the extremes.

@@ -4,32 +4,15 @@
 use imu_proto::*;
 use proptest::prelude::*;
 
-fn frame_of(s: &Status, direct: bool) -> Result<std::vec::Vec<u8>, EncodeError> {
-    let mut out = std::vec![0u8; MAX_FRAME];
-    let mut enc = FrameEncoder::new();
-    let n = if direct {
-        enc.encode_status(s, &mut out)?
-    } else {
-        enc.encode(&DeviceMsg::Status(*s), &mut out)?
-    };
-    out.truncate(n);
-    Ok(out)
-}
+mod common;
+use common::{arb_bits, frame_with};
 
-/// Unsigned values of `bits` bits weighted towards the varint boundaries and the extremes.
-fn arb_bits(bits: u32) -> impl Strategy<Value = u64> {
-    let max = if bits == 64 {
-        u64::MAX
+fn frame_of(s: &Status, direct: bool) -> Result<std::vec::Vec<u8>, EncodeError> {
+    if direct {
+        frame_with(|e, out| e.encode_status(s, out))
     } else {
-        (1u64 << bits) - 1
-    };
-    prop_oneof![
-        any::<u64>().prop_map(move |v| v & max),
-        Just(max),
-        Just(0),
-        (0..bits).prop_map(|k| 1u64 << k),
-        (1..bits).prop_map(|k| (1u64 << k) - 1),
-    ]
+        frame_with(|e, out| e.encode(&DeviceMsg::Status(*s), out))
+    }
 }
 
 fn arb_state() -> impl Strategy<Value = SensorState> {
@@ -95,11 +78,11 @@ prop_compose! {
         mode in prop::sample::select(vec![StreamMode::Off, StreamMode::Calibrated, StreamMode::Raw]),
     ) -> Status {
         Status {
-            uptime_us: counts[0],
-            samples_taken: counts[1],
-            samples_dropped: counts[2],
-            mag_samples: counts[3],
-            mag_dropped: counts[4],
+            uptime_us: counts[0] as u64,
+            samples_taken: counts[1] as u64,
+            samples_dropped: counts[2] as u64,
+            mag_samples: counts[3] as u64,
+            mag_dropped: counts[4] as u64,
             fifo_overflows: counters[0] as u32,
             i2c_errors: counters[1] as u32,
             bus_faults: counters[2] as u32,

@@ -4,33 +4,15 @@
 use imu_proto::*;
 use proptest::prelude::*;
 
-fn frame_of(t: &AllanTable, direct: bool) -> Result<std::vec::Vec<u8>, EncodeError> {
-    let mut out = std::vec![0u8; MAX_FRAME];
-    let mut enc = FrameEncoder::new();
-    let n = if direct {
-        enc.encode_table(t, &mut out)?
-    } else {
-        enc.encode(&DeviceMsg::Table(t.clone()), &mut out)?
-    };
-    out.truncate(n);
-    Ok(out)
-}
+mod common;
+use common::{arb_bits, frame_with};
 
-/// Unsigned values of `bits` bits weighted towards the varint boundaries and the extremes.
-fn arb_bits(bits: u32) -> impl Strategy<Value = u128> {
-    let max = if bits == 128 {
-        u128::MAX
+fn frame_of(t: &AllanTable, direct: bool) -> Result<std::vec::Vec<u8>, EncodeError> {
+    if direct {
+        frame_with(|e, out| e.encode_table(t, out))
     } else {
-        (1u128 << bits) - 1
-    };
-    prop_oneof![
-        any::<u128>().prop_map(move |v| v & max),
-        Just(max),
-        Just(0u128),
-        (0..bits).prop_map(|k| 1u128 << k),
-        (1..bits).prop_map(|k| (1u128 << k) - 1),
-        (0..bits).prop_flat_map(move |k| (0u128..=(1 << 20)).prop_map(move |v| v << k & max)),
-    ]
+        frame_with(|e, out| e.encode(&DeviceMsg::Table(t.clone()), out))
+    }
 }
 
 fn arb_level() -> impl Strategy<Value = AllanLevel> {

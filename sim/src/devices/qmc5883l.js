@@ -24,7 +24,8 @@ export class Qmc5883l extends RegisterDevice {
     this.record = record;
     this.clockError = clockError;
     this.samples = [];
-    this.stats = { produced: 0, overflows: 0, dataOverruns: 0, served: 0, resets: 0, stalledSlots: 0 };
+    // statusNotReady: status reads that found DRDY clear (a reader polled before the sample).
+    this.stats = { produced: 0, overflows: 0, dataOverruns: 0, served: 0, resets: 0, stalledSlots: 0, statusNotReady: 0 };
     this.slots = new SlotGrid();
     this.stalls = [];
     this.powerOnReset(0);
@@ -113,7 +114,10 @@ export class Qmc5883l extends RegisterDevice {
     const v = this.regs[r];
     // A reader uses the data only after it has seen DRDY set (a roll-over read from 06H reads
     // the data bytes even when the status it got first was clear, and discards them).
-    if (r === REG.STATUS && v & 0x01) this.readySeen = true;
+    if (r === REG.STATUS) {
+      if (v & 0x01) this.readySeen = true;
+      else this.stats.statusNotReady++;
+    }
     if (r <= REG.DATA_X_LSB + 5) {
       // Reading any data register clears DRDY and DOR.
       this.regs[REG.STATUS] &= ~0x05;

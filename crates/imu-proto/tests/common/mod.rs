@@ -1,8 +1,39 @@
-//! Helpers shared by the integration tests: a batch from generated parts, and batch equality
-//! that sees NaN scales as equal to themselves.
+//! Helpers shared by the integration tests: a batch from generated parts, batch equality that
+//! sees NaN scales as equal to themselves, one frame from an encoder call, and unsigned values
+//! weighted towards the varint boundaries.
 #![allow(dead_code)] // each test crate uses its own subset
 
-use imu_proto::{ImuSample, MagSample, SampleBatch, Scales, Vec};
+use imu_proto::{
+    EncodeError, FrameEncoder, ImuSample, MagSample, SampleBatch, Scales, Vec, MAX_FRAME,
+};
+use proptest::prelude::*;
+
+/// The frame `encode` writes with a fresh encoder into a buffer of [`MAX_FRAME`] bytes.
+pub fn frame_with(
+    encode: impl FnOnce(&mut FrameEncoder, &mut [u8]) -> Result<usize, EncodeError>,
+) -> Result<std::vec::Vec<u8>, EncodeError> {
+    let mut out = std::vec![0u8; MAX_FRAME];
+    let n = encode(&mut FrameEncoder::new(), &mut out)?;
+    out.truncate(n);
+    Ok(out)
+}
+
+/// Unsigned values of `bits` bits weighted towards the varint boundaries and the extremes.
+pub fn arb_bits(bits: u32) -> impl Strategy<Value = u128> {
+    let max = if bits == 128 {
+        u128::MAX
+    } else {
+        (1u128 << bits) - 1
+    };
+    prop_oneof![
+        any::<u128>().prop_map(move |v| v & max),
+        Just(max),
+        Just(0u128),
+        (0..bits).prop_map(|k| 1u128 << k),
+        (1..bits).prop_map(|k| (1u128 << k) - 1),
+        (0..bits).prop_flat_map(move |k| (0u128..=(1 << 20)).prop_map(move |v| v << k & max)),
+    ]
+}
 
 /// The IMU sample of generated parts (seq, t_us, accel, gyro, temp).
 pub fn imu_sample(
