@@ -371,9 +371,11 @@ impl Problem for AccelProblem {
     fn fit_items(&self, model: &[Effect], keep: &[bool]) -> Result<Fitted, CalError> {
         let p = 3 * model.len();
         let used: Vec<usize> = (0..self.poses.len()).filter(|&i| keep[i]).collect();
-        if used.len() <= p.max(1) {
+        // Fewer poses than parameters still fit (Levenberg–Marquardt's damping keeps the step
+        // defined); the verdict then names what the poses leave undetermined.
+        if used.is_empty() {
             return Err(CalError::Fit(format!(
-                "{} static poses found{}; the model {:?} needs more than {p}",
+                "{} static poses found{}; the model {:?} needs at least one",
                 self.poses.len(),
                 if used.len() < self.poses.len() {
                     format!(" ({} after excluding outliers)", used.len())
@@ -424,7 +426,7 @@ impl Problem for AccelProblem {
             }
         };
         let params = to_params(&fit.x);
-        let cov = covariance(&fit.jacobian, fit.rss, (used.len() - p) as f64);
+        let cov = covariance(&fit.jacobian, fit.rss, used.len().saturating_sub(p) as f64);
         let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
         let residuals: Vec<f64> = self
             .poses
@@ -438,7 +440,20 @@ impl Problem for AccelProblem {
             residuals,
             used: keep.to_vec(),
             n_params: p,
+            not_converged: fit.not_converged,
         })
+    }
+
+    /// Datasheet-sized spreads of a low-cost accelerometer (the MPU-6050's: zero-g offset
+    /// ±50–80 mg, sensitivity ±3 %, cross-axis ±2 % ≈ 1.2°), rounded up: offset ±0.1 g, scale
+    /// ±0.1, misalignment ±2°.
+    fn plausible_range(&self, name: &str, _params: &Params) -> Option<f64> {
+        match name.split('.').next().unwrap_or(name) {
+            "offset" => Some(0.1 * self.g),
+            "scale" => Some(0.1),
+            "misalignment_deg" => Some(2.0),
+            _ => None,
+        }
     }
 
     /// σ of |ā_i| per pose: the radial half-split differences d_i have variance 4·var(|ā_i|) for

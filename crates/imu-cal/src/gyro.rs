@@ -267,6 +267,7 @@ impl Problem for GyroProblem {
             residuals,
             used: keep.to_vec(),
             n_params: 3 * p_axis,
+            not_converged: None,
         })
     }
 

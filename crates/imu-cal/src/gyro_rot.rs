@@ -355,7 +355,18 @@ impl Problem for GyroRotProblem {
             residuals,
             used: keep.iter().flat_map(|k| [*k, *k]).collect(),
             n_params: p,
+            not_converged: fit.not_converged,
         })
+    }
+
+    /// Scale within ±0.1 and axis angles within ±2° (the MPU-6050's ±3 % sensitivity and ±2 %
+    /// cross-axis, rounded up); the bias comes from the rest and is not judged here.
+    fn plausible_range(&self, name: &str, _params: &Params) -> Option<f64> {
+        match name.split(['.', '[']).next().unwrap_or(name) {
+            "scale" => Some(0.1),
+            "gyro_misalignment_deg" => Some(2.0),
+            _ => None,
+        }
     }
 
     fn noise_floor(&self) -> NoiseFloor {

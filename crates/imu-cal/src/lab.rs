@@ -65,10 +65,12 @@ pub const PRACTICAL_MARGIN: f64 = 1.10;
 pub const OUTLIER_SIGMAS: f64 = 6.0;
 /// Most refits of the outlier rejection.
 pub const ROBUST_ROUNDS: usize = 20;
-/// Beyond this fraction of the items, residuals over the cut are a misfit, not outliers.
-pub const MAX_OUTLIER_FRACTION: f64 = 0.1;
-/// Residual degrees of freedom each parameter needs before a model can be judged.
-pub const DOF_PER_PARAMETER: f64 = 3.0;
+/// Beyond this fraction of the items, residuals over the cut are a misfit, not outliers (the
+/// robust start holds to 25 % of gross outliers and beyond: module docs, 1).
+pub const MAX_OUTLIER_FRACTION: f64 = 0.3;
+/// A parameter is identified when its σ is at most this fraction of its plausible half-range
+/// (module docs, 3).
+pub const IDENTIFIED_FRACTION: f64 = 0.1;
 
 /// The deterministic error effects the lab knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -308,6 +310,45 @@ impl Params {
         out
     }
 
+    /// [`Params::values`] with a name each: the field, then `.x`/`.y`/`.z` for vectors,
+    /// `[i][j]` for matrices, `[i]` for the gyro angles, `.r`/`.q`/`.theta_deg`/`.sigma` for
+    /// the ellipse (e.g. `offset.z`, `soft_iron[0][1]`).
+    pub fn named_values(&self) -> Vec<(String, f64)> {
+        let mut names: Vec<String> = Vec::new();
+        let xyz = |f: &str| ["x", "y", "z"].map(|a| format!("{f}.{a}"));
+        for (f, on) in [
+            ("offset", self.offset.is_some()),
+            ("scale", self.scale.is_some()),
+            ("misalignment_deg", self.misalignment_deg.is_some()),
+            ("bias", self.bias.is_some()),
+            ("temp_coeff", self.temp_coeff.is_some()),
+            ("hard_iron", self.hard_iron.is_some()),
+        ] {
+            if on {
+                names.extend(xyz(f));
+            }
+        }
+        if self.temp_ref.is_some() {
+            names.push("temp_ref".into());
+        }
+        if self.gyro_misalignment_deg.is_some() {
+            names.extend((0..6).map(|i| format!("gyro_misalignment_deg[{i}]")));
+        }
+        if self.soft_iron.is_some() {
+            names.extend((0..9).map(|i| format!("soft_iron[{}][{}]", i / 3, i % 3)));
+        }
+        if self.soft_iron_2d.is_some() {
+            names.extend(["r", "q", "theta_deg", "sigma"].map(|a| format!("soft_iron_2d.{a}")));
+        }
+        if self.field.is_some() {
+            names.push("field".into());
+        }
+        if self.g.is_some() {
+            names.push("g".into());
+        }
+        names.into_iter().zip(self.values()).collect()
+    }
+
     /// The same effects with every value 0 (the uncertainty of given or fixed values).
     pub fn zeros_like(&self) -> Params {
         self.with_values(&vec![0.0; self.values().len()])
@@ -353,6 +394,9 @@ pub struct Fitted {
     pub used: Vec<bool>,
     /// Number of free parameters.
     pub n_params: usize,
+    /// None when the solver converged; else why the parameters are only the best point it
+    /// reached (reported, and the verdict accounts for it: module docs, 3).
+    pub not_converged: Option<String>,
 }
 
 impl Fitted {
@@ -372,6 +416,7 @@ impl Fitted {
             residuals,
             used,
             n_params,
+            not_converged: None,
         }
     }
 
@@ -459,6 +504,19 @@ pub trait Problem {
             _ => "block means",
         }
     }
+    /// The items to start the robust fit from (module docs, 1): those a fit that tolerates
+    /// gross outliers finds consistent, one flag per item. None: no such start for this problem
+    /// or model, and the robust fit starts from the least-squares fit of every item.
+    fn robust_start(&self, _model: &[Effect]) -> Option<Vec<bool>> {
+        None
+    }
+    /// The plausible half-range of the parameter `name` (a [`Params::named_values`] name such as
+    /// `offset.z` or `soft_iron_2d.theta_deg`) before any data, in the data's unit, for the
+    /// identifiability rule (module docs, 3); `params` is the fit, for ranges that scale with
+    /// it (the magnetometer's field). None: the parameter is not judged.
+    fn plausible_range(&self, _name: &str, _params: &Params) -> Option<f64> {
+        None
+    }
     /// Evidence outside the residual variance for a candidate effect (e.g. a correlation in the
     /// time domain), given the fit of the current model: `Ok(text)` supports trying it,
     /// `Err(text)` says why the data do not show it (it is then not tried); `None` when the
@@ -524,8 +582,12 @@ pub struct Model {
     pub p_value: f64,
     /// The residual is at the floor (by the test or within the practical margin).
     pub fits_floor: bool,
-    /// Fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom per parameter.
+    /// Some parameter is not identified by the data (module docs, 3): named in
+    /// [`Model::unidentified`].
     pub underdetermined: bool,
+    /// The parameters the data do not determine, each with its σ and plausible range (or
+    /// "every parameter" when the residuals leave no degree of freedom); empty otherwise.
+    pub unidentified: Vec<String>,
     /// Adequate, not adequate or underdetermined.
     pub verdict: Verdict,
     /// Items excluded as outliers.

@@ -39,8 +39,19 @@
 use crate::lab::{
     model_names, params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d,
 };
-use crate::solve::{covariance, fit_model, lstsq, mean, sigma_second_diff, sym_eigen};
-use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Vector2, Vector3};
+use crate::solve::{
+    covariance, data_key, fit_model, lmeds, lstsq, mean, sigma_second_diff, sym_eigen,
+};
+use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
+use std::sync::OnceLock;
+
+/// Random minimal subsets the robust start tries (module docs): with 25 % gross outliers a
+/// 4-sample subset is clean with probability 0.32, so 200 trials all miss with probability
+/// 1e-33; at 50 % (the breakdown point of the median) 1e-6.
+pub const START_TRIALS: usize = 200;
+/// Samples within this many robust scales of the robust start's sphere (or circle) start the
+/// robust fit (Rousseeuw & Leroy 1987, §5.1: 2.5 s₀).
+pub const START_CUT: f64 = 2.5;
 
 /// Ratio of principal standard deviations below which data counts as planar.
 pub const PLANAR_RATIO: f64 = 0.15;
@@ -68,7 +79,10 @@ pub struct MagProblem {
     pub principal_sd: [f64; 3],
     /// The data's unit (µT for the contract; LSB for raw counts).
     pub unit: String,
+    /// Per-axis second-difference σ, the floor's fallback (module docs).
     sigma: f64,
+    /// The noise floor, estimated once (it needs a robust fit).
+    floor: OnceLock<NoiseFloor>,
 }
 
 /// Hard iron as Jaime et al. estimate it: the midpoint of each axis' range over a full rotation.
@@ -180,6 +194,32 @@ pub fn ellipsoid_fit(m: &[Vector3<f64>]) -> Result<(Vector3<f64>, Matrix3<f64>),
     Ok((c0 + c * sc, qn / (sc * sc)))
 }
 
+/// The sphere through the four points `s` of `pts` (centre, radius); None when they are
+/// (nearly) coplanar.
+fn sphere_through(pts: &[Vector3<f64>], s: &[usize]) -> Option<(Vector3<f64>, f64)> {
+    let a = Matrix4::from_fn(|i, j| if j < 3 { 2.0 * pts[s[i]][j] } else { 1.0 });
+    let b = Vector4::from_fn(|i, _| pts[s[i]].norm_squared());
+    let x = a.lu().solve(&b)?;
+    let c = Vector3::new(x[0], x[1], x[2]);
+    let r2 = x[3] + c.norm_squared();
+    (r2 > 0.0 && r2.is_finite()).then(|| (c, r2.sqrt()))
+}
+
+/// The circle through the three points `s` of `pts` (in their first two components).
+fn circle_through(pts: &[Vector3<f64>], s: &[usize]) -> Option<(Vector3<f64>, f64)> {
+    let a = Matrix3::from_fn(|i, j| if j < 2 { 2.0 * pts[s[i]][j] } else { 1.0 });
+    let b = Vector3::from_fn(|i, _| pts[s[i]].xy().norm_squared());
+    let x = a.lu().solve(&b)?;
+    let c = Vector3::new(x[0], x[1], 0.0);
+    let r2 = x[2] + c.norm_squared();
+    (r2 > 0.0 && r2.is_finite()).then(|| (c, r2.sqrt()))
+}
+
+/// Distance of point `i` from the shell (sphere or circle) `(c, r)`.
+fn shell_residual(pts: &[Vector3<f64>]) -> impl Fn(&(Vector3<f64>, f64), usize) -> f64 + '_ {
+    |(c, r), i| (pts[i] - c).norm() - r
+}
+
 /// Symmetric square root of a positive-definite matrix.
 fn sqrtm(a: &Matrix3<f64>) -> Result<Matrix3<f64>, CalError> {
     let e = sym_eigen(*a, "matrix square root")?;
@@ -272,7 +312,74 @@ impl MagProblem {
             principal_sd: sd,
             unit: unit.into(),
             sigma: s2.sqrt(),
+            floor: OnceLock::new(),
         })
+    }
+
+    /// The points the robust start fits: the in-plane components for planar data, else all
+    /// three, relative to the data's centroid.
+    fn start_points(&self) -> Vec<Vector3<f64>> {
+        let c = centroid(&self.m);
+        match self.plane {
+            Some([i, j]) => self
+                .m
+                .iter()
+                .map(|v| Vector3::new(v[i] - c[i], v[j] - c[j], 0.0))
+                .collect(),
+            None => self.m.iter().map(|v| v - c).collect(),
+        }
+    }
+
+    /// The noise floor (module docs): second differences of the residual series of the most
+    /// complete model the data identify, fitted robustly; the per-axis estimate when no such fit
+    /// exists.
+    fn estimate_floor(&self) -> NoiseFloor {
+        let none = NoiseFloor {
+            sigma: 0.0,
+            dof: 1.0,
+            method: "",
+        };
+        let tries: [(&[Effect], &'static str); 2] = match self.plane {
+            Some(_) => [
+                (
+                    &[Effect::HardIron, Effect::SoftIron2d],
+                    "second differences (MAD) of the robust hard_iron+soft_iron_2d residuals",
+                ),
+                (
+                    &[Effect::HardIron],
+                    "second differences (MAD) of the robust hard_iron residuals",
+                ),
+            ],
+            None => [
+                (
+                    &[Effect::HardIron, Effect::SoftIron],
+                    "second differences (MAD) of the robust hard_iron+soft_iron residuals",
+                ),
+                (
+                    &[Effect::HardIron],
+                    "second differences (MAD) of the robust hard_iron residuals",
+                ),
+            ],
+        };
+        for (model, method) in tries {
+            let Ok(f) = crate::lab::robust_fit(self, model, &none) else {
+                continue;
+            };
+            let r: Vec<f64> = f.used_residuals().collect();
+            let sigma = sigma_second_diff(&r);
+            if r.len() >= 20 && sigma.is_finite() {
+                return NoiseFloor {
+                    sigma,
+                    dof: (r.len() - 2) as f64,
+                    method,
+                };
+            }
+        }
+        NoiseFloor {
+            sigma: self.sigma,
+            dof: (self.m.len() as f64 - 2.0).max(1.0),
+            method: "per-axis second differences (MAD; no robust fit of the data succeeded)",
+        }
     }
 
     /// Apply fitted params to a sample: `S·(m − h)`.
@@ -468,7 +575,7 @@ impl MagProblem {
         let np = 2 * has_h as usize + 2 * has_2d as usize + has_tilt as usize + fit_f as usize;
         let cov = covariance(&fit.jacobian, fit.rss, (idx.len() - np) as f64);
         let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
-        Ok(self.fitted(model, params, sigma, idx, np))
+        Ok(self.fitted(model, params, sigma, idx, np, fit.not_converged))
     }
 
     /// The fit's residuals for every sample, `used` for the samples of `idx`.
@@ -479,6 +586,7 @@ impl MagProblem {
         sigma: Params,
         idx: &[usize],
         n_params: usize,
+        not_converged: Option<String>,
     ) -> Fitted {
         let residuals = self
             .m
@@ -496,6 +604,7 @@ impl MagProblem {
             residuals,
             used,
             n_params,
+            not_converged,
         }
     }
 
@@ -604,7 +713,7 @@ impl MagProblem {
             (idx.len() - np.min(idx.len())) as f64,
         );
         let sigma = params_sigma(to_params, &fit.x, cov.as_ref());
-        Ok(self.fitted(model, params, sigma, idx, np))
+        Ok(self.fitted(model, params, sigma, idx, np, fit.not_converged))
     }
 }
 
@@ -675,10 +784,52 @@ impl Problem for MagProblem {
     }
 
     fn noise_floor(&self) -> NoiseFloor {
-        NoiseFloor {
-            sigma: self.sigma,
-            dof: (self.m.len() as f64 - 2.0).max(1.0),
-            method: "per-axis second differences (MAD)",
+        *self.floor.get_or_init(|| self.estimate_floor())
+    }
+
+    /// The least-median-of-squares sphere (3-D) or circle (planar) over minimal subsets
+    /// (module docs): the samples within [`START_CUT`] robust scales of it. Whatever the model,
+    /// the sphere or circle only has to tell gross outliers from the shell of the data (a
+    /// soft-iron ellipsoid lies within a few robust scales of its best sphere); the robust fit
+    /// then judges every sample again with the model's own residual.
+    fn robust_start(&self, _model: &[Effect]) -> Option<Vec<bool>> {
+        let pts = self.start_points();
+        let key = data_key(self.m.iter().flat_map(|v| v.iter().copied()));
+        let (n, planar) = (pts.len(), self.plane.is_some());
+        let (_, s0, r) = if planar {
+            lmeds(
+                n,
+                3,
+                START_TRIALS,
+                key,
+                |s| circle_through(&pts, s),
+                shell_residual(&pts),
+            )?
+        } else {
+            lmeds(
+                n,
+                4,
+                START_TRIALS,
+                key,
+                |s| sphere_through(&pts, s),
+                shell_residual(&pts),
+            )?
+        };
+        let keep: Vec<bool> = r.iter().map(|v| v.abs() <= START_CUT * s0).collect();
+        (keep.iter().filter(|k| **k).count() >= 20).then_some(keep)
+    }
+
+    fn plausible_range(&self, name: &str, params: &Params) -> Option<f64> {
+        // Hard iron, field and the ellipse's axes scale with the field; the soft-iron matrix
+        // (det 1) within ±0.5 of the identity, σ = q/r within ±0.5, θ anywhere in ±90°.
+        let f = params.field.filter(|f| f.is_finite() && *f > 0.0)?;
+        let field = name.split(['.', '[']).next().unwrap_or(name);
+        match (field, name) {
+            (_, "soft_iron_2d.theta_deg") => Some(90.0),
+            (_, "soft_iron_2d.sigma") => Some(0.5),
+            ("soft_iron", _) => Some(0.5),
+            ("hard_iron" | "field" | "soft_iron_2d", _) => Some(f),
+            _ => None,
         }
     }
 

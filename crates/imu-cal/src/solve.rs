@@ -17,6 +17,9 @@ pub struct LmFit {
     pub iterations: usize,
     /// Jacobian of the residuals at `x` (central differences), for the parameters' covariance.
     pub jacobian: DMatrix<f64>,
+    /// None when the iteration converged; else why `x` is only the best point reached (the
+    /// iteration cap, with how fast the sum of squares was still falling).
+    pub not_converged: Option<String>,
 }
 
 /// Jacobian of `f` at `x` by central differences.
@@ -50,6 +53,7 @@ where
         x: DVector::zeros(0),
         r,
         iterations: 0,
+        not_converged: None,
     }
 }
 
@@ -75,9 +79,11 @@ where
 /// Minimise Σ r_i(x)² by Levenberg–Marquardt (Marquardt 1963, with Nielsen's damping update)
 /// with a central-difference Jacobian, in at most `max_iter` iterations of at most 30 damping
 /// trials each. `f` must return the same number of residuals for every x; non-finite residuals
-/// make a step be rejected. Errors name the routine and `what`: residuals not finite at the
-/// start, or the iteration cap reached while the sum of squares was still falling by more than
-/// 1e-9 of itself per iteration.
+/// make a step be rejected. The one error, naming the routine and `what`: residuals not finite
+/// at the start. The iteration cap reached while the sum of squares was still falling by more than
+/// 1e-9 of itself per iteration is not an error: the best point reached is returned with
+/// [`LmFit::not_converged`] saying so, for the caller to report (a fit of valid data never fails
+/// for want of iterations).
 pub fn levenberg_marquardt<F>(
     x0: DVector<f64>,
     f: F,
@@ -148,12 +154,13 @@ where
             break;
         }
     }
-    if !converged && last_rel > 1e-9 {
-        return Err(CalError::Fit(format!(
+    let not_converged = (!converged && last_rel > 1e-9).then(|| {
+        format!(
             "Levenberg–Marquardt ({what}) did not converge in {max_iter} iterations (the sum of \
-             squares was still falling by {last_rel:.1e} of itself per iteration)"
-        )));
-    }
+             squares was still falling by {last_rel:.1e} of itself per iteration): the parameters \
+             are the best point reached"
+        )
+    });
     let jacobian = jacobian(&f, &x, r.len());
     Ok(LmFit {
         x,
@@ -161,6 +168,7 @@ where
         rss,
         iterations: it,
         jacobian,
+        not_converged,
     })
 }
 
@@ -211,6 +219,90 @@ where
             "eigen-decomposition ({what}) did not converge in 1000 iterations"
         ))
     })
+}
+
+/// A small deterministic generator (Marsaglia's xorshift64*) for the robust start's subsets: its
+/// key comes from the data ([`data_key`]), so the same data always give the same fit.
+#[derive(Debug, Clone)]
+pub struct XorShift(u64);
+
+impl XorShift {
+    /// A generator from `key` (any value; 0 is mapped to a fixed non-zero state).
+    pub fn new(key: u64) -> XorShift {
+        XorShift(if key == 0 { 0x9e37_79b9_7f4a_7c15 } else { key })
+    }
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        let mut x = self.0;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.0 = x;
+        x.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    /// A uniform index below `n` (n > 0).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+/// A key for [`XorShift`] from the bits of a data set (FNV-1a over every value).
+pub fn data_key(values: impl Iterator<Item = f64>) -> u64 {
+    values.fold(0xcbf2_9ce4_8422_2325, |h, v| {
+        (h ^ v.to_bits()).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// The least-median-of-squares fit of Rousseeuw (1984, "Least median of squares regression",
+/// JASA 79) over minimal subsets drawn as in RANSAC (Fischler & Bolles 1981): `trials` random
+/// subsets of `k` of the `n` items are fitted exactly by `fit` (None: a degenerate subset), each
+/// scored by the median of `resid²` over at most 1000 items spread evenly through the data; the
+/// best is returned with its robust scale over all items,
+/// `s₀ = 1.4826·(1 + 5/(n − k))·√med rᵢ²` (Rousseeuw & Leroy 1987, eq. 5.1.7), and the
+/// residuals of every item. None when every subset was degenerate.
+pub fn lmeds<P, F, R>(
+    n: usize,
+    k: usize,
+    trials: usize,
+    key: u64,
+    fit: F,
+    resid: R,
+) -> Option<(P, f64, Vec<f64>)>
+where
+    F: Fn(&[usize]) -> Option<P>,
+    R: Fn(&P, usize) -> f64,
+{
+    if n <= k || k == 0 {
+        return None;
+    }
+    let mut rng = XorShift::new(key);
+    let stride = n.div_ceil(1000);
+    let probe: Vec<usize> = (0..n).step_by(stride).collect();
+    let mut best: Option<(P, f64)> = None;
+    let mut subset = Vec::with_capacity(k);
+    for _ in 0..trials {
+        subset.clear();
+        while subset.len() < k {
+            let i = rng.below(n);
+            if !subset.contains(&i) {
+                subset.push(i);
+            }
+        }
+        let Some(cand) = fit(&subset) else { continue };
+        let r2: Vec<f64> = probe.iter().map(|&i| resid(&cand, i).powi(2)).collect();
+        if r2.iter().any(|v| !v.is_finite()) {
+            continue;
+        }
+        let med = median(&r2);
+        if best.as_ref().is_none_or(|(_, b)| med < *b) {
+            best = Some((cand, med));
+        }
+    }
+    let (cand, _) = best?;
+    let r: Vec<f64> = (0..n).map(|i| resid(&cand, i)).collect();
+    let r2: Vec<f64> = r.iter().map(|v| v * v).collect();
+    let s0 = 1.4826 * (1.0 + 5.0 / (n - k) as f64) * median(&r2).sqrt();
+    Some((cand, s0, r))
 }
 
 /// Robust σ of a sample: 1.4826 × the median absolute deviation from the median (NaN if
@@ -328,19 +420,22 @@ mod tests {
     }
 
     #[test]
-    fn lm_cap_and_bad_start_are_errors_naming_the_fit() {
-        // Rosenbrock's valley from far away: 2 iterations cannot reach the minimum.
+    fn lm_cap_is_reported_and_bad_start_is_an_error_naming_the_fit() {
+        // Rosenbrock's valley from far away: 2 iterations cannot reach the minimum; the best
+        // point is returned (lower than the start) and says it did not converge.
         let rosen =
             |x: &DVector<f64>| DVector::from_vec(vec![10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]]);
-        let e = levenberg_marquardt(DVector::from_vec(vec![-1.2, 1.0]), rosen, 2, "valley")
-            .unwrap_err()
-            .to_string();
+        let start = rosen(&DVector::from_vec(vec![-1.2, 1.0])).norm_squared();
+        let fit =
+            levenberg_marquardt(DVector::from_vec(vec![-1.2, 1.0]), rosen, 2, "valley").unwrap();
+        let e = fit.not_converged.as_deref().unwrap_or("");
         assert!(
-            e.contains("Levenberg–Marquardt (valley) did not converge in 2"),
+            e.contains("Levenberg–Marquardt (valley) did not converge in 2") && fit.rss < start,
             "{e}"
         );
         let fit =
             levenberg_marquardt(DVector::from_vec(vec![-1.2, 1.0]), rosen, 200, "valley").unwrap();
+        assert!(fit.not_converged.is_none());
         assert!((fit.x[0] - 1.0).abs() < 1e-8 && (fit.x[1] - 1.0).abs() < 1e-8);
         let e = levenberg_marquardt(
             DVector::from_vec(vec![1e300]),

@@ -6,7 +6,7 @@ use model_lab::{Edit, Lab, Summary};
 use super::{
     model_names, reading, CalError, Candidate, Diagnosis, Effect, Fitted, Model, NestedTest,
     NoiseFloor, NotTried, Problem, Report, Step, Verdict, ALPHA_ADEQUATE, ALPHA_EFFECT,
-    DOF_PER_PARAMETER, MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
+    IDENTIFIED_FRACTION, MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
 };
 use crate::solve::{f_sf, mad_sigma, median};
 
@@ -38,17 +38,19 @@ fn kept_items(p: &dyn Problem, f: &Fitted) -> Vec<bool> {
     f.used.chunks(k).map(|c| c.iter().all(|u| *u)).collect()
 }
 
-/// Fit `model` with the robust loss of the module docs.
+/// Fit `model` with the robust loss of the module docs, from the problem's robust start (or
+/// from every item when it has none).
 pub fn robust_fit(
     p: &dyn Problem,
     model: &[Effect],
     floor: &NoiseFloor,
 ) -> Result<Fitted, CalError> {
-    let first = p.fit_items(model, &vec![true; p.n()])?;
+    let keep = p.robust_start(model).unwrap_or_else(|| vec![true; p.n()]);
+    let first = p.fit_items(model, &keep)?;
     robust_from(p, model, floor, first)
 }
 
-/// [`robust_fit`] from `first`, the least-squares fit of every item.
+/// [`robust_fit`] from `first`, a least-squares fit of some of the items (those it used).
 fn robust_from(
     p: &dyn Problem,
     model: &[Effect],
@@ -57,8 +59,8 @@ fn robust_from(
 ) -> Result<Fitted, CalError> {
     let n = p.n();
     let per = p.residuals_per_item();
-    let mut keep = vec![true; n];
-    let mut fit = first.clone();
+    let mut keep = kept_items(p, &first);
+    let mut fit = first;
     for _ in 0..ROBUST_ROUNDS {
         let used: Vec<f64> = fit.used_residuals().collect();
         let centre = median(&used);
@@ -74,8 +76,12 @@ fn robust_from(
             .collect();
         let out = next.iter().filter(|k| !**k).count();
         if out as f64 > MAX_OUTLIER_FRACTION * n as f64 {
-            // A misfit, not outliers: the plain fit stands.
-            return Ok(first);
+            // A misfit, not outliers: the plain fit of every item stands.
+            return if keep.iter().all(|k| *k) {
+                Ok(fit)
+            } else {
+                p.fit_items(model, &vec![true; n])
+            };
         }
         if next == keep {
             return Ok(fit);
@@ -83,11 +89,51 @@ fn robust_from(
         keep = next;
         fit = p.fit_items(model, &keep)?;
     }
-    Err(CalError::Fit(format!(
-        "outlier rejection for the {} model {} did not settle in {ROBUST_ROUNDS} refits",
+    // The last set stands, said so (an alternation between two sets of items, each the
+    // other's outliers, is the usual cause).
+    let note = format!(
+        "the outlier rejection for the {} model {} did not settle in {ROBUST_ROUNDS} refits: the \
+         fit is the last one's",
         p.sensor(),
         model_names(model)
-    )))
+    );
+    fit.not_converged = Some(match fit.not_converged.take() {
+        Some(lm) => format!("{note}; {lm}"),
+        None => note,
+    });
+    Ok(fit)
+}
+
+/// The parameters that `fitted` does not determine (module docs, 3): those whose σ is not
+/// finite or exceeds [`IDENTIFIED_FRACTION`] of their plausible half-range, each with its σ
+/// and range.
+fn unidentified(p: &dyn Problem, fitted: &Fitted) -> Vec<String> {
+    let unit = p.unit();
+    fitted
+        .params
+        .named_values()
+        .into_iter()
+        .zip(fitted.sigma.values())
+        .filter_map(|((name, _), s)| {
+            let range = p.plausible_range(&name, &fitted.params)?;
+            let ok = s.is_finite() && s <= IDENTIFIED_FRACTION * range;
+            (!ok).then(|| {
+                let u = match name.split(['.', '[']).next().unwrap_or("") {
+                    "offset" | "bias" | "hard_iron" | "field" => format!(" {unit}"),
+                    "soft_iron_2d" if name.ends_with(".r") || name.ends_with(".q") => {
+                        format!(" {unit}")
+                    }
+                    _ if name.contains("deg") => "°".to_string(),
+                    _ => String::new(),
+                };
+                if s.is_finite() {
+                    format!("{name} (σ {s:.3e}{u} against a plausible ±{range:.3}{u})")
+                } else {
+                    format!("{name} (no finite σ: the data leave it free)")
+                }
+            })
+        })
+        .collect()
 }
 
 /// The calibration lab over one problem: fits and judges models of named effects against the
@@ -129,7 +175,16 @@ impl<'a> CalLab<'a> {
         let n = fitted.n_used() as f64;
         let k = fitted.n_params as f64;
         let dof = n - k;
-        let underdetermined = k > 0.0 && dof < DOF_PER_PARAMETER * k;
+        let unidentified = if k > 0.0 && dof < 1.0 {
+            vec![format!(
+                "every parameter ({} residuals for {} parameters leave no degree of freedom)",
+                fitted.n_used(),
+                fitted.n_params
+            )]
+        } else {
+            unidentified(self.problem, &fitted)
+        };
+        let underdetermined = !unidentified.is_empty();
         let dof1 = dof.max(1.0);
         let expected_rms = floor.sigma * (dof1 / n.max(1.0)).sqrt();
         let s2 = fitted.rss() / dof1;
@@ -150,7 +205,10 @@ impl<'a> CalLab<'a> {
         } else {
             p_value >= ALPHA_ADEQUATE || rms <= PRACTICAL_MARGIN * expected_rms
         };
-        let verdict = match (fits_floor, underdetermined) {
+        // A fit that stopped short of its minimum is never called adequate: at the floor its
+        // parameters are still not the least-squares ones.
+        let converged = fitted.not_converged.is_none();
+        let verdict = match (fits_floor, underdetermined || !converged) {
             (true, false) => Verdict::Adequate,
             (true, true) => Verdict::Underdetermined,
             (false, _) => Verdict::NotAdequate,
@@ -163,6 +221,7 @@ impl<'a> CalLab<'a> {
             p_value,
             fits_floor,
             underdetermined,
+            unidentified,
             verdict,
             outliers,
             nested,
@@ -351,17 +410,17 @@ impl<'a> CalLab<'a> {
                 }
             )
         };
+        let mut out = verdict;
         if m.underdetermined {
-            format!(
-                "{verdict} (and {} residuals for {} parameters leave {} degrees of freedom, fewer \
-                 than {DOF_PER_PARAMETER} per parameter)",
-                m.fitted.n_used(),
-                m.fitted.n_params,
-                m.fitted.dof().max(0.0)
-            )
-        } else {
-            verdict
+            out += &format!(
+                " (and the data do not determine {})",
+                m.unidentified.join(", ")
+            );
         }
+        if let Some(why) = &m.fitted.not_converged {
+            out += &format!(" (warning: {why})");
+        }
+        out
     }
 
     /// The lab's report on a model: its candidates, the diagnosis in words and the step.
@@ -372,20 +431,24 @@ impl<'a> CalLab<'a> {
         let verdict = self.verdict_text(&m);
         let best = candidates.iter().find(|c| c.admissible);
         let explanation = match (m.verdict, best) {
-            (Verdict::Underdetermined, _) => {
-                let k = m.fitted.n_params as f64;
-                let need = (k * (1.0 + DOF_PER_PARAMETER)).ceil();
-                format!(
-                    "underdetermined: the residual is at the noise floor, but {} residuals for {} \
-                     parameters leave {} degrees of freedom, fewer than {DOF_PER_PARAMETER} per \
-                     parameter, so it cannot tell an adequate model from an overfitted one \
-                     ({verdict}). Record at least {need} {} to judge this model.",
-                    m.fitted.n_used(),
-                    m.fitted.n_params,
-                    m.fitted.dof().max(0.0),
-                    p.items()
-                )
-            }
+            (Verdict::Underdetermined, _) if !m.underdetermined => format!(
+                "underdetermined: the residual is at the noise floor, but the fit did not reach \
+                 its minimum, so its parameters are not the least-squares ones ({verdict})."
+            ),
+            (Verdict::Underdetermined, _) => format!(
+                "underdetermined: the residual is at the noise floor, but the data do not \
+                 determine every parameter ({verdict}). Record {} that excite {}.",
+                if m.fitted.dof() < 1.0 {
+                    format!("more than {} {}", m.fitted.n_params, p.items())
+                } else {
+                    format!("more {}", p.items())
+                },
+                if m.unidentified.len() == 1 {
+                    "it"
+                } else {
+                    "them"
+                }
+            ),
             (Verdict::Adequate, _) => format!("adequate: {verdict}."),
             (Verdict::NotAdequate, Some(c)) => {
                 let e = c.edit.add[0];

@@ -130,3 +130,52 @@ pub fn not_tried_reason(r: &Report, e: Effect) -> &str {
         .unwrap()
         .reason
 }
+
+/// A magnetometer recording of `n` samples: a spiral over the whole sphere (or its upper half)
+/// making `turns` turns about z, seen as `m = D·(F·u) + h + noise` (σ per axis), with a fraction
+/// `outliers` of the samples then moved by 100–200 µT in random directions (bumps, corrupted
+/// reads). Returns the samples and the indices of the corrupted ones.
+#[allow(clippy::too_many_arguments)]
+pub fn mag_recording(
+    rng: &mut Rng,
+    n: usize,
+    half: bool,
+    turns: f64,
+    f: f64,
+    d: Matrix3<f64>,
+    h: Vector3<f64>,
+    sigma: f64,
+    outliers: f64,
+) -> (Vec<Vector3<f64>>, std::collections::BTreeSet<usize>) {
+    let mut m: Vec<Vector3<f64>> = (0..n)
+        .map(|k| {
+            let t = (k as f64 + 0.5) / n as f64;
+            let z = if half { 1.0 - t } else { 1.0 - 2.0 * t };
+            let r = (1.0 - z * z).sqrt();
+            let phi = turns * 2.0 * std::f64::consts::PI * t;
+            let u = Vector3::new(r * phi.cos(), r * phi.sin(), z);
+            d * (u * f) + h + Vector3::new(rng.gauss(), rng.gauss(), rng.gauss()) * sigma
+        })
+        .collect();
+    let mut hit = std::collections::BTreeSet::new();
+    while (hit.len() as f64) < outliers * n as f64 {
+        hit.insert((rng.uniform() * n as f64) as usize);
+    }
+    for &j in &hit {
+        m[j] += rng.unit() * (100.0 + 100.0 * rng.uniform());
+    }
+    (m, hit)
+}
+
+/// A symmetric soft-iron distortion `I + E` with the entries of E uniform in ±`a`.
+pub fn soft_iron(rng: &mut Rng, a: f64) -> Matrix3<f64> {
+    let mut e = Matrix3::zeros();
+    for i in 0..3 {
+        for j in i..3 {
+            let v = a * (2.0 * rng.uniform() - 1.0);
+            e[(i, j)] = v;
+            e[(j, i)] = v;
+        }
+    }
+    Matrix3::identity() + e
+}
