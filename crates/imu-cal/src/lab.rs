@@ -4,24 +4,36 @@
 //! F. Beck Ferrero, M. L. Miretti, E. Bernardi, "Caracterización y calibración de unidades de
 //! medición inercial de bajo costo", UTN Facultad Regional San Francisco.
 //!
-//! 1. **Robust fit.** Real recordings hold the odd wild sample (a bumped sensor, a corrupted
-//!    read). The loss is Tukey's redescending kind in its hard form, the truncated quadratic
-//!    ρ(r) = min(r², c²) with c = [`OUTLIER_SIGMAS`]·σ̂ (σ̂ = 1.4826·MAD of the residuals, never
-//!    below the noise floor): fitted by iteratively refitting least squares on the items within c
-//!    of the median residual until that set stops changing (at most [`ROBUST_ROUNDS`] rounds).
-//!    Items beyond c are outliers, excluded and named with their count; the parameters, their
-//!    uncertainties, the residual RMS and every test below are those of the least-squares fit of
-//!    the rest, so the reported residual is recomputable from the reported parameters. When
-//!    more than [`MAX_OUTLIER_FRACTION`] of the items lie beyond c they are not outliers but a
-//!    misfit, and nothing is excluded. (Sensor overflow sentinels are removed before, by
-//!    [`crate::sentinel`].)
+//! 1. **Robust fit.** Real recordings hold wild samples (a bumped sensor, a corrupted read), up
+//!    to a quarter of a session. The fit starts from the problem's *robust start*
+//!    ([`Problem::robust_start`]): for the magnetometer the least-median-of-squares sphere
+//!    (circle for planar data) over random minimal subsets (Rousseeuw 1984; subsets drawn as in
+//!    RANSAC, Fischler & Bolles 1981, from a generator keyed by the data, so the same data give
+//!    the same fit), whose breakdown point is 50 %; the items within 2.5 robust scales of it are
+//!    fitted by least squares. From there the loss is Tukey's redescending kind in its hard form,
+//!    the truncated quadratic ρ(r) = min(r², c²) with c = [`OUTLIER_SIGMAS`]·σ̂ (σ̂ = 1.4826·MAD
+//!    of the residuals, never below the noise floor): every item is judged again and least
+//!    squares refitted on the items within c of the median residual until that set stops
+//!    changing (at most [`ROBUST_ROUNDS`] rounds; if it never settles the last fit stands, with a
+//!    warning). Items beyond c are outliers, excluded and named with their count; the
+//!    parameters, their uncertainties, the residual RMS and every test below are those of the
+//!    least-squares fit of the rest, so the reported residual is recomputable from the reported
+//!    parameters. When more than [`MAX_OUTLIER_FRACTION`] of the items lie beyond c they are not
+//!    outliers but a misfit, and nothing is excluded. (Sensor overflow sentinels are removed
+//!    before, by [`crate::sentinel`].) A solver that stops at its iteration cap is not an
+//!    error: the best point reached is the fit, with [`Fitted::not_converged`] saying so.
 //! 2. **Uncertainty.** Every parameter gets a 1σ standard error from the least-squares
 //!    covariance `s²·(JᵀJ)⁻¹` (s² = RSS/(N − p)), propagated to the reported form (degrees,
 //!    matrices, ellipse axes) to first order.
-//! 3. **Enough data.** A model with fewer than [`DOF_PER_PARAMETER`] residual degrees of freedom
-//!    per parameter is *underdetermined*: a residual at the floor cannot tell an adequate model
-//!    from an overfitted one, so it is never called adequate (a residual far above the floor is
-//!    a failure whatever the degrees of freedom, and is diagnosed as such).
+//! 3. **Enough data: identifiability.** A model is *underdetermined* when the data do not
+//!    identify its parameters: no residual degree of freedom (N ≤ p: every parameter), or a
+//!    parameter whose σ is not finite (JᵀJ singular) or exceeds [`IDENTIFIED_FRACTION`] of its
+//!    plausible half-range before any data ([`Problem::plausible_range`]: datasheet-sized
+//!    spreads, e.g. an accelerometer offset of ±0.1 g). A near-singular JᵀJ shows up there as a
+//!    σ far above the range, so the rule also covers ill-conditioning, and it names the
+//!    parameters concerned. Such a model is never called adequate (a residual far above the
+//!    floor is a failure whatever the identifiability, and is diagnosed as such), nor is a fit
+//!    that did not converge: at the floor it is called underdetermined, with the reason.
 //! 4. **Adequacy.** The residual variance per degree of freedom, `s² = RSS/(N − p)`, is compared
 //!    with the noise-floor variance `σ²` estimated from the data itself on the same basis (per pose,
 //!    per sample or per block). Under a complete model `s²/σ²` follows F(N − p, ν) (ν = degrees of

@@ -226,7 +226,7 @@ fn rotate_z() -> MagProblem {
 /// A real hand-held 360° turn: planar data (the x–z plane of this board), whose in-plane
 /// magnitude follows the out-of-plane component (correlation ≈ +0.68): the lab names tilt first
 /// (residual 2.04 → 0.25 µT, measured), not soft iron; then, on top of it, the in-plane soft
-/// iron that the tilt sphere of the same board shows (0.25 → 0.18 µT against a 0.11 µT floor:
+/// iron that the tilt sphere of the same board shows (0.25 → 0.18 µT against a 0.135 µT floor:
 /// still not adequate, and said so). Asserted: the order, and each drop to within 20 %.
 #[test]
 fn real_level_turn_is_tilt_then_soft_iron() {

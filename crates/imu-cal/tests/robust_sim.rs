@@ -235,6 +235,7 @@ fn unidentifiable_sets_are_underdetermined_and_named() {
         let (ps, _) = poses(&mut rng, &dirs, 0.002);
         let p = AccelProblem::new(ps, G_STANDARD);
         let r = analyse(&p, &FULL).unwrap();
+        eprintln!("{}", r.diagnosis.explanation);
         let named = r.model.unidentified.join(", ");
         assert_eq!(
             r.model.verdict,
@@ -255,6 +256,7 @@ fn unidentifiable_sets_are_underdetermined_and_named() {
         let (ps, _) = poses(&mut rng, &dirs, 0.002);
         let p = AccelProblem::new(ps, G_STANDARD);
         let r = analyse(&p, &FULL).unwrap();
+        eprintln!("{}", r.diagnosis.explanation);
         assert_eq!(r.model.verdict, Verdict::Underdetermined, "run {run}");
         assert!(
             r.diagnosis
@@ -263,5 +265,84 @@ fn unidentifiable_sets_are_underdetermined_and_named() {
             "run {run}: {}",
             r.diagnosis.explanation
         );
+    }
+}
+
+/// Every number a report writes in words: no NaN or infinity in the explanation, the candidates'
+/// reasons and readings, and the residual, floor and statistic are finite (the statistic may
+/// be absent only for data without noise, where it is said so).
+fn assert_finite_report(r: &Report, what: &str) {
+    let m = &r.model;
+    let mut texts = vec![r.diagnosis.explanation.clone()];
+    for c in &r.diagnosis.candidates {
+        texts.push(c.reason.clone());
+        texts.push(c.reading.clone());
+    }
+    for t in r.diagnosis.not_tried.iter().map(|n| n.reason.clone()) {
+        texts.push(t);
+    }
+    for t in &texts {
+        assert!(
+            !t.contains("NaN") && !t.contains("inf"),
+            "{what}: a non-finite number in {t}"
+        );
+    }
+    assert!(
+        m.fitted.rms().is_finite() && m.floor.sigma.is_finite() && m.expected_rms.is_finite(),
+        "{what}: rms {} floor {} expected {}",
+        m.fitted.rms(),
+        m.floor.sigma,
+        m.expected_rms
+    );
+    assert!(
+        m.ratio.is_finite() || m.floor.sigma == 0.0,
+        "{what}: ratio {}",
+        m.ratio
+    );
+    // A σ that is not finite belongs to a parameter the verdict names as undetermined.
+    let free = m.fitted.sigma.values().iter().any(|s| !s.is_finite());
+    assert!(!free || m.underdetermined, "{what}: σ {:?}", m.fitted.sigma);
+}
+
+/// Awkward but valid sets — fewer poses than parameters, poses in one plane, poses without
+/// noise, a quarter of gross outliers, the smallest magnetometer set — give reports whose every
+/// statistic is finite, or say why not.
+#[test]
+fn no_nan_in_any_report() {
+    let mut rng = Rng::new(600);
+    let dirs: Vec<Vector3<f64>> = (0..7).map(|_| rng.unit()).collect();
+    let (few, _) = poses(&mut rng, &dirs, 0.002);
+    let flat: Vec<Vector3<f64>> = (0..12)
+        .map(|i| {
+            let a = i as f64 * 0.5;
+            Vector3::new(a.cos(), a.sin(), 0.0)
+        })
+        .collect();
+    let (flat, _) = poses(&mut rng, &flat, 0.002);
+    let dirs: Vec<Vector3<f64>> = (0..20).map(|_| rng.unit()).collect();
+    let (exact, _) = poses(&mut rng, &dirs, 0.0);
+    for (name, ps) in [("7 poses", few), ("flat", flat), ("noiseless", exact)] {
+        let p = AccelProblem::new(ps, G_STANDARD);
+        for model in [&FULL[..1], &FULL[..2], &FULL[..]] {
+            let r = analyse(&p, model).unwrap();
+            assert_finite_report(&r, &format!("{name} {model:?}"));
+        }
+    }
+    let h = Vector3::new(10.0, -20.0, 5.0);
+    for (n, frac, half) in [(2000, 0.25, true), (20, 0.0, false), (40, 0.1, true)] {
+        let (m, _) = mag_recording(&mut rng, n, half, 5.0, F, Matrix3::identity(), h, 0.2, frac);
+        let p = MagProblem::new(m, None).unwrap();
+        for model in [
+            vec![],
+            vec![Effect::HardIron],
+            vec![Effect::HardIron, Effect::SoftIron],
+        ] {
+            let what = format!("mag n {n} outliers {frac} {model:?}");
+            match analyse(&p, &model) {
+                Ok(r) => assert_finite_report(&r, &what),
+                // A refusal is a cause in words, never a number gone wrong.
+                Err(e) => assert!(!e.to_string().contains("NaN"), "{what}: {e}"),
+            }
+        }
     }
 }

@@ -127,7 +127,12 @@ fn unidentified(p: &dyn Problem, fitted: &Fitted) -> Vec<String> {
                     _ => String::new(),
                 };
                 if s.is_finite() {
-                    format!("{name} (σ {s:.3e}{u} against a plausible ±{range:.3}{u})")
+                    let s = if (1e-3..1e4).contains(&s) {
+                        format!("{s:.4}")
+                    } else {
+                        format!("{s:.3e}")
+                    };
+                    format!("{name} (σ {s}{u} against a plausible ±{range:.3}{u})")
                 } else {
                     format!("{name} (no finite σ: the data leave it free)")
                 }
@@ -177,7 +182,7 @@ impl<'a> CalLab<'a> {
         let dof = n - k;
         let unidentified = if k > 0.0 && dof < 1.0 {
             vec![format!(
-                "every parameter ({} residuals for {} parameters leave no degree of freedom)",
+                "every parameter: {} residuals for {} parameters leave no degree of freedom",
                 fitted.n_used(),
                 fitted.n_params
             )]
@@ -437,16 +442,19 @@ impl<'a> CalLab<'a> {
             ),
             (Verdict::Underdetermined, _) => format!(
                 "underdetermined: the residual is at the noise floor, but the data do not \
-                 determine every parameter ({verdict}). Record {} that excite {}.",
+                 determine every parameter ({verdict}). Record {}.",
                 if m.fitted.dof() < 1.0 {
                     format!("more than {} {}", m.fitted.n_params, p.items())
                 } else {
-                    format!("more {}", p.items())
-                },
-                if m.unidentified.len() == 1 {
-                    "it"
-                } else {
-                    "them"
+                    format!(
+                        "{} that excite {}",
+                        p.items(),
+                        if m.unidentified.len() == 1 {
+                            "it"
+                        } else {
+                            "them"
+                        }
+                    )
                 }
             ),
             (Verdict::Adequate, _) => format!("adequate: {verdict}."),
