@@ -542,11 +542,13 @@ pub trait Problem {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
-    /// The residual is consistent with the noise floor, with enough degrees of freedom to say so.
+    /// The residual is consistent with the noise floor, every parameter is identified and the
+    /// fit converged.
     Adequate,
     /// The residual exceeds the floor.
     NotAdequate,
-    /// The residual is at the floor, but too few degrees of freedom back it.
+    /// The residual is at the floor, but the data leave some parameter undetermined (named in
+    /// [`Model::unidentified`]) or the fit stopped before its minimum.
     Underdetermined,
 }
 
@@ -610,8 +612,8 @@ pub struct Model {
 }
 
 impl Model {
-    /// True when the residual is consistent with the noise floor with enough degrees of freedom
-    /// (never for an underdetermined model).
+    /// True when the verdict is adequate (module docs, 3–4): never for an underdetermined model
+    /// nor for a fit that did not converge.
     pub fn adequate(&self) -> bool {
         self.verdict == Verdict::Adequate
     }

@@ -346,3 +346,81 @@ fn no_nan_in_any_report() {
         }
     }
 }
+
+/// A problem whose solver stops at its cap: residuals at the floor, one parameter, the fit's
+/// `not_converged` set. The lab reports it and never calls the fit adequate.
+struct Capped {
+    r: Vec<f64>,
+    converged: bool,
+}
+
+impl imu_cal::lab::Problem for Capped {
+    fn sensor(&self) -> &'static str {
+        "accel"
+    }
+    fn unit(&self) -> &str {
+        "m/s²"
+    }
+    fn effects(&self) -> &'static [Effect] {
+        &[Effect::Offset]
+    }
+    fn identifiable(&self, _: &[Effect], _: Effect) -> Result<(), String> {
+        Ok(())
+    }
+    fn fit_items(
+        &self,
+        model: &[Effect],
+        keep: &[bool],
+    ) -> Result<imu_cal::lab::Fitted, imu_cal::lab::CalError> {
+        let params = imu_cal::lab::Params {
+            offset: Some([0.0; 3]),
+            ..Default::default()
+        };
+        let sigma = params.with_values(&[1e-4; 3]);
+        Ok(imu_cal::lab::Fitted {
+            model: model.to_vec(),
+            params,
+            sigma,
+            residuals: self.r.clone(),
+            used: keep.to_vec(),
+            n_params: 3,
+            not_converged: (!self.converged)
+                .then(|| "Levenberg–Marquardt (test) did not converge in 200 iterations".into()),
+        })
+    }
+    fn noise_floor(&self) -> imu_cal::lab::NoiseFloor {
+        imu_cal::lab::NoiseFloor {
+            sigma: 0.01,
+            dof: 1e6,
+            method: "given",
+        }
+    }
+    fn n(&self) -> usize {
+        self.r.len()
+    }
+}
+
+#[test]
+fn a_fit_that_did_not_converge_is_reported_and_not_adequate() {
+    let mut rng = Rng::new(700);
+    let r: Vec<f64> = (0..50).map(|_| 0.01 * rng.gauss()).collect();
+    let ok = Capped {
+        r: r.clone(),
+        converged: true,
+    };
+    assert_eq!(
+        analyse(&ok, &[Effect::Offset]).unwrap().model.verdict,
+        Verdict::Adequate
+    );
+    let capped = Capped {
+        r,
+        converged: false,
+    };
+    let rep = analyse(&capped, &[Effect::Offset]).unwrap();
+    let e = &rep.diagnosis.explanation;
+    assert_eq!(rep.model.verdict, Verdict::Underdetermined, "{e}");
+    assert!(
+        e.contains("did not reach its minimum") && e.contains("did not converge in 200"),
+        "{e}"
+    );
+}
