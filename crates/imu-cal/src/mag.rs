@@ -24,8 +24,8 @@
 //! define a sphere, 3 a circle) drawn by a xorshift generator keyed by the data. The sphere is
 //! used for every model: it only has to tell gross outliers from the shell of the data, which a
 //! soft-iron ellipsoid of ±10 % stays within; the lab then judges each sample again with the
-//! model's own residual. Least squares of a set with 12 % of samples moved by 100–200 µT misses
-//! the hard iron by tens of µT; from this start it is found to the noise with up to 25 %.
+//! model's own residual. The median's breakdown point is 50 %: the start holds while fewer than
+//! half the samples are gross outliers, where least squares of every sample is pulled by a few.
 //!
 //! **Noise floor.** σ of one residual, from the residuals themselves: the residual series (in
 //! recording order) of the robust fit of the most complete model the data identify
@@ -33,8 +33,8 @@
 //! σ = 1.4826·MAD(second differences)/√6. The model removes the motion (|m| is constant on the
 //! sphere however fast the sensor turns) and the second differences any slow misfit of orientation
 //! that the model lacks, so a missing effect still shows above the floor. Second differences of
-//! the raw axes (the fallback when no fit succeeds) hold the motion itself: at 0.2 rad between
-//! samples they read 0.5 µT for a 0.2 µT noise.
+//! the raw axes (the fallback when no fit succeeds) hold the motion itself, `F·ω²` per sample for
+//! a turn of ω rad between samples, which exceeds the noise of a hand-turned board.
 //!
 //! **Planar data.** When the measurements lie in a plane (smallest principal standard deviation
 //! below [`PLANAR_RATIO`] of the largest), the axis closest to the plane normal is not excited:
