@@ -283,10 +283,18 @@ pub fn edf_simple(alpha: i32, m: f64, n: f64) -> f64 {
 
 /// Regularised incomplete gamma functions `(P(a, x), Q(a, x) = 1 − P)`, each computed directly
 /// where it is small so both tails keep full relative accuracy (series below a+1, Lentz's
-/// continued fraction above; Numerical Recipes §6.2, A&S 6.5.29/6.5.31).
+/// continued fraction above; Numerical Recipes §6.2, A&S 6.5.29/6.5.31). A NaN argument or a
+/// shape that is not a positive finite number gives NaN for both (never a probability of 0 or 1
+/// that a comparison would take for a verdict); x = +∞ gives (1, 0).
 pub fn gamma_pq(a: f64, x: f64) -> (f64, f64) {
+    if x.is_nan() || !(a > 0.0 && a.is_finite()) {
+        return (f64::NAN, f64::NAN);
+    }
     if x <= 0.0 {
         return (0.0, 1.0);
+    }
+    if x == f64::INFINITY {
+        return (1.0, 0.0);
     }
     let ln_pre = a * libm::log(x) - x - libm::lgamma(a);
     if x < a + 1.0 {
@@ -505,5 +513,21 @@ mod tests {
         // χ²(2) survival is exp(−x/2) exactly; A&S 26.8: χ²(10) 99.9 % point 29.588.
         assert!((chi2_sf(7.0, 2.0) - (-3.5f64).exp()).abs() < 1e-14);
         assert!((chi2_ppf(0.999, 10.0) - 29.588_3).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_nan_statistic_is_no_probability() {
+        // A NaN statistic or degree of freedom must not read as p = 1 (a model passing) or 0.
+        for (x, nu) in [
+            (f64::NAN, 10.0),
+            (5.0, f64::NAN),
+            (5.0, 0.0),
+            (5.0, f64::INFINITY),
+        ] {
+            assert!(chi2_sf(x, nu).is_nan(), "chi2_sf({x}, {nu})");
+            assert!(chi2_cdf(x, nu).is_nan(), "chi2_cdf({x}, {nu})");
+        }
+        assert_eq!(chi2_sf(f64::INFINITY, 3.0), 0.0);
+        assert_eq!(chi2_cdf(f64::INFINITY, 3.0), 1.0);
     }
 }

@@ -493,10 +493,14 @@ pub fn allan_covariance(
 
 /// The correlation factor of a covariance matrix: its standard deviations and the lower Cholesky
 /// factor L of its correlation ρ = LLᵀ (a jitter of up to 1e-2 on the diagonal where ρ is not
-/// numerically positive definite; None when even that fails).
+/// numerically positive definite; None when even that fails, or when an entry of the covariance
+/// is not finite: a NaN must never reach a whitened residual, where it would make χ² NaN).
 pub fn correlation_factor(cov: &DMatrix<f64>) -> (Vec<f64>, Option<DMatrix<f64>>) {
     let n = cov.nrows();
     let s: Vec<f64> = (0..n).map(|j| cov[(j, j)].max(1e-300).sqrt()).collect();
+    if cov.iter().any(|v| !v.is_finite()) {
+        return (s, None);
+    }
     let rho = DMatrix::from_fn(n, n, |a, b| {
         if a == b {
             1.0
@@ -507,7 +511,8 @@ pub fn correlation_factor(cov: &DMatrix<f64>) -> (Vec<f64>, Option<DMatrix<f64>>
     let l = [0.0, 1e-10, 1e-8, 1e-6, 1e-4, 1e-2]
         .iter()
         .find_map(|j| (&rho + DMatrix::identity(n, n) * *j).cholesky())
-        .map(|c| c.l());
+        .map(|c| c.l())
+        .filter(|l| l.iter().all(|v| v.is_finite()) && (0..n).all(|j| l[(j, j)] > 0.0));
     (s, l)
 }
 

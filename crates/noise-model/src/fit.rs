@@ -23,7 +23,7 @@
 //! Error Analysis*, §8.5). Every term reports its estimate, σ and interval whether or not it is
 //! detected (c > 2σ_c); the model curve is exactly Σ c_k b_k with the reported values.
 use crate::cov::{Component, CovCache, Design, Deterministic};
-use crate::effect::{Basis, Context, Effect, ParamSpec};
+use crate::effect::{Basis, Context, Effect, Kind, ParamSpec};
 use crate::nnls::nnls;
 use nalgebra::{DMatrix, DVector};
 use std::fmt;
@@ -62,6 +62,9 @@ pub enum FitError {
     BadTerms(String),
     /// A numerical routine did not converge within its iteration cap.
     NoConvergence(String),
+    /// A statistic of the fit came out NaN or infinite: the step failed, with its cause (never a
+    /// verdict: a comparison with NaN is false, and must not read as a pass).
+    NonFinite(String),
 }
 
 impl fmt::Display for FitError {
@@ -76,6 +79,7 @@ impl fmt::Display for FitError {
             ),
             FitError::BadTerms(s) => write!(f, "{s}"),
             FitError::NoConvergence(s) => write!(f, "{s}"),
+            FitError::NonFinite(s) => write!(f, "the fit failed: {s} is not a finite number"),
         }
     }
 }

@@ -98,6 +98,22 @@ pub struct Model {
     pub neg2ll_time: f64,
 }
 
+impl Model {
+    /// Parameters the model spends: the Allan fit's free ones and those its time-domain terms
+    /// estimated (a step's size and instant, a warm-up's amplitude and time constant, a
+    /// temperature coefficient). The resolution is known from the data's lattice: none.
+    pub fn spent_params(&self) -> usize {
+        let td: usize = self
+            .fit
+            .terms
+            .iter()
+            .filter(|t| t.known && t.effect != Effect::Resolution)
+            .map(|t| 1 + t.theta.len())
+            .sum();
+        self.fit.n_params() + td
+    }
+}
+
 /// The lab over one recording.
 pub struct NoiseLab<'a> {
     pub record: Record<'a>,
@@ -389,6 +405,18 @@ impl<'a> NoiseLab<'a> {
             &fit.components(),
             &signals,
         );
+        for (what, v) in [
+            ("the −2 log-likelihood of the Allan points", neg2ll),
+            (
+                "the −2 log-likelihood of the block differences",
+                neg2ll_time,
+            ),
+            ("the verdict's p-value", assessment.p_value),
+        ] {
+            if !v.is_finite() {
+                return Err(FitError::NonFinite(format!("{what} ({v})")));
+            }
+        }
         Ok(Model {
             specs,
             fit,
@@ -511,10 +539,21 @@ impl<'a> NoiseLab<'a> {
         }
     }
 
-    /// The penalised criterion that ranks candidates, AIC: −2 log-likelihood of the points
-    /// ([`crate::assess::neg2_loglik`]) + 2 × free parameters.
+    /// The one criterion every candidate is judged by, spectral, time-domain and user-described
+    /// alike: the −2 log-likelihood of the record's two summaries under the model — the Allan
+    /// points ([`crate::assess::neg2_loglik`]) and the block differences of the time series
+    /// ([`nonstat::neg2_loglik`]) — plus 2 for every parameter the model spends
+    /// ([`Model::spent_params`]): the Allan fit's free ones and those estimated in the time domain
+    /// (a step's size and instant, a warm-up's amplitude and time constant, a temperature
+    /// coefficient), so a staircase of steps pays for each of them against one warm-up. A
+    /// statistic that is not finite makes the criterion +∞ (never better than anything).
     pub fn criterion(m: &Model) -> f64 {
-        m.neg2ll + 2.0 * m.fit.n_params() as f64
+        let c = m.neg2ll + m.neg2ll_time + 2.0 * m.spent_params() as f64;
+        if c.is_finite() {
+            c
+        } else {
+            f64::INFINITY
+        }
     }
 
     fn spectral_blocked(&self) -> bool {

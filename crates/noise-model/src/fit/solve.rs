@@ -187,29 +187,52 @@ impl Problem<'_> {
             mean_diff: vec![0.0; n],
             sines: Vec::new(),
         };
-        let mut det_avar = vec![0.0; n];
+        // the ramp's Allan variance (every Δ the same), and that of the signals localised or
+        // shaped in time (steps, warm-up, temperature), per point
+        let mut ramp_avar = vec![0.0; n];
+        let mut signal_avar = vec![0.0; n];
+        let mut noise_avar = vec![0.0; n];
         for (t, &c) in work.iter().zip(coef) {
             if c <= 0.0 {
                 continue;
             }
             match (&t.basis, t.spec.effect.kind()) {
-                (Basis::Stochastic { structure, factor }, _) => comps.push(Component {
-                    coef: c * factor,
-                    structure: structure.clone(),
-                }),
-                (Basis::Sine { theta }, _) => det.sines.push((c, *theta)),
-                _ => {
-                    for (d, b) in det_avar.iter_mut().zip(&t.b) {
-                        *d += c * b;
-                    }
+                (Basis::Stochastic { structure, factor }, _) => {
+                    comps.push(Component {
+                        coef: c * factor,
+                        structure: structure.clone(),
+                    });
+                    add_scaled(&mut noise_avar, c, &t.b);
                 }
+                (Basis::Sine { theta }, _) => det.sines.push((c, *theta)),
+                (_, Kind::Ramp) => add_scaled(&mut ramp_avar, c, &t.b),
+                _ => add_scaled(&mut signal_avar, c, &t.b),
             }
         }
-        for ((md, m), a) in det.mean_diff.iter_mut().zip(&self.ms).zip(&det_avar) {
+        for ((md, m), a) in det.mean_diff.iter_mut().zip(&self.ms).zip(&ramp_avar) {
             *md = m * (2.0 * a).sqrt();
         }
-        // Floor: a point the model cannot produce (model ≈ 0) keeps a finite weight.
         let mut c = self.meas.cache.covariance(&comps, &det);
+        localised_signals(
+            &mut c,
+            &self.ms,
+            &self.meas.cache,
+            &noise_avar,
+            &signal_avar,
+        );
+        // A covariance the model's terms cannot give as finite numbers (a term's structure
+        // function overflowing at an extreme parameter) is no basis for weights: the points'
+        // own EDFs about the model then weight them, independently, as for a device's table.
+        if c.iter().any(|v| !v.is_finite()) {
+            c = DMatrix::from_fn(n, n, |a, b| {
+                if a == b {
+                    2.0 * model[a].max(MODEL_FLOOR * self.y[a]).powi(2) / self.meas.points[a].edf
+                } else {
+                    0.0
+                }
+            });
+        }
+        // Floor: a point the model cannot produce (model ≈ 0) keeps a finite weight.
         for j in 0..n {
             let floor = 2.0 * (MODEL_FLOOR * self.y[j]).powi(2) / self.meas.points[j].edf.max(1.0);
             if !(c[(j, j)] > floor) {
@@ -316,6 +339,63 @@ impl Problem<'_> {
         }
         eval(best_v, work)?;
         Ok(best_c)
+    }
+}
+
+fn add_scaled(acc: &mut [f64], c: f64, b: &[f64]) {
+    for (a, v) in acc.iter_mut().zip(b) {
+        *a += c * v;
+    }
+}
+
+/// Peak of the power gain |H(f)|² of the Allan difference at m samples (the difference of two
+/// adjacent sums of m samples, |H|² = 4 sin⁴(πfm)/sin²(πf)), per m²: max 4 sin⁴x/x² at x ≈ 1.1656.
+const HAAR_PEAK_GAIN: f64 = 2.1;
+
+/// The covariance the deterministic signals localised in time (a bias step, a warm-up, a bias
+/// following the temperature) add to the Allan estimates. With D_i the signal's part of the Allan
+/// difference Δ_i and N_i the noise's, σ̂²(m) = Σ(N_i + D_i)²/(2m²M) varies through the noise
+/// projected on the signal, 4·Var(Σ D_i N_i)/(2m²M)² — large where the signal is concentrated:
+/// a step's D is a triangle 2m wide around its instant, which the noise's differences at lags
+/// below 2m do not average out (the coherent mean a ramp has would make this term vanish, and
+/// the model's covariance would then claim a precision the data do not have where the step
+/// dominates). Var(Σ D_i N_i) ≤ λ·Σ D_i² with λ the largest eigenvalue of the noise differences'
+/// covariance, nearly attained by a signal as compact as a step; λ is the peak of the noise
+/// spectrum seen through |H|², taken as that of white noise of the model's noise variance at m,
+/// λ ≈ 2.1 m²·(2m σ²_N(m)) / 2 — so the added variance is e = 4.2·m·σ²_N(m)·a(m)/M for a
+/// signal of Allan variance a(m) (Σ D_i² = 2m²M·a). Between points it carries the noise's own
+/// correlation (a Schur product with a rank-one matrix: the covariance stays positive definite).
+fn localised_signals(
+    c: &mut DMatrix<f64>,
+    ms: &[f64],
+    cache: &crate::cov::CovCache,
+    noise_avar: &[f64],
+    signal_avar: &[f64],
+) {
+    if signal_avar.iter().all(|&a| a <= 0.0) {
+        return;
+    }
+    let n = ms.len();
+    let e: Vec<f64> = (0..n)
+        .map(|j| {
+            let terms = cache.design().terms(ms[j] as u64).max(1) as f64;
+            (2.0 * HAAR_PEAK_GAIN * ms[j] * noise_avar[j].max(0.0) * signal_avar[j].max(0.0)
+                / terms)
+                .max(0.0)
+        })
+        .collect();
+    let sd: Vec<f64> = (0..n).map(|j| c[(j, j)].max(0.0).sqrt()).collect();
+    for a in 0..n {
+        for b in 0..n {
+            let rho = if a == b {
+                1.0
+            } else if sd[a] > 0.0 && sd[b] > 0.0 {
+                (c[(a, b)] / (sd[a] * sd[b])).clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+            c[(a, b)] += rho * (e[a] * e[b]).sqrt();
+        }
     }
 }
 
@@ -661,5 +741,42 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
         per_term_basis,
     };
     out.chi2 = out.statistic().1;
+    out.check_finite()?;
     Ok(out)
+}
+
+impl Fit {
+    /// Every statistic of the fit is a finite number, or the fit fails naming the first that is
+    /// not ([`FitError::NonFinite`]).
+    pub fn check_finite(&self) -> Result<(), FitError> {
+        let bad = |what: String| Err(FitError::NonFinite(what));
+        for (name, v) in [
+            ("the goodness-of-fit statistic T", self.chi2),
+            ("the fit's generalised χ²", self.objective),
+            ("the degrees of freedom", self.dof),
+        ] {
+            if !v.is_finite() {
+                return bad(format!("{name} ({v})"));
+            }
+        }
+        for (j, p) in self.points.iter().enumerate() {
+            for (name, v) in [
+                ("the model Allan variance", self.model_avar[j]),
+                ("the model EDF", self.model_edf[j]),
+            ] {
+                if !v.is_finite() {
+                    return bad(format!("{name} at τ = {} s ({v})", p.tau));
+                }
+            }
+        }
+        for t in &self.terms {
+            if !t.coef.is_finite() || t.theta.iter().any(|v| !v.is_finite()) {
+                return bad(format!(
+                    "a parameter of {} (c = {}, θ = {:?})",
+                    t.effect, t.coef, t.theta
+                ));
+            }
+        }
+        Ok(())
+    }
 }

@@ -6,9 +6,12 @@ use super::*;
 impl<'a> NoiseLab<'a> {
     /// Candidate edits of a model, refitted and tested, best first.
     pub fn candidate_edits(&self, cur: &Model) -> Result<Vec<Candidate<Effect, Model>>, FitError> {
-        let mut out: Vec<Candidate<Effect, Model>> = Vec::new();
         let have: Vec<Effect> = cur.specs.iter().map(|s| s.effect.clone()).collect();
-        // 1. non-stationarity findings first
+        let cur_crit = Self::criterion(cur);
+        // 1. non-stationarity findings, judged by the same criterion as every other candidate: a
+        //    finding is added only when the refit lowers it, and the findings compete with each
+        //    other (one warm-up against the steps that would stand in for it)
+        let mut found: Vec<Candidate<Effect, Model>> = Vec::new();
         for f in &cur.findings {
             let mut specs = cur.specs.clone();
             specs.push(f.spec.clone());
@@ -37,22 +40,46 @@ impl<'a> NoiseLab<'a> {
             let mut best: Option<Candidate<Effect, Model>> = None;
             for (specs, edit) in edits {
                 let Ok(m) = self.fit(&specs) else { continue };
-                let c = self.candidate(cur, m, edit, f.p_value, true, f.text.clone());
-                // prefer the replacement when it explains the data as well (fewer terms)
-                if best.as_ref().is_none_or(|b| {
-                    Self::criterion(&c.model) <= Self::criterion(&b.model) + 2.0
-                        && c.model.findings.len() <= b.model.findings.len()
-                }) {
+                let mut c = self.candidate(cur, m, edit, f.p_value, false, f.text.clone());
+                let k = c.model.fit.terms.iter().rposition(|t| t.effect == f.effect);
+                let present = k.is_some_and(|k| c.model.fit.terms[k].coef > 0.0);
+                let better = Self::criterion(&c.model) < cur_crit;
+                c.admissible = present && better;
+                if !present {
+                    c.reason = format!("{}its amplitude is zero in the refit", prefix(&c.reason));
+                } else if !better {
+                    c.reason = format!(
+                        "{}the refit does not lower the criterion (Δ = {:+.1})",
+                        prefix(&c.reason),
+                        Self::criterion(&c.model) - cur_crit
+                    );
+                }
+                // the replacement goes first unless the ramp still stands beside the cause
+                // found: its own likelihood ratio in the time domain, given the cause and the
+                // noise model, is significant
+                let replaces = !c.edit.remove.is_empty();
+                let take = match &best {
+                    None => true,
+                    Some(b) if c.admissible != b.admissible => c.admissible,
+                    Some(b) => replaces && !self.ramp_significant(&b.model),
+                };
+                if take {
                     best = Some(c);
                 }
             }
             if let Some(b) = best {
-                out.push(b);
+                found.push(b);
             }
         }
-        if !out.is_empty() {
-            return Ok(out);
+        found.sort_by(|a, b| {
+            b.admissible
+                .cmp(&a.admissible)
+                .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
+        });
+        if found.first().is_some_and(|c| c.admissible) {
+            return Ok(found);
         }
+        let refused_findings = found;
         // 2. Allan-curve candidates
         let mut tries: Vec<(Vec<TermSpec>, Edit<Effect>, String)> = Vec::new();
         let add = |e: Effect,
@@ -183,7 +210,6 @@ impl<'a> NoiseLab<'a> {
                 }
             }
         }
-        let cur_crit = Self::criterion(cur);
         let line_explains = |c: &Candidate<Effect, Model>| {
             c.edit.add.contains(&Effect::Sinusoid) && c.p_value < P_CANDIDATE
         };
@@ -194,15 +220,10 @@ impl<'a> NoiseLab<'a> {
             // two likelihood-ratio tests on the same data, Bonferroni-combined: the Allan points
             // (every τ) and the block differences in the time domain (long τ)
             let s = m.fit.chi2_dof().max(1.0);
-            let lr_p = |delta: f64| {
-                if extra > 0 {
-                    chi2_sf(delta.max(0.0) / s, extra as f64)
-                } else if delta > 0.0 {
-                    0.0
-                } else {
-                    1.0
-                }
-            };
+            // An edit that adds no free parameter (a known term such as the data's resolution, a
+            // filter in place of the white noise it shapes) is tested as if it spent one: a
+            // change of the likelihood by a hair is no evidence, however many points agree.
+            let lr_p = |delta: f64| chi2_sf(delta.max(0.0) / s, extra.max(1) as f64);
             let d_time = self.time_lr(cur, &m, &edit.add);
             let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(d_time))).min(1.0);
             let mut c = self.candidate(cur, m, edit, p, false, why);
@@ -251,8 +272,23 @@ impl<'a> NoiseLab<'a> {
                 .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
         });
         Self::prefer_simplest_of_equals(&mut cands);
-        out.extend(cands);
-        Ok(out)
+        cands.extend(refused_findings);
+        Ok(cands)
+    }
+
+    /// Whether the model's rate ramp is significant in the time domain (its likelihood ratio
+    /// among the model's signals, with the model's noise, at [`P_SIGNAL`]).
+    fn ramp_significant(&self, m: &Model) -> bool {
+        let signals: Vec<Signal> = m.specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let Some(k) = signals.iter().position(|s| *s == Signal::Ramp) else {
+            return false;
+        };
+        let est = nonstat::estimate(
+            &nonstat::gls_scale(&self.blocks),
+            &m.fit.components(),
+            &signals,
+        );
+        est.get(k).is_some_and(|e| chi2_sf(e.lr, 1.0) < P_SIGNAL)
     }
 
     /// Among the admissible candidates the data cannot tell apart from the best — χ² + 2p within

@@ -1,0 +1,233 @@
+//! The verdict on ordinary data, analysed exactly as `imu-lab fit --auto` does (OADEV at octave τ,
+//! the noise lab on the record, the automatic walk at the default level): no statistic that is not
+//! finite, a found step or warm-up that lowers the error instead of raising it, one warm-up rather
+//! than a staircase of steps, and the data's resolution named only when it changes the fit.
+//! Parameters and seeds are drawn at random for each run (printed on failure), so the tests probe
+//! the behaviour rather than one realisation.
+use imu_sim::{gyro_background, Rng, SimConfig, SimEffect};
+use noise_model::{walk, Effect, Model, NoiseLab, Stop, TermSpec, Walk};
+
+fn cfg(rate: f64, secs: f64, seed: u64, effects: Vec<SimEffect>) -> SimConfig {
+    SimConfig::new(rate, (rate * secs) as usize, seed, effects)
+}
+
+fn describe(c: &SimConfig, w: &Walk<Effect, Model>) -> String {
+    let mut s = format!("seed {} effects {:?} lsb {:?}\n", c.seed, c.effects, c.lsb);
+    for st in &w.steps {
+        s += &format!(
+            "  {}: χ²/dof {:.2} → {:.2} ({})\n",
+            st.edit, st.before.chi2_dof, st.after.chi2_dof, st.reading
+        );
+    }
+    s + &format!("  stop: {}\n", w.stop)
+}
+
+/// Every statistic of a model the lab reports is a finite number.
+fn all_finite(m: &Model) -> Result<(), String> {
+    let f = &m.fit;
+    let a = &m.assessment;
+    let mut named: Vec<(&str, f64)> = vec![
+        ("χ²/dof", f.chi2_dof()),
+        ("dof", f.dof),
+        ("p", a.p_value),
+        ("T", a.sum_z2),
+        ("rms log-residual", a.rms_log_residual),
+        ("−2ℓ", m.neg2ll),
+        ("−2ℓ time", m.neg2ll_time),
+        ("criterion", NoiseLab::criterion(m)),
+    ];
+    named.extend(f.model_avar.iter().map(|v| ("model", *v)));
+    named.extend(a.z.iter().map(|v| ("z", *v)));
+    named.extend(a.residuals.iter().map(|v| ("r", *v)));
+    for t in &f.terms {
+        for p in t.params() {
+            named.push(("param", p.value));
+        }
+    }
+    match named.iter().find(|(_, v)| !v.is_finite()) {
+        Some((n, v)) => Err(format!("{n} = {v}")),
+        None => Ok(()),
+    }
+}
+
+fn run(c: &SimConfig) -> (Walk<Effect, Model>, String) {
+    let a = c.analyse();
+    let lab = NoiseLab::new(a.record(None)).expect("lab");
+    let start = lab.fit(&lab.default_specs()).expect("five-term fit");
+    let w = walk(&lab, start, 6).expect("walk");
+    let report = describe(c, &w);
+    for m in &w.models {
+        if let Err(e) = all_finite(m) {
+            panic!("a statistic that is not finite: {e}\n{report}");
+        }
+    }
+    // no step of the walk makes the criterion worse
+    for pair in w.models.windows(2) {
+        assert!(
+            NoiseLab::criterion(&pair[1]) < NoiseLab::criterion(&pair[0]),
+            "a step raised the criterion\n{report}"
+        );
+    }
+    (w, report)
+}
+
+fn added(w: &Walk<Effect, Model>) -> Vec<Effect> {
+    w.steps.iter().flat_map(|s| s.edit.add.clone()).collect()
+}
+
+/// A bias step in white + flicker + random walk: named once, at its size, and the model with it
+/// is adequate, its χ²/dof near 1 rather than raised by the step's own Allan variance.
+#[test]
+fn a_found_step_lowers_the_error_and_is_added_once() {
+    let mut rng = Rng::new(0x5eed_57e9);
+    for _ in 0..3 {
+        let size = (0.05 + 0.1 * rng.uniform()) * if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+        let at = 3600.0 * (0.25 + 0.5 * rng.uniform());
+        let mut e = gyro_background(true);
+        e.push(SimEffect::BiasStep { at_s: at, size });
+        let c = cfg(100.0, 3600.0, rng.next_u64() % 10_000, e);
+        let (w, report) = run(&c);
+        let steps = added(&w).iter().filter(|e| **e == Effect::BiasStep).count();
+        assert_eq!(steps, 1, "{report}");
+        assert_eq!(w.stop, Stop::Adequate, "{report}");
+        let last = w.last();
+        assert!(last.fit.chi2_dof() < 2.5, "{report}");
+        let t = last.fit.term(&Effect::BiasStep).expect("the step");
+        assert!(
+            (t.amplitude() - size).abs() < 0.1 * size.abs(),
+            "size {} vs {size}\n{report}",
+            t.amplitude()
+        );
+    }
+}
+
+/// A fast warm-up without a temperature column is one warm-up term, not a staircase of steps.
+#[test]
+fn a_warm_up_is_one_warm_up_not_a_staircase() {
+    let mut rng = Rng::new(0x3a7e_0b0e);
+    for _ in 0..3 {
+        let amplitude = 0.1 + 0.3 * rng.uniform();
+        let tau_s = 60.0 + 240.0 * rng.uniform();
+        let mut e = gyro_background(true);
+        e.push(SimEffect::WarmUp { amplitude, tau_s });
+        let c = cfg(100.0, 3600.0, rng.next_u64() % 10_000, e);
+        let (w, report) = run(&c);
+        let a = added(&w);
+        assert!(!a.contains(&Effect::BiasStep), "{report}");
+        assert_eq!(
+            a.iter().filter(|e| **e == Effect::Temperature).count(),
+            1,
+            "{report}"
+        );
+        assert_eq!(w.stop, Stop::Adequate, "{report}");
+    }
+}
+
+/// Data written with a fixed number of decimals sit on a lattice; when its LSB is far below the
+/// noise, adding the resolution changes nothing and it is not named.
+#[test]
+fn resolution_is_named_only_when_it_changes_the_fit() {
+    let mut rng = Rng::new(0x1eb5);
+    for _ in 0..3 {
+        let mut e = gyro_background(true);
+        e.push(SimEffect::Markov {
+            sigma: 0.01 + 0.01 * rng.uniform(),
+            tau_c: 1.0 + 3.0 * rng.uniform(),
+        });
+        let mut c = cfg(100.0, 1200.0, rng.next_u64() % 10_000, e);
+        c.lsb = Some(1e-6);
+        let a = c.analyse();
+        let lab = NoiseLab::new(a.record(None)).expect("lab");
+        // the five terms and the correlated noise, without the resolution term
+        let mut specs: Vec<TermSpec> = noise_model::DEFAULT_TERMS
+            .iter()
+            .cloned()
+            .map(TermSpec::new)
+            .collect();
+        specs.push(TermSpec::new(Effect::Markov));
+        let m = lab.fit(&specs).expect("fit");
+        let cands = lab.candidate_edits(&m).expect("candidates");
+        let res = cands
+            .iter()
+            .find(|c| c.edit.add.contains(&Effect::Resolution))
+            .expect("the lattice makes the resolution a candidate");
+        assert!(
+            !res.admissible,
+            "resolution named with p = {:.1e} while χ²/dof {:.3} → {:.3}",
+            res.p_value,
+            m.fit.chi2_dof(),
+            res.model.fit.chi2_dof()
+        );
+    }
+}
+
+/// Random mixtures of every effect the simulator makes, at random levels, rates and lengths, some
+/// with lines far above the background: every model of every walk has finite statistics, and a
+/// fit that cannot be made is an error that says why, never a verdict.
+#[test]
+fn no_statistic_is_ever_nan() {
+    let mut rng = Rng::new(0x0a0a_0b0b);
+    for _ in 0..8 {
+        let rate: f64 = [50.0, 100.0, 200.0][(rng.next_u64() % 3) as usize];
+        let secs = 300.0 + 900.0 * rng.uniform();
+        let n = 10f64.powf(-3.0 + 1.5 * rng.uniform());
+        let mut e = vec![SimEffect::White { n }];
+        let mut pick = |p: f64| rng.uniform() < p;
+        let draws: Vec<bool> = (0..6).map(|_| pick(0.5)).collect();
+        let (u1, u2, u3) = (rng.uniform(), rng.uniform(), rng.uniform());
+        if draws[0] {
+            e.push(SimEffect::Flicker { b: n * (0.1 + u1) });
+        }
+        if draws[1] {
+            e.push(SimEffect::RateRandomWalk { k: n * 0.01 * u2 });
+        }
+        if draws[2] {
+            // a line up to a thousand times the background's density
+            e.push(SimEffect::Sinusoid {
+                amplitude: n * (rate.sqrt()) * (0.1 + 3.0 * u3),
+                freq_hz: rate * (0.002 + 0.45 * u1),
+            });
+        }
+        if draws[3] {
+            e.push(SimEffect::Markov {
+                sigma: n * (0.5 + 2.0 * u2),
+                tau_c: 0.05 + 5.0 * u3,
+            });
+        }
+        if draws[4] {
+            e.push(SimEffect::BiasStep {
+                at_s: secs * (0.1 + 0.8 * u1),
+                size: n * (0.5 + 5.0 * u2),
+            });
+        }
+        if draws[5] {
+            e.push(SimEffect::RateRamp { r: n * 1e-3 * u3 });
+        }
+        let mut c = cfg(rate, secs, rng.next_u64() % 10_000, e);
+        if rng.uniform() < 0.4 {
+            c.lsb = Some(n * 10f64.powf(-1.0 + 1.5 * rng.uniform()));
+        }
+        let a = c.analyse();
+        let lab = NoiseLab::new(a.record(None)).expect("lab");
+        let start = match lab.fit(&lab.default_specs()) {
+            Ok(m) => m,
+            Err(e) => {
+                let s = e.to_string();
+                assert!(!s.is_empty());
+                continue;
+            }
+        };
+        let w = walk(&lab, start, 4).expect("walk");
+        let report = describe(&c, &w);
+        for m in &w.models {
+            if let Err(e) = all_finite(m) {
+                panic!("a statistic that is not finite: {e}\n{report}");
+            }
+        }
+        for cand in &w.last_candidates {
+            if let Err(e) = all_finite(&cand.model) {
+                panic!("candidate {}: {e}\n{report}", cand.edit);
+            }
+        }
+    }
+}
