@@ -264,9 +264,9 @@ fn the_sensors_own_filters_are_named() {
 fn equally_supported_filter_shapes_go_to_the_simplest_and_are_named() {
     // The emulated MPU-6050's DLPF: one pole at 188 Hz on 1 kHz samples, one minute. Near
     // Nyquist the one-pole, two-pole and decimation shapes differ by little on 60 s of data.
-    // Among candidates within EQUAL_SUPPORT of the best χ² + 2p the simplest goes first (fewest
+    // Among candidates within EQUAL_SUPPORT of the best criterion the simplest goes first (fewest
     // parameters, then the vocabulary's order), and its reading names the others within
-    // NEAR_SUPPORT. By χ² + 2p alone the one-pole truth came first for 3 of these 10 seeds.
+    // NEAR_SUPPORT. By the criterion alone the one-pole truth came first for 3 of these 10 seeds.
     let order = |c: &noise_model::Candidate<Effect, Model>| {
         let pos = |e: &Effect| ALL_EFFECTS.iter().position(|v| v == e).unwrap_or(99);
         (

@@ -14,12 +14,12 @@
 //!    variance. While one is found and not in the model, the model is not adequate, whatever its
 //!    χ² says: a step or a warm-up absorbed into rate random walk or a ramp is not a noise density.
 //! 3. **The Allan curve**: the generalised χ² fit and verdict ([`crate::fit`], [`crate::assess`]).
-//!    Candidates are refitted and tested by the nested χ² difference (Δχ²/s ~ χ²_k, s the new
-//!    model's χ²/dof when above 1); among the significant ones (p < [`P_CANDIDATE`]) the one with
-//!    the lowest AIC on the covariance-weighted χ², χ² + 2p, is preferred, and one that does not
-//!    lower it is refused as over-fitting. Spectral evidence gates the spectral names: a sinusoid
-//!    needs a line in the periodogram (its frequency is fixed there), and when a line explains the
-//!    misfit a Markov term is not named in its place.
+//!    Candidates are refitted and tested (likelihood ratios on the Allan points and on the
+//!    block differences); every candidate, a time-domain finding included, is judged by one
+//!    criterion ([`NoiseLab::criterion`]) that must fall for it to be added, and the admissible
+//!    ones are ranked by it. Spectral evidence gates the spectral names: a sinusoid needs a line
+//!    in the periodogram (its frequency is fixed there), and when a line explains the misfit a
+//!    Markov term is not named in its place.
 use crate::assess::{assess, Assessment};
 use crate::effect::{Context, Effect, DEFAULT_TERMS};
 use crate::fit::{
@@ -42,10 +42,10 @@ pub const P_CANDIDATE: f64 = 1e-3;
 pub const P_SIGNAL: f64 = 1e-3;
 /// Most steps of a walk.
 pub const MAX_STEPS: usize = 6;
-/// Candidates whose χ² + 2p is within this of the best one's are equally supported by the data
+/// Candidates whose criterion is within this of the best one's are equally supported by the data
 /// (a likelihood ratio below e: "substantial support" for both, Burnham & Anderson 2002, §2.6).
 pub const EQUAL_SUPPORT: f64 = 2.0;
-/// Candidates within this of the best one's χ² + 2p (relative likelihood above e⁻² ≈ 0.14) are
+/// Candidates within this of the best one's criterion (relative likelihood above e⁻² ≈ 0.14) are
 /// named beside it as fitting nearly as well.
 pub const NEAR_SUPPORT: f64 = 4.0;
 

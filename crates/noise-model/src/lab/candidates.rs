@@ -243,7 +243,7 @@ impl<'a> NoiseLab<'a> {
                     format!("{}not significant (p = {:.1e})", prefix(&c.reason), p)
                 } else {
                     format!(
-                        "{}it does not lower χ² + 2p (over-fitting)",
+                        "{}it does not lower the criterion (over-fitting)",
                         prefix(&c.reason)
                     )
                 };
@@ -291,7 +291,7 @@ impl<'a> NoiseLab<'a> {
         est.get(k).is_some_and(|e| chi2_sf(e.lr, 1.0) < P_SIGNAL)
     }
 
-    /// Among the admissible candidates the data cannot tell apart from the best — χ² + 2p within
+    /// Among the admissible candidates the data cannot tell apart from the best — the criterion within
     /// [`EQUAL_SUPPORT`] — the one with the fewest added parameters, then the earliest in the
     /// vocabulary (the simpler physics: a one-pole filter before a two-pole one) goes first. The
     /// first candidate's reading names the others that fit nearly as well
@@ -327,7 +327,7 @@ impl<'a> NoiseLab<'a> {
             .filter(|c| c.admissible && Self::criterion(&c.model) <= top + NEAR_SUPPORT)
             .map(|c| {
                 format!(
-                    "{} (Δ(χ² + 2p) = {:+.1})",
+                    "{} (Δ criterion = {:+.1})",
                     c.reading,
                     Self::criterion(&c.model) - top
                 )
