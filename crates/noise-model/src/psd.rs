@@ -253,6 +253,138 @@ fn line_at(p: &[f64], df: f64, k: usize, ratio: f64, bg: f64, threshold: f64) ->
     }
 }
 
+/// A band of excess power in the PSD: a resonance's peak of finite width (evidence for the
+/// resonance effect, as a line is for the sinusoid).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Band {
+    /// Natural frequency [Hz] and damping ratio of the best resonance shape on the grid.
+    pub f0_hz: f64,
+    pub zeta: f64,
+    /// The fall of the spectrum's χ² (each Welch bin's relative variance 2/ν) when the resonance
+    /// joins the smooth background, scaled by the fit's χ²/dof when that exceeds 1.
+    pub delta_chi2: f64,
+    /// The resonance's density at f0 over the background's there.
+    pub peak_ratio: f64,
+}
+
+/// Smallest Δχ² for a band (a 3-parameter shape searched over a grid; far beyond any
+/// look-elsewhere correction, because the smooth background is only approximately right).
+pub const BAND_MIN_DELTA_CHI2: f64 = 100.0;
+/// Smallest peak-to-background ratio for a band: the peak at least doubles the density.
+pub const BAND_MIN_PEAK_RATIO: f64 = 1.0;
+
+/// The strongest band of excess power of finite width in a Welch PSD of data sampled every
+/// `tau0`, if any. The spectrum from 6·df to 0.49·f_s is fitted (non-negative least squares,
+/// weights 1/P̂ with P̂ the ±4-bin running mean, so the residuals are relative) by a smooth
+/// background — white (flat), quantization (∝ sin²(πfτ0)), flicker (1/f), random walk (1/f²) —
+/// with and without the sampled resonance shape [`crate::effect::resonance_psd_unit`], its f0 on a
+/// log grid (40 per decade, from 16·df to 0.45·f_s) and ζ in 0.02–0.5. Shapes narrower than 6
+/// bins (2ζf0 < 6·df) are lines, left to [`find_lines`]; ζ > 0.5 has hardly a peak (the
+/// low-pass shapes describe it). A band needs Δχ² ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥
+/// [`BAND_MIN_PEAK_RATIO`].
+pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
+    use nalgebra::{DMatrix, DVector};
+    let p = &psd.density;
+    let nb = p.len();
+    let df = psd.df;
+    let fs = 1.0 / tau0;
+    let hi = ((0.49 * fs / df) as usize).min(nb.saturating_sub(1));
+    let lo = 6usize;
+    if hi < lo + 64 {
+        return None;
+    }
+    let ks: Vec<usize> = (lo..=hi).collect();
+    let n = ks.len();
+    // relative weights from the running mean (robust enough: a band spans many bins)
+    let w: Vec<f64> = ks
+        .iter()
+        .map(|&k| {
+            let (a, b) = (k.saturating_sub(4).max(1), (k + 4).min(nb - 1));
+            let m = p[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
+            if m > 0.0 {
+                1.0 / m
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let f = |k: usize| k as f64 * df;
+    let background: Vec<fn(f64, f64) -> f64> = vec![
+        |_, _| 1.0,
+        |f, t| (std::f64::consts::PI * f * t).sin().powi(2),
+        |f, _| 1.0 / f,
+        |f, _| 1.0 / (f * f),
+    ];
+    let nbg = background.len();
+    let mut a = DMatrix::<f64>::zeros(n, nbg + 1);
+    for (i, &k) in ks.iter().enumerate() {
+        for (j, g) in background.iter().enumerate() {
+            a[(i, j)] = g(f(k), tau0) * w[i];
+        }
+    }
+    // column scales, so that NNLS sees comparable columns
+    let scale = |a: &mut DMatrix<f64>, j: usize| {
+        let s = a.column(j).norm();
+        if s > 0.0 {
+            a.column_mut(j).scale_mut(1.0 / s);
+        }
+    };
+    for j in 0..nbg {
+        scale(&mut a, j);
+    }
+    let b = DVector::from_iterator(n, ks.iter().zip(&w).map(|(&k, wi)| p[k] * wi));
+    let chi2 = |a: &DMatrix<f64>| {
+        let c = crate::nnls::nnls(a, &b);
+        let r = &b - a * &c;
+        (r.norm_squared() * psd.edf / 2.0, c)
+    };
+    let bg = a.columns(0, nbg).into_owned();
+    let (chi0, _) = chi2(&bg);
+    let zetas = [0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5];
+    let (flo, fhi) = (16.0 * df, 0.45 * fs);
+    let nf = ((fhi / flo).log10() * 40.0).ceil().max(1.0) as usize;
+    let mut best: Option<(f64, f64, f64, f64)> = None; // (χ², f0, ζ, peak ratio)
+    for i in 0..=nf {
+        let f0 = flo * (fhi / flo).powf(i as f64 / nf as f64);
+        for &zeta in &zetas {
+            if 2.0 * zeta * f0 < 6.0 * df {
+                continue;
+            }
+            for (r, &k) in ks.iter().enumerate() {
+                a[(r, nbg)] = crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta) * w[r];
+            }
+            let s = a.column(nbg).norm();
+            if !(s > 0.0 && s.is_finite()) {
+                continue;
+            }
+            a.column_mut(nbg).scale_mut(1.0 / s);
+            let (c2, c) = chi2(&a);
+            if best.is_none_or(|b| c2 < b.0) {
+                // densities at f0 of the resonance and of the background
+                let k0 = (f0 / df).round() as usize;
+                let r0 = ks.iter().position(|&k| k == k0).unwrap_or(0);
+                let res = a[(r0, nbg)] * c[nbg];
+                let back: f64 = (0..nbg).map(|j| a[(r0, j)] * c[j]).sum();
+                let ratio = if back > 0.0 {
+                    res / back
+                } else {
+                    f64::INFINITY
+                };
+                best = Some((c2, f0, zeta, ratio));
+            }
+        }
+    }
+    let (c2, f0_hz, zeta, peak_ratio) = best?;
+    let dof = n.saturating_sub(nbg + 3).max(1) as f64;
+    let delta_chi2 = (chi0 - c2) / (c2 / dof).max(1.0);
+    (delta_chi2 >= BAND_MIN_DELTA_CHI2 && peak_ratio >= BAND_MIN_PEAK_RATIO).then_some(Band {
+        f0_hz,
+        zeta,
+        delta_chi2,
+        peak_ratio,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

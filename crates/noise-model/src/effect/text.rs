@@ -164,7 +164,7 @@ impl Effect {
                  terms it generalises). In an IMU record it is a mechanical mode excited by \
                  broadband vibration: the board on its standoffs, the mount, a cable or the \
                  vehicle's structure, typically 5–50 Hz with ζ of 0.02–0.3. The MPU-6050's own \
-                 proof-mass modes lie in the kHz range (the gyro drive near 30 kHz), far above any \
+                 proof-mass modes lie in the kHz range (its datasheet gives gyro mechanical frequencies of 24–36 kHz), far above any \
                  output rate, so a resonance at 1–50 Hz belongs to the mount or the structure \
                  and changes when the sensor is mounted differently. It shows as a band of \
                  excess power of width ≈ 2ζf0 in the PSD, unlike a sinusoid's line, and as a bump \
