@@ -257,9 +257,12 @@ fn line_at(p: &[f64], df: f64, k: usize, ratio: f64, bg: f64, threshold: f64) ->
 /// resonance effect, as a line is for the sinusoid).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Band {
-    /// Natural frequency [Hz] and damping ratio of the best resonance shape on the grid.
+    /// Natural frequency [Hz] and damping ratio of the best resonance shape, with their
+    /// standard errors from the curvature of the spectrum's χ² (each with the other fixed).
     pub f0_hz: f64,
     pub zeta: f64,
+    pub f0_sigma: f64,
+    pub zeta_sigma: f64,
     /// The fall of the spectrum's χ² (each Welch bin's relative variance 2/ν) when the resonance
     /// joins the smooth background, scaled by the fit's χ²/dof when that exceeds 1.
     pub delta_chi2: f64,
@@ -340,46 +343,87 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     };
     let bg = a.columns(0, nbg).into_owned();
     let (chi0, _) = chi2(&bg);
+    // χ² and peak ratio of the background with the resonance shape (f0, ζ)
+    let mut with = |f0: f64, zeta: f64| -> (f64, f64) {
+        for (r, &k) in ks.iter().enumerate() {
+            a[(r, nbg)] = crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta) * w[r];
+        }
+        let s = a.column(nbg).norm();
+        if !(s > 0.0 && s.is_finite()) {
+            return (f64::INFINITY, 0.0);
+        }
+        a.column_mut(nbg).scale_mut(1.0 / s);
+        let (c2, c) = chi2(&a);
+        // densities at f0 of the resonance and of the background
+        let k0 = (f0 / df).round() as usize;
+        let r0 = ks.iter().position(|&k| k == k0).unwrap_or(0);
+        let res = a[(r0, nbg)] * c[nbg];
+        let back: f64 = (0..nbg).map(|j| a[(r0, j)] * c[j]).sum();
+        (
+            c2,
+            if back > 0.0 {
+                res / back
+            } else {
+                f64::INFINITY
+            },
+        )
+    };
     let zetas = [0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5];
     let (flo, fhi) = (16.0 * df, 0.45 * fs);
     let nf = ((fhi / flo).log10() * 40.0).ceil().max(1.0) as usize;
-    let mut best: Option<(f64, f64, f64, f64)> = None; // (χ², f0, ζ, peak ratio)
+    let mut best: Option<(f64, f64, f64)> = None; // (χ², f0, ζ)
     for i in 0..=nf {
         let f0 = flo * (fhi / flo).powf(i as f64 / nf as f64);
         for &zeta in &zetas {
             if 2.0 * zeta * f0 < 6.0 * df {
                 continue;
             }
-            for (r, &k) in ks.iter().enumerate() {
-                a[(r, nbg)] = crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta) * w[r];
-            }
-            let s = a.column(nbg).norm();
-            if !(s > 0.0 && s.is_finite()) {
-                continue;
-            }
-            a.column_mut(nbg).scale_mut(1.0 / s);
-            let (c2, c) = chi2(&a);
+            let (c2, _) = with(f0, zeta);
             if best.is_none_or(|b| c2 < b.0) {
-                // densities at f0 of the resonance and of the background
-                let k0 = (f0 / df).round() as usize;
-                let r0 = ks.iter().position(|&k| k == k0).unwrap_or(0);
-                let res = a[(r0, nbg)] * c[nbg];
-                let back: f64 = (0..nbg).map(|j| a[(r0, j)] * c[j]).sum();
-                let ratio = if back > 0.0 {
-                    res / back
-                } else {
-                    f64::INFINITY
-                };
-                best = Some((c2, f0, zeta, ratio));
+                best = Some((c2, f0, zeta));
             }
         }
     }
-    let (c2, f0_hz, zeta, peak_ratio) = best?;
+    let (_, mut f0_hz, mut zeta) = best?;
+    // refine between the grid's neighbours: golden sections on ln f0 and ln ζ in turn
+    let zmax = crate::effect::RESONANCE_ZETA_MAX;
+    for _ in 0..3 {
+        let (x, _) = crate::fit::golden_min(
+            |x| with(x.exp(), zeta).0,
+            (f0_hz / 1.06).ln(),
+            (f0_hz * 1.06).min(0.499 * fs).ln(),
+            30,
+        );
+        f0_hz = x.exp();
+        let (x, _) = crate::fit::golden_min(
+            |x| with(f0_hz, x.exp()).0,
+            (zeta / 1.5).max(0.005).ln(),
+            (zeta * 1.5).min(zmax).ln(),
+            30,
+        );
+        zeta = x.exp();
+    }
+    let (c2, peak_ratio) = with(f0_hz, zeta);
     let dof = n.saturating_sub(nbg + 3).max(1) as f64;
-    let delta_chi2 = (chi0 - c2) / (c2 / dof).max(1.0);
+    let s2 = (c2 / dof).max(1.0);
+    // σ of a parameter from the χ² curvature: Var = 2·s²/(∂²χ²/∂θ²)
+    let mut curvature_sigma = |v: f64, g: &mut dyn FnMut(f64) -> f64| {
+        let h = 1e-3 * v;
+        let d2 = (g(v + h) - 2.0 * c2 + g(v - h)) / (h * h);
+        if d2 > 0.0 {
+            (2.0 * s2 / d2).sqrt()
+        } else {
+            f64::INFINITY
+        }
+    };
+    let f0_sigma = curvature_sigma(f0_hz, &mut |v| with(v, zeta).0);
+    let zeta_sigma = curvature_sigma(zeta, &mut |v| with(f0_hz, v).0);
+    let delta_chi2 = (chi0 - c2) / s2;
     (delta_chi2 >= BAND_MIN_DELTA_CHI2 && peak_ratio >= BAND_MIN_PEAK_RATIO).then_some(Band {
         f0_hz,
         zeta,
+        f0_sigma,
+        zeta_sigma,
         delta_chi2,
         peak_ratio,
     })
