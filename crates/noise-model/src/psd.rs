@@ -1,4 +1,5 @@
-//! Welch power spectral density and spectral-line detection (evidence for the sinusoid effect).
+//! Welch power spectral density, spectral-line detection (evidence for the sinusoid effect) and
+//! band detection (evidence for the resonance effect, [`find_band`]).
 //!
 //! Welch (1967): Hann-windowed segments with 50 % overlap, mean removed per segment, averaged
 //! periodograms, one-sided density P(f) = 2|X(f)|² / (f_s Σw²) in u²/Hz. Each averaged bin of a
@@ -281,7 +282,8 @@ pub const BAND_MIN_PEAK_RATIO: f64 = 1.0;
 /// weights 1/P̂ with P̂ the ±4-bin running mean, so the residuals are relative) by a smooth
 /// background — white (flat), quantization (∝ sin²(πfτ0)), flicker (1/f), random walk (1/f²) —
 /// with and without the sampled resonance shape [`crate::effect::resonance_psd_unit`], its f0 on a
-/// log grid (40 per decade, from 16·df to 0.45·f_s) and ζ in 0.02–0.5. Shapes narrower than 6
+/// log grid (40 per decade, from 16·df to 0.45·f_s) and ζ in 0.02–0.5, the best refined by golden
+/// sections on ln f0 and ln ζ between the grid's neighbours. Shapes narrower than 6
 /// bins (2ζf0 < 6·df) are lines, left to [`find_lines`]; ζ > 0.5 has hardly a peak (the
 /// low-pass shapes describe it). A band needs Δχ² ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥
 /// [`BAND_MIN_PEAK_RATIO`].
