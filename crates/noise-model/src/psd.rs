@@ -409,7 +409,7 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     let dof = n.saturating_sub(nbg + 3).max(1) as f64;
     let s2 = (c2 / dof).max(1.0);
     // σ of a parameter from the χ² curvature: Var = 2·s²/(∂²χ²/∂θ²)
-    let mut curvature_sigma = |v: f64, g: &mut dyn FnMut(f64) -> f64| {
+    let curvature_sigma = |v: f64, g: &mut dyn FnMut(f64) -> f64| {
         let h = 1e-3 * v;
         let d2 = (g(v + h) - 2.0 * c2 + g(v - h)) / (h * h);
         if d2 > 0.0 {
