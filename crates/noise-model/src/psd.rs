@@ -274,18 +274,25 @@ pub struct Band {
 /// Smallest Δχ² for a band (a 3-parameter shape searched over a grid; far beyond any
 /// look-elsewhere correction, because the smooth background is only approximately right).
 pub const BAND_MIN_DELTA_CHI2: f64 = 100.0;
+/// The spectrum is averaged in log-spaced groups of bins, this many per decade (a group of c bins
+/// has relative variance 2/(νc)).
+pub const BAND_GROUPS_PER_DECADE: f64 = 400.0;
+/// Largest damping ratio searched for a band: beyond it the peak is hardly one (|H|² has no maximum
+/// above ζ = 1/√2) and the shape is a low-pass one.
+pub const BAND_MAX_ZETA: f64 = 0.5;
 /// Smallest peak-to-background ratio for a band: the peak at least doubles the density.
 pub const BAND_MIN_PEAK_RATIO: f64 = 1.0;
 
 /// The strongest band of excess power of finite width in a Welch PSD of data sampled every
-/// `tau0`, if any. The spectrum from 6·df to 0.49·f_s is fitted (non-negative least squares,
-/// weights 1/P̂ with P̂ the ±4-bin running mean, so the residuals are relative) by a smooth
-/// background — white (flat), quantization (∝ sin²(πfτ0)), flicker (1/f), random walk (1/f²) —
-/// with and without the sampled resonance shape [`crate::effect::resonance_psd_unit`], its f0 on a
-/// log grid (40 per decade, from 16·df to 0.45·f_s) and ζ in 0.02–0.5, the best refined by golden
-/// sections on ln f0 and ln ζ between the grid's neighbours. Shapes narrower than 6
-/// bins (2ζf0 < 6·df) are lines, left to [`find_lines`]; ζ > 0.5 has hardly a peak (the
-/// low-pass shapes describe it). A band needs Δχ² ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥
+/// `tau0`, if any. The spectrum from 6·df to 0.49·f_s, averaged in log-spaced groups of bins
+/// ([`BAND_GROUPS_PER_DECADE`]; weights relative to the ±4-bin running mean), is fitted by non-negative least squares with a smooth background — white (flat),
+/// quantization (∝ sin²(πfτ0)), flicker (1/f), random walk (1/f²), and one- and two-pole low-pass
+/// shapes with corners on octaves from 32·df (Markov noise, the sensor's filters), all monotone
+/// or rising, none with a peak — with and without the sampled resonance shape
+/// [`crate::effect::resonance_psd_unit`], its f0 on a log grid (40 per decade, from 16·df to
+/// 0.45·f_s) and ζ in 0.02–[`BAND_MAX_ZETA`], the best refined by golden sections on ln f0 and ln ζ
+/// between the grid's neighbours. Shapes narrower than 6 bins or 3 groups (2ζf0 < 6·df, or ζ below
+/// 0.9 %) are lines, left to [`find_lines`]. A band needs Δχ² ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥
 /// [`BAND_MIN_PEAK_RATIO`].
 pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     use nalgebra::{DMatrix, DVector};
@@ -298,57 +305,80 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     if hi < lo + 64 {
         return None;
     }
-    let ks: Vec<usize> = (lo..=hi).collect();
-    let n = ks.len();
-    // relative weights from the running mean (robust enough: a band spans many bins)
-    let w: Vec<f64> = ks
+    let f = |k: usize| k as f64 * df;
+    // log-spaced groups of bins [a, b]
+    let step = 10f64.powf(1.0 / BAND_GROUPS_PER_DECADE);
+    let mut groups: Vec<(usize, usize)> = Vec::new();
+    let mut k = lo;
+    while k <= hi {
+        let end = ((k as f64 * step).floor() as usize).clamp(k, hi);
+        groups.push((k, end));
+        k = end + 1;
+    }
+    let ng = groups.len();
+    let mean_over = |g: (usize, usize), v: &dyn Fn(usize) -> f64| {
+        (g.0..=g.1).map(v).sum::<f64>() / (g.1 - g.0 + 1) as f64
+    };
+    // row weights √(νc/2)/P̂, P̂ the group's mean of the ±4-bin running mean
+    let running = |k: usize| {
+        let (a, b) = (k.saturating_sub(4).max(1), (k + 4).min(nb - 1));
+        p[a..=b].iter().sum::<f64>() / (b - a + 1) as f64
+    };
+    let rw: Vec<f64> = groups
         .iter()
-        .map(|&k| {
-            let (a, b) = (k.saturating_sub(4).max(1), (k + 4).min(nb - 1));
-            let m = p[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
-            if m > 0.0 {
-                1.0 / m
+        .map(|&g| {
+            let ph = mean_over(g, &running);
+            let c = (g.1 - g.0 + 1) as f64;
+            if ph > 0.0 {
+                (psd.edf * c / 2.0).sqrt() / ph
             } else {
                 0.0
             }
         })
         .collect();
-    let f = |k: usize| k as f64 * df;
-    let background: Vec<fn(f64, f64) -> f64> = vec![
-        |_, _| 1.0,
-        |f, t| (std::f64::consts::PI * f * t).sin().powi(2),
-        |f, _| 1.0 / f,
-        |f, _| 1.0 / (f * f),
+    let mut shapes: Vec<Box<dyn Fn(f64) -> f64>> = vec![
+        Box::new(|_| 1.0),
+        Box::new(move |f| (std::f64::consts::PI * f * tau0).sin().powi(2)),
+        Box::new(|f| 1.0 / f),
+        Box::new(|f| 1.0 / (f * f)),
     ];
-    let nbg = background.len();
-    let mut a = DMatrix::<f64>::zeros(n, nbg + 1);
-    for (i, &k) in ks.iter().enumerate() {
-        for (j, g) in background.iter().enumerate() {
-            a[(i, j)] = g(f(k), tau0) * w[i];
-        }
+    let mut fc = 32.0 * df;
+    while fc < 0.5 * fs {
+        shapes.push(Box::new(move |f| 1.0 / (1.0 + (f / fc).powi(2))));
+        shapes.push(Box::new(move |f| 1.0 / (1.0 + (f / fc).powi(2)).powi(2)));
+        fc *= 2.0;
     }
-    // column scales, so that NNLS sees comparable columns
-    let scale = |a: &mut DMatrix<f64>, j: usize| {
+    let nbg = shapes.len();
+    let mut a = DMatrix::<f64>::zeros(ng, nbg + 1);
+    for (j, shape) in shapes.iter().enumerate() {
+        for (r, &g) in groups.iter().enumerate() {
+            a[(r, j)] = mean_over(g, &|k| shape(f(k))) * rw[r];
+        }
+        // column scales, so that NNLS sees comparable columns
         let s = a.column(j).norm();
         if s > 0.0 {
             a.column_mut(j).scale_mut(1.0 / s);
         }
-    };
-    for j in 0..nbg {
-        scale(&mut a, j);
     }
-    let b = DVector::from_iterator(n, ks.iter().zip(&w).map(|(&k, wi)| p[k] * wi));
+    let b = DVector::from_iterator(
+        ng,
+        groups
+            .iter()
+            .zip(&rw)
+            .map(|(&g, w)| mean_over(g, &|k| p[k]) * w),
+    );
     let chi2 = |a: &DMatrix<f64>| {
         let c = crate::nnls::nnls(a, &b);
         let r = &b - a * &c;
-        (r.norm_squared() * psd.edf / 2.0, c)
+        (r.norm_squared(), c)
     };
-    let bg = a.columns(0, nbg).into_owned();
-    let (chi0, _) = chi2(&bg);
+    let (chi0, _) = chi2(&a.columns(0, nbg).into_owned());
     // χ² and peak ratio of the background with the resonance shape (f0, ζ)
     let mut with = |f0: f64, zeta: f64| -> (f64, f64) {
-        for (r, &k) in ks.iter().enumerate() {
-            a[(r, nbg)] = crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta) * w[r];
+        for (r, &g) in groups.iter().enumerate() {
+            a[(r, nbg)] = mean_over(g, &|k| {
+                crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta)
+            }) * rw[r];
         }
         let s = a.column(nbg).norm();
         if !(s > 0.0 && s.is_finite()) {
@@ -356,9 +386,9 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
         }
         a.column_mut(nbg).scale_mut(1.0 / s);
         let (c2, c) = chi2(&a);
-        // densities at f0 of the resonance and of the background
+        // densities in f0's group of the resonance and of the background
         let k0 = (f0 / df).round() as usize;
-        let r0 = ks.iter().position(|&k| k == k0).unwrap_or(0);
+        let r0 = groups.iter().position(|g| g.1 >= k0).unwrap_or(ng - 1);
         let res = a[(r0, nbg)] * c[nbg];
         let back: f64 = (0..nbg).map(|j| a[(r0, j)] * c[j]).sum();
         (
@@ -370,14 +400,27 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
             },
         )
     };
-    let zetas = [0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5];
+    // a band at least 6 bins and 3 groups wide: narrower, a line and a band look alike
+    let min_zeta = |f0: f64| (3.0 * df / f0).max(1.5 * (step - 1.0));
+    let zetas = [
+        0.02,
+        0.03,
+        0.05,
+        0.07,
+        0.1,
+        0.15,
+        0.2,
+        0.3,
+        0.4,
+        BAND_MAX_ZETA,
+    ];
     let (flo, fhi) = (16.0 * df, 0.45 * fs);
     let nf = ((fhi / flo).log10() * 40.0).ceil().max(1.0) as usize;
     let mut best: Option<(f64, f64, f64)> = None; // (χ², f0, ζ)
     for i in 0..=nf {
         let f0 = flo * (fhi / flo).powf(i as f64 / nf as f64);
         for &zeta in &zetas {
-            if 2.0 * zeta * f0 < 6.0 * df {
+            if zeta < min_zeta(f0) {
                 continue;
             }
             let (c2, _) = with(f0, zeta);
@@ -388,7 +431,6 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     }
     let (_, mut f0_hz, mut zeta) = best?;
     // refine between the grid's neighbours: golden sections on ln f0 and ln ζ in turn
-    let zmax = crate::effect::RESONANCE_ZETA_MAX;
     for _ in 0..3 {
         let (x, _) = crate::fit::golden_min(
             |x| with(x.exp(), zeta).0,
@@ -399,14 +441,15 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
         f0_hz = x.exp();
         let (x, _) = crate::fit::golden_min(
             |x| with(f0_hz, x.exp()).0,
-            (zeta / 1.5).max(0.005).ln(),
-            (zeta * 1.5).min(zmax).ln(),
+            // no narrower than a line there either
+            (zeta / 1.5).max(min_zeta(f0_hz)).min(zeta).ln(),
+            (zeta * 1.5).min(BAND_MAX_ZETA).ln(),
             30,
         );
         zeta = x.exp();
     }
     let (c2, peak_ratio) = with(f0_hz, zeta);
-    let dof = n.saturating_sub(nbg + 3).max(1) as f64;
+    let dof = ng.saturating_sub(nbg + 3).max(1) as f64;
     let s2 = (c2 / dof).max(1.0);
     // σ of a parameter from the χ² curvature: Var = 2·s²/(∂²χ²/∂θ²)
     let curvature_sigma = |v: f64, g: &mut dyn FnMut(f64) -> f64| {
