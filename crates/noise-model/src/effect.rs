@@ -5,7 +5,9 @@
 //! Power-law terms follow IEEE Std 952-1997 Annex C and eqs. 10–14 of I. Jaime, F. Beck Ferrero,
 //! M. L. Miretti, E. Bernardi, "Caracterización y calibración de unidades de medición inercial de
 //! bajo costo" (UTN Facultad Regional San Francisco): σ²(τ) = 3Q²/τ², N²/τ, (2 ln2/π)B², K²τ/3,
-//! R²τ²/2. The Gauss–Markov and sinusoid terms follow IEEE Std 952-1997 C.7/C.8.
+//! R²τ²/2. The Gauss–Markov and sinusoid terms follow IEEE Std 952-1997 C.7/C.8; the resonance
+//! (second-order Gauss–Markov) term P. S. Maybeck, *Stochastic Models, Estimation and Control*,
+//! vol. 1 (1979), §4.11, sampled exactly ([`crate::structure::oscillator_v`]).
 //!
 //! Every term is `coefficient × basis(τ)` with a non-negative coefficient (the square of the
 //! amplitude parameter), which makes the fit a non-negative linear least-squares problem once the
@@ -25,7 +27,9 @@ mod units;
 pub mod user;
 use avar::octaves;
 pub use avar::{
-    markov_avar_continuous, markov_avar_unit, sinusoid_avar_unit, step_avar, warmup_avar, Basis,
+    markov_avar_continuous, markov_avar_unit, resonance_avar_unit, resonance_psd_unit,
+    resonance_structure, sinusoid_avar_unit, step_avar, warmup_avar, Basis, RESONANCE_ZETA_MAX,
+    RESONANCE_ZETA_START,
 };
 pub use params::{Context, ParamSpec};
 pub use units::{DisplayUnit, UnitFamily, G0};
@@ -56,6 +60,9 @@ pub enum Effect {
     Boxcar,
     /// White noise through a triangular (Bartlett) filter, two boxcars of L samples in cascade.
     Bartlett,
+    /// White noise driving a damped harmonic oscillator (second-order Gauss–Markov): a mount or
+    /// structural mode at f0 with damping ratio ζ < 1.
+    Resonance,
     /// A user-described effect.
     User(Arc<UserEffect>),
 }
@@ -83,7 +90,7 @@ pub const DEFAULT_TERMS: [Effect; 5] = [
 ];
 
 /// Every built-in effect, in vocabulary order.
-pub const ALL_EFFECTS: [Effect; 14] = [
+pub const ALL_EFFECTS: [Effect; 15] = [
     Effect::Quantization,
     Effect::White,
     Effect::Flicker,
@@ -98,6 +105,7 @@ pub const ALL_EFFECTS: [Effect; 14] = [
     Effect::Lowpass2,
     Effect::Boxcar,
     Effect::Bartlett,
+    Effect::Resonance,
 ];
 
 /// How an effect enters the Allan variance and the covariance of the estimates.
@@ -131,6 +139,7 @@ impl Effect {
             Effect::Lowpass2 => "lowpass2",
             Effect::Boxcar => "boxcar",
             Effect::Bartlett => "bartlett",
+            Effect::Resonance => "resonance",
             Effect::User(u) => &u.name,
         }
     }
@@ -153,6 +162,9 @@ impl Effect {
                 "lowpass2" => Effect::Lowpass2,
                 "boxcar" | "moving_average" => Effect::Boxcar,
                 "bartlett" | "triangular" => Effect::Bartlett,
+                "resonance" | "second_order_markov" | "gauss_markov2" | "gm2" | "oscillator" => {
+                    Effect::Resonance
+                }
                 _ => return None,
             },
         )
@@ -179,7 +191,10 @@ impl Effect {
 
     /// Whether a model may hold more than one term of this effect.
     pub fn repeatable(&self) -> bool {
-        matches!(self, Effect::Markov | Effect::Sinusoid | Effect::BiasStep)
+        matches!(
+            self,
+            Effect::Markov | Effect::Sinusoid | Effect::BiasStep | Effect::Resonance
+        )
     }
 
     /// A filter effect describes the white noise it shapes, so it takes the white term's place.

@@ -1,4 +1,5 @@
-//! Welch power spectral density and spectral-line detection (evidence for the sinusoid effect).
+//! Welch power spectral density, spectral-line detection (evidence for the sinusoid effect) and
+//! band detection (evidence for the resonance effect, [`find_band`]).
 //!
 //! Welch (1967): Hann-windowed segments with 50 % overlap, mean removed per segment, averaged
 //! periodograms, one-sided density P(f) = 2|X(f)|² / (f_s Σw²) in u²/Hz. Each averaged bin of a
@@ -251,6 +252,226 @@ fn line_at(p: &[f64], df: f64, k: usize, ratio: f64, bg: f64, threshold: f64) ->
         ratio,
         threshold,
     }
+}
+
+/// A band of excess power in the PSD: a resonance's peak of finite width (evidence for the
+/// resonance effect, as a line is for the sinusoid).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Band {
+    /// Natural frequency [Hz] and damping ratio of the best resonance shape, with their
+    /// standard errors from the curvature of the spectrum's χ² (each with the other fixed).
+    pub f0_hz: f64,
+    pub zeta: f64,
+    pub f0_sigma: f64,
+    pub zeta_sigma: f64,
+    /// The fall of the spectrum's χ² (each Welch bin's relative variance 2/ν) when the resonance
+    /// joins the smooth background, scaled by the fit's χ²/dof when that exceeds 1.
+    pub delta_chi2: f64,
+    /// The resonance's density at f0 over the background's there.
+    pub peak_ratio: f64,
+}
+
+/// Smallest Δχ² for a band (a 3-parameter shape searched over a grid; far beyond any
+/// look-elsewhere correction, because the smooth background is only approximately right).
+pub const BAND_MIN_DELTA_CHI2: f64 = 100.0;
+/// The spectrum is averaged in log-spaced groups of bins, this many per decade (a group of c bins
+/// has relative variance 2/(νc)).
+pub const BAND_GROUPS_PER_DECADE: f64 = 400.0;
+/// Largest damping ratio searched for a band: beyond it the peak is hardly one (|H|² has no maximum
+/// above ζ = 1/√2) and the shape is a low-pass one.
+pub const BAND_MAX_ZETA: f64 = 0.5;
+/// Smallest peak-to-background ratio for a band: the peak at least doubles the density.
+pub const BAND_MIN_PEAK_RATIO: f64 = 1.0;
+
+/// The strongest band of excess power of finite width in a Welch PSD of data sampled every
+/// `tau0`, if any. The spectrum from 6·df to 0.49·f_s, averaged in log-spaced groups of bins
+/// ([`BAND_GROUPS_PER_DECADE`]; weights relative to the ±4-bin running mean), is fitted by non-negative least squares with a smooth background — white (flat),
+/// quantization (∝ sin²(πfτ0)), flicker (1/f), random walk (1/f²), and one- and two-pole low-pass
+/// shapes with corners on octaves from 32·df (Markov noise, the sensor's filters), all monotone
+/// or rising, none with a peak — with and without the sampled resonance shape
+/// [`crate::effect::resonance_psd_unit`], its f0 on a log grid (40 per decade, from 16·df to
+/// 0.45·f_s) and ζ in 0.02–[`BAND_MAX_ZETA`], the best refined by golden sections on ln f0 and ln ζ
+/// between the grid's neighbours. Shapes narrower than 6 bins or 3 groups (2ζf0 < 6·df, or ζ below
+/// 0.9 %) are lines, left to [`find_lines`]. A band needs Δχ² ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥
+/// [`BAND_MIN_PEAK_RATIO`].
+pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
+    use nalgebra::{DMatrix, DVector};
+    let p = &psd.density;
+    let nb = p.len();
+    let df = psd.df;
+    let fs = 1.0 / tau0;
+    let hi = ((0.49 * fs / df) as usize).min(nb.saturating_sub(1));
+    let lo = 6usize;
+    if hi < lo + 64 {
+        return None;
+    }
+    let f = |k: usize| k as f64 * df;
+    // log-spaced groups of bins [a, b]
+    let step = 10f64.powf(1.0 / BAND_GROUPS_PER_DECADE);
+    let mut groups: Vec<(usize, usize)> = Vec::new();
+    let mut k = lo;
+    while k <= hi {
+        let end = ((k as f64 * step).floor() as usize).clamp(k, hi);
+        groups.push((k, end));
+        k = end + 1;
+    }
+    let ng = groups.len();
+    let mean_over = |g: (usize, usize), v: &dyn Fn(usize) -> f64| {
+        (g.0..=g.1).map(v).sum::<f64>() / (g.1 - g.0 + 1) as f64
+    };
+    // row weights √(νc/2)/P̂, P̂ the group's mean of the ±4-bin running mean
+    let running = |k: usize| {
+        let (a, b) = (k.saturating_sub(4).max(1), (k + 4).min(nb - 1));
+        p[a..=b].iter().sum::<f64>() / (b - a + 1) as f64
+    };
+    let rw: Vec<f64> = groups
+        .iter()
+        .map(|&g| {
+            let ph = mean_over(g, &running);
+            let c = (g.1 - g.0 + 1) as f64;
+            if ph > 0.0 {
+                (psd.edf * c / 2.0).sqrt() / ph
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut shapes: Vec<Box<dyn Fn(f64) -> f64>> = vec![
+        Box::new(|_| 1.0),
+        Box::new(move |f| (std::f64::consts::PI * f * tau0).sin().powi(2)),
+        Box::new(|f| 1.0 / f),
+        Box::new(|f| 1.0 / (f * f)),
+    ];
+    let mut fc = 32.0 * df;
+    while fc < 0.5 * fs {
+        shapes.push(Box::new(move |f| 1.0 / (1.0 + (f / fc).powi(2))));
+        shapes.push(Box::new(move |f| 1.0 / (1.0 + (f / fc).powi(2)).powi(2)));
+        fc *= 2.0;
+    }
+    let nbg = shapes.len();
+    let mut a = DMatrix::<f64>::zeros(ng, nbg + 1);
+    for (j, shape) in shapes.iter().enumerate() {
+        for (r, &g) in groups.iter().enumerate() {
+            a[(r, j)] = mean_over(g, &|k| shape(f(k))) * rw[r];
+        }
+        // column scales, so that NNLS sees comparable columns
+        let s = a.column(j).norm();
+        if s > 0.0 {
+            a.column_mut(j).scale_mut(1.0 / s);
+        }
+    }
+    let b = DVector::from_iterator(
+        ng,
+        groups
+            .iter()
+            .zip(&rw)
+            .map(|(&g, w)| mean_over(g, &|k| p[k]) * w),
+    );
+    let chi2 = |a: &DMatrix<f64>| {
+        let c = crate::nnls::nnls(a, &b);
+        let r = &b - a * &c;
+        (r.norm_squared(), c)
+    };
+    let (chi0, _) = chi2(&a.columns(0, nbg).into_owned());
+    // χ² and peak ratio of the background with the resonance shape (f0, ζ)
+    let mut with = |f0: f64, zeta: f64| -> (f64, f64) {
+        for (r, &g) in groups.iter().enumerate() {
+            a[(r, nbg)] = mean_over(g, &|k| {
+                crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta)
+            }) * rw[r];
+        }
+        let s = a.column(nbg).norm();
+        if !(s > 0.0 && s.is_finite()) {
+            return (f64::INFINITY, 0.0);
+        }
+        a.column_mut(nbg).scale_mut(1.0 / s);
+        let (c2, c) = chi2(&a);
+        // densities in f0's group of the resonance and of the background
+        let k0 = (f0 / df).round() as usize;
+        let r0 = groups.iter().position(|g| g.1 >= k0).unwrap_or(ng - 1);
+        let res = a[(r0, nbg)] * c[nbg];
+        let back: f64 = (0..nbg).map(|j| a[(r0, j)] * c[j]).sum();
+        (
+            c2,
+            if back > 0.0 {
+                res / back
+            } else {
+                f64::INFINITY
+            },
+        )
+    };
+    // a band at least 6 bins and 3 groups wide: narrower, a line and a band look alike
+    let min_zeta = |f0: f64| (3.0 * df / f0).max(1.5 * (step - 1.0));
+    let zetas = [
+        0.02,
+        0.03,
+        0.05,
+        0.07,
+        0.1,
+        0.15,
+        0.2,
+        0.3,
+        0.4,
+        BAND_MAX_ZETA,
+    ];
+    let (flo, fhi) = (16.0 * df, 0.45 * fs);
+    let nf = ((fhi / flo).log10() * 40.0).ceil().max(1.0) as usize;
+    let mut best: Option<(f64, f64, f64)> = None; // (χ², f0, ζ)
+    for i in 0..=nf {
+        let f0 = flo * (fhi / flo).powf(i as f64 / nf as f64);
+        for &zeta in &zetas {
+            if zeta < min_zeta(f0) {
+                continue;
+            }
+            let (c2, _) = with(f0, zeta);
+            if best.is_none_or(|b| c2 < b.0) {
+                best = Some((c2, f0, zeta));
+            }
+        }
+    }
+    let (_, mut f0_hz, mut zeta) = best?;
+    // refine between the grid's neighbours: golden sections on ln f0 and ln ζ in turn
+    for _ in 0..3 {
+        let (x, _) = crate::fit::golden_min(
+            |x| with(x.exp(), zeta).0,
+            (f0_hz / 1.06).ln(),
+            (f0_hz * 1.06).min(0.499 * fs).ln(),
+            30,
+        );
+        f0_hz = x.exp();
+        let (x, _) = crate::fit::golden_min(
+            |x| with(f0_hz, x.exp()).0,
+            // no narrower than a line there either
+            (zeta / 1.5).max(min_zeta(f0_hz)).min(zeta).ln(),
+            (zeta * 1.5).min(BAND_MAX_ZETA).ln(),
+            30,
+        );
+        zeta = x.exp();
+    }
+    let (c2, peak_ratio) = with(f0_hz, zeta);
+    let dof = ng.saturating_sub(nbg + 3).max(1) as f64;
+    let s2 = (c2 / dof).max(1.0);
+    // σ of a parameter from the χ² curvature: Var = 2·s²/(∂²χ²/∂θ²)
+    let curvature_sigma = |v: f64, g: &mut dyn FnMut(f64) -> f64| {
+        let h = 1e-3 * v;
+        let d2 = (g(v + h) - 2.0 * c2 + g(v - h)) / (h * h);
+        if d2 > 0.0 {
+            (2.0 * s2 / d2).sqrt()
+        } else {
+            f64::INFINITY
+        }
+    };
+    let f0_sigma = curvature_sigma(f0_hz, &mut |v| with(v, zeta).0);
+    let zeta_sigma = curvature_sigma(zeta, &mut |v| with(f0_hz, v).0);
+    let delta_chi2 = (chi0 - c2) / s2;
+    (delta_chi2 >= BAND_MIN_DELTA_CHI2 && peak_ratio >= BAND_MIN_PEAK_RATIO).then_some(Band {
+        f0_hz,
+        zeta,
+        f0_sigma,
+        zeta_sigma,
+        delta_chi2,
+        peak_ratio,
+    })
 }
 
 #[cfg(test)]

@@ -31,6 +31,10 @@ pub enum Structure {
     /// First-order Gauss–Markov (AR(1)) of unit variance and lag-one correlation φ:
     /// V(k) = k(1+φ)/(1−φ) − 2φ(1 − φ^k)/(1−φ)².
     Ar1 { phi: f64 },
+    /// Second-order Gauss–Markov (a damped oscillator driven by white noise, damping ratio ζ < 1)
+    /// of unit variance, point-sampled: R(k) = e^{−αk}[cos βk + (α/β) sin βk] with α = ζω0τ0,
+    /// β = ω0τ0√(1 − ζ²). V(k) in closed form ([`oscillator_v`]).
+    Oscillator { alpha: f64, beta: f64 },
     /// Any stationary process with a decaying autocovariance, tabulated.
     Table(Arc<RTable>),
 }
@@ -54,6 +58,7 @@ impl Structure {
             Structure::Flicker => -k * k * k.ln() / std::f64::consts::PI,
             Structure::Cubic => (k - k * k * k) / 6.0,
             Structure::Ar1 { phi } => ar1_v(*phi, k),
+            Structure::Oscillator { alpha, beta } => oscillator_v(*alpha, *beta, k),
             Structure::Table(t) => t.v(k),
         }
     }
@@ -72,6 +77,10 @@ impl Structure {
             Structure::Cubic => (3, 0),
             Structure::Ar1 { phi } => (4, phi.to_bits()),
             Structure::Table(t) => (5, t.id),
+            Structure::Oscillator { alpha, beta } => (
+                6,
+                alpha.to_bits() ^ beta.to_bits().rotate_left(32) ^ 0x9E37_79B9_7F4A_7C15,
+            ),
         }
     }
 
@@ -82,6 +91,7 @@ impl Structure {
         match self {
             Structure::Ar1 { phi } if *phi > 0.0 && *phi < 1.0 => 20.0 / -phi.ln(),
             Structure::Table(t) => t.len() as f64,
+            Structure::Oscillator { alpha, .. } if *alpha > 0.0 => 20.0 / alpha,
             _ => 0.0,
         }
     }
@@ -118,6 +128,40 @@ fn ar1_v(phi: f64, k: f64) -> f64 {
     }
     let b = -(-x).exp_m1(); // 1 − φ^k
     (k * (2.0 - a) * a - 2.0 * (1.0 - a) * b) / (a * a)
+}
+
+/// e^{x+iy} − 1 without cancellation for small |x + iy|: (expm1(x)·cos y − 2 sin²(y/2),
+/// e^x·sin y).
+fn cexpm1(x: f64, y: f64) -> (f64, f64) {
+    let h = (y / 2.0).sin();
+    (x.exp_m1() * y.cos() - 2.0 * h * h, x.exp() * y.sin())
+}
+
+fn cmul(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    (a.0 * b.0 - a.1 * b.1, a.0 * b.1 + a.1 * b.0)
+}
+
+fn cdiv(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    let d = b.0 * b.0 + b.1 * b.1;
+    ((a.0 * b.0 + a.1 * b.1) / d, (a.1 * b.0 - a.0 * b.1) / d)
+}
+
+/// V(k) of the unit-variance sampled damped oscillator (see [`Structure::Oscillator`]).
+///
+/// R(j) = Re(a·zʲ) with z = e^λ, λ = −α + iβ, a = 1 − i·α/β (Re a = R(0) = 1). The weighted
+/// geometric sum Σ_{j=1}^{k−1} (k − j) zʲ = z[k(1 − z) − (1 − zᵏ)]/(1 − z)², so
+/// V(k) = k + 2·Re(a·(1 + E₁)(E_k − k·E₁)/E₁²) with E₁ = e^λ − 1 and E_k = e^{kλ} − 1, both taken
+/// from `expm1` so that a slow oscillator (|λ| ≪ 1) keeps its digits. Smooth in real k.
+pub fn oscillator_v(alpha: f64, beta: f64, k: f64) -> f64 {
+    if !(beta > 0.0) || !(alpha >= 0.0) {
+        return f64::NAN;
+    }
+    let e1 = cexpm1(-alpha, beta);
+    let ek = cexpm1(-alpha * k, beta * k);
+    let num = cmul((1.0 + e1.0, e1.1), (ek.0 - k * e1.0, ek.1 - k * e1.1));
+    let s = cdiv(num, cmul(e1, e1));
+    // Re((1 − ic)(s.0 + i s.1)) = s.0 + c·s.1
+    k + 2.0 * (s.0 + alpha / beta * s.1)
 }
 
 /// A tabulated autocovariance R(0..=K) of a stationary process, with the prefix sums that give
@@ -263,6 +307,90 @@ mod tests {
                 let v = s.v(k as f64);
                 assert!((v - d).abs() <= 1e-9 * d.abs(), "φ {phi} k {k}: {v} vs {d}");
             }
+        }
+    }
+
+    /// The sampled oscillator's R(j), straight from its definition.
+    fn oscillator_r(alpha: f64, beta: f64, j: usize) -> f64 {
+        let j = j as f64;
+        (-alpha * j).exp() * ((beta * j).cos() + alpha / beta * (beta * j).sin())
+    }
+
+    #[test]
+    fn oscillator_matches_its_autocovariance_sum() {
+        // f0 from 0.01·fs to 0.45·fs, ζ from 0.02 to 0.99: V(k) and the Allan variance against the
+        // direct sums of R(j) (σ² from the direct V, as the lab computes it)
+        let mut worst: f64 = 0.0;
+        for f0 in [0.01, 0.037, 0.1, 0.25, 0.45] {
+            for zeta in [0.02f64, 0.1, 0.3, 0.7, 0.99] {
+                let w = 2.0 * std::f64::consts::PI * f0;
+                let (alpha, beta) = (zeta * w, w * (1.0 - zeta * zeta).sqrt());
+                let s = Structure::Oscillator { alpha, beta };
+                let r = |j: usize| oscillator_r(alpha, beta, j);
+                for m in [1usize, 2, 3, 5, 10, 33, 100, 1000, 4000] {
+                    let (dm, d2m) = (direct_v(r, m), direct_v(r, 2 * m));
+                    let want = (4.0 * dm - d2m) / (2.0 * (m * m) as f64);
+                    let got = s.avar(m as f64);
+                    let e = ((got - want) / want).abs();
+                    worst = worst.max(e);
+                    assert!(e < 1e-9, "f0 {f0} ζ {zeta} m {m}: {got} vs {want}");
+                    let ev = ((s.v(m as f64) - dm) / dm).abs();
+                    assert!(
+                        ev < 1e-9,
+                        "f0 {f0} ζ {zeta} V({m}): {} vs {dm}",
+                        s.v(m as f64)
+                    );
+                }
+            }
+        }
+        eprintln!("oscillator closed form vs direct sums: worst relative error {worst:.1e}");
+        assert!(worst < 1e-9, "{worst:e}");
+    }
+
+    #[test]
+    fn oscillator_limits() {
+        let pi = std::f64::consts::PI;
+        // m = 1: σ² = R(0) − R(1) exactly
+        let (alpha, beta) = (0.05, 0.6);
+        let s = Structure::Oscillator { alpha, beta };
+        let r1 = oscillator_r(alpha, beta, 1);
+        assert!((s.avar(1.0) - (1.0 - r1)).abs() < 1e-14);
+        // long τ: white noise of the process's total correlation Σ_j R(j) per sample,
+        // which tends to the continuous ∫R dt/τ0 = 4ζ/(ω0τ0) for a slow oscillator
+        for (f0, zeta) in [(0.001, 0.05), (0.001, 0.5), (0.2, 0.1)] {
+            let w = 2.0 * pi * f0;
+            let (alpha, beta) = (zeta * w, w * (1.0 - zeta * zeta).sqrt());
+            let s = Structure::Oscillator { alpha, beta };
+            let total: f64 = 1.0
+                + 2.0
+                    * (1..200_000)
+                        .map(|j| oscillator_r(alpha, beta, j))
+                        .sum::<f64>();
+            let m = 1e7;
+            assert!(
+                (s.avar(m) * m / total - 1.0).abs() < 1e-3,
+                "f0 {f0} ζ {zeta}"
+            );
+            if f0 < 0.01 {
+                assert!((total / (4.0 * zeta / w) - 1.0).abs() < 1e-3, "{total}");
+            }
+        }
+        // a slow oscillator point-sampled fast: σ² at m = τ/τ0 tends to the continuous form
+        // (1/τ²)∫∫ over two adjacent windows, checked against a fine direct sum in continuous time
+        // through R(t) itself: the sampled value moves by O(τ0/τ) only
+        let (f0, zeta) = (1e-3, 0.2);
+        let w = 2.0 * pi * f0;
+        let s = Structure::Oscillator {
+            alpha: zeta * w,
+            beta: w * (1.0 - zeta * zeta).sqrt(),
+        };
+        let s2 = Structure::Oscillator {
+            alpha: zeta * w / 10.0,
+            beta: w / 10.0 * (1.0 - zeta * zeta).sqrt(),
+        };
+        for m in [50.0, 300.0, 2000.0] {
+            let (a, b) = (s.avar(m), s2.avar(10.0 * m));
+            assert!((a / b - 1.0).abs() < 0.02, "m {m}: {a} vs {b}");
         }
     }
 

@@ -46,6 +46,10 @@ pub struct Args {
     /// Sinusoid: AMPLITUDE,FREQ_HZ (u peak, Hz).
     #[arg(long, value_delimiter = ',')]
     pub sinusoid: Vec<f64>,
+    /// A resonance (white noise driving a damped oscillator, a mount or structural mode):
+    /// SIGMA,F0,ZETA (u standard deviation, Hz natural frequency, damping ratio 0 < ζ < 1).
+    #[arg(long, value_delimiter = ',')]
+    pub resonance: Vec<f64>,
     /// Pass the white noise through a low-pass filter with this corner [Hz] (the MPU-6050 DLPF;
     /// Jaime et al. configured 5 Hz).
     #[arg(long)]
@@ -195,6 +199,24 @@ pub fn run(args: Args) -> Result<()> {
         }
         effects.push(SimEffect::Sinusoid { amplitude, freq_hz });
     }
+    match args.resonance[..] {
+        [] => {}
+        [sigma, f0_hz, zeta]
+            if sigma >= 0.0
+                && sigma.is_finite()
+                && f0_hz > 0.0
+                && f0_hz < args.rate / 2.0
+                && zeta > 0.0
+                && zeta < 1.0 =>
+        {
+            effects.push(SimEffect::Resonance { sigma, f0_hz, zeta })
+        }
+        _ => bail!(
+            "--resonance: expected SIGMA,F0,ZETA with sigma ≥ 0, 0 < f0 < rate/2 and 0 < ζ < 1 \
+             (ζ ≥ 1 has no resonant peak), got {:?}",
+            args.resonance
+        ),
+    }
     if !args.step.len().is_multiple_of(2) {
         bail!("--step: expected TIME_S,SIZE pairs, got {:?}", args.step);
     }
@@ -241,7 +263,7 @@ pub fn run(args: Args) -> Result<()> {
         }
     }
     if effects.is_empty() {
-        bail!("no effect given: use --white, --flicker, --rrw, --ramp, --quantization, --markov or --sinusoid");
+        bail!("no effect given: use --white, --flicker, --rrw, --ramp, --quantization, --markov, --sinusoid or --resonance");
     }
     let mut units = Vec::new();
     for c in &args.columns {

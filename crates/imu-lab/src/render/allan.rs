@@ -33,6 +33,7 @@ fn color(e: &Effect) -> &'static str {
         Effect::Temperature => "#17becf",
         Effect::Lowpass | Effect::Lowpass2 => "#1f3f9f",
         Effect::Boxcar | Effect::Bartlett => "#3f9f1f",
+        Effect::Resonance => "#ff1f8f",
         Effect::User(_) => "#aa5500",
     }
 }

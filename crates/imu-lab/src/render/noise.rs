@@ -79,6 +79,8 @@ pub fn param_rows(fit: &Fit, unit: &str) -> Vec<ParamRow> {
                     sig(1.0 / (2.0 * std::f64::consts::PI * v), 3)
                 ),
                 (Effect::Sinusoid, _) => format!("period {} s", sig(1.0 / v, 4)),
+                (Effect::Resonance, "f0_hz") => format!("period {} s", sig(1.0 / v, 4)),
+                (Effect::Resonance, "zeta") => format!("Q = 1/(2ζ) = {}", sig(0.5 / v, 3)),
                 (Effect::Lowpass | Effect::Lowpass2, _) => {
                     format!(
                         "τ_c = 1/(2π f_c) = {} s",

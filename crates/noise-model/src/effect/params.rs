@@ -94,6 +94,19 @@ impl Effect {
                 2.0 / tau0,
                 16.0,
             )],
+            // A mode between fs/1000 and just below Nyquist (the sampled form needs f0 < fs/2);
+            // ζ < 1: a critically damped or overdamped second-order process has no peak and is a
+            // two-pole low-pass shape (lowpass2, or two Markov terms).
+            Effect::Resonance => vec![
+                spec(
+                    "f0_hz",
+                    "Hz",
+                    1.0 / (1000.0 * tau0),
+                    0.5 / tau0 * 0.999,
+                    40.0,
+                ),
+                spec("zeta", "", 0.01, super::RESONANCE_ZETA_MAX, 12.0),
+            ],
             Effect::Boxcar | Effect::Bartlett => {
                 let hi = (ctx.samples() as f64 / 16.0).clamp(2.0, 1024.0);
                 vec![spec("length", "samples", 1.0, hi, 24.0)]
@@ -196,6 +209,22 @@ impl Effect {
                 Basis::Stochastic {
                     structure: Structure::Table(Arc::new(t)),
                     factor: 1.0 / tau0,
+                }
+            }
+            Effect::Resonance => {
+                let f0 = th(0);
+                if !(f0 > 0.0) {
+                    return Ok(Basis::Zero);
+                }
+                // the frequency is searched first, with the damping not yet set: a middling ζ
+                let zeta = if th(1).is_nan() {
+                    super::RESONANCE_ZETA_START
+                } else {
+                    th(1)
+                };
+                Basis::Stochastic {
+                    structure: super::resonance_structure(f0, zeta, tau0)?,
+                    factor: 1.0,
                 }
             }
             Effect::Boxcar | Effect::Bartlett => {

@@ -150,3 +150,81 @@ fn names_roundtrip() {
         assert_eq!(Effect::parse(e.name()), Some(e.clone()));
     }
 }
+
+#[test]
+fn resonance_psd_is_the_sampled_spectrum_of_its_autocovariance() {
+    // ∫_0^{fs/2} S(f) df = R(0) = 1 (aliasing included), S equal to the direct Fourier sum of
+    // R(k), and for a slow mode the continuous oscillator's spectrum
+    let tau0 = 0.01;
+    for (f0, zeta) in [(12.0, 0.1), (45.0, 0.05), (3.0, 0.6), (20.0, 0.99)] {
+        let s = |f: f64| resonance_psd_unit(f, tau0, f0, zeta);
+        let n = 200_000;
+        let df = 0.5 / tau0 / n as f64;
+        // midpoint rule
+        let total: f64 = (0..n).map(|i| s((i as f64 + 0.5) * df)).sum::<f64>() * df;
+        assert!((total - 1.0).abs() < 1e-6, "f0 {f0} ζ {zeta}: ∫S = {total}");
+        let w = 2.0 * std::f64::consts::PI * f0 * tau0;
+        let (alpha, beta) = (zeta * w, w * (1.0 - zeta * zeta).sqrt());
+        let r = |k: f64| (-alpha * k).exp() * ((beta * k).cos() + alpha / beta * (beta * k).sin());
+        for f in [0.0, 1.0, f0, 31.0, 49.0] {
+            let th = 2.0 * std::f64::consts::PI * f * tau0;
+            let direct = 2.0
+                * tau0
+                * (1.0
+                    + 2.0
+                        * (1..200_000)
+                            .map(|k| r(k as f64) * (th * k as f64).cos())
+                            .sum::<f64>());
+            assert!((s(f) / direct - 1.0).abs() < 1e-8, "f0 {f0} ζ {zeta} f {f}");
+        }
+    }
+    let (f0, zeta, tau0) = (0.5, 0.2, 1e-4);
+    let w0 = 2.0 * std::f64::consts::PI * f0;
+    for f in [0.05, 0.4, 0.5, 0.6, 2.0] {
+        let w = 2.0 * std::f64::consts::PI * f;
+        let h2 = 1.0 / ((w0 * w0 - w * w).powi(2) + (2.0 * zeta * w0 * w).powi(2));
+        let cont = 2.0 * 4.0 * zeta * w0.powi(3) * h2;
+        let got = resonance_psd_unit(f, tau0, f0, zeta);
+        assert!((got / cont - 1.0).abs() < 1e-3, "f {f}: {got} vs {cont}");
+    }
+}
+
+#[test]
+fn resonance_basis_and_its_allan_bump() {
+    let ctx = Context::uniform(0.01, 1 << 20);
+    let b = Effect::Resonance.basis(&[12.0, 0.1], &ctx).unwrap();
+    for m in [1.0, 3.0, 50.0] {
+        let want = resonance_avar_unit(m * 0.01, 0.01, 12.0, 0.1);
+        assert_eq!(b.avar(m, 0.01), want);
+    }
+    assert!(Effect::Resonance.basis(&[12.0, 1.0], &ctx).is_err());
+    assert!(Effect::Resonance.basis(&[60.0, 0.1], &ctx).is_err());
+    assert!(matches!(
+        Effect::Resonance.basis(&[f64::NAN, 0.1], &ctx),
+        Ok(Basis::Zero)
+    ));
+    // the bump of the signature text: for small ζ near τ = 0.37/f0 with σ ≈ 1.0·sigma (the
+    // random-phase sinusoid of variance sigma², amplitude √2·sigma: 0.725·√2 = 1.03); a slow
+    // mode sampled fast so that the continuous shape shows
+    for (zeta, lo, hi) in [(0.01, 0.95, 1.05), (0.1, 0.85, 1.0), (0.3, 0.8, 0.9)] {
+        let (f0, tau0) = (1.0, 1e-3);
+        let (mut best, mut bt) = (0.0, 0.0);
+        for m in 1..3000 {
+            let v = resonance_avar_unit(m as f64 * tau0, tau0, f0, zeta);
+            if v > best {
+                best = v;
+                bt = m as f64 * tau0;
+            }
+        }
+        eprintln!(
+            "ζ {zeta}: σ peak {:.3}·sigma at τ = {bt:.3}/f0",
+            best.sqrt()
+        );
+        assert!((bt - 0.37).abs() < 0.03, "ζ {zeta}: peak at {bt}");
+        assert!(
+            best.sqrt() > lo && best.sqrt() < hi,
+            "ζ {zeta}: {}",
+            best.sqrt()
+        );
+    }
+}

@@ -40,6 +40,12 @@ impl Effect {
                 "σ(τ) below the white line for τ shorter than the filter length L·τ0 and on it \
                  beyond; the PSD has the filter's sinc² (boxcar) or sinc⁴ (Bartlett) shape"
             }
+            Effect::Resonance => {
+                "a bump near τ ≈ 0.37/f0 (σ ≈ 1.0·sigma for small ζ, 0.85·sigma at ζ = 0.3), falling \
+                 about as 1/τ beyond it with ripples near τ = k/f0 while the oscillation lasts, \
+                 then joining a −½ slope of white level N² ≈ 4ζ·sigma²/(2πf0) for τ ≫ 1/(2πζf0); \
+                 a peak of finite width (≈ 2ζ·f0) in the PSD, not a line"
+            }
             Effect::User(u) => &u.signature,
         }
     }
@@ -150,6 +156,20 @@ impl Effect {
                 "A triangular (Bartlett, sinc²) decimation filter: two boxcar stages of L output \
                  samples in cascade, common in MEMS readouts (second-order CIC); it correlates the \
                  output for 2L samples with a smoother shape than a single boxcar."
+            }
+            Effect::Resonance => {
+                "A resonance: white noise driving a damped harmonic oscillator, x'' + 2ζω0x' + \
+                 ω0²x = w, the second-order Gauss–Markov process (Maybeck, Stochastic Models, \
+                 Estimation and Control, vol. 1, §4.11; IEEE Std 952-1997 lists the correlated \
+                 terms it generalises). In an IMU record it is a mechanical mode excited by \
+                 broadband vibration: the board on its standoffs, the mount, a cable or the \
+                 vehicle's structure, typically 5–50 Hz with ζ of 0.02–0.3. The MPU-6050's own \
+                 proof-mass modes lie in the kHz range (its datasheet gives gyro mechanical frequencies of 24–36 kHz), far above any \
+                 output rate, so a resonance at 1–50 Hz belongs to the mount or the structure \
+                 and changes when the sensor is mounted differently. It shows as a band of \
+                 excess power of width ≈ 2ζf0 in the PSD, unlike a sinusoid's line, and as a bump \
+                 near τ ≈ 0.37/f0 on the Allan plot; a first-order Markov process has no \
+                 oscillation and the lowpass filters no peak."
             }
             Effect::User(u) => &u.physics,
         }

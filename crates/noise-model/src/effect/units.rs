@@ -44,7 +44,7 @@ impl Effect {
             Effect::Flicker => "B",
             Effect::RateRandomWalk => "K",
             Effect::RateRamp => "R",
-            Effect::Markov => "sigma",
+            Effect::Markov | Effect::Resonance => "sigma",
             Effect::Sinusoid => "amplitude",
             Effect::Resolution => "lsb",
             Effect::BiasStep => "size",
@@ -77,6 +77,7 @@ impl Effect {
             }
             Effect::Flicker
             | Effect::Markov
+            | Effect::Resonance
             | Effect::Sinusoid
             | Effect::Resolution
             | Effect::BiasStep => u.to_string(),
@@ -121,9 +122,11 @@ impl Effect {
                     | Effect::Lowpass2
                     | Effect::Boxcar
                     | Effect::Bartlett => d("°/√h", 60.0 * k),
-                    Effect::Flicker | Effect::Markov | Effect::Sinusoid | Effect::BiasStep => {
-                        d("°/h", 3600.0 * k)
-                    }
+                    Effect::Flicker
+                    | Effect::Markov
+                    | Effect::Resonance
+                    | Effect::Sinusoid
+                    | Effect::BiasStep => d("°/h", 3600.0 * k),
                     Effect::Temperature if warm_up => d("°/h", 3600.0 * k),
                     Effect::Temperature => d("°/h/°C", 3600.0 * k),
                     Effect::RateRandomWalk => d("°/h/√h", 3600.0 * 60.0 * k),
@@ -138,9 +141,11 @@ impl Effect {
                 | Effect::Lowpass2
                 | Effect::Boxcar
                 | Effect::Bartlett => d("µg/√Hz", ug),
-                Effect::Flicker | Effect::Markov | Effect::Sinusoid | Effect::BiasStep => {
-                    d("µg", ug)
-                }
+                Effect::Flicker
+                | Effect::Markov
+                | Effect::Resonance
+                | Effect::Sinusoid
+                | Effect::BiasStep => d("µg", ug),
                 Effect::Temperature if warm_up => d("µg", ug),
                 Effect::Temperature => d("µg/°C", ug),
                 Effect::RateRandomWalk => d("µg/√s", ug),

@@ -132,6 +132,32 @@ impl<'a> NoiseLab<'a> {
                     &mut tries,
                 );
             }
+            // a band of excess power in the Welch PSD not yet fitted: a resonance there; the
+            // spectrum resolves the band far better than the octave Allan points, so it pins f0
+            // and ζ, as the periodogram pins a sinusoid's frequency
+            let (seg, t0) = (self.longest_segment(), self.record.tau0);
+            if let Some(b) = welch(seg, 1.0 / t0, default_segment(seg.len()))
+                .and_then(|p| crate::psd::find_band(&p, t0))
+                .filter(|b| {
+                    !cur.fit.terms.iter().any(|t| {
+                        t.effect == Effect::Resonance
+                            && t.theta0().is_some_and(|f| (f / b.f0_hz - 1.0).abs() < 0.25)
+                    })
+                })
+            {
+                let why = format!(
+                    "the spectrum has a band of excess power at {:.2} Hz, ζ ≈ {:.2} \
+                     (Δχ² = {:.0}, peak {:.1}× the background)",
+                    b.f0_hz, b.zeta, b.delta_chi2, b.peak_ratio
+                );
+                let spec = TermSpec {
+                    theta: Some(vec![b.f0_hz, b.zeta]),
+                    theta_fixed: true,
+                    theta_sigma: Some(vec![b.f0_sigma, b.zeta_sigma]),
+                    ..TermSpec::new(Effect::Resonance)
+                };
+                add(Effect::Resonance, spec, why, &mut tries);
+            }
             // the strongest spectral line not yet in the model
             let fitted: Vec<f64> = cur
                 .fit

@@ -92,6 +92,14 @@ pub fn reading(fit: &Fit, e: &Effect) -> String {
                 )
             }
         }
+        Effect::Resonance => format!(
+            "a resonance at f0 = {:.3} Hz, ζ = {:.3}, σ = {:.3e} — a mount or structural mode \
+             (band ≈ {:.2} Hz wide in the PSD)",
+            th,
+            t.theta.get(1).copied().unwrap_or(f64::NAN),
+            t.amplitude(),
+            2.0 * t.theta.get(1).copied().unwrap_or(f64::NAN) * th
+        ),
         Effect::Resolution => format!("rounding to the data's LSB of {:.4e}", t.amplitude()),
         e => format!("{} = {:.4e}", e.amp_name(), t.amplitude()),
     }
