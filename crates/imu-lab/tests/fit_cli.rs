@@ -169,6 +169,40 @@ fn auto_walk_names_the_filter_and_the_json_reproduces_the_model() {
 }
 
 #[test]
+fn simulate_resonance_and_the_auto_walk_names_it() {
+    // `simulate --resonance SIGMA,F0,ZETA` on the gyro background; `fit --auto` names the
+    // resonance with f0 and ζ from the spectrum's band; an overdamped ζ is refused
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("res.csv");
+    let p = p.to_str().unwrap().to_string();
+    simulate_gyro(&p, 3, &["--resonance", "0.03,12,0.1"]);
+    let out = run_ok(["fit", &p, "--column", "gz", "--auto", "--json"]);
+    let v = stdout_json(&out);
+    let steps = v["steps"].as_array().unwrap();
+    assert_eq!(
+        steps[0]["added"],
+        serde_json::json!(["resonance"]),
+        "{steps:?}"
+    );
+    assert_eq!(v["diagnosis"]["adequate"], true);
+    let t = term(&v, "resonance");
+    let (f0, zeta) = (
+        t["params"]["f0_hz"].as_f64().unwrap(),
+        t["params"]["zeta"].as_f64().unwrap(),
+    );
+    assert!((f0 / 12.0 - 1.0).abs() < 0.05, "f0 {f0}");
+    assert!((zeta / 0.1 - 1.0).abs() < 0.4, "ζ {zeta}");
+    let err = run_err([
+        "simulate",
+        "--resonance",
+        "0.03,12,1.5",
+        "-o",
+        dir.path().join("x.csv").to_str().unwrap(),
+    ]);
+    assert!(err.contains("ζ ≥ 1 has no resonant peak"), "{err}");
+}
+
+#[test]
 fn a_user_effect_file_is_fitted_and_reported_by_its_name() {
     let dir = tempfile::tempdir().unwrap();
     let f = dlpf_file(dir.path());

@@ -3,10 +3,10 @@
 //! spectrum, lattice), the automatic walk diagnose → add → refit.
 //!
 //! Each case is a failure mode of real recordings: a bias step, a temperature-driven bias, a
-//! warm-up, a spectral line (near Nyquist and slow), the sensor's own filters, correlated noise,
-//! a mount resonance, irregular timestamps. Each runs more than one seed; estimates must lie within 4σ of the truth
-//! (p ≈ 6e-5 per check for a Gaussian estimator) and within a relative band that says what
-//! "recovered" means physically.
+//! warm-up, a spectral line (near Nyquist and slow), the sensor's own filters, correlated noise, a
+//! mount resonance, irregular timestamps. Each runs more than one seed; estimates must lie within
+//! 4σ of the truth (p ≈ 6e-5 per check for a Gaussian estimator) and within a relative band that
+//! says what "recovered" means physically.
 use allan::{deviation, Stat, TauSet};
 use imu_sim::{SimConfig, SimEffect};
 use noise_model::{

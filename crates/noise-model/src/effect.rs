@@ -7,7 +7,7 @@
 //! bajo costo" (UTN Facultad Regional San Francisco): σ²(τ) = 3Q²/τ², N²/τ, (2 ln2/π)B², K²τ/3,
 //! R²τ²/2. The Gauss–Markov and sinusoid terms follow IEEE Std 952-1997 C.7/C.8; the resonance
 //! (second-order Gauss–Markov) term P. S. Maybeck, *Stochastic Models, Estimation and Control*,
-//! vol. 1 (1979), §4.11, sampled exactly ([`crate::structure::oscillator_v`]).
+//! vol. 1 (1979), ch. 4 (shaping filters), sampled exactly ([`crate::structure::oscillator_v`]).
 //!
 //! Every term is `coefficient × basis(τ)` with a non-negative coefficient (the square of the
 //! amplitude parameter), which makes the fit a non-negative linear least-squares problem once the

@@ -1,10 +1,10 @@
 //! The pico-imu noise-model lab: an effect library for Allan-variance curves (power-law noise,
-//! Gauss–Markov, sinusoids, the sensor's own filters, resolution, bias steps, temperature,
-//! user-described effects), the covariance of overlapping Allan estimates, a generalised
-//! least-squares fit with an uncertainty for every estimate, an adequacy verdict, time-domain
-//! tests for non-stationarity, and the lab workflow (diagnose → add → refit) on a recording.
-//! Pure maths: no I/O. Inputs are measured Allan points (τ, σ, EDF, 68.3 % bounds, m), e.g. rows
-//! of `allan::deviation(…, Stat::Oadev, …)`, and for the lab the record's samples.
+//! Gauss–Markov, sinusoids, mount resonances, the sensor's own filters, resolution, bias steps,
+//! temperature, user-described effects), the covariance of overlapping Allan estimates, a
+//! generalised least-squares fit with an uncertainty for every estimate, an adequacy verdict,
+//! time-domain tests for non-stationarity, and the lab workflow (diagnose → add → refit) on a
+//! recording. Pure maths: no I/O. Inputs are measured Allan points (τ, σ, EDF, 68.3 % bounds,
+//! m), e.g. rows of `allan::deviation(…, Stat::Oadev, …)`, and for the lab the record's samples.
 //!
 //! ```
 //! use noise_model::{assess, fit_model, Effect, Measurement, Point, TermSpec};

@@ -283,17 +283,17 @@ pub const BAND_MAX_ZETA: f64 = 0.5;
 /// Smallest peak-to-background ratio for a band: the peak at least doubles the density.
 pub const BAND_MIN_PEAK_RATIO: f64 = 1.0;
 
-/// The strongest band of excess power of finite width in a Welch PSD of data sampled every
-/// `tau0`, if any. The spectrum from 6·df to 0.49·f_s, averaged in log-spaced groups of bins
-/// ([`BAND_GROUPS_PER_DECADE`]; weights relative to the ±4-bin running mean), is fitted by non-negative least squares with a smooth background — white (flat),
-/// quantization (∝ sin²(πfτ0)), flicker (1/f), random walk (1/f²), and one- and two-pole low-pass
-/// shapes with corners on octaves from 32·df (Markov noise, the sensor's filters), all monotone
-/// or rising, none with a peak — with and without the sampled resonance shape
-/// [`crate::effect::resonance_psd_unit`], its f0 on a log grid (40 per decade, from 16·df to
-/// 0.45·f_s) and ζ in 0.02–[`BAND_MAX_ZETA`], the best refined by golden sections on ln f0 and ln ζ
-/// between the grid's neighbours. Shapes narrower than 6 bins or 3 groups (2ζf0 < 6·df, or ζ below
-/// 0.9 %) are lines, left to [`find_lines`]. A band needs Δχ² ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥
-/// [`BAND_MIN_PEAK_RATIO`].
+/// The strongest band of excess power of finite width in a Welch PSD of data sampled every `tau0`,
+/// if any. The spectrum from 6·df to 0.49·f_s, averaged in log-spaced groups of bins
+/// ([`BAND_GROUPS_PER_DECADE`]; weights relative to the ±4-bin running mean), is fitted by
+/// non-negative least squares with a smooth background — white (flat), quantization (∝ sin²(πfτ0)),
+/// flicker (1/f), random walk (1/f²), and one- and two-pole low-pass shapes with corners on octaves
+/// from 32·df (Markov noise, the sensor's filters), all monotone or rising, none with a peak — with
+/// and without the sampled resonance shape [`crate::effect::resonance_psd_unit`], its f0 on a log
+/// grid (40 per decade, from 16·df to 0.45·f_s) and ζ in 0.02–[`BAND_MAX_ZETA`], the best refined
+/// by golden sections on ln f0 and ln ζ between the grid's neighbours. Shapes narrower than 6 bins
+/// or 3 groups (2ζf0 < 6·df, or ζ < 0.009) are lines, left to [`find_lines`]. A band needs Δχ²
+/// ≥ [`BAND_MIN_DELTA_CHI2`] and a peak ratio ≥ [`BAND_MIN_PEAK_RATIO`].
 pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     use nalgebra::{DMatrix, DVector};
     let p = &psd.density;

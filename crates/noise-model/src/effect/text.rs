@@ -41,10 +41,10 @@ impl Effect {
                  beyond; the PSD has the filter's sinc² (boxcar) or sinc⁴ (Bartlett) shape"
             }
             Effect::Resonance => {
-                "a bump near τ ≈ 0.37/f0 (σ ≈ 1.0·sigma for small ζ, 0.85·sigma at ζ = 0.3), falling \
-                 about as 1/τ beyond it with ripples near τ = k/f0 while the oscillation lasts, \
-                 then joining a −½ slope of white level N² ≈ 4ζ·sigma²/(2πf0) for τ ≫ 1/(2πζf0); \
-                 a peak of finite width (≈ 2ζ·f0) in the PSD, not a line"
+                "a bump near τ ≈ 0.37/f0 (σ ≈ 1.0·sigma for small ζ, 0.85·sigma at ζ = 0.3), \
+                 falling about as 1/τ beyond it with ripples near τ = k/f0 while the oscillation \
+                 lasts, then joining a −½ slope of white level N² ≈ 4ζ·sigma²/(2πf0) for τ ≫ \
+                 1/(2πζf0); a peak of finite width (≈ 2ζ·f0) in the PSD, not a line"
             }
             Effect::User(u) => &u.signature,
         }
@@ -160,16 +160,16 @@ impl Effect {
             Effect::Resonance => {
                 "A resonance: white noise driving a damped harmonic oscillator, x'' + 2ζω0x' + \
                  ω0²x = w, the second-order Gauss–Markov process (Maybeck, Stochastic Models, \
-                 Estimation and Control, vol. 1, §4.11; IEEE Std 952-1997 lists the correlated \
-                 terms it generalises). In an IMU record it is a mechanical mode excited by \
-                 broadband vibration: the board on its standoffs, the mount, a cable or the \
-                 vehicle's structure, typically 5–50 Hz with ζ of 0.02–0.3. The MPU-6050's own \
-                 proof-mass modes lie in the kHz range (its datasheet gives gyro mechanical frequencies of 24–36 kHz), far above any \
-                 output rate, so a resonance at 1–50 Hz belongs to the mount or the structure \
-                 and changes when the sensor is mounted differently. It shows as a band of \
-                 excess power of width ≈ 2ζf0 in the PSD, unlike a sinusoid's line, and as a bump \
-                 near τ ≈ 0.37/f0 on the Allan plot; a first-order Markov process has no \
-                 oscillation and the lowpass filters no peak."
+                 Estimation and Control, vol. 1, ch. 4; IEEE Std 952-1997 Annex C has the \
+                 correlated terms it generalises). In an IMU record it is a mechanical mode \
+                 excited by broadband vibration: the board on its standoffs, the mount, a cable or \
+                 the vehicle's structure, typically 5–50 Hz with ζ of 0.02–0.3. The MPU-6050's own \
+                 proof-mass modes lie in the kHz range (its datasheet gives gyro mechanical \
+                 frequencies of 24–36 kHz), far above any output rate, so a resonance at 1–50 Hz \
+                 belongs to the mount or the structure and changes when the sensor is mounted \
+                 differently. It shows as a band of excess power of width ≈ 2ζf0 in the PSD, \
+                 unlike a sinusoid's line, and as a bump near τ ≈ 0.37/f0 on the Allan plot; a \
+                 first-order Markov process has no oscillation and the lowpass filters no peak."
             }
             Effect::User(u) => &u.physics,
         }
