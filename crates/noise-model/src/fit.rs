@@ -30,7 +30,8 @@ use std::fmt;
 use std::sync::Arc;
 
 mod solve;
-pub use solve::{fit_model, golden_min};
+pub use crate::optim::golden_min;
+pub use solve::fit_model;
 
 /// Outer iterations of the covariance update.
 pub const OUTER_ITERATIONS: usize = 4;

@@ -32,6 +32,7 @@ pub mod fit;
 pub mod lab;
 pub mod nnls;
 pub mod nonstat;
+pub mod optim;
 pub mod practical;
 pub mod psd;
 pub mod structure;

@@ -289,7 +289,7 @@ pub const BAND_MIN_PEAK_RATIO: f64 = 1.0;
 /// non-negative least squares with a smooth background — white (flat), quantization (∝ sin²(πfτ0)),
 /// flicker (1/f), random walk (1/f²), and one- and two-pole low-pass shapes with corners on octaves
 /// from 32·df (Markov noise, the sensor's filters), all monotone or rising, none with a peak — with
-/// and without the sampled resonance shape [`crate::effect::resonance_psd_unit`], its f0 on a log
+/// and without the sampled resonance shape [`crate::structure::resonance_psd_unit`], its f0 on a log
 /// grid (40 per decade, from 16·df to 0.45·f_s) and ζ in 0.02–[`BAND_MAX_ZETA`], the best refined
 /// by golden sections on ln f0 and ln ζ between the grid's neighbours. Shapes narrower than 6 bins
 /// or 3 groups (2ζf0 < 6·df, or ζ < 0.009) are lines, left to [`find_lines`]. A band needs Δχ²
@@ -377,7 +377,7 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     let mut with = |f0: f64, zeta: f64| -> (f64, f64) {
         for (r, &g) in groups.iter().enumerate() {
             a[(r, nbg)] = mean_over(g, &|k| {
-                crate::effect::resonance_psd_unit(f(k), tau0, f0, zeta)
+                crate::structure::resonance_psd_unit(f(k), tau0, f0, zeta)
             }) * rw[r];
         }
         let s = a.column(nbg).norm();
@@ -432,14 +432,14 @@ pub fn find_band(psd: &Psd, tau0: f64) -> Option<Band> {
     let (_, mut f0_hz, mut zeta) = best?;
     // refine between the grid's neighbours: golden sections on ln f0 and ln ζ in turn
     for _ in 0..3 {
-        let (x, _) = crate::fit::golden_min(
+        let (x, _) = crate::optim::golden_min(
             |x| with(x.exp(), zeta).0,
             (f0_hz / 1.06).ln(),
             (f0_hz * 1.06).min(0.499 * fs).ln(),
             30,
         );
         f0_hz = x.exp();
-        let (x, _) = crate::fit::golden_min(
+        let (x, _) = crate::optim::golden_min(
             |x| with(f0_hz, x.exp()).0,
             // no narrower than a line there either
             (zeta / 1.5).max(min_zeta(f0_hz)).min(zeta).ln(),

@@ -274,6 +274,64 @@ impl RTable {
     }
 }
 
+/// Largest damping ratio of the resonance effect: ζ ≥ 1 has no resonant peak (a critically damped
+/// or overdamped second-order process is a two-pole low-pass shape, the lowpass2 or two Markov
+/// terms), and the oscillator form R = e^{−αk}[cos βk + (α/β) sin βk] needs β > 0.
+pub const RESONANCE_ZETA_MAX: f64 = 0.99;
+
+/// The damping ratio the resonance's frequency is searched with before ζ itself is.
+pub const RESONANCE_ZETA_START: f64 = 0.2;
+
+/// The unit-variance structure of a resonance at `f0` [Hz], damping ratio `zeta`, point-sampled
+/// every `tau0`: α = ζω0τ0, β = ω0τ0√(1 − ζ²) (an error outside 0 < ζ ≤ [`RESONANCE_ZETA_MAX`]
+/// or 0 < f0 < 1/(2τ0)).
+pub fn resonance_structure(f0: f64, zeta: f64, tau0: f64) -> Result<Structure, String> {
+    if !(zeta > 0.0 && zeta <= RESONANCE_ZETA_MAX) {
+        return Err(format!(
+            "damping ratio ζ = {zeta} outside (0, {RESONANCE_ZETA_MAX}]: ζ ≥ 1 has no resonant \
+             peak (use lowpass2 or Markov terms)"
+        ));
+    }
+    if !(f0 > 0.0 && f0 * tau0 < 0.5) {
+        return Err(format!(
+            "natural frequency f0 = {f0} Hz outside (0, {}) Hz (Nyquist)",
+            0.5 / tau0
+        ));
+    }
+    let w = 2.0 * std::f64::consts::PI * f0 * tau0;
+    Ok(Structure::Oscillator {
+        alpha: zeta * w,
+        beta: w * ((1.0 - zeta) * (1.0 + zeta)).sqrt(),
+    })
+}
+
+/// One-sided PSD [1/Hz] at `f` (0 ≤ f ≤ 1/(2τ0)) of the *sampled* unit-variance resonance,
+/// aliasing included: S(f) = 2τ0[1 + 2 Re Σ_{k≥1} R(k) e^{−iθk}], θ = 2πfτ0, which with
+/// R(k) = Re(a·zᵏ) is 2τ0[1 + Re(a·q/(1 − q)) + Re(ā·q′/(1 − q′))], q = z·e^{−iθ},
+/// q′ = z̄·e^{−iθ}. For f0 ≪ 1/τ0 it is the continuous oscillator's 2σ²·4ζω0³/|ω0² − ω² + 2iζω0ω|²
+/// (the white level times |H|², normalised to unit variance).
+pub fn resonance_psd_unit(f: f64, tau0: f64, f0: f64, zeta: f64) -> f64 {
+    let Ok(Structure::Oscillator { alpha, beta }) = resonance_structure(f0, zeta, tau0) else {
+        return f64::NAN;
+    };
+    let theta = 2.0 * std::f64::consts::PI * f * tau0;
+    let c = alpha / beta;
+    // Re(a·q/(1 − q)) with a = 1 − ic, q = e^{−α + iφ}: q/(1 − q) = −(1 + E)/E, E = e^{ln q} − 1
+    let term = |phi: f64, c: f64| {
+        let h = (phi / 2.0).sin();
+        let (er, ei) = (
+            (-alpha).exp_m1() * phi.cos() - 2.0 * h * h,
+            (-alpha).exp() * phi.sin(),
+        );
+        let d = er * er + ei * ei;
+        // −(1 + E)/E = −(1 + E)·Ē/|E|²
+        let (nr, ni) = (1.0 + er, ei);
+        let (qr, qi) = (-(nr * er + ni * ei) / d, -(ni * er - nr * ei) / d);
+        qr + c * qi
+    };
+    2.0 * tau0 * (1.0 + term(beta - theta, c) + term(-beta - theta, -c))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
