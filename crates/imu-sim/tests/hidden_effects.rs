@@ -384,8 +384,8 @@ fn no_band_without_a_resonance() {
     // The band detector stays silent on the power-law background, on a spectral line, on
     // first-order Markov noise and on the sensor's own low-pass filters, and finds the band of a
     // resonance at its f0. Measured with the thresholds removed: the quiet records' best band
-    // shapes reach Δχ² 4–12 (threshold 100) and peak ratios 0.06–0.38 (threshold 1); the
-    // resonance's band Δχ² ≈ 3800, peak ratio 3.4.
+    // shapes reach Δχ² 6–14 (threshold 100) and peak ratios 0.10–0.38 (threshold 0.25: the Δχ²
+    // gate is the one that separates them); the resonance's band Δχ² ≈ 3200, peak ratio 3.4.
     let with = |extra: Option<SimEffect>, seed: u64| {
         let mut e = gyro(true);
         e.extend(extra);

@@ -282,7 +282,7 @@ pub const BAND_GROUPS_PER_DECADE: f64 = 400.0;
 pub const BAND_MAX_ZETA: f64 = 0.5;
 /// Smallest peak-to-background ratio for a band: the peak adds at least a quarter to the density
 /// there (a resonance of ζ = 0.2 and σ = 0.02 °/s on 5e-3 °/s·√s white noise reaches 0.9; the
-/// quiet records of the tests at most 0.43, with Δχ² ≤ 12).
+/// quiet records of the tests up to 0.38, but with Δχ² ≤ 14: the Δχ² gate separates them).
 pub const BAND_MIN_PEAK_RATIO: f64 = 0.25;
 
 /// The strongest band of excess power of finite width in a Welch PSD of data sampled every `tau0`,
