@@ -3,13 +3,15 @@
 //! Model: σ²(τ) = Σ_k c_k·b_k(τ; θ_k), c_k ≥ 0 (see [`Effect::basis`]).
 //!
 //! **Weights.** The octave overlapping Allan estimates are correlated (neighbouring octaves share
-//! most of their data) and, on long records, precise to 0.1 % at short τ. The fit therefore
-//! minimises the generalised χ² = rᵀ C⁻¹ r, r = σ̂² − σ²_model, with C the covariance of the
-//! estimates *under the model* ([`crate::cov`], exact for Gaussian noise on this record's
-//! segments) — the weighting GMWM uses in wavelet-variance space (Guerrier et al., JASA 2013).
-//! C depends on the model, so the fit iterates (at most [`OUTER_ITERATIONS`] times): fit with C
-//! fixed, recompute C from the new model. With C fixed the problem is linear in c: the whitened
-//! system L⁻¹S⁻¹(σ̂² − b·c), C = S ρ S, ρ = L Lᵀ, is solved by Lawson–Hanson NNLS.
+//! most of their data) and, on long records, precise to 0.1 % at short τ. The fit minimises the
+//! generalised χ² of the logs, rᵀR⁻¹r with r = ln σ̂² − ln σ²_model − β(ν) (β the bias of the log
+//! of a χ²_ν/ν variable) and R = C/(mmᵀ), C the covariance of the estimates *under the model*
+//! ([`crate::cov`], exact for Gaussian noise on this record's segments) — the weighting GMWM uses
+//! in wavelet-variance space (Guerrier et al., JASA 2013), on the logs so that a model above the
+//! data costs what one below does. Gauss–Newton: the residual linearised at the current model is
+//! a variance-space problem with the same whitening, L⁻¹S⁻¹(t − b·c), C = S ρ S, ρ = L Lᵀ, solved
+//! by Lawson–Hanson NNLS; C and the linearisation are recomputed from the new model (at most
+//! [`OUTER_ITERATIONS`] times), each step damped until the log criterion falls.
 //! When only points are known (e.g. a device's table without its record), C is diagonal from the
 //! points' EDFs, var(σ̂²) = 2σ⁴/ν (NIST SP 1065 §5.3), the model's σ⁴ in place of the noisy
 //! measurement's.

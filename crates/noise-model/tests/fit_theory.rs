@@ -58,7 +58,9 @@ fn recovers_the_five_terms_from_an_exact_curve() {
         let t = f.term(&e).unwrap();
         assert!(t.detected, "{e}: {t:?}");
         assert!(
-            (t.amplitude() / v - 1.0).abs() < 1e-6,
+            // the fit is on the logs with their χ² bias corrected (E[ln χ²_ν/ν] ≈ −1/ν), so a
+            // curve of exact expectations is recovered to 1 % (its long-τ points have ν of a few), not to rounding
+            (t.amplitude() / v - 1.0).abs() < 1e-2,
             "{e}: {} vs {v}",
             t.amplitude()
         );
@@ -69,7 +71,7 @@ fn recovers_the_five_terms_from_an_exact_curve() {
     }
     // the criterion vanishes; the goodness-of-fit statistic is small but not 0, since an estimate
     // at its mean sits slightly above the χ² median
-    assert!(f.objective < 1e-9, "{}", f.objective);
+    assert!(f.objective < 1e-2, "{}", f.objective);
     assert!(f.chi2_dof() < 0.1, "{}", f.chi2_dof());
     assert!(assess(&f).adequate);
 }
@@ -159,9 +161,16 @@ fn markov_and_sinusoid_are_recovered() {
     sp.push(TermSpec::new(Effect::Markov));
     let f = fit_model(&meas, &sp).unwrap();
     let t = f.term(&Effect::Markov).unwrap();
-    assert!((t.theta[0] / 2.0 - 1.0).abs() < 1e-4, "{t:?}");
-    assert!((t.amplitude() / 1e-2 - 1.0).abs() < 1e-4, "{t:?}");
-    assert!(f.objective < 1e-9 && f.chi2_dof() < 0.1 && base.chi2_dof() > 10.0);
+    // within O(1/ν) of the long-τ points (the log fit's bias correction, see above)
+    assert!((t.theta[0] / 2.0 - 1.0).abs() < 1e-2, "{t:?}");
+    assert!((t.amplitude() / 1e-2 - 1.0).abs() < 1e-2, "{t:?}");
+    assert!(
+        f.objective < 1e-2 && f.chi2_dof() < 0.1 && base.chi2_dof() > 10.0,
+        "{} {} {}",
+        f.objective,
+        f.chi2_dof(),
+        base.chi2_dof()
+    );
 
     let pts = curve_n(tau0, 18, |t| {
         n * n / t + 4e-4 * sinusoid_avar_unit(t, tau0, 0.3)
