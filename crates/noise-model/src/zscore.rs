@@ -15,6 +15,17 @@ pub fn z_score(dev: f64, edf: f64, model_dev: f64) -> f64 {
         // a model with no variance where the data have some: as far off as a z-score is taken
         return if dev > 0.0 { 38.0 } else { 0.0 };
     }
+    if !(edf > 0.0 && edf.is_finite()) {
+        // no degrees of freedom about the model (a model with no variance at this τ, its EDF
+        // 2m²/var → 0): the point is as far off as a z-score is taken, on its side
+        return if dev > model_dev {
+            38.0
+        } else if dev < model_dev {
+            -38.0
+        } else {
+            0.0
+        };
+    }
     let x = edf * (dev / model_dev).powi(2);
     if edf > 2e4 {
         // Wilson–Hilferty: (χ²_ν/ν)^{1/3} is normal with mean 1 − 2/(9ν), variance 2/(9ν)
@@ -61,4 +72,21 @@ pub fn t_statistic(
         None => z.iter().map(|v| v * v).sum::<f64>() / CORRELATION_INFLATION,
     };
     (z, t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_point_without_degrees_of_freedom_is_finite_and_on_its_side() {
+        // a model with no variance at a τ has EDF 2m²/var = 0 there: the z-score must still be
+        // a number (NaN made the verdict's T NaN, and the whole fit fail), as far off as taken
+        assert_eq!(z_score(1.0, 0.0, 0.5), 38.0);
+        assert_eq!(z_score(0.2, 0.0, 0.5), -38.0);
+        assert_eq!(z_score(1.0, f64::NAN, 0.5), 38.0);
+        assert_eq!(z_score(1.0, 10.0, 0.0), 38.0);
+        let z = z_score(1.0, 10.0, 1.0);
+        assert!(z.is_finite() && z.abs() < 1.0, "{z}");
+    }
 }
