@@ -13,8 +13,13 @@ use noise_model::Context;
 use serde_json::Value;
 use std::f64::consts::{LN_2, PI};
 
-/// Runs per effect.
-const RUNS: usize = 3;
+/// Runs per effect (`PICO_IMU_SWEEP_RUNS` sets it for the longer version in docs/benchmarks.md).
+fn runs() -> usize {
+    std::env::var("PICO_IMU_SWEEP_RUNS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3)
+}
 /// Record: 30 min at 100 Hz on the gyro background of the project's tests.
 const RATE: f64 = 100.0;
 const SAMPLES: usize = 180_000;
@@ -117,7 +122,8 @@ fn sweep(name: &str, stream: u64, mut flags: impl FnMut(&mut Draw) -> Vec<String
     let mut d = Draw(stream);
     let ctx = Context::uniform(1.0 / RATE, SAMPLES as u64);
     let mut failures = Vec::new();
-    for _ in 0..RUNS {
+    let runs = runs();
+    for _ in 0..runs {
         let seed = 1 + (d.u() * 1e6) as u64;
         let extra = flags(&mut d);
         let (v, shown) = walk(seed, &extra);
@@ -138,7 +144,13 @@ fn sweep(name: &str, stream: u64, mut flags: impl FnMut(&mut Draw) -> Vec<String
         }
         check_model_column(&v, &ctx, &shown);
     }
-    assert!(failures.is_empty(), "{name}: {failures:#?}");
+    let good = runs - failures.len();
+    eprintln!("sweep {name}: {good} of {runs} named and adequate, every model column reproduced");
+    // at least 90 % of the runs (all of them in the CI version's three)
+    assert!(
+        good as f64 >= 0.9 * runs as f64,
+        "{name}: {good} of {runs}: {failures:#?}"
+    );
 }
 
 fn f(v: &[f64]) -> String {
