@@ -748,6 +748,70 @@ fn uncertainties(
     let r: Vec<f64> = t.iter().zip(&model).map(|(a, b)| a - b).collect();
     let chi2 = wf.apply(&r).norm_squared();
 
+    let (cols, index) = fisher_columns(prob, work, nl, &coef, &wf)?;
+    let q = cols.len();
+    // A coefficient held at its bound 0 by the constraint counts half: the χ² reduction of a
+    // boundary parameter is 0 or 1 degree of freedom with probability ½ each (the chi-bar-square
+    // mixture; Self & Liang, JASA 1987).
+    let interior = index
+        .iter()
+        .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
+        .count();
+    let boundary = index.len() - interior;
+    let dof = (points.len() as f64 - interior as f64 - 0.5 * boundary as f64).max(1.0);
+    let chi2_dof = chi2 / dof;
+    let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
+    let d: Vec<f64> = (0..q)
+        .map(|a| {
+            let v = fisher[(a, a)];
+            if v > 0.0 {
+                1.0 / v.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let fs = DMatrix::from_fn(q, q, |a, b| fisher[(a, b)] * d[a] * d[b]);
+    let inv = fs.clone().try_inverse().or_else(|| crate::nnls::pinv(&fs));
+    let infl = chi2_dof.max(1.0);
+    let param_cov = match &inv {
+        Some(m) => DMatrix::from_fn(q, q, |a, b| m[(a, b)] * d[a] * d[b] * infl),
+        None => DMatrix::from_element(q, q, f64::NAN),
+    };
+    let terms = term_fits(work, &coef, &index, &param_cov);
+    let per_term_basis = work.iter().map(|t| t.b.clone()).collect();
+    let mut out = Fit {
+        tau0: meas.ctx.tau0,
+        points: points.clone(),
+        ctx: meas.ctx.clone(),
+        weighting: meas.weighting,
+        terms,
+        model_avar: model,
+        point_cov,
+        model_edf,
+        chi2: f64::NAN,
+        objective: chi2,
+        dof,
+        param_cov,
+        param_index: index,
+        per_term_basis,
+    };
+    out.chi2 = out.statistic().1;
+    out.check_finite()?;
+    Ok(out)
+}
+
+/// The whitened columns of the Fisher matrix over the free parameters, with each column's
+/// (term, parameter) index: 0 for the term's coefficient, i + 1 for its non-linear parameter i
+/// (a central difference of the basis at the optimum).
+#[allow(clippy::type_complexity)]
+fn fisher_columns(
+    prob: &Problem,
+    work: &[Work],
+    nl: &[(usize, usize)],
+    coef: &[f64],
+    wf: &Whitener,
+) -> Result<(Vec<DVector<f64>>, Vec<(usize, usize)>), FitError> {
     // Fisher matrix over the free parameters: coefficients of non-known terms and the searched
     // non-linear parameters of terms present.
     let mut cols: Vec<DVector<f64>> = Vec::new();
@@ -789,38 +853,21 @@ fn uncertainties(
         cols.push(wf.apply(&d));
         index.push((k, i + 1));
     }
-    let q = cols.len();
-    // A coefficient held at its bound 0 by the constraint counts half: the χ² reduction of a
-    // boundary parameter is 0 or 1 degree of freedom with probability ½ each (the chi-bar-square
-    // mixture; Self & Liang, JASA 1987).
-    let interior = index
-        .iter()
-        .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
-        .count();
-    let boundary = index.len() - interior;
-    let dof = (points.len() as f64 - interior as f64 - 0.5 * boundary as f64).max(1.0);
-    let chi2_dof = chi2 / dof;
-    let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
-    let d: Vec<f64> = (0..q)
-        .map(|a| {
-            let v = fisher[(a, a)];
-            if v > 0.0 {
-                1.0 / v.sqrt()
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let fs = DMatrix::from_fn(q, q, |a, b| fisher[(a, b)] * d[a] * d[b]);
-    let inv = fs.clone().try_inverse().or_else(|| crate::nnls::pinv(&fs));
-    let infl = chi2_dof.max(1.0);
-    let param_cov = match &inv {
-        Some(m) => DMatrix::from_fn(q, q, |a, b| m[(a, b)] * d[a] * d[b] * infl),
-        None => DMatrix::from_element(q, q, f64::NAN),
-    };
+    Ok((cols, index))
+}
+
+/// Each term's result at the optimum: its coefficient and non-linear parameters with the standard
+/// errors of the free ones from `param_cov` (indexed by `index`), the known ones' as given, and
+/// whether it is detected (above twice its standard error).
+fn term_fits(
+    work: &[Work],
+    coef: &[f64],
+    index: &[(usize, usize)],
+    param_cov: &DMatrix<f64>,
+) -> Vec<TermFit> {
     let mut terms: Vec<TermFit> = work
         .iter()
-        .zip(&coef)
+        .zip(coef)
         .map(|(t, &c)| TermFit {
             effect: t.spec.effect.clone(),
             coef: c,
@@ -851,26 +898,7 @@ fn uncertainties(
     for t in &mut terms {
         t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
     }
-    let per_term_basis = work.iter().map(|t| t.b.clone()).collect();
-    let mut out = Fit {
-        tau0: meas.ctx.tau0,
-        points: points.clone(),
-        ctx: meas.ctx.clone(),
-        weighting: meas.weighting,
-        terms,
-        model_avar: model,
-        point_cov,
-        model_edf,
-        chi2: f64::NAN,
-        objective: chi2,
-        dof,
-        param_cov,
-        param_index: index,
-        per_term_basis,
-    };
-    out.chi2 = out.statistic().1;
-    out.check_finite()?;
-    Ok(out)
+    terms
 }
 
 impl Fit {
