@@ -112,18 +112,6 @@ impl<'a> NoiseLab<'a> {
     fn allan_tries(&self, cur: &Model) -> Vec<Try> {
         let have: Vec<Effect> = cur.specs.iter().map(|s| s.effect.clone()).collect();
         let mut tries: Vec<Try> = Vec::new();
-        let add = |e: Effect, spec: TermSpec, why: String, tries: &mut Vec<Try>| {
-            let mut s = cur.specs.clone();
-            s.push(spec);
-            tries.push((
-                s,
-                Edit {
-                    add: vec![e],
-                    remove: vec![],
-                },
-                why,
-            ));
-        };
         for e in [
             Effect::Quantization,
             Effect::White,
@@ -132,96 +120,35 @@ impl<'a> NoiseLab<'a> {
             Effect::RateRamp,
         ] {
             if !have.contains(&e) {
-                add(e.clone(), TermSpec::new(e), String::new(), &mut tries);
+                tries.push(added(cur, e.clone(), TermSpec::new(e), String::new()));
             }
         }
         if !have.contains(&Effect::Resolution) {
             if let Some(s) = self.resolution_spec() {
-                add(
+                tries.push(added(
+                    cur,
                     Effect::Resolution,
                     s,
                     format!(
                         "the values sit on a lattice of {:.4e}",
                         self.lsb.unwrap_or(0.0)
                     ),
-                    &mut tries,
-                );
+                ));
             }
         }
         let blocked = self.spectral_blocked();
         if !blocked {
             let n_markov = have.iter().filter(|e| **e == Effect::Markov).count();
             if n_markov < 3 {
-                add(
+                tries.push(added(
+                    cur,
                     Effect::Markov,
                     TermSpec::new(Effect::Markov),
                     String::new(),
-                    &mut tries,
-                );
+                ));
             }
-            // a band of excess power in the Welch PSD not yet fitted: a resonance there; the
-            // spectrum resolves the band far better than the octave Allan points, so it pins f0
-            // and ζ, as the periodogram pins a sinusoid's frequency
-            let (seg, t0) = (self.longest_segment(), self.record.tau0);
-            if let Some(b) = welch(seg, 1.0 / t0, default_segment(seg.len()))
-                .and_then(|p| crate::psd::find_band(&p, t0))
-                .filter(|b| {
-                    !cur.fit.terms.iter().any(|t| {
-                        t.effect == Effect::Resonance
-                            && t.theta0().is_some_and(|f| (f / b.f0_hz - 1.0).abs() < 0.25)
-                    })
-                })
-            {
-                let why = format!(
-                    "the spectrum has a band of excess power at {:.2} Hz, ζ ≈ {:.2} \
-                     (Δχ² = {:.0}, peak {:.1}× the background)",
-                    b.f0_hz, b.zeta, b.delta_chi2, b.peak_ratio
-                );
-                let spec = TermSpec {
-                    theta: Some(vec![b.f0_hz, b.zeta]),
-                    theta_fixed: true,
-                    theta_sigma: Some(vec![b.f0_sigma, b.zeta_sigma]),
-                    ..TermSpec::new(Effect::Resonance)
-                };
-                add(Effect::Resonance, spec, why, &mut tries);
-            }
-            // the strongest spectral line not yet in the model
-            let fitted: Vec<f64> = cur
-                .fit
-                .terms
-                .iter()
-                .filter(|t| t.effect == Effect::Sinusoid)
-                .filter_map(|t| t.theta0())
-                .collect();
-            let df_w = self.periodogram_df;
-            if let Some(l) = self.lines.iter().find(|l| {
-                !fitted
-                    .iter()
-                    .any(|&f| (f - l.freq_hz).abs() < 4.0 * df_w.max(1e-12) + 0.02 * f)
-            }) {
-                // the whole-record periodogram pins the frequency
-                let y = self.longest_segment();
-                let fs = 1.0 / self.record.tau0;
-                let (f, sf) = match line_near(y, fs, l.freq_hz, 0.05) {
-                    Some(t) if t.p_value < P_CANDIDATE => (t.freq_hz, self.periodogram_df / 2.0),
-                    _ => (l.freq_hz, self.periodogram_df * 8.0),
-                };
-                add(
-                    Effect::Sinusoid,
-                    TermSpec {
-                        theta: Some(vec![f]),
-                        theta_fixed: true,
-                        theta_sigma: Some(vec![sf]),
-                        ..TermSpec::new(Effect::Sinusoid)
-                    },
-                    format!(
-                        "the spectrum has a line at {:.4} Hz, {:.0}× the local background \
-                         (threshold {:.1}×)",
-                        l.freq_hz, l.ratio, l.threshold
-                    ),
-                    &mut tries,
-                );
-            }
+            tries.extend(self.band_try(cur));
+            tries.extend(self.line_try(cur));
             for e in [
                 Effect::Lowpass,
                 Effect::Lowpass2,
@@ -254,16 +181,84 @@ impl<'a> NoiseLab<'a> {
             }
             for u in &self.record.user_effects {
                 if !have.contains(u) {
-                    add(
+                    tries.push(added(
+                        cur,
                         u.clone(),
                         TermSpec::new(u.clone()),
                         String::new(),
-                        &mut tries,
-                    );
+                    ));
                 }
             }
         }
         tries
+    }
+
+    /// A resonance at a band of excess power in the Welch PSD that the model does not fit yet.
+    fn band_try(&self, cur: &Model) -> Option<Try> {
+        // a band of excess power in the Welch PSD not yet fitted: a resonance there; the
+        // spectrum resolves the band far better than the octave Allan points, so it pins f0
+        // and ζ, as the periodogram pins a sinusoid's frequency
+        let (seg, t0) = (self.longest_segment(), self.record.tau0);
+        let b = welch(seg, 1.0 / t0, default_segment(seg.len()))
+            .and_then(|p| crate::psd::find_band(&p, t0))
+            .filter(|b| {
+                !cur.fit.terms.iter().any(|t| {
+                    t.effect == Effect::Resonance
+                        && t.theta0().is_some_and(|f| (f / b.f0_hz - 1.0).abs() < 0.25)
+                })
+            })?;
+        let why = format!(
+            "the spectrum has a band of excess power at {:.2} Hz, ζ ≈ {:.2} \
+             (Δχ² = {:.0}, peak {:.1}× the background)",
+            b.f0_hz, b.zeta, b.delta_chi2, b.peak_ratio
+        );
+        let spec = TermSpec {
+            theta: Some(vec![b.f0_hz, b.zeta]),
+            theta_fixed: true,
+            theta_sigma: Some(vec![b.f0_sigma, b.zeta_sigma]),
+            ..TermSpec::new(Effect::Resonance)
+        };
+        Some(added(cur, Effect::Resonance, spec, why))
+    }
+
+    /// A sinusoid at the strongest spectral line the model does not fit yet.
+    fn line_try(&self, cur: &Model) -> Option<Try> {
+        // the strongest spectral line not yet in the model
+        let fitted: Vec<f64> = cur
+            .fit
+            .terms
+            .iter()
+            .filter(|t| t.effect == Effect::Sinusoid)
+            .filter_map(|t| t.theta0())
+            .collect();
+        let df_w = self.periodogram_df;
+        let l = self.lines.iter().find(|l| {
+            !fitted
+                .iter()
+                .any(|&f| (f - l.freq_hz).abs() < 4.0 * df_w.max(1e-12) + 0.02 * f)
+        })?;
+        // the whole-record periodogram pins the frequency
+        let y = self.longest_segment();
+        let fs = 1.0 / self.record.tau0;
+        let (f, sf) = match line_near(y, fs, l.freq_hz, 0.05) {
+            Some(t) if t.p_value < P_CANDIDATE => (t.freq_hz, self.periodogram_df / 2.0),
+            _ => (l.freq_hz, self.periodogram_df * 8.0),
+        };
+        Some(added(
+            cur,
+            Effect::Sinusoid,
+            TermSpec {
+                theta: Some(vec![f]),
+                theta_fixed: true,
+                theta_sigma: Some(vec![sf]),
+                ..TermSpec::new(Effect::Sinusoid)
+            },
+            format!(
+                "the spectrum has a line at {:.4} Hz, {:.0}× the local background \
+                 (threshold {:.1}×)",
+                l.freq_hz, l.ratio, l.threshold
+            ),
+        ))
     }
 
     /// One try refitted and tested against `cur` (criterion `cur_crit`): two likelihood-ratio
@@ -523,6 +518,20 @@ impl<'a> NoiseLab<'a> {
             model: m,
         }
     }
+}
+
+/// The try adding `spec` (of effect `e`) to the model `cur`, tried for the reason `why`.
+fn added(cur: &Model, e: Effect, spec: TermSpec, why: String) -> Try {
+    let mut s = cur.specs.clone();
+    s.push(spec);
+    (
+        s,
+        Edit {
+            add: vec![e],
+            remove: vec![],
+        },
+        why,
+    )
 }
 
 fn prefix(s: &str) -> String {
