@@ -8,6 +8,9 @@
 //!   SP 1065 Table 5 elsewhere.
 //! * Bounds: `σ_lo² = edf·σ²/χ²(1−p, edf)`, `σ_hi² = edf·σ²/χ²(p, edf)` (SP 1065 eq. 45),
 //!   with `p = (1 − cl)/2`.
+//! * The tails the labs test with: χ² through the regularised incomplete gamma function
+//!   (`gamma_pq`, `chi2_sf`), F through the regularised incomplete beta function (`beta_reg`,
+//!   `f_sf`; Numerical Recipes §6.4, A&S 26.6.2).
 //!
 //! Everything here is `no_std` (libm), so the device can compute bounds too.
 
@@ -354,6 +357,90 @@ pub fn chi2_sf(x: f64, nu: f64) -> f64 {
     gamma_pq(nu / 2.0, x / 2.0).1
 }
 
+/// Regularised incomplete beta function `I_x(a, b)`, by its continued fraction (modified Lentz)
+/// on the side where it converges fast: directly below x = (a+1)/(a+b+2), else as
+/// `1 − I_{1−x}(b, a)` (Numerical Recipes §6.4; A&S 26.5.8). NaN unless a > 0, b > 0 and
+/// 0 ≤ x ≤ 1.
+pub fn beta_reg(a: f64, b: f64, x: f64) -> f64 {
+    if !(a > 0.0 && b > 0.0 && (0.0..=1.0).contains(&x)) {
+        return f64::NAN;
+    }
+    if x == 0.0 || x == 1.0 {
+        return x;
+    }
+    let ln_front = libm::lgamma(a + b) - libm::lgamma(a) - libm::lgamma(b)
+        + a * libm::log(x)
+        + b * libm::log1p(-x);
+    if x < (a + 1.0) / (a + b + 2.0) {
+        libm::exp(ln_front) * beta_cf(a, b, x) / a
+    } else {
+        1.0 - libm::exp(ln_front) * beta_cf(b, a, 1.0 - x) / b
+    }
+}
+
+/// The continued fraction of `I_x(a, b)` (Numerical Recipes §6.4 `betacf`), modified Lentz.
+fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
+    let tiny = 1e-300;
+    let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
+    let mut c = 1.0;
+    let mut d = 1.0 - qab * x / qap;
+    if libm::fabs(d) < tiny {
+        d = tiny;
+    }
+    d = 1.0 / d;
+    let mut h = d;
+    for m in 1..10_000 {
+        let m = m as f64;
+        let m2 = 2.0 * m;
+        // even step
+        let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
+        d = 1.0 + aa * d;
+        if libm::fabs(d) < tiny {
+            d = tiny;
+        }
+        c = 1.0 + aa / c;
+        if libm::fabs(c) < tiny {
+            c = tiny;
+        }
+        d = 1.0 / d;
+        h *= d * c;
+        // odd step
+        let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+        d = 1.0 + aa * d;
+        if libm::fabs(d) < tiny {
+            d = tiny;
+        }
+        c = 1.0 + aa / c;
+        if libm::fabs(c) < tiny {
+            c = tiny;
+        }
+        d = 1.0 / d;
+        let del = d * c;
+        h *= del;
+        if libm::fabs(del - 1.0) < 1e-16 {
+            break;
+        }
+    }
+    h
+}
+
+/// Upper tail P(F > f) of the Fisher–Snedecor distribution with (d1, d2) degrees of freedom,
+/// `I_{d2/(d2 + d1·f)}(d2/2, d1/2)` (A&S 26.6.2), the argument taken in the form that keeps the
+/// far tail's relative accuracy. f = +∞ gives 0; f ≤ 0, a NaN f and degrees of freedom that are
+/// not positive give 1 (no evidence against the null).
+pub fn f_sf(f: f64, d1: f64, d2: f64) -> f64 {
+    if !(d1 > 0.0 && d2 > 0.0 && d1.is_finite() && d2.is_finite()) {
+        return if f == f64::INFINITY { 0.0 } else { 1.0 };
+    }
+    if f == f64::INFINITY {
+        return 0.0;
+    }
+    if f.is_nan() || f <= 0.0 {
+        return 1.0;
+    }
+    beta_reg(d2 / 2.0, d1 / 2.0, d2 / (d2 + d1 * f))
+}
+
 /// Standard normal CDF, Φ(z) = ½[1 ± P(½, z²/2)].
 pub fn norm_cdf(z: f64) -> f64 {
     let (p, q) = gamma_pq(0.5, 0.5 * z * z);
@@ -490,6 +577,32 @@ pub fn alpha_from_slope(var_lo: f64, var_hi: f64, tau_ratio: f64, d: u32) -> i32
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn f_tail_matches_tables_and_closed_form() {
+        // Upper 5 % point of F(3, 20) = 3.098 (NIST/SEMATECH e-Handbook of Statistical Methods,
+        // §1.3.6.7.3, table of the F distribution's upper critical values; A&S Table 26.9).
+        assert!((f_sf(3.098, 3.0, 20.0) - 0.05).abs() < 1e-4);
+        // upper 1 % point of F(5, 10) = 5.636 (same tables)
+        assert!((f_sf(5.636, 5.0, 10.0) - 0.01).abs() < 1e-4);
+        // d1 = 2 has the closed form P(F > f) = (1 + 2f/d2)^(−d2/2): to the last digits, far
+        // tail included
+        for &(f, d2) in &[(0.3, 7.0), (2.5, 40.0), (60.0, 12.5), (1e3, 30.0)] {
+            let exact = libm::pow(1.0 + 2.0 * f / d2, -d2 / 2.0);
+            assert!(
+                (f_sf(f, 2.0, d2) / exact - 1.0).abs() < 1e-12,
+                "{f} {d2}: {} vs {exact}",
+                f_sf(f, 2.0, d2)
+            );
+        }
+        // the edges: no evidence without a positive statistic, none left at +∞
+        assert_eq!(f_sf(0.0, 3.0, 20.0), 1.0);
+        assert_eq!(f_sf(f64::NAN, 3.0, 20.0), 1.0);
+        assert_eq!(f_sf(f64::INFINITY, 3.0, 20.0), 0.0);
+        assert_eq!(f_sf(2.0, 0.0, 20.0), 1.0);
+        // I_x(a, b) + I_{1−x}(b, a) = 1
+        assert!((beta_reg(2.5, 4.0, 0.3) + beta_reg(4.0, 2.5, 0.7) - 1.0).abs() < 1e-14);
+    }
 
     #[test]
     fn chi2_quantiles_match_tables() {

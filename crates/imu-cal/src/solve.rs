@@ -2,7 +2,6 @@
 //! the F / χ² tail probabilities of the diagnosis.
 use crate::error::CalError;
 use nalgebra::{DMatrix, DVector};
-use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
 /// Result of a nonlinear least-squares fit.
 #[derive(Debug, Clone)]
@@ -336,20 +335,6 @@ pub fn lstsq(a: DMatrix<f64>, b: &DVector<f64>, what: &str) -> Result<DVector<f6
         .map_err(|e| CalError::Fit(format!("{what}: {e}")))
 }
 
-/// Upper tail P(F > f) of the Fisher–Snedecor distribution with (d1, d2) degrees of freedom.
-pub fn f_sf(f: f64, d1: f64, d2: f64) -> f64 {
-    if !(f.is_finite()) || d1 <= 0.0 || d2 <= 0.0 {
-        return if f.is_infinite() { 0.0 } else { 1.0 };
-    }
-    if f <= 0.0 {
-        return 1.0;
-    }
-    match FisherSnedecor::new(d1, d2) {
-        Ok(d) => d.sf(f),
-        Err(_) => 1.0,
-    }
-}
-
 /// Median of a slice (NaN-free input; empty → NaN).
 pub fn median(v: &[f64]) -> f64 {
     if v.is_empty() {
@@ -475,12 +460,6 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("(test)"));
-    }
-
-    #[test]
-    fn f_tail_matches_tables() {
-        // F(3, 20) 0.95 quantile is 3.098 (standard tables): the upper tail there is 0.05.
-        assert!((f_sf(3.098, 3.0, 20.0) - 0.05).abs() < 1e-3);
     }
 
     #[test]

@@ -8,7 +8,8 @@ use super::{
     NoiseFloor, NotTried, Problem, Report, Step, Verdict, ALPHA_ADEQUATE, ALPHA_EFFECT,
     IDENTIFIED_FRACTION, MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
 };
-use crate::solve::{f_sf, mad_sigma, median};
+use crate::solve::{mad_sigma, median};
+use allan::ci::f_sf;
 
 /// Normalise a model: sorted, deduplicated, and checked against the sensor's effects.
 pub fn normalise_model(p: &dyn Problem, model: &[Effect]) -> Result<Vec<Effect>, CalError> {

@@ -123,7 +123,56 @@ fn names(effects: &[Effect]) -> String {
         .join(" + ")
 }
 
+/// `imu-lab fit`: read the column and build the lab, fit the start model and walk from it
+/// (`--add` or `--auto`), analyse each model, then write the files and print the JSON or the
+/// report.
 pub fn run(args: Args) -> Result<()> {
+    check_args(&args)?;
+    let user = load_user_effects(&args.effects)?;
+    let rec = input::load_with(&args.input, &[&args.column], &["temp"])?;
+    let shown = args.input.file.display().to_string();
+    let series = rec
+        .column(&args.column)
+        .ok_or_else(|| anyhow!("{shown}: column {:?} missing", args.column))?;
+    let (lab, points, skipped) = build_lab(&args, &rec, &series.values, &shown, &user)?;
+    let (models, mut steps, stop) = fit_and_walk(&args, &lab, &user)?;
+    let stages = analyse(&lab, &rec, models)?;
+    // the step records say what the diagnosis says of each model
+    for (i, s) in steps.iter_mut().enumerate() {
+        s.before.adequate = stages[i].diagnosis.adequate;
+        s.after.adequate = stages[i + 1].diagnosis.adequate;
+    }
+    let last = stages.last().expect("one stage");
+    let recal = args.tolerance.map(|tol| {
+        let (b, k, r, kc, rc) = drift_terms(&last.model.fit);
+        practical::recalibration(b, k, r, kc, rc, tol)
+    });
+    let out = Outcome {
+        args: &args,
+        rate_hz: rec.rate_hz,
+        timing: rec.timing.as_ref(),
+        unit: series.unit.clone(),
+        samples: series.values.len(),
+        shown,
+        points,
+        skipped,
+        lsb: lab.lsb,
+        stages,
+        steps,
+        stop,
+        recal,
+    };
+    out.write_files()?;
+    if args.json {
+        out.print_json()
+    } else {
+        out.print_text();
+        Ok(())
+    }
+}
+
+/// The options that no file is needed to refuse.
+fn check_args(args: &Args) -> Result<()> {
     if let Some(tol) = args.tolerance {
         if !(tol > 0.0 && tol.is_finite()) {
             bail!("--tolerance {tol}: must be a positive number in the column's unit");
@@ -132,16 +181,19 @@ pub fn run(args: Args) -> Result<()> {
     if args.max_steps == 0 || args.max_steps > 20 {
         bail!("--max-steps {}: give 1 to 20", args.max_steps);
     }
-    let user = load_user_effects(&args.effects)?;
-    let rec = input::load_with(&args.input, &[&args.column], &["temp"])?;
-    let shown = args.input.file.display().to_string();
-    let series = rec
-        .column(&args.column)
-        .ok_or_else(|| anyhow!("{shown}: column {:?} missing", args.column))?;
-    let unit = series.unit.clone();
-    let y = &series.values;
+    Ok(())
+}
+
+/// The noise lab of the column `y` of `rec`: its overlapping Allan deviation at octave τ as the
+/// fit's points (with the count of rows left out for want of an EDF) and the record.
+fn build_lab<'r>(
+    args: &Args,
+    rec: &'r input::Recording,
+    y: &'r [f64],
+    shown: &str,
+    user: &[Effect],
+) -> Result<(NoiseLab<'r>, Vec<Point>, usize)> {
     let temp = rec.column("temp").map(|c| c.values.as_slice());
-    let timing = rec.timing.clone();
     let tau0 = 1.0 / rec.rate_hz;
     let segments = rec.segments_of(&args.column).unwrap_or_default();
     let rows = deviation_segments(&segments, tau0, Stat::Oadev, &TauSet::Octave)
@@ -150,23 +202,34 @@ pub fn run(args: Args) -> Result<()> {
     let lab = NoiseLab::new(Record {
         y,
         tau0,
-        segments: input::nominal_segments(&rec),
+        segments: input::nominal_segments(rec),
         temp,
-        timing: timing.clone(),
+        timing: rec.timing.clone(),
         points: points.clone(),
-        user_effects: user.clone(),
+        user_effects: user.to_vec(),
     })
     .map_err(|e| anyhow!("{shown}: column {:?}: {e}", args.column))?;
+    Ok((lab, points, skipped))
+}
 
+/// The start model (--terms, or the lab's default) fitted, then the walk from it: automatic
+/// with --auto, else one step per --add. Returns the models, the steps between them and, for
+/// --auto, why the walk stopped.
+#[allow(clippy::type_complexity)]
+fn fit_and_walk(
+    args: &Args,
+    lab: &NoiseLab,
+    user: &[Effect],
+) -> Result<(Vec<Model>, Vec<Step<Effect>>, Option<Stop>)> {
     let base: Vec<TermSpec> = if args.terms.is_empty() {
         lab.default_specs()
     } else {
-        parse_effects(&args.terms, "--terms", &user)?
+        parse_effects(&args.terms, "--terms", user)?
             .into_iter()
             .map(TermSpec::new)
             .collect()
     };
-    let adds = parse_effects(&args.add, "--add", &user)?;
+    let adds = parse_effects(&args.add, "--add", user)?;
     for e in &adds {
         if !e.repeatable() && base.iter().any(|s| s.effect == *e) {
             bail!("--add {e}: the model already has it");
@@ -181,51 +244,53 @@ pub fn run(args: Args) -> Result<()> {
             names(&base.iter().map(|s| s.effect.clone()).collect::<Vec<_>>())
         )
     })?;
+    if args.auto {
+        let w = walk(lab, start, args.max_steps).map_err(|e| anyhow!("{e}"))?;
+        return Ok((w.models, w.steps, Some(w.stop)));
+    }
     let mut models: Vec<Model> = vec![start];
     let mut steps: Vec<Step<Effect>> = Vec::new();
-    let mut stop: Option<Stop> = None;
-    if args.auto {
-        let w =
-            walk(&lab, models.pop().expect("start"), args.max_steps).map_err(|e| anyhow!("{e}"))?;
-        models = w.models;
-        steps = w.steps;
-        stop = Some(w.stop);
-    } else {
-        for e in &adds {
-            let prev = models.last().expect("one model");
-            let mut specs = prev.specs.clone();
-            if e.replaces_white() {
-                specs.retain(|s| s.effect != Effect::White);
-            }
-            specs.push(TermSpec::new(e.clone()));
-            let next = lab
-                .fit(&specs)
-                .map_err(|err| anyhow!("fit with {e}: {err}"))?;
-            let before = summary(&lab, prev);
-            steps.push(Step {
-                edit: noise_model::Edit {
-                    add: vec![e.clone()],
-                    remove: if e.replaces_white()
-                        && prev.specs.iter().any(|s| s.effect == Effect::White)
-                    {
-                        vec![Effect::White]
-                    } else {
-                        vec![]
-                    },
-                },
-                before,
-                after: summary(&lab, &next),
-                p_value: f64::NAN,
-                reading: reading(&next.fit, e),
-                reason: String::new(),
-            });
-            models.push(next);
+    for e in &adds {
+        let prev = models.last().expect("one model");
+        let mut specs = prev.specs.clone();
+        if e.replaces_white() {
+            specs.retain(|s| s.effect != Effect::White);
         }
+        specs.push(TermSpec::new(e.clone()));
+        let next = lab
+            .fit(&specs)
+            .map_err(|err| anyhow!("fit with {e}: {err}"))?;
+        let before = summary(lab, prev);
+        steps.push(Step {
+            edit: noise_model::Edit {
+                add: vec![e.clone()],
+                remove: if e.replaces_white()
+                    && prev.specs.iter().any(|s| s.effect == Effect::White)
+                {
+                    vec![Effect::White]
+                } else {
+                    vec![]
+                },
+            },
+            before,
+            after: summary(lab, &next),
+            p_value: f64::NAN,
+            reading: reading(&next.fit, e),
+            reason: String::new(),
+        });
+        models.push(next);
     }
-    let stages: Vec<Stage> = models
+    Ok((models, steps, None))
+}
+
+/// Each model diagnosed, with the Allan deviation of the record with its time-domain signals
+/// removed.
+fn analyse(lab: &NoiseLab, rec: &input::Recording, models: Vec<Model>) -> Result<Vec<Stage>> {
+    let tau0 = 1.0 / rec.rate_hz;
+    models
         .into_iter()
         .map(|m| {
-            let d = diagnose(&lab, &m).map_err(|e| anyhow!("{e}"))?;
+            let d = diagnose(lab, &m).map_err(|e| anyhow!("{e}"))?;
             let compensated = match lab.compensated(&m) {
                 Some(yc) => {
                     let segs: Vec<&[f64]> = rec.segments.iter().map(|r| &yc[r.clone()]).collect();
@@ -242,48 +307,73 @@ pub fn run(args: Args) -> Result<()> {
                 compensated,
             })
         })
-        .collect::<Result<_>>()?;
-    // the step records say what the diagnosis says of each model
-    for (i, s) in steps.iter_mut().enumerate() {
-        s.before.adequate = stages[i].diagnosis.adequate;
-        s.after.adequate = stages[i + 1].diagnosis.adequate;
+        .collect()
+}
+
+/// What `imu-lab fit` reports: the record, the models analysed, the steps between them and the
+/// recalibration period.
+struct Outcome<'a> {
+    args: &'a Args,
+    rate_hz: f64,
+    timing: Option<&'a imu_proto::csv::Timing>,
+    unit: String,
+    samples: usize,
+    /// The input file as shown in messages.
+    shown: String,
+    points: Vec<Point>,
+    /// Allan rows left out for want of an EDF.
+    skipped: usize,
+    lsb: Option<f64>,
+    stages: Vec<Stage>,
+    steps: Vec<Step<Effect>>,
+    stop: Option<Stop>,
+    recal: Option<practical::Recalibration>,
+}
+
+impl Outcome<'_> {
+    fn last(&self) -> &Stage {
+        self.stages.last().expect("one stage")
     }
-    let last = stages.last().expect("one stage");
-    let recal = args.tolerance.map(|tol| {
-        let (b, k, r, kc, rc) = drift_terms(&last.model.fit);
-        practical::recalibration(b, k, r, kc, rc, tol)
-    });
-    let base_name = args
-        .input
-        .file
-        .file_name()
-        .map_or(shown.clone(), |n| n.to_string_lossy().into_owned());
-    let title = format!("{} [{unit}] — {}", args.column, base_name);
-    if let Some(path) = &args.plot {
-        write_plot(path, &stages, &steps, &title, &unit)?;
+
+    /// The plot (--plot) and the HTML report (--report).
+    fn write_files(&self) -> Result<()> {
+        let args = self.args;
+        let base_name = args
+            .input
+            .file
+            .file_name()
+            .map_or(self.shown.clone(), |n| n.to_string_lossy().into_owned());
+        let title = format!("{} [{}] — {}", args.column, self.unit, base_name);
+        if let Some(path) = &args.plot {
+            write_plot(path, &self.stages, &self.steps, &title, &self.unit)?;
+        }
+        if let Some(path) = &args.report {
+            write_report(
+                path,
+                &self.stages,
+                &self.steps,
+                &title,
+                &self.unit,
+                &self.shown,
+                args,
+                self.samples,
+                self.rate_hz,
+                self.recal.as_ref(),
+                self.stop,
+            )?;
+        }
+        Ok(())
     }
-    if let Some(path) = &args.report {
-        write_report(
-            path,
-            &stages,
-            &steps,
-            &title,
-            &unit,
-            &shown,
-            &args,
-            y.len(),
-            rec.rate_hz,
-            recal.as_ref(),
-            stop,
-        )?;
-    }
-    if args.json {
+
+    /// The last model, its diagnosis and the steps as one JSON object on stdout.
+    fn print_json(&self) -> Result<()> {
+        let last = self.last();
         let f = &last.model.fit;
         let out = JsonOut {
-            column: &args.column,
-            unit: &unit,
-            rate_hz: rec.rate_hz,
-            samples: y.len(),
+            column: &self.args.column,
+            unit: &self.unit,
+            rate_hz: self.rate_hz,
+            samples: self.samples,
             terms: json_terms(f),
             chi2_dof: f.chi2_dof(),
             dof: f.dof,
@@ -324,14 +414,14 @@ pub fn run(args: Args) -> Result<()> {
                     edf_model: f.model_edf[i],
                 })
                 .collect(),
-            steps: steps.iter().map(json_step).collect(),
+            steps: self.steps.iter().map(json_step).collect(),
             adev_compensated: last
                 .compensated
                 .iter()
                 .map(|&(tau_s, dev)| JsonTau { tau_s, dev })
                 .collect(),
-            stop: stop.map(|s| s.to_string()),
-            timing: timing.as_ref().map(|t| JsonTiming {
+            stop: self.stop.map(|s| s.to_string()),
+            timing: self.timing.map(|t| JsonTiming {
                 median_dt_s: t.median_dt_s,
                 mean_dt_s: t.mean_dt_s,
                 p95_dt_s: t.p95_dt_s,
@@ -340,8 +430,8 @@ pub fn run(args: Args) -> Result<()> {
                 duplicates: t.duplicates,
                 irregular: t.irregular(),
             }),
-            resolution_lsb: lab.lsb,
-            recalibration: recal.as_ref().map(|r| JsonRecal {
+            resolution_lsb: self.lsb,
+            recalibration: self.recal.as_ref().map(|r| JsonRecal {
                 tolerance: r.tolerance,
                 period_s: r.period_s,
                 period_conservative_s: r.period_conservative_s,
@@ -350,83 +440,88 @@ pub fn run(args: Args) -> Result<()> {
             }),
         };
         println!("{}", serde_json::to_string(&out)?);
-        return Ok(());
+        Ok(())
     }
 
-    // Human report
-    println!(
-        "Noise-model fit of {} [{unit}] — {shown}: {} samples at {} Hz ({})",
-        args.column,
-        y.len(),
-        report::sig(rec.rate_hz, 6),
-        duration(y.len() as f64 / rec.rate_hz)
-    );
-    println!(
-        "Overlapping Allan deviation at {} octave τ ({}–{} s); generalised least squares with the \
-         estimates' covariance under the model{}.",
-        points.len(),
-        report::sig(points.first().map_or(0.0, |p| p.tau), 3),
-        report::sig(points.last().map_or(0.0, |p| p.tau), 4),
-        if skipped > 0 {
-            format!("; {skipped} row(s) without an EDF left out")
-        } else {
-            String::new()
-        },
-    );
-    if let Some(t) = timing
-        .as_ref()
-        .filter(|t| t.irregular() || !t.gaps.is_empty())
-    {
-        println!("Timing: {}.", t.describe());
-    }
-    if let Some(l) = lab.lsb {
+    /// The human report on stdout.
+    fn print_text(&self) {
+        let (args, unit, shown) = (self.args, &self.unit, &self.shown);
+        let (points, skipped, stages, steps) =
+            (&self.points, self.skipped, &self.stages, &self.steps);
+        let last = self.last();
         println!(
-            "Resolution: the values sit on a lattice of {} {unit} (the data's LSB).",
-            report::sig(l, 4)
+            "Noise-model fit of {} [{unit}] — {shown}: {} samples at {} Hz ({})",
+            args.column,
+            self.samples,
+            report::sig(self.rate_hz, 6),
+            duration(self.samples as f64 / self.rate_hz)
         );
-    }
-    if args.auto {
-        println!();
-        println!("== Automatic walk: diagnose → add the named effect → refit");
-        print!("{}", step_table(&steps));
-        println!("Stop: {}.", stop.map_or(String::new(), |s| s.to_string()));
-    }
-    for (i, st) in stages.iter().enumerate() {
-        if args.auto && i + 1 != stages.len() && i != 0 {
-            continue;
+        println!(
+            "Overlapping Allan deviation at {} octave τ ({}–{} s); generalised least squares with the \
+             estimates' covariance under the model{}.",
+            points.len(),
+            report::sig(points.first().map_or(0.0, |p| p.tau), 3),
+            report::sig(points.last().map_or(0.0, |p| p.tau), 4),
+            if skipped > 0 {
+                format!("; {skipped} row(s) without an EDF left out")
+            } else {
+                String::new()
+            },
+        );
+        if let Some(t) = self.timing.filter(|t| t.irregular() || !t.gaps.is_empty()) {
+            println!("Timing: {}.", t.describe());
         }
-        println!();
-        if i == 0 {
-            println!("== Model: {}", names(&st.model.fit.effects()));
-        } else if args.auto {
-            println!("== Final model: {}", names(&st.model.fit.effects()));
-        } else {
-            println!("== Step {}: {}", i, report::step_line(&steps[i - 1]));
-        }
-        print_stage(st, &unit);
-    }
-    println!();
-    println!("Per-τ comparison of the last model (r = (measured − model)/CI half-width; * outside the 68.3 % interval, ! significant):");
-    print!(
-        "{}",
-        report::tau_table(&last.model.fit, &last.model.assessment, &unit)
-    );
-    if let Some(e) = &last.diagnosis.missing {
-        if !args.auto {
-            let mut cmd: Vec<String> = std::env::args().collect();
-            cmd.push(format!("--add {e}"));
-            println!();
+        if let Some(l) = self.lsb {
             println!(
-                "Next: add the term and refit, e.g. `{}` (or walk with --auto)",
-                cmd.join(" ")
+                "Resolution: the values sit on a lattice of {} {unit} (the data's LSB).",
+                report::sig(l, 4)
             );
         }
-    }
-    if let Some(r) = &recal {
+        if args.auto {
+            println!();
+            println!("== Automatic walk: diagnose → add the named effect → refit");
+            print!("{}", step_table(steps));
+            println!(
+                "Stop: {}.",
+                self.stop.map_or(String::new(), |s| s.to_string())
+            );
+        }
+        for (i, st) in stages.iter().enumerate() {
+            if args.auto && i + 1 != stages.len() && i != 0 {
+                continue;
+            }
+            println!();
+            if i == 0 {
+                println!("== Model: {}", names(&st.model.fit.effects()));
+            } else if args.auto {
+                println!("== Final model: {}", names(&st.model.fit.effects()));
+            } else {
+                println!("== Step {}: {}", i, report::step_line(&steps[i - 1]));
+            }
+            print_stage(st, unit);
+        }
         println!();
-        println!("{}", recal_text(r, &unit));
+        println!("Per-τ comparison of the last model (r = (measured − model)/CI half-width; * outside the 68.3 % interval, ! significant):");
+        print!(
+            "{}",
+            report::tau_table(&last.model.fit, &last.model.assessment, unit)
+        );
+        if let Some(e) = &last.diagnosis.missing {
+            if !args.auto {
+                let mut cmd: Vec<String> = std::env::args().collect();
+                cmd.push(format!("--add {e}"));
+                println!();
+                println!(
+                    "Next: add the term and refit, e.g. `{}` (or walk with --auto)",
+                    cmd.join(" ")
+                );
+            }
+        }
+        if let Some(r) = &self.recal {
+            println!();
+            println!("{}", recal_text(r, unit));
+        }
     }
-    Ok(())
 }
 
 fn summary(lab: &NoiseLab, m: &Model) -> noise_model::Summary {

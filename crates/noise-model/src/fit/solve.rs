@@ -493,8 +493,25 @@ fn localised_signals(
     }
 }
 
-/// Fit the terms `specs` to the measurement.
+/// Fit the terms `specs` to the measurement: the problem built from the data and the specs, the
+/// initial search, the outer Gauss–Newton/covariance iterations, then the statistics and the
+/// uncertainties at the optimum.
 pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError> {
+    let (mut prob, mut work, nl) = build_problem(meas, specs)?;
+    let coef = initial_search(&mut prob, &mut work, &nl)?;
+    let coef = outer_iterations(&mut prob, &mut work, &nl, coef)?;
+    uncertainties(&prob, &work, &nl, coef)
+}
+
+/// The problem of fitting `specs` to `meas`: the points and specs validated, the measured
+/// variances, each term's working state (its non-linear parameters as given, or NaN where they
+/// are searched, and its basis at the points when they are known), and the free non-linear
+/// parameters as (term, parameter) indices.
+#[allow(clippy::type_complexity)]
+fn build_problem<'a>(
+    meas: &'a Measurement,
+    specs: &[TermSpec],
+) -> Result<(Problem<'a>, Vec<Work>, Vec<(usize, usize)>), FitError> {
     let points = &meas.points;
     validate(points)?;
     let tau0 = meas.ctx.tau0;
@@ -539,7 +556,7 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
             params: n_params,
         });
     }
-    let mut prob = Problem {
+    let prob = Problem {
         meas,
         y: points.iter().map(|p| p.dev * p.dev).collect(),
         target: Vec::new(),
@@ -590,28 +607,39 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
         .filter(|(_, t)| !t.spec.theta_fixed)
         .flat_map(|(k, t)| (0..t.specs.len()).map(move |i| (k, i)))
         .collect();
+    Ok((prob, work, nl))
+}
 
+/// The start: diagonal weights from the measurement's own EDFs with the target linearised at the
+/// data, a grid search of each free non-linear parameter with the other searched terms absent,
+/// then coordinate rounds over all of them jointly. Returns the coefficients there.
+fn initial_search(
+    prob: &mut Problem,
+    work: &mut [Work],
+    nl: &[(usize, usize)],
+) -> Result<Vec<f64>, FitError> {
+    let points = &prob.meas.points;
     // Start: diagonal weights from the measurement's own EDFs, linearised at the data.
     let point_edf: Vec<f64> = points.iter().map(|p| p.edf).collect();
     prob.target = log_target(&prob.y, &prob.y, &point_edf);
-    let mut w = Whitener::diagonal(
+    let w = Whitener::diagonal(
         &points
             .iter()
             .map(|p| 2.0 * (p.dev * p.dev).powi(2) / p.edf)
             .collect::<Vec<_>>(),
     );
     // Initialise each searched term alone (the others' searched terms absent), then jointly.
-    for &(k, i) in &nl {
+    for &(k, i) in nl {
         let saved: Vec<(Basis, Vec<f64>)> = work
             .iter()
             .map(|t| (t.basis.clone(), t.b.clone()))
             .collect();
-        for &(o, _) in &nl {
+        for &(o, _) in nl {
             if o != k && work[o].theta.iter().any(|v| !v.is_finite()) {
                 work[o].b = vec![0.0; points.len()];
             }
         }
-        prob.refine(&mut work, k, i, &w, true)?;
+        prob.refine(work, k, i, &w, true)?;
         for (o, (bs, b)) in saved.into_iter().enumerate() {
             if o != k {
                 work[o].basis = bs;
@@ -619,37 +647,48 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
             }
         }
     }
-    for &(k, _) in &nl {
+    for &(k, _) in nl {
         let (basis, b) = prob.eval_basis(&work[k].spec.effect, &work[k].theta.clone())?;
         work[k].basis = basis;
         work[k].b = b;
     }
     let rounds = if nl.len() > 1 { NONLINEAR_ROUNDS } else { 0 };
     for _ in 0..rounds {
-        for &(k, i) in &nl {
-            prob.refine(&mut work, k, i, &w, true)?;
+        for &(k, i) in nl {
+            prob.refine(work, k, i, &w, true)?;
         }
     }
-    let (mut coef, _) = prob.solve(&work, &w);
-    // Outer iterations: covariance (or diagonal weights) from the model, and the log-space
-    // residual linearised there (Gauss–Newton, each step damped until the log criterion falls).
+    let (coef, _) = prob.solve(work, &w);
+    Ok(coef)
+}
+
+/// Outer iterations from `coef`: covariance (or diagonal weights) from the model, and the
+/// log-space residual linearised there (Gauss–Newton, each step damped until the log criterion
+/// falls), until the coefficients stop moving or the iterations run out. Returns the last
+/// iterate.
+fn outer_iterations(
+    prob: &mut Problem,
+    work: &mut [Work],
+    nl: &[(usize, usize)],
+    mut coef: Vec<f64>,
+) -> Result<Vec<f64>, FitError> {
     let mut converged = false;
-    for it in 0..OUTER_ITERATIONS.max(if meas.weighting == Weighting::Diagonal {
+    for it in 0..OUTER_ITERATIONS.max(if prob.meas.weighting == Weighting::Diagonal {
         12
     } else {
         0
     }) {
-        let model = prob.model(&work, &coef);
-        let edf = prob.edf_at(&work, &coef, &model);
-        w = prob.whitener(&work, &coef);
+        let model = prob.model(work, &coef);
+        let edf = prob.edf_at(work, &coef, &model);
+        let w = prob.whitener(work, &coef);
         prob.target = log_target(&prob.y, &model, &edf);
         for _ in 0..if nl.len() > 1 { 2 } else { 1 } {
-            for &(k, i) in &nl {
-                prob.refine(&mut work, k, i, &w, it == 0)?;
+            for &(k, i) in nl {
+                prob.refine(work, k, i, &w, it == 0)?;
             }
         }
-        let (mut new_coef, _) = prob.solve(&work, &w);
-        let log_crit = |c: &[f64]| prob.log_criterion(&work, c, &model, &edf, &w);
+        let (mut new_coef, _) = prob.solve(work, &w);
+        let log_crit = |c: &[f64]| prob.log_criterion(work, c, &model, &edf, &w);
         let old_crit = log_crit(&coef);
         let mut lambda = 1.0;
         while log_crit(&new_coef) > old_crit && lambda > 0.1 {
@@ -665,7 +704,7 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
         let change = new_coef
             .iter()
             .zip(&coef)
-            .zip(&work)
+            .zip(work.iter())
             .map(|((a, b), t)| {
                 let peak =
                     t.b.iter()
@@ -681,12 +720,26 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
             break;
         }
     }
-    let _ = converged; // the last iterate is used either way; χ² below is evaluated at it
-    let model = prob.model(&work, &coef);
-    let point_cov = prob.point_cov(&work, &coef, &model);
+    let _ = converged; // the last iterate is used either way; χ² is evaluated at it
+    Ok(coef)
+}
+
+/// The fit at the coefficients `coef`: the model, its covariance and EDFs, the generalised χ²,
+/// then the Fisher matrix over the free parameters, the degrees of freedom, the parameter
+/// covariance and each term's result with its uncertainties.
+fn uncertainties(
+    prob: &Problem,
+    work: &[Work],
+    nl: &[(usize, usize)],
+    coef: Vec<f64>,
+) -> Result<Fit, FitError> {
+    let meas = prob.meas;
+    let points = &meas.points;
+    let model = prob.model(work, &coef);
+    let point_cov = prob.point_cov(work, &coef, &model);
     let wf = match meas.weighting {
         Weighting::Model => Whitener::from_cov(&point_cov),
-        Weighting::Diagonal => prob.whitener(&work, &coef),
+        Weighting::Diagonal => prob.whitener(work, &coef),
     };
     let model_edf: Vec<f64> = (0..points.len())
         .map(|j| 2.0 * model[j].max(1e-300).powi(2) / point_cov[(j, j)])
@@ -695,6 +748,70 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
     let r: Vec<f64> = t.iter().zip(&model).map(|(a, b)| a - b).collect();
     let chi2 = wf.apply(&r).norm_squared();
 
+    let (cols, index) = fisher_columns(prob, work, nl, &coef, &wf)?;
+    let q = cols.len();
+    // A coefficient held at its bound 0 by the constraint counts half: the χ² reduction of a
+    // boundary parameter is 0 or 1 degree of freedom with probability ½ each (the chi-bar-square
+    // mixture; Self & Liang, JASA 1987).
+    let interior = index
+        .iter()
+        .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
+        .count();
+    let boundary = index.len() - interior;
+    let dof = (points.len() as f64 - interior as f64 - 0.5 * boundary as f64).max(1.0);
+    let chi2_dof = chi2 / dof;
+    let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
+    let d: Vec<f64> = (0..q)
+        .map(|a| {
+            let v = fisher[(a, a)];
+            if v > 0.0 {
+                1.0 / v.sqrt()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let fs = DMatrix::from_fn(q, q, |a, b| fisher[(a, b)] * d[a] * d[b]);
+    let inv = fs.clone().try_inverse().or_else(|| crate::nnls::pinv(&fs));
+    let infl = chi2_dof.max(1.0);
+    let param_cov = match &inv {
+        Some(m) => DMatrix::from_fn(q, q, |a, b| m[(a, b)] * d[a] * d[b] * infl),
+        None => DMatrix::from_element(q, q, f64::NAN),
+    };
+    let terms = term_fits(work, &coef, &index, &param_cov);
+    let per_term_basis = work.iter().map(|t| t.b.clone()).collect();
+    let mut out = Fit {
+        tau0: meas.ctx.tau0,
+        points: points.clone(),
+        ctx: meas.ctx.clone(),
+        weighting: meas.weighting,
+        terms,
+        model_avar: model,
+        point_cov,
+        model_edf,
+        chi2: f64::NAN,
+        objective: chi2,
+        dof,
+        param_cov,
+        param_index: index,
+        per_term_basis,
+    };
+    out.chi2 = out.statistic().1;
+    out.check_finite()?;
+    Ok(out)
+}
+
+/// The whitened columns of the Fisher matrix over the free parameters, with each column's
+/// (term, parameter) index: 0 for the term's coefficient, i + 1 for its non-linear parameter i
+/// (a central difference of the basis at the optimum).
+#[allow(clippy::type_complexity)]
+fn fisher_columns(
+    prob: &Problem,
+    work: &[Work],
+    nl: &[(usize, usize)],
+    coef: &[f64],
+    wf: &Whitener,
+) -> Result<(Vec<DVector<f64>>, Vec<(usize, usize)>), FitError> {
     // Fisher matrix over the free parameters: coefficients of non-known terms and the searched
     // non-linear parameters of terms present.
     let mut cols: Vec<DVector<f64>> = Vec::new();
@@ -705,7 +822,7 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
             index.push((k, 0));
         }
     }
-    for &(k, i) in &nl {
+    for &(k, i) in nl {
         if coef[k] <= 0.0 {
             continue;
         }
@@ -736,38 +853,21 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
         cols.push(wf.apply(&d));
         index.push((k, i + 1));
     }
-    let q = cols.len();
-    // A coefficient held at its bound 0 by the constraint counts half: the χ² reduction of a
-    // boundary parameter is 0 or 1 degree of freedom with probability ½ each (the chi-bar-square
-    // mixture; Self & Liang, JASA 1987).
-    let interior = index
-        .iter()
-        .filter(|&&(k, i)| i > 0 || coef[k] > 0.0)
-        .count();
-    let boundary = index.len() - interior;
-    let dof = (points.len() as f64 - interior as f64 - 0.5 * boundary as f64).max(1.0);
-    let chi2_dof = chi2 / dof;
-    let fisher = DMatrix::from_fn(q, q, |a, b| cols[a].dot(&cols[b]));
-    let d: Vec<f64> = (0..q)
-        .map(|a| {
-            let v = fisher[(a, a)];
-            if v > 0.0 {
-                1.0 / v.sqrt()
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let fs = DMatrix::from_fn(q, q, |a, b| fisher[(a, b)] * d[a] * d[b]);
-    let inv = fs.clone().try_inverse().or_else(|| crate::nnls::pinv(&fs));
-    let infl = chi2_dof.max(1.0);
-    let param_cov = match &inv {
-        Some(m) => DMatrix::from_fn(q, q, |a, b| m[(a, b)] * d[a] * d[b] * infl),
-        None => DMatrix::from_element(q, q, f64::NAN),
-    };
+    Ok((cols, index))
+}
+
+/// Each term's result at the optimum: its coefficient and non-linear parameters with the standard
+/// errors of the free ones from `param_cov` (indexed by `index`), the known ones' as given, and
+/// whether it is detected (above twice its standard error).
+fn term_fits(
+    work: &[Work],
+    coef: &[f64],
+    index: &[(usize, usize)],
+    param_cov: &DMatrix<f64>,
+) -> Vec<TermFit> {
     let mut terms: Vec<TermFit> = work
         .iter()
-        .zip(&coef)
+        .zip(coef)
         .map(|(t, &c)| TermFit {
             effect: t.spec.effect.clone(),
             coef: c,
@@ -798,26 +898,7 @@ pub fn fit_model(meas: &Measurement, specs: &[TermSpec]) -> Result<Fit, FitError
     for t in &mut terms {
         t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
     }
-    let per_term_basis = work.iter().map(|t| t.b.clone()).collect();
-    let mut out = Fit {
-        tau0,
-        points: points.clone(),
-        ctx: meas.ctx.clone(),
-        weighting: meas.weighting,
-        terms,
-        model_avar: model,
-        point_cov,
-        model_edf,
-        chi2: f64::NAN,
-        objective: chi2,
-        dof,
-        param_cov,
-        param_index: index,
-        per_term_basis,
-    };
-    out.chi2 = out.statistic().1;
-    out.check_finite()?;
-    Ok(out)
+    terms
 }
 
 impl Fit {

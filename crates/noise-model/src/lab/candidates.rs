@@ -3,14 +3,40 @@
 //! their evidence and ranked by the penalised criterion.
 use super::*;
 
+/// One try of an edit: the specs to refit, the edit, and why it is tried (empty when the Allan
+/// curve alone suggests it).
+type Try = (Vec<TermSpec>, Edit<Effect>, String);
+
 impl<'a> NoiseLab<'a> {
-    /// Candidate edits of a model, refitted and tested, best first.
+    /// Candidate edits of a model, refitted and tested, best first: the non-stationarity
+    /// findings when one of them is admissible, else the Allan-curve candidates ranked, followed
+    /// by the refused findings.
     pub fn candidate_edits(&self, cur: &Model) -> Result<Vec<Candidate<Effect, Model>>, FitError> {
+        // 1. non-stationarity findings
+        let found = self.finding_candidates(cur);
+        if found.first().is_some_and(|c| c.admissible) {
+            return Ok(found);
+        }
+        let refused_findings = found;
+        // 2. Allan-curve candidates
+        let cur_crit = Self::criterion(cur);
+        let mut cands: Vec<Candidate<Effect, Model>> = self
+            .allan_tries(cur)
+            .into_iter()
+            .filter_map(|t| self.test_try(cur, cur_crit, t))
+            .collect();
+        Self::rank(&mut cands);
+        cands.extend(refused_findings);
+        Ok(cands)
+    }
+
+    /// The non-stationarity findings of `cur` as candidates, judged by the same criterion as
+    /// every other candidate: a finding is admissible only when the refit lowers it, and the
+    /// findings compete with each other (one warm-up against the steps that would stand in for
+    /// it). Admissible first, then by the criterion.
+    fn finding_candidates(&self, cur: &Model) -> Vec<Candidate<Effect, Model>> {
         let have: Vec<Effect> = cur.specs.iter().map(|s| s.effect.clone()).collect();
         let cur_crit = Self::criterion(cur);
-        // 1. non-stationarity findings, judged by the same criterion as every other candidate: a
-        //    finding is added only when the refit lowers it, and the findings compete with each
-        //    other (one warm-up against the steps that would stand in for it)
         let mut found: Vec<Candidate<Effect, Model>> = Vec::new();
         for f in &cur.findings {
             let mut specs = cur.specs.clone();
@@ -76,27 +102,16 @@ impl<'a> NoiseLab<'a> {
                 .cmp(&a.admissible)
                 .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
         });
-        if found.first().is_some_and(|c| c.admissible) {
-            return Ok(found);
-        }
-        let refused_findings = found;
-        // 2. Allan-curve candidates
-        let mut tries: Vec<(Vec<TermSpec>, Edit<Effect>, String)> = Vec::new();
-        let add = |e: Effect,
-                   spec: TermSpec,
-                   why: String,
-                   tries: &mut Vec<(Vec<TermSpec>, Edit<Effect>, String)>| {
-            let mut s = cur.specs.clone();
-            s.push(spec);
-            tries.push((
-                s,
-                Edit {
-                    add: vec![e],
-                    remove: vec![],
-                },
-                why,
-            ));
-        };
+        found
+    }
+
+    /// The Allan-curve tries for `cur`: the terms it lacks (power laws, the data's resolution,
+    /// and unless the spectrum is blocked a Markov term, a resonance at an unfitted band of the
+    /// spectrum, the strongest unfitted spectral line, the filters in place of white noise and
+    /// the user's effects), each as its specs, its edit and why it is tried.
+    fn allan_tries(&self, cur: &Model) -> Vec<Try> {
+        let have: Vec<Effect> = cur.specs.iter().map(|s| s.effect.clone()).collect();
+        let mut tries: Vec<Try> = Vec::new();
         for e in [
             Effect::Quantization,
             Effect::White,
@@ -105,96 +120,35 @@ impl<'a> NoiseLab<'a> {
             Effect::RateRamp,
         ] {
             if !have.contains(&e) {
-                add(e.clone(), TermSpec::new(e), String::new(), &mut tries);
+                tries.push(added(cur, e.clone(), TermSpec::new(e), String::new()));
             }
         }
         if !have.contains(&Effect::Resolution) {
             if let Some(s) = self.resolution_spec() {
-                add(
+                tries.push(added(
+                    cur,
                     Effect::Resolution,
                     s,
                     format!(
                         "the values sit on a lattice of {:.4e}",
                         self.lsb.unwrap_or(0.0)
                     ),
-                    &mut tries,
-                );
+                ));
             }
         }
         let blocked = self.spectral_blocked();
         if !blocked {
             let n_markov = have.iter().filter(|e| **e == Effect::Markov).count();
             if n_markov < 3 {
-                add(
+                tries.push(added(
+                    cur,
                     Effect::Markov,
                     TermSpec::new(Effect::Markov),
                     String::new(),
-                    &mut tries,
-                );
+                ));
             }
-            // a band of excess power in the Welch PSD not yet fitted: a resonance there; the
-            // spectrum resolves the band far better than the octave Allan points, so it pins f0
-            // and ζ, as the periodogram pins a sinusoid's frequency
-            let (seg, t0) = (self.longest_segment(), self.record.tau0);
-            if let Some(b) = welch(seg, 1.0 / t0, default_segment(seg.len()))
-                .and_then(|p| crate::psd::find_band(&p, t0))
-                .filter(|b| {
-                    !cur.fit.terms.iter().any(|t| {
-                        t.effect == Effect::Resonance
-                            && t.theta0().is_some_and(|f| (f / b.f0_hz - 1.0).abs() < 0.25)
-                    })
-                })
-            {
-                let why = format!(
-                    "the spectrum has a band of excess power at {:.2} Hz, ζ ≈ {:.2} \
-                     (Δχ² = {:.0}, peak {:.1}× the background)",
-                    b.f0_hz, b.zeta, b.delta_chi2, b.peak_ratio
-                );
-                let spec = TermSpec {
-                    theta: Some(vec![b.f0_hz, b.zeta]),
-                    theta_fixed: true,
-                    theta_sigma: Some(vec![b.f0_sigma, b.zeta_sigma]),
-                    ..TermSpec::new(Effect::Resonance)
-                };
-                add(Effect::Resonance, spec, why, &mut tries);
-            }
-            // the strongest spectral line not yet in the model
-            let fitted: Vec<f64> = cur
-                .fit
-                .terms
-                .iter()
-                .filter(|t| t.effect == Effect::Sinusoid)
-                .filter_map(|t| t.theta0())
-                .collect();
-            let df_w = self.periodogram_df;
-            if let Some(l) = self.lines.iter().find(|l| {
-                !fitted
-                    .iter()
-                    .any(|&f| (f - l.freq_hz).abs() < 4.0 * df_w.max(1e-12) + 0.02 * f)
-            }) {
-                // the whole-record periodogram pins the frequency
-                let y = self.longest_segment();
-                let fs = 1.0 / self.record.tau0;
-                let (f, sf) = match line_near(y, fs, l.freq_hz, 0.05) {
-                    Some(t) if t.p_value < P_CANDIDATE => (t.freq_hz, self.periodogram_df / 2.0),
-                    _ => (l.freq_hz, self.periodogram_df * 8.0),
-                };
-                add(
-                    Effect::Sinusoid,
-                    TermSpec {
-                        theta: Some(vec![f]),
-                        theta_fixed: true,
-                        theta_sigma: Some(vec![sf]),
-                        ..TermSpec::new(Effect::Sinusoid)
-                    },
-                    format!(
-                        "the spectrum has a line at {:.4} Hz, {:.0}× the local background \
-                         (threshold {:.1}×)",
-                        l.freq_hz, l.ratio, l.threshold
-                    ),
-                    &mut tries,
-                );
-            }
+            tries.extend(self.band_try(cur));
+            tries.extend(self.line_try(cur));
             for e in [
                 Effect::Lowpass,
                 Effect::Lowpass2,
@@ -227,60 +181,144 @@ impl<'a> NoiseLab<'a> {
             }
             for u in &self.record.user_effects {
                 if !have.contains(u) {
-                    add(
+                    tries.push(added(
+                        cur,
                         u.clone(),
                         TermSpec::new(u.clone()),
                         String::new(),
-                        &mut tries,
-                    );
+                    ));
                 }
             }
         }
+        tries
+    }
+
+    /// A resonance at a band of excess power in the Welch PSD that the model does not fit yet.
+    fn band_try(&self, cur: &Model) -> Option<Try> {
+        // a band of excess power in the Welch PSD not yet fitted: a resonance there; the
+        // spectrum resolves the band far better than the octave Allan points, so it pins f0
+        // and ζ, as the periodogram pins a sinusoid's frequency
+        let (seg, t0) = (self.longest_segment(), self.record.tau0);
+        let b = welch(seg, 1.0 / t0, default_segment(seg.len()))
+            .and_then(|p| crate::psd::find_band(&p, t0))
+            .filter(|b| {
+                !cur.fit.terms.iter().any(|t| {
+                    t.effect == Effect::Resonance
+                        && t.theta0().is_some_and(|f| (f / b.f0_hz - 1.0).abs() < 0.25)
+                })
+            })?;
+        let why = format!(
+            "the spectrum has a band of excess power at {:.2} Hz, ζ ≈ {:.2} \
+             (Δχ² = {:.0}, peak {:.1}× the background)",
+            b.f0_hz, b.zeta, b.delta_chi2, b.peak_ratio
+        );
+        let spec = TermSpec {
+            theta: Some(vec![b.f0_hz, b.zeta]),
+            theta_fixed: true,
+            theta_sigma: Some(vec![b.f0_sigma, b.zeta_sigma]),
+            ..TermSpec::new(Effect::Resonance)
+        };
+        Some(added(cur, Effect::Resonance, spec, why))
+    }
+
+    /// A sinusoid at the strongest spectral line the model does not fit yet.
+    fn line_try(&self, cur: &Model) -> Option<Try> {
+        // the strongest spectral line not yet in the model
+        let fitted: Vec<f64> = cur
+            .fit
+            .terms
+            .iter()
+            .filter(|t| t.effect == Effect::Sinusoid)
+            .filter_map(|t| t.theta0())
+            .collect();
+        let df_w = self.periodogram_df;
+        let l = self.lines.iter().find(|l| {
+            !fitted
+                .iter()
+                .any(|&f| (f - l.freq_hz).abs() < 4.0 * df_w.max(1e-12) + 0.02 * f)
+        })?;
+        // the whole-record periodogram pins the frequency
+        let y = self.longest_segment();
+        let fs = 1.0 / self.record.tau0;
+        let (f, sf) = match line_near(y, fs, l.freq_hz, 0.05) {
+            Some(t) if t.p_value < P_CANDIDATE => (t.freq_hz, self.periodogram_df / 2.0),
+            _ => (l.freq_hz, self.periodogram_df * 8.0),
+        };
+        Some(added(
+            cur,
+            Effect::Sinusoid,
+            TermSpec {
+                theta: Some(vec![f]),
+                theta_fixed: true,
+                theta_sigma: Some(vec![sf]),
+                ..TermSpec::new(Effect::Sinusoid)
+            },
+            format!(
+                "the spectrum has a line at {:.4} Hz, {:.0}× the local background \
+                 (threshold {:.1}×)",
+                l.freq_hz, l.ratio, l.threshold
+            ),
+        ))
+    }
+
+    /// One try refitted and tested against `cur` (criterion `cur_crit`): two likelihood-ratio
+    /// tests, its admissibility and, when refused, why. `None` when the refit fails.
+    fn test_try(
+        &self,
+        cur: &Model,
+        cur_crit: f64,
+        (specs, edit, why): Try,
+    ) -> Option<Candidate<Effect, Model>> {
+        let Ok(m) = self.fit(&specs) else {
+            return None;
+        };
+        let extra = m.fit.n_params() as i64 - cur.fit.n_params() as i64;
+        // two likelihood-ratio tests on the same data, Bonferroni-combined: the Allan points
+        // (every τ) and the block differences in the time domain (long τ)
+        let s = m.fit.chi2_dof().max(1.0);
+        // An edit that adds no free parameter (a known term such as the data's resolution, a
+        // filter in place of the white noise it shapes) is tested as if it spent one: a
+        // change of the likelihood by a hair is no evidence, however many points agree.
+        let lr_p = |delta: f64| chi2_sf(delta.max(0.0) / s, extra.max(1) as f64);
+        let d_time = self.time_lr(cur, &m, &edit.add);
+        let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(d_time))).min(1.0);
+        let mut c = self.candidate(cur, m, edit, p, false, why);
+        let added_present = c.edit.add.iter().all(|e| {
+            c.model
+                .fit
+                .terms
+                .iter()
+                .any(|t| t.effect == *e && t.coef > 0.0)
+        });
+        let better = Self::criterion(&c.model) < cur_crit;
+        c.admissible = p < P_CANDIDATE && added_present && better;
+        if !c.admissible {
+            c.reason = if !added_present {
+                format!("{}the refit puts its amplitude at zero", prefix(&c.reason))
+            } else if p >= P_CANDIDATE {
+                format!("{}not significant (p = {:.1e})", prefix(&c.reason), p)
+            } else {
+                format!(
+                    "{}it does not lower the criterion (over-fitting)",
+                    prefix(&c.reason)
+                )
+            };
+        }
+        Some(c)
+    }
+
+    /// The Allan-curve candidates ranked: the line gate (a spectral line that explains the
+    /// misfit refuses the smooth shapes), admissible first, the explaining line first, then by
+    /// the criterion; among equals the simplest first.
+    fn rank(cands: &mut [Candidate<Effect, Model>]) {
         let line_explains = |c: &Candidate<Effect, Model>| {
             c.edit.add.contains(&Effect::Sinusoid) && c.p_value < P_CANDIDATE
         };
-        let mut cands: Vec<Candidate<Effect, Model>> = Vec::new();
-        for (specs, edit, why) in tries {
-            let Ok(m) = self.fit(&specs) else { continue };
-            let extra = m.fit.n_params() as i64 - cur.fit.n_params() as i64;
-            // two likelihood-ratio tests on the same data, Bonferroni-combined: the Allan points
-            // (every τ) and the block differences in the time domain (long τ)
-            let s = m.fit.chi2_dof().max(1.0);
-            // An edit that adds no free parameter (a known term such as the data's resolution, a
-            // filter in place of the white noise it shapes) is tested as if it spent one: a
-            // change of the likelihood by a hair is no evidence, however many points agree.
-            let lr_p = |delta: f64| chi2_sf(delta.max(0.0) / s, extra.max(1) as f64);
-            let d_time = self.time_lr(cur, &m, &edit.add);
-            let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(d_time))).min(1.0);
-            let mut c = self.candidate(cur, m, edit, p, false, why);
-            let added_present = c.edit.add.iter().all(|e| {
-                c.model
-                    .fit
-                    .terms
-                    .iter()
-                    .any(|t| t.effect == *e && t.coef > 0.0)
-            });
-            let better = Self::criterion(&c.model) < cur_crit;
-            c.admissible = p < P_CANDIDATE && added_present && better;
-            if !c.admissible {
-                c.reason = if !added_present {
-                    format!("{}the refit puts its amplitude at zero", prefix(&c.reason))
-                } else if p >= P_CANDIDATE {
-                    format!("{}not significant (p = {:.1e})", prefix(&c.reason), p)
-                } else {
-                    format!(
-                        "{}it does not lower the criterion (over-fitting)",
-                        prefix(&c.reason)
-                    )
-                };
-            }
-            cands.push(c);
-        }
         // A narrow line in the periodogram is direct evidence: when the sinusoid at that line
         // explains the misfit, the smooth-spectrum shapes (Markov, filters) that would absorb it
         // are not named in its place; it comes first.
         if cands.iter().any(|c| line_explains(c) && c.admissible) {
-            for c in &mut cands {
+            for c in cands.iter_mut() {
                 let smooth = c.edit.add.iter().any(|e| {
                     *e == Effect::Markov || e.replaces_white() || matches!(e, Effect::User(_))
                 });
@@ -297,9 +335,7 @@ impl<'a> NoiseLab<'a> {
                 .then(line_explains(b).cmp(&line_explains(a)))
                 .then(Self::criterion(&a.model).total_cmp(&Self::criterion(&b.model)))
         });
-        Self::prefer_simplest_of_equals(&mut cands);
-        cands.extend(refused_findings);
-        Ok(cands)
+        Self::prefer_simplest_of_equals(cands);
     }
 
     /// Whether the model's rate ramp is significant in the time domain (its likelihood ratio
@@ -482,6 +518,20 @@ impl<'a> NoiseLab<'a> {
             model: m,
         }
     }
+}
+
+/// The try adding `spec` (of effect `e`) to the model `cur`, tried for the reason `why`.
+fn added(cur: &Model, e: Effect, spec: TermSpec, why: String) -> Try {
+    let mut s = cur.specs.clone();
+    s.push(spec);
+    (
+        s,
+        Edit {
+            add: vec![e],
+            remove: vec![],
+        },
+        why,
+    )
 }
 
 fn prefix(s: &str) -> String {
