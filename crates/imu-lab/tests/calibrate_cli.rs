@@ -162,6 +162,18 @@ fn ten_poses_cannot_judge_nine_parameters() {
     let v = stdout_json(&run_ok(&a));
     assert_eq!(v["diagnosis"]["underdetermined"], true);
     assert_eq!(v["diagnosis"]["adequate"], false);
+    // the parameters the ten poses cannot identify are named in the JSON, not only in the text
+    let free: Vec<&str> = v["diagnosis"]["unidentified"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_str().unwrap())
+        .collect();
+    assert!(
+        free.iter().any(|p| p.starts_with("misalignment_deg")),
+        "{free:?}"
+    );
+    assert!(v["diagnosis"]["not_converged"].is_null());
     for k in 0..3 {
         let s = v["sigma"]["misalignment_deg"][k].as_f64().unwrap();
         assert!(s > 0.0, "{v}");

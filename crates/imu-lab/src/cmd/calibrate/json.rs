@@ -18,6 +18,10 @@ struct JsonDiagnosis<'a> {
     verdict: imu_cal::lab::Verdict,
     adequate: bool,
     underdetermined: bool,
+    /// The parameters the data cannot identify (σ not small against their plausible range).
+    unidentified: &'a [String],
+    /// Why the fit stopped before its minimum (an iteration cap), when it did.
+    not_converged: Option<&'a str>,
     missing: Option<&'static str>,
     explanation: &'a str,
     p_value: Option<f64>,
@@ -119,6 +123,8 @@ pub(super) fn json_out(l: &Loaded, run: &Outcome) -> Result<String> {
             verdict: m.verdict,
             adequate: m.adequate(),
             underdetermined: m.underdetermined,
+            unidentified: &m.unidentified,
+            not_converged: m.fitted.not_converged.as_deref(),
             missing: d.missing.map(|e| e.name()),
             explanation: &d.explanation,
             p_value: finite(m.p_value),
@@ -225,6 +231,7 @@ mod tests {
         );
         let d = &v["diagnosis"];
         assert!(d["adequate"].is_boolean() && d["explanation"].is_string());
+        assert!(d["unidentified"].is_array() && d.get("not_converged").is_some());
         assert!(d["missing"].is_null() || d["missing"].is_string());
         assert!(v["residual_rms"].as_f64().unwrap() < 0.2);
     }
