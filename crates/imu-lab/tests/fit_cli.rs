@@ -1,7 +1,7 @@
 //! `imu-lab fit` end to end on the real MPU-6050 recording: the JSON contract, the verdict, and
 //! the pictures in both formats.
 mod common;
-use common::{run_err, run_ok, static_449s, stdout_json, GZ_RAW};
+use common::{run_err, run_ok, simulate_gyro, static_449s, stdout_json, GZ_RAW};
 use serde_json::Value;
 
 /// The term of `effect` in a fit's JSON.
@@ -66,35 +66,6 @@ fn dlpf_file(dir: &std::path::Path) -> String {
     let p = p.to_str().unwrap().to_string();
     simulate_gyro(&p, 5, &["--dlpf", "5"]);
     p
-}
-
-/// `imu-lab simulate`: 30 min at 100 Hz of a gyro's background noise (quantization, white,
-/// flicker, rate random walk) plus `extra`, written to `path`.
-fn simulate_gyro(path: &str, seed: u64, extra: &[&str]) {
-    let seed = seed.to_string();
-    run_ok(
-        [
-            "simulate",
-            "--rate",
-            "100",
-            "--samples",
-            "180000",
-            "--seed",
-            &seed,
-            "--quantization",
-            "2e-4",
-            "--white",
-            "5e-3",
-            "--flicker",
-            "3e-3",
-            "--rrw",
-            "1e-4",
-            "-o",
-            path,
-        ]
-        .into_iter()
-        .chain(extra.iter().copied()),
-    );
 }
 
 #[test]

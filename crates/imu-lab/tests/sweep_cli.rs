@@ -5,7 +5,7 @@
 //! The parameters are drawn from a fixed stream so a failure names the run that can be repeated
 //! (printed in the message); the longer version of this sweep is in docs/benchmarks.md.
 mod common;
-use common::{run_ok, stdout_json};
+use common::{run_ok, simulate_gyro, stdout_json};
 use noise_model::effect::{
     markov_avar_unit, resonance_avar_unit, sinusoid_avar_unit, step_avar, warmup_avar,
 };
@@ -46,29 +46,11 @@ fn walk(seed: u64, extra: &[String]) -> (Value, String) {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("sweep.csv");
     let p = p.to_str().unwrap().to_string();
-    let mut args: Vec<String> = [
-        "simulate",
-        "--rate",
-        "100",
-        "--samples",
-        "180000",
-        "--quantization",
-        "2e-4",
-        "--white",
-        "5e-3",
-        "--flicker",
-        "3e-3",
-        "--rrw",
-        "1e-4",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    args.extend(["--seed".into(), seed.to_string()]);
-    args.extend(extra.iter().cloned());
-    let shown = args.join(" ");
-    args.extend(["-o".into(), p.clone()]);
-    run_ok(&args);
+    simulate_gyro(&p, seed, extra);
+    let shown = format!(
+        "imu-lab simulate (the gyro background, 30 min at 100 Hz) --seed {seed} {}",
+        extra.join(" ")
+    );
     let out = run_ok(["fit", &p, "--column", "gz", "--auto", "--json"]);
     (stdout_json(&out), shown)
 }

@@ -66,3 +66,33 @@ pub fn stdout_json(out: &Output) -> Value {
 pub fn stdout_text(out: &Output) -> String {
     String::from_utf8_lossy(&out.stdout).to_string()
 }
+
+/// `imu-lab simulate`: 30 min at 100 Hz of a gyro's background noise (quantization, white,
+/// flicker, rate random walk) plus `extra`, written to `path`.
+pub fn simulate_gyro<S: AsRef<OsStr>>(path: &str, seed: u64, extra: &[S]) {
+    let seed = seed.to_string();
+    let args: Vec<OsString> = [
+        "simulate",
+        "--rate",
+        "100",
+        "--samples",
+        "180000",
+        "--seed",
+        &seed,
+        "--quantization",
+        "2e-4",
+        "--white",
+        "5e-3",
+        "--flicker",
+        "3e-3",
+        "--rrw",
+        "1e-4",
+        "-o",
+        path,
+    ]
+    .iter()
+    .map(OsString::from)
+    .chain(extra.iter().map(|e| e.as_ref().to_os_string()))
+    .collect();
+    run_ok(args);
+}
