@@ -389,33 +389,29 @@ fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
     }
     d = 1.0 / d;
     let mut h = d;
+    // one modified-Lentz step with coefficient aa: updates c and d, returns the factor of h
+    let step = |aa: f64, c: &mut f64, d: &mut f64| {
+        *d = 1.0 + aa * *d;
+        if libm::fabs(*d) < tiny {
+            *d = tiny;
+        }
+        *c = 1.0 + aa / *c;
+        if libm::fabs(*c) < tiny {
+            *c = tiny;
+        }
+        *d = 1.0 / *d;
+        *d * *c
+    };
     for m in 1..10_000 {
         let m = m as f64;
         let m2 = 2.0 * m;
-        // even step
-        let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
-        if libm::fabs(d) < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if libm::fabs(c) < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
-        h *= d * c;
-        // odd step
-        let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
-        if libm::fabs(d) < tiny {
-            d = tiny;
-        }
-        c = 1.0 + aa / c;
-        if libm::fabs(c) < tiny {
-            c = tiny;
-        }
-        d = 1.0 / d;
-        let del = d * c;
+        // even step, then odd step
+        h *= step(m * (b - m) * x / ((qam + m2) * (a + m2)), &mut c, &mut d);
+        let del = step(
+            -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2)),
+            &mut c,
+            &mut d,
+        );
         h *= del;
         if libm::fabs(del - 1.0) < 1e-16 {
             break;

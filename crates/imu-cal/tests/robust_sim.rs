@@ -181,19 +181,9 @@ const FULL: [Effect; 3] = [Effect::Offset, Effect::Scale, Effect::Misalignment];
 /// at the floor, and the model is adequate; the truth is within 5σ.
 #[test]
 fn well_spread_24_poses_judge_the_full_model() {
-    let faces = [
-        Vector3::x(),
-        -Vector3::x(),
-        Vector3::y(),
-        -Vector3::y(),
-        Vector3::z(),
-        -Vector3::z(),
-    ];
     for run in 1..=6u64 {
         let mut rng = Rng::new(400 + run);
-        let dirs: Vec<Vector3<f64>> = (0..24)
-            .map(|i| if i < 6 { faces[i] } else { rng.unit() })
-            .collect();
+        let dirs = spread_directions(&mut rng, 24);
         let sd = uniform(&mut rng, 0.001, 0.003);
         let (ps, truth) = poses(&mut rng, &dirs, sd);
         let p = AccelProblem::new(ps, G_STANDARD);

@@ -50,18 +50,7 @@ pub fn accel_recording(
             out[k].push(m[k] + sigma * rng.gauss());
         }
     };
-    // Poses spread over the sphere: the six faces first, then random directions.
-    let faces = [
-        Vector3::x(),
-        -Vector3::x(),
-        Vector3::y(),
-        -Vector3::y(),
-        Vector3::z(),
-        -Vector3::z(),
-    ];
-    let dirs: Vec<Vector3<f64>> = (0..n_poses)
-        .map(|i| if i < 6 { faces[i] } else { rng.unit() })
-        .collect();
+    let dirs = spread_directions(rng, n_poses);
     for i in 0..n_poses {
         for _ in 0..hold {
             push(dirs[i] * g, rng);
@@ -178,4 +167,19 @@ pub fn soft_iron(rng: &mut Rng, a: f64) -> Matrix3<f64> {
         }
     }
     Matrix3::identity() + e
+}
+
+/// `n` pose directions spread over the sphere: the six faces first, then random directions.
+pub fn spread_directions(rng: &mut Rng, n: usize) -> Vec<Vector3<f64>> {
+    let faces = [
+        Vector3::x(),
+        -Vector3::x(),
+        Vector3::y(),
+        -Vector3::y(),
+        Vector3::z(),
+        -Vector3::z(),
+    ];
+    (0..n)
+        .map(|i| if i < 6 { faces[i] } else { rng.unit() })
+        .collect()
 }

@@ -714,9 +714,11 @@ fn outer_iterations(
         let (mut new_coef, _) = prob.solve(work, &w);
         let log_crit = |c: &[f64]| prob.log_criterion(work, c, &model, &edf, &w);
         let old_crit = log_crit(&coef);
-        let mut lambda = 1.0;
-        while log_crit(&new_coef) > old_crit && lambda > 0.1 {
-            lambda *= 0.5;
+        // halve the step towards the old coefficients, at most four times
+        for _ in 0..4 {
+            if log_crit(&new_coef) <= old_crit {
+                break;
+            }
             new_coef = coef
                 .iter()
                 .zip(&new_coef)
