@@ -15,8 +15,8 @@
 //! defined by their structure function V(k) ([`crate::structure`]), which gives both the exact
 //! expected overlapping Allan variance of the *sampled* process, σ²(m) = (4V(m) − V(2m))/(2m²),
 //! and the covariance of the Allan estimates ([`crate::cov`]). Deterministic effects (a ramp, a
-//! sinusoid, a bias step, a temperature-driven bias) have their exact expected Allan variance
-//! computed over the record's own segments.
+//! sinusoid, a bias step, a temperature-driven bias, a smooth drift) have their exact expected
+//! Allan variance computed over the record's own segments.
 use core::fmt;
 use std::sync::Arc;
 
@@ -27,8 +27,9 @@ mod units;
 pub mod user;
 use avar::octaves;
 pub use avar::{
-    markov_avar_continuous, markov_avar_unit, resonance_avar_unit, resonance_psd_unit,
-    resonance_structure, sinusoid_avar_unit, step_avar, warmup_avar, Basis, RESONANCE_ZETA_MAX,
+    drift_at, drift_avar, drift_gram, drift_norm, drift_span, markov_avar_continuous,
+    markov_avar_unit, resonance_avar_unit, resonance_psd_unit, resonance_structure,
+    sinusoid_avar_unit, step_avar, warmup_avar, Basis, DRIFT_MAX_COMPONENTS, RESONANCE_ZETA_MAX,
     RESONANCE_ZETA_START,
 };
 pub use params::{Context, ParamSpec};
@@ -52,6 +53,11 @@ pub enum Effect {
     BiasStep,
     /// The bias following the temperature column, or a warm-up transient when there is none.
     Temperature,
+    /// A smooth drift of the bias over the record: a ramp and `components` cosines of the
+    /// record's length (periods 2T, 2T/2, …), their shape found in the time domain.
+    Drift {
+        components: u8,
+    },
     /// White noise through a one-pole low-pass filter (corner f_c).
     Lowpass,
     /// White noise through two cascaded one-pole sections (critically damped two-pole low-pass).
@@ -90,7 +96,7 @@ pub const DEFAULT_TERMS: [Effect; 5] = [
 ];
 
 /// Every built-in effect, in vocabulary order.
-pub const ALL_EFFECTS: [Effect; 15] = [
+pub const ALL_EFFECTS: [Effect; 16] = [
     Effect::Quantization,
     Effect::White,
     Effect::Flicker,
@@ -101,6 +107,7 @@ pub const ALL_EFFECTS: [Effect; 15] = [
     Effect::Resolution,
     Effect::BiasStep,
     Effect::Temperature,
+    Effect::Drift { components: 0 },
     Effect::Lowpass,
     Effect::Lowpass2,
     Effect::Boxcar,
@@ -135,6 +142,7 @@ impl Effect {
             Effect::Resolution => "resolution",
             Effect::BiasStep => "bias_step",
             Effect::Temperature => "temperature",
+            Effect::Drift { .. } => "drift",
             Effect::Lowpass => "lowpass",
             Effect::Lowpass2 => "lowpass2",
             Effect::Boxcar => "boxcar",
@@ -158,6 +166,7 @@ impl Effect {
                 "resolution" | "lsb" | "rounding" => Effect::Resolution,
                 "bias_step" | "step" => Effect::BiasStep,
                 "temperature" | "temp" | "warm_up" | "warmup" => Effect::Temperature,
+                "drift" | "smooth_drift" | "trend" => Effect::Drift { components: 0 },
                 "lowpass" | "lowpass1" | "dlpf" => Effect::Lowpass,
                 "lowpass2" => Effect::Lowpass2,
                 "boxcar" | "moving_average" => Effect::Boxcar,
@@ -175,7 +184,7 @@ impl Effect {
         match self {
             Effect::RateRamp => Kind::Ramp,
             Effect::Sinusoid => Kind::Sine,
-            Effect::BiasStep | Effect::Temperature => Kind::Signal,
+            Effect::BiasStep | Effect::Temperature | Effect::Drift { .. } => Kind::Signal,
             _ => Kind::Stochastic,
         }
     }
@@ -185,7 +194,7 @@ impl Effect {
     pub fn time_domain(&self) -> bool {
         matches!(
             self,
-            Effect::BiasStep | Effect::Temperature | Effect::Resolution
+            Effect::BiasStep | Effect::Temperature | Effect::Drift { .. } | Effect::Resolution
         )
     }
 

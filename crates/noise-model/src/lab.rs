@@ -29,6 +29,7 @@ use crate::nonstat::{self, Blocks, Signal};
 use crate::psd::{default_segment, find_lines, line_near, welch, Line};
 use allan::ci::chi2_sf;
 use model_lab::{Candidate, Edit, Summary};
+use nalgebra::DMatrix;
 
 mod candidates;
 mod reading;
@@ -108,9 +109,90 @@ impl Model {
             .terms
             .iter()
             .filter(|t| t.known && t.effect != Effect::Resolution)
-            .map(|t| 1 + t.theta.len())
+            // a drift's size and unit shape are its J cosine amplitudes
+            .map(|t| match t.effect {
+                Effect::Drift { .. } => t.theta.len(),
+                _ => 1 + t.theta.len(),
+            })
             .sum();
         self.fit.n_params() + td
+    }
+}
+
+/// Enter a time-domain term's estimates into its spec as a known coefficient: a step, a warm-up
+/// or a temperature coefficient as its amplitude v (coefficient v², σ 2|v|σ_v, sign of v); a
+/// drift as its size a, the rms about its mean of the curve its estimates draw (a ramp R̂ [u/s]
+/// and cosine amplitudes ê_j [u], [`crate::effect::drift_norm`]), coefficient a², with the
+/// unit-size shape (R̂τ0, ê_1, …)/a as its fixed parameters. `value` and `cov` are the term's
+/// estimates and their joint covariance.
+fn set_known(spec: &mut TermSpec, value: &[f64], cov: &DMatrix<f64>, ctx: &Context) {
+    let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
+    if let Effect::Drift { .. } = spec.effect {
+        // per sample: the ramp's estimate is per second
+        let unit = |j: usize| if j == 0 { ctx.tau0 } else { 1.0 };
+        let e: Vec<f64> = value
+            .iter()
+            .enumerate()
+            .map(|(j, v)| finite(*v) * unit(j))
+            .collect();
+        if cov.nrows() != e.len() {
+            return;
+        }
+        // The curve the estimates draw carries the noise's projection on the drift's components,
+        // whose Allan variance the noise terms already hold: each independent direction of the
+        // estimate (whitened by its covariance) is shrunk to its unbiased size, z → z·√(1 − 1/z²)
+        // (zero where |z| ≤ 1), so the known term is the drift's and not drift + noise twice.
+        let cs = DMatrix::from_fn(e.len(), e.len(), |j, k| {
+            finite(cov[(j, k)]) * unit(j) * unit(k)
+        });
+        let e = match cs.clone().cholesky() {
+            Some(ch) => {
+                let l = ch.l();
+                let z = l
+                    .solve_lower_triangular(&nalgebra::DVector::from_column_slice(&e))
+                    .unwrap_or_else(|| nalgebra::DVector::zeros(e.len()));
+                let shrunk = z.map(|v| v * (1.0 - 1.0 / (v * v)).max(0.0).sqrt());
+                (l * shrunk).iter().copied().collect::<Vec<f64>>()
+            }
+            None => e,
+        };
+        let span = crate::effect::drift_span(ctx);
+        let a = crate::effect::drift_norm(&e, span);
+        if !(a > 0.0) {
+            return;
+        }
+        // σ of a by the delta method with the estimates' joint covariance: ∂a/∂e = G·e/a
+        let g = crate::effect::drift_gram(e.len(), span);
+        let grad: Vec<f64> = g
+            .iter()
+            .enumerate()
+            .map(|(j, gj)| gj.iter().zip(&e).map(|(x, y)| x * y).sum::<f64>() / a * unit(j))
+            .collect();
+        let mut var = 0.0;
+        for (j, gj) in grad.iter().enumerate() {
+            for (k, gk) in grad.iter().enumerate() {
+                var += gj * finite(cov[(j, k)]) * gk;
+            }
+        }
+        spec.theta = Some(e.iter().map(|v| v / a).collect());
+        spec.theta_sigma = Some(
+            (0..e.len())
+                .map(|j| finite(cov[(j, j)]).max(0.0).sqrt() * unit(j) / a)
+                .collect(),
+        );
+        spec.theta_fixed = true;
+        spec.known = Some(Known {
+            coef: a * a,
+            coef_sigma: 2.0 * a * var.max(0.0).sqrt(),
+            sign: 1.0,
+        });
+    } else if let Some(&v) = value.first() {
+        let v = finite(v);
+        spec.known = Some(Known {
+            coef: v * v,
+            coef_sigma: 2.0 * v.abs() * finite(cov[(0, 0)]).max(0.0).sqrt(),
+            sign: v.signum(),
+        });
     }
 }
 
@@ -303,6 +385,7 @@ impl<'a> NoiseLab<'a> {
     /// Allan curve the noise terms describe. The ramp stays (its sign is not estimated).
     pub fn compensated(&self, m: &Model) -> Option<Vec<f64>> {
         let tau0 = self.record.tau0;
+        let span = crate::effect::drift_span(&self.meas.ctx);
         let mut y = self.record.y.to_vec();
         let mut any = false;
         for t in &m.fit.terms {
@@ -319,6 +402,7 @@ impl<'a> NoiseLab<'a> {
                         (Effect::BiasStep, _) if n * tau0 >= t.theta[0] - 0.5 * tau0 => a,
                         (Effect::Temperature, Some(temp)) if t.theta.is_empty() => a * temp[k],
                         (Effect::Temperature, _) => a * (-n * tau0 / t.theta[0]).exp(),
+                        (Effect::Drift { .. }, _) => a * crate::effect::drift_at(&t.theta, n, span),
                         _ => 0.0,
                     };
                     k += 1;
@@ -329,60 +413,65 @@ impl<'a> NoiseLab<'a> {
         any.then_some(y)
     }
 
-    /// The time-domain signal of a term, if it has one.
-    fn signal_of(&self, s: &TermSpec) -> Option<Signal> {
+    /// The time-domain signals of a term: none for a noise, one for a ramp, a step, the
+    /// temperature or a warm-up, one cosine per component for a drift.
+    fn signals_of(&self, s: &TermSpec) -> Vec<Signal> {
         let tau0 = self.record.tau0;
         match s.effect {
-            Effect::RateRamp => Some(Signal::Ramp),
-            Effect::BiasStep => s.theta.as_ref().map(|t| Signal::Step { at: t[0] / tau0 }),
+            Effect::RateRamp => vec![Signal::Ramp],
+            Effect::BiasStep => s
+                .theta
+                .iter()
+                .map(|t| Signal::Step { at: t[0] / tau0 })
+                .collect(),
             Effect::Temperature => {
                 if self.meas.ctx.temp_avar.is_some() {
-                    Some(Signal::Temperature)
+                    vec![Signal::Temperature]
                 } else {
                     s.theta
-                        .as_ref()
+                        .iter()
                         .map(|t| Signal::WarmUp { kappa: t[0] / tau0 })
+                        .collect()
                 }
             }
-            _ => None,
+            Effect::Drift { components } => self.drift_signals(components),
+            _ => Vec::new(),
         }
+    }
+
+    /// The signals of a drift of `components` cosines over this record: the ramp, then the
+    /// cosines.
+    fn drift_signals(&self, components: u8) -> Vec<Signal> {
+        let span = crate::effect::drift_span(&self.meas.ctx);
+        std::iter::once(Signal::Ramp)
+            .chain((1..=components).map(|j| Signal::Cosine { j, span }))
+            .collect()
     }
 
     /// Fit a model: time-domain terms are estimated on the record with the current noise model
     /// and enter the Allan fit as known terms; two rounds let the noise model settle.
     pub fn fit(&self, specs: &[TermSpec]) -> Result<Model, FitError> {
         let mut specs = specs.to_vec();
-        let td: Vec<usize> = (0..specs.len())
-            .filter(|&k| matches!(specs[k].effect, Effect::BiasStep | Effect::Temperature))
-            .collect();
+        let is_td = |s: &TermSpec| s.effect.kind() == crate::effect::Kind::Signal;
+        let td: Vec<usize> = (0..specs.len()).filter(|&k| is_td(&specs[k])).collect();
         let mut fit = if td.is_empty() {
             fit_model(&self.meas, &specs)?
         } else {
-            let noise: Vec<TermSpec> = specs
-                .iter()
-                .filter(|s| !matches!(s.effect, Effect::BiasStep | Effect::Temperature))
-                .cloned()
-                .collect();
+            let noise: Vec<TermSpec> = specs.iter().filter(|s| !is_td(s)).cloned().collect();
             let mut f = fit_model(&self.meas, &noise)?;
             for _ in 0..3 {
                 let comps = f.components();
-                let sig_idx: Vec<usize> = (0..specs.len())
-                    .filter(|&k| self.signal_of(&specs[k]).is_some())
-                    .collect();
-                let signals: Vec<Signal> = sig_idx
-                    .iter()
-                    .map(|&k| self.signal_of(&specs[k]).expect("signal"))
-                    .collect();
-                let est = nonstat::estimate(&nonstat::gls_scale(&self.blocks), &comps, &signals);
-                for (e, &k) in est.iter().zip(&sig_idx) {
-                    if td.contains(&k) {
-                        let v = if e.value.is_finite() { e.value } else { 0.0 };
-                        specs[k].known = Some(Known {
-                            coef: v * v,
-                            coef_sigma: 2.0 * v.abs() * e.sigma,
-                            sign: v.signum(),
-                        });
-                    }
+                // every term's signals, flattened, with the term each belongs to
+                let (owner, signals): (Vec<usize>, Vec<Signal>) = (0..specs.len())
+                    .flat_map(|k| self.signals_of(&specs[k]).into_iter().map(move |g| (k, g)))
+                    .unzip();
+                let (value, cov) =
+                    nonstat::joint(&nonstat::gls_scale(&self.blocks), &comps, &signals);
+                for &k in &td {
+                    let mine: Vec<usize> = (0..owner.len()).filter(|&i| owner[i] == k).collect();
+                    let v: Vec<f64> = mine.iter().map(|&i| value[i]).collect();
+                    let c = cov.select_rows(&mine).select_columns(&mine);
+                    set_known(&mut specs[k], &v, &c, &self.meas.ctx);
                 }
                 f = fit_model(&self.meas, &specs)?;
             }
@@ -399,7 +488,7 @@ impl<'a> NoiseLab<'a> {
         let findings = self.findings(&specs, &fit);
         let adequate = assessment.adequate && findings.is_empty();
         let neg2ll = crate::assess::neg2_loglik(&fit);
-        let signals: Vec<Signal> = specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let signals: Vec<Signal> = specs.iter().flat_map(|s| self.signals_of(s)).collect();
         let neg2ll_time = nonstat::neg2_loglik(
             &nonstat::gls_scale(&self.blocks),
             &fit.components(),
@@ -434,7 +523,7 @@ impl<'a> NoiseLab<'a> {
         if comps.is_empty() {
             return Vec::new();
         }
-        let signals: Vec<Signal> = specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let signals: Vec<Signal> = specs.iter().flat_map(|s| self.signals_of(s)).collect();
         let mut out = Vec::new();
         let segs = &self.record.segments;
         for st in nonstat::find_steps(&self.blocks, &comps, &signals, Some((self.record.y, segs))) {
@@ -461,7 +550,10 @@ impl<'a> NoiseLab<'a> {
             });
         }
         let has_temp = specs.iter().any(|s| s.effect == Effect::Temperature);
-        if !has_temp {
+        let has_drift_term = specs
+            .iter()
+            .any(|s| matches!(s.effect, Effect::Drift { .. }));
+        if !has_temp && !has_drift_term {
             let gls = nonstat::gls_scale(&self.blocks);
             if self.meas.ctx.temp_avar.is_some() {
                 let mut sig = signals.clone();
@@ -526,7 +618,86 @@ impl<'a> NoiseLab<'a> {
                 }
             }
         }
+        // one smooth description of the record's slow change: a drift or a warm-up/temperature,
+        // not both (their Allan variances would add where the curves overlap)
+        let has_drift = specs
+            .iter()
+            .any(|s| matches!(s.effect, Effect::Drift { .. }));
+        if !has_drift && !has_temp {
+            if let Some(f) = self.drift_finding(&signals, &comps) {
+                out.push(f);
+            }
+        }
         out
+    }
+
+    /// A smooth drift beyond the model's signals: a ramp and the cosines of the record's length
+    /// cos(πjk/T), j = 1 … J, tested in the time domain with the noise model's covariance for
+    /// what the cosines add to the ramp. J is the one that maximises the likelihood ratio less
+    /// ln(differences) per component (a Schwarz penalty: the smoothest drift the data allow); its
+    /// likelihood ratio is tested against χ²_J with a Bonferroni factor for the orders tried.
+    fn drift_finding(
+        &self,
+        signals: &[Signal],
+        comps: &[crate::cov::Component],
+    ) -> Option<Finding> {
+        let gls = nonstat::gls_scale(&self.blocks);
+        let n = gls.diffs();
+        let jmax = crate::effect::DRIFT_MAX_COMPONENTS.min((n / 8).min(255) as u8);
+        if jmax == 0 {
+            return None;
+        }
+        let base: Vec<Signal> = signals
+            .iter()
+            .filter(|s| **s != Signal::Ramp)
+            .copied()
+            .collect();
+        let extra = self.drift_signals(jmax);
+        let lrs = nonstat::nested_lrs(&gls, comps, &base, &extra);
+        let pen = (n as f64).ln();
+        let (j, lr) = lrs[1..]
+            .iter()
+            .enumerate()
+            .map(|(i, &lr)| (i + 1, lr - lrs[0]))
+            .max_by(|a, b| (a.1 - pen * a.0 as f64).total_cmp(&(b.1 - pen * b.0 as f64)))?;
+        let p = (chi2_sf(lr, j as f64) * jmax as f64).min(1.0);
+        if !(p < P_SIGNAL) {
+            return None;
+        }
+        let mut all = base.clone();
+        all.extend_from_slice(&extra[..=j]);
+        let (value, cov) = nonstat::joint(&gls, comps, &all);
+        let mine: Vec<usize> = (base.len()..all.len()).collect();
+        let mut spec = TermSpec::new(Effect::Drift {
+            components: j as u8,
+        });
+        // the shape from this estimate; the size is estimated again with the model's noise
+        set_known(
+            &mut spec,
+            &value[base.len()..],
+            &cov.select_rows(&mine).select_columns(&mine),
+            &self.meas.ctx,
+        );
+        let a = spec.known.take()?.coef.sqrt();
+        let record = self.record.y.len() as f64 * self.record.tau0;
+        Some(Finding {
+            effect: spec.effect.clone(),
+            spec,
+            p_value: p,
+            text: format!(
+                "a smooth drift of the bias, {:.4e} rms over the record: a ramp and {} cosine \
+                 component{} of the record's length (the shortest period {}); no step, \
+                 exponential or temperature describes it (likelihood ratio {:.1} on {} degrees \
+                 of freedom beyond the ramp, p = {:.1e} after the search over orders)",
+                a,
+                j,
+                if j == 1 { "" } else { "s" },
+                fmt_s(2.0 * record / j as f64),
+                lr,
+                j,
+                p
+            ),
+        })
     }
 
     fn summary_of(&self, m: &Model) -> Summary {

@@ -1,6 +1,6 @@
 //! How an effect enters the fit: what the record tells the bases, the non-linear parameters and
 //! their search ranges, and the basis for fixed parameters.
-use super::{octaves, step_avar, warmup_avar, Basis, Effect};
+use super::{drift_avar, octaves, step_avar, warmup_avar, Basis, Effect};
 use crate::structure::{RTable, Structure};
 use std::sync::Arc;
 
@@ -128,6 +128,23 @@ impl Effect {
                     8.0,
                 )]
             }
+            // the drift's shape: a ramp (per sample) and cosine coefficients, of unit size (its
+            // rms about its mean over the record is 1), found in the time domain and held fixed
+            // in the Allan fit
+            Effect::Drift { components } => (0..=*components)
+                .map(|j| ParamSpec {
+                    name: if j == 0 {
+                        "shape_ramp".into()
+                    } else {
+                        format!("shape_cos{j}")
+                    },
+                    unit: if j == 0 { "1/sample" } else { "" }.into(),
+                    lo: f64::NEG_INFINITY,
+                    hi: f64::INFINITY,
+                    log: false,
+                    density: 0.0,
+                })
+                .collect(),
             Effect::User(u) => u.params.clone(),
             _ => Vec::new(),
         }
@@ -272,6 +289,16 @@ impl Effect {
                     )
                 }
             },
+            Effect::Drift { .. } => {
+                if theta.is_empty() || theta.iter().any(|v| !v.is_finite()) {
+                    return Ok(Basis::Zero);
+                }
+                Basis::Table(
+                    octaves(ctx)
+                        .map(|m| (m, drift_avar(theta, m, ctx)))
+                        .collect(),
+                )
+            }
             Effect::User(u) => u.basis(theta, tau0)?,
         })
     }

@@ -111,6 +111,57 @@ fn step_and_warmup_bases_are_exact() {
 }
 
 #[test]
+fn the_drift_basis_is_exact_with_gaps_and_random_shapes() {
+    let segs = vec![(0u64, 700u64), (750, 500)];
+    let ctx = Context {
+        tau0: 0.01,
+        segments: segs.clone(),
+        ..Context::default()
+    };
+    let span = super::drift_span(&ctx);
+    assert_eq!(span, 1250.0);
+    let mut state = 0x5eed_d41f_u64;
+    let mut uniform = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    for j in [1usize, 2, 5, 16] {
+        // a ramp per sample, then j cosine amplitudes
+        let c: Vec<f64> = (0..=j)
+            .map(|i| uniform() * if i == 0 { 1e-3 } else { 1.0 })
+            .collect();
+        let x: Vec<f64> = (0..1250)
+            .map(|k| {
+                c[0] * k as f64
+                    + c[1..]
+                        .iter()
+                        .enumerate()
+                        .map(|(i, ci)| {
+                            ci * (std::f64::consts::PI * (i + 1) as f64 * k as f64 / span).cos()
+                        })
+                        .sum::<f64>()
+            })
+            .collect();
+        for m in [1usize, 3, 16, 100, 240, 300] {
+            let want = signal_avar(&x, &segs, m);
+            let got = super::drift_avar(&c, m as u64, &ctx);
+            assert!(
+                (got - want).abs() <= 1e-15 + 1e-9 * want,
+                "J {j} m {m}: {got} vs {want}"
+            );
+        }
+        // its size: the rms about the mean of the continuous curve over the record's span, which
+        // the 1250 samples' own rms meets to O(1/n)
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        let rms = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt();
+        let got = super::drift_norm(&c, span);
+        assert!((got / rms - 1.0).abs() < 2e-3, "J {j}: {got} vs {rms}");
+    }
+}
+
+#[test]
 fn filters_join_the_white_line_and_match_their_impulse_responses() {
     let ctx = Context::uniform(0.01, 1 << 16);
     let white = Effect::White.basis(&[], &ctx).unwrap();

@@ -32,6 +32,12 @@ impl Effect {
                 "slope +½ to +1 at long τ, following the Allan variance of the temperature \
                  column itself; in the time series the bias tracks the temperature"
             }
+            Effect::Drift { .. } => {
+                "slope +½ to +1 at long τ (like a ramp where the drift is monotone, bending over \
+                 where it turns), reaching its largest values at τ of the order of the record; in \
+                 the time series a slow, smooth wander of the bias that neither one step, one \
+                 exponential nor the temperature describes"
+            }
             Effect::Lowpass | Effect::Lowpass2 => {
                 "σ(τ) below the white line at τ ≲ 1/(2πf_c) (slope +½ at the shortest τ for one \
                  pole, steeper for two), joining it for τ ≫ 1/f_c; the PSD falls off above f_c"
@@ -132,6 +138,17 @@ impl Effect {
                  it and the Allan curve is shown before and after compensation; without one, a \
                  warm-up after power-on shows as an exponential approach of the bias with a time \
                  constant of minutes. Like a ramp it is a non-stationarity of this record."
+            }
+            Effect::Drift { .. } => {
+                "A smooth drift of the bias over the record: thermal settling of the package and \
+                 the board without a temperature column to regress on, a slow change of the \
+                 supply or of the mounting stress, a turn-on transient that is not one \
+                 exponential. It is a non-stationarity of this record, not a noise of the sensor: \
+                 it is described as a sum of a few cosines of the record's length (periods 2T, \
+                 2T/2, … — the slowest terms of a discrete cosine transform), their number chosen \
+                 by the penalised criterion, tested in the time domain against the noise model \
+                 and removed before the noise terms are read. A long record at a settled \
+                 temperature does not show it; repeat the run to tell it from a rate random walk."
             }
             Effect::Lowpass => {
                 "The sensor's own digital low-pass filter on its white noise, one pole at f_c: \

@@ -49,6 +49,7 @@ impl Effect {
             Effect::Resolution => "lsb",
             Effect::BiasStep => "size",
             Effect::Temperature => "coefficient",
+            Effect::Drift { .. } => "rms",
             Effect::Lowpass | Effect::Lowpass2 | Effect::Boxcar | Effect::Bartlett => "N",
             Effect::User(u) => &u.amplitude.name,
         }
@@ -80,7 +81,8 @@ impl Effect {
             | Effect::Resonance
             | Effect::Sinusoid
             | Effect::Resolution
-            | Effect::BiasStep => u.to_string(),
+            | Effect::BiasStep
+            | Effect::Drift { .. } => u.to_string(),
             Effect::Temperature => {
                 if warm_up {
                     u.to_string()
@@ -126,7 +128,8 @@ impl Effect {
                     | Effect::Markov
                     | Effect::Resonance
                     | Effect::Sinusoid
-                    | Effect::BiasStep => d("°/h", 3600.0 * k),
+                    | Effect::BiasStep
+                    | Effect::Drift { .. } => d("°/h", 3600.0 * k),
                     Effect::Temperature if warm_up => d("°/h", 3600.0 * k),
                     Effect::Temperature => d("°/h/°C", 3600.0 * k),
                     Effect::RateRandomWalk => d("°/h/√h", 3600.0 * 60.0 * k),
@@ -145,7 +148,8 @@ impl Effect {
                 | Effect::Markov
                 | Effect::Resonance
                 | Effect::Sinusoid
-                | Effect::BiasStep => d("µg", ug),
+                | Effect::BiasStep
+                | Effect::Drift { .. } => d("µg", ug),
                 Effect::Temperature if warm_up => d("µg", ug),
                 Effect::Temperature => d("µg/°C", ug),
                 Effect::RateRandomWalk => d("µg/√s", ug),

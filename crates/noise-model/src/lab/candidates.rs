@@ -41,15 +41,20 @@ impl<'a> NoiseLab<'a> {
         for f in &cur.findings {
             let mut specs = cur.specs.clone();
             specs.push(f.spec.clone());
-            let mut edits: Vec<(Vec<TermSpec>, Edit<Effect>)> = vec![(
-                specs.clone(),
-                Edit {
-                    add: vec![f.effect.clone()],
-                    remove: vec![],
-                },
-            )];
+            // a drift holds its own ramp: it replaces the model's
+            let drift = matches!(f.effect, Effect::Drift { .. });
+            let mut edits: Vec<(Vec<TermSpec>, Edit<Effect>)> = Vec::new();
+            if !drift || !have.contains(&Effect::RateRamp) {
+                edits.push((
+                    specs.clone(),
+                    Edit {
+                        add: vec![f.effect.clone()],
+                        remove: vec![],
+                    },
+                ));
+            }
             // a physical cause found in the time domain replaces the ramp that stood in for it
-            if f.effect == Effect::Temperature && have.contains(&Effect::RateRamp) {
+            if (drift || f.effect == Effect::Temperature) && have.contains(&Effect::RateRamp) {
                 let s2: Vec<TermSpec> = specs
                     .iter()
                     .filter(|s| s.effect != Effect::RateRamp)
@@ -119,7 +124,10 @@ impl<'a> NoiseLab<'a> {
             Effect::RateRandomWalk,
             Effect::RateRamp,
         ] {
-            if !have.contains(&e) {
+            // a drift holds its own ramp
+            let drift = have.iter().any(|h| matches!(h, Effect::Drift { .. }));
+            let held = have.contains(&e) || (drift && e == Effect::RateRamp);
+            if !held {
                 tries.push(added(cur, e.clone(), TermSpec::new(e), String::new()));
             }
         }
@@ -341,7 +349,7 @@ impl<'a> NoiseLab<'a> {
     /// Whether the model's rate ramp is significant in the time domain (its likelihood ratio
     /// among the model's signals, with the model's noise, at [`P_SIGNAL`]).
     fn ramp_significant(&self, m: &Model) -> bool {
-        let signals: Vec<Signal> = m.specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let signals: Vec<Signal> = m.specs.iter().flat_map(|s| self.signals_of(s)).collect();
         let Some(k) = signals.iter().position(|s| *s == Signal::Ramp) else {
             return false;
         };
@@ -424,7 +432,7 @@ impl<'a> NoiseLab<'a> {
         if tau_range(&m.fit, k).is_none_or(|(_, hi)| hi < 2.0 * block_tau) {
             return base;
         }
-        let signals: Vec<Signal> = m.specs.iter().filter_map(|s| self.signal_of(s)).collect();
+        let signals: Vec<Signal> = m.specs.iter().flat_map(|s| self.signals_of(s)).collect();
         let others: Vec<crate::cov::Component> = m
             .fit
             .terms

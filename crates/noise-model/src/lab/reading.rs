@@ -101,6 +101,13 @@ pub fn reading(fit: &Fit, e: &Effect) -> String {
             2.0 * t.theta.get(1).copied().unwrap_or(f64::NAN) * th
         ),
         Effect::Resolution => format!("rounding to the data's LSB of {:.4e}", t.amplitude()),
+        Effect::Drift { .. } => format!(
+            "a smooth drift of the bias, {:.4e} rms over the record (a ramp and {} cosine \
+             component{} of the record's length) — a non-stationarity of this record, not noise",
+            t.amplitude(),
+            t.theta.len().saturating_sub(1),
+            if t.theta.len() == 2 { "" } else { "s" }
+        ),
         e => format!("{} = {:.4e}", e.amp_name(), t.amplitude()),
     }
 }
