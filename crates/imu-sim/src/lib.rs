@@ -124,6 +124,11 @@ pub enum SimEffect {
     },
     /// A warm-up transient A·e^{−t/τ} [u] (no temperature column).
     WarmUp { amplitude: f64, tau_s: f64 },
+    /// A smooth drift of the bias, `rms` [u] about its mean over the record, of a shape drawn
+    /// from `shape_seed` ([`drift_curve`]): a logistic transition of random instant, width and
+    /// sign plus a quadratic bow — a slow wander that is neither a step, one exponential nor a
+    /// ramp, and not of the lab's own cosine form.
+    Drift { rms: f64, shape_seed: u64 },
     /// A resonance: x'' + 2ζω0x' + ω0²x = white noise, ω0 = 2π·f0_hz, 0 < ζ < 1, scaled to the
     /// standard deviation `sigma` [u]; the rate is x point-sampled.
     Resonance { sigma: f64, f0_hz: f64, zeta: f64 },
@@ -267,6 +272,28 @@ fn decimated_white_avar(h: &[f64], var_w: f64, r: usize, m: usize) -> f64 {
 }
 
 /// Overlapping Allan variance of a deterministic series at m samples (its exact value).
+/// A smooth drift of `n` samples, `rms` about its mean, of a shape drawn from `shape_seed`: a
+/// logistic transition centred in the middle 60 % of the record, 8–25 % of it wide, plus a
+/// quadratic bow of random sign and weight (up to the transition's own size).
+pub fn drift_curve(rms: f64, shape_seed: u64, n: usize) -> Vec<f64> {
+    let mut r = Rng::new(shape_seed ^ 0xd71f_7c0d_e5a1_9b33);
+    let centre = 0.2 + 0.6 * r.uniform();
+    let width = 0.08 + 0.17 * r.uniform();
+    let sign = if r.uniform() < 0.5 { -1.0 } else { 1.0 };
+    let bow = 2.0 * r.uniform() - 1.0;
+    let nf = n.max(1) as f64;
+    let x: Vec<f64> = (0..n)
+        .map(|i| {
+            let u = i as f64 / nf;
+            sign / (1.0 + (-(u - centre) / width).exp()) + bow * (2.0 * u - 1.0).powi(2)
+        })
+        .collect();
+    let mean = x.iter().sum::<f64>() / nf;
+    let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / nf).sqrt();
+    let k = if sd > 0.0 { rms / sd } else { 0.0 };
+    x.into_iter().map(|v| (v - mean) * k).collect()
+}
+
 fn exact_oavar(x: &[f64], m: usize) -> f64 {
     let mut pre = Vec::with_capacity(x.len() + 1);
     pre.push(0.0);
@@ -319,6 +346,16 @@ impl SimConfig {
                     .map(|i| start_c + rise_c * -(-(i as f64) * self.tau0() / tau_s).exp_m1())
                     .collect(),
             ),
+            _ => None,
+        })
+    }
+
+    /// The curve of a `Drift` effect over this record, if any.
+    pub fn drift(&self) -> Option<Vec<f64>> {
+        self.effects.iter().find_map(|e| match *e {
+            SimEffect::Drift { rms, shape_seed } => {
+                Some(drift_curve(rms, shape_seed, self.n_samples))
+            }
             _ => None,
         })
     }
@@ -448,6 +485,12 @@ impl SimConfig {
                         *v += amplitude * (-(i as f64) * tau0 / tau_s).exp();
                     }
                 }
+                SimEffect::Drift { .. } => {
+                    let d = self.drift().expect("drift effect");
+                    for (v, c) in y.iter_mut().zip(&d) {
+                        *v += c;
+                    }
+                }
                 SimEffect::Resonance { sigma, f0_hz, zeta } => {
                     let (a, l) = resonance_step(f0_hz, zeta, tau0);
                     // the stationary distribution: x and x'/ω0 independent, each of variance σ²
@@ -558,6 +601,7 @@ impl SimConfig {
                             * amplitude
                             * noise_model::effect::warmup_avar(tau_s / tau0, m as u64, &ctx)
                     }
+                    SimEffect::Drift { .. } => exact_oavar(&self.drift().expect("drift"), m),
                     SimEffect::Resonance { sigma, f0_hz, zeta } => {
                         sigma * sigma * resonance_avar_unit(tau, tau0, f0_hz, zeta)
                     }

@@ -206,6 +206,39 @@ fn a_warm_up_without_a_temperature_column_is_named() {
 }
 
 #[test]
+fn a_smooth_drift_is_one_drift_not_a_staircase() {
+    // random shapes (a logistic transition of random instant, width and sign plus a quadratic
+    // bow) and random data: one edit, the drift in place of the ramp, adequate, no step, the
+    // RMS log-residual not worse, and the drift's size recovered
+    let mut rng = imu_sim::Rng::new(0xd21f_7000);
+    for _ in 0..3 {
+        let rms = 0.03 + 0.03 * rng.uniform();
+        let r = hidden(
+            SimEffect::Drift {
+                rms,
+                shape_seed: rng.next_u64() % 10_000,
+            },
+            rng.next_u64() % 10_000,
+        );
+        let drift = Effect::Drift { components: 0 };
+        let (added, gone) = r.edits();
+        assert_eq!(added, std::slice::from_ref(&drift), "{}", r.report);
+        assert_eq!(gone, [Effect::RateRamp], "{}", r.report);
+        assert_eq!(r.walk.stop, Stop::Adequate, "{}", r.report);
+        // the Allan fit not worse: χ²/dof not up, and the RMS log-residual not up by more than
+        // 5 % unless both sit at the level of the points' own scatter (1-h record: ~0.02)
+        let s = &r.walk.steps[0];
+        assert!(s.after.chi2_dof <= s.before.chi2_dof * 1.05, "{}", r.report);
+        assert!(
+            s.after.rms_residual <= (s.before.rms_residual * 1.05).max(0.03),
+            "{}",
+            r.report
+        );
+        r.recovered("drift rms", &drift, 0, rms, 0.25);
+    }
+}
+
+#[test]
 fn spectral_lines_are_named_sinusoid_not_markov() {
     // a line just below Nyquist and a slow one: named from the periodogram, f pinned there
     for (seed, amp, f) in [(7u64, 0.01, 49.5), (8, 0.003, 0.1)] {

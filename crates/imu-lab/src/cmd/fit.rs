@@ -237,6 +237,9 @@ fn fit_and_walk(
         if matches!(e, Effect::BiasStep) {
             bail!("--add bias_step: a step's instant comes from the change-point test; use --auto, which adds the steps it finds");
         }
+        if matches!(e, Effect::Drift { .. }) {
+            bail!("--add drift: a drift's shape comes from the time-domain test; use --auto, which adds the drift it finds");
+        }
     }
     let start = lab.fit(&base).map_err(|e| {
         anyhow!(

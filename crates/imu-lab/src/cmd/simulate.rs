@@ -70,6 +70,10 @@ pub struct Args {
     /// A warm-up transient A·e^(−t/τ): AMPLITUDE,TAU_S (u, s).
     #[arg(long = "warm-up", value_delimiter = ',')]
     pub warm_up: Vec<f64>,
+    /// A smooth drift of the bias (a logistic transition and a quadratic bow of a shape drawn
+    /// from SHAPE_SEED): RMS[,SHAPE_SEED] (u about its mean over the record; default shape 1)
+    #[arg(long = "drift", value_delimiter = ',')]
+    pub drift: Vec<f64>,
     /// A bias following a warming temperature, written as a `temp` column:
     /// COEF,START_C,RISE_C,TAU_S (u/°C, °C, °C, s).
     #[arg(long, value_delimiter = ',')]
@@ -236,6 +240,28 @@ pub fn run(args: Args) -> Result<()> {
         _ => bail!(
             "--warm-up: expected AMPLITUDE,TAU_S with τ > 0, got {:?}",
             args.warm_up
+        ),
+    }
+    match args.drift[..] {
+        [] => {}
+        [rms] if rms.is_finite() && rms >= 0.0 => {
+            effects.push(SimEffect::Drift { rms, shape_seed: 1 })
+        }
+        [rms, seed]
+            if rms.is_finite()
+                && rms >= 0.0
+                && seed >= 0.0
+                && seed.fract() == 0.0
+                && seed < 9.0e15 =>
+        {
+            effects.push(SimEffect::Drift {
+                rms,
+                shape_seed: seed as u64,
+            })
+        }
+        _ => bail!(
+            "--drift: expected RMS[,SHAPE_SEED] with rms ≥ 0 and a whole shape seed ≥ 0, got {:?}",
+            args.drift
         ),
     }
     match args.temperature[..] {

@@ -31,6 +31,7 @@ fn color(e: &Effect) -> &'static str {
         Effect::Resolution => "#7f7f7f",
         Effect::BiasStep => "#bcbd22",
         Effect::Temperature => "#17becf",
+        Effect::Drift { .. } => "#5f9ea0",
         Effect::Lowpass | Effect::Lowpass2 => "#1f3f9f",
         Effect::Boxcar | Effect::Bartlett => "#3f9f1f",
         Effect::Resonance => "#ff1f8f",
