@@ -143,7 +143,8 @@ proptest! {
 /// soft iron of zeros, an 89° misalignment.
 #[test]
 fn the_quoted_refusals_name_key_axis_value_and_bound() {
-    let cases: [(fn(&mut CalFile), String); 5] = [
+    type Edit = fn(&mut CalFile);
+    let cases: [(Edit, String); 5] = [
         (
             |f| f.accel.scale = [1.9, 1.0, 1.0],
             message(Key::AccelScale, Some(0), "1.9", "0.91–1.09"),
