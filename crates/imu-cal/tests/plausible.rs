@@ -187,6 +187,27 @@ fn the_quoted_refusals_name_key_axis_value_and_bound() {
     assert!(e
         .to_string()
         .starts_with("accel.lsb_per_unit = 900 LSB per m/s² is none"));
+    // The gyro at 100 LSB per deg/s and the magnetometer at 50 LSB per µT are no ranges either;
+    // ±500 °/s (65.5) and ±8 G (30 LSB per µT) are.
+    for (gyro, mag, bad) in [
+        (100.0, 120.0, Some((Key::GyroLsbPerUnit, 100.0))),
+        (131.0, 50.0, Some((Key::MagLsbPerUnit, 50.0))),
+        (65.5, 30.0, None),
+    ] {
+        let mut f = CalFile::default();
+        f.gyro.lsb_per_unit = gyro;
+        f.mag.lsb_per_unit = mag;
+        match (f.to_device(), bad) {
+            (Err(BlobError::NoRange { key, value }), Some((k, v))) => {
+                assert_eq!((key, value), (k, v))
+            }
+            (Ok(cal), None) => {
+                let r = cal.fitted_for().unwrap().ranges;
+                assert_eq!((r.gyro_dps, r.mag_gauss), (500, 8));
+            }
+            other => panic!("{gyro}, {mag}: {other:?}"),
+        }
+    }
     let mut f = CalFile::default();
     f.gyro.temp_lsb_per_c = 0.0;
     assert!(matches!(

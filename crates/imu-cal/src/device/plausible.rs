@@ -102,14 +102,14 @@ impl Fitted {
     /// The ranges of `imu` and `mag` whose nominal sensitivities `lsb_per_unit` matches (within
     /// [`LSB_MATCH`]); [`BlobError::NoRange`] names the key of the one that matches none.
     pub fn new(imu: ImuPart, mag: MagPart, lsb_per_unit: [f32; 3]) -> Result<Fitted, BlobError> {
-        let [a, g, m] = lsb_per_unit.map(f64::from);
-        let no = |key| BlobError::NoRange {
-            key,
-            value: lsb_per_unit[key as usize % 3],
-        };
-        let accel_g = range_of(a * G0, &imu.accel_ranges()).ok_or(no(Key::AccelLsbPerUnit))?;
-        let gyro_dps = range_of(g, &imu.gyro_ranges()).ok_or(no(Key::GyroLsbPerUnit))?;
-        let mag_gauss = range_of(m * 100.0, &mag.ranges()).ok_or(no(Key::MagLsbPerUnit))?;
+        let [a, g, m] = lsb_per_unit;
+        let no = |key, value| BlobError::NoRange { key, value };
+        let accel_g =
+            range_of(f64::from(a) * G0, &imu.accel_ranges()).ok_or(no(Key::AccelLsbPerUnit, a))?;
+        let gyro_dps =
+            range_of(f64::from(g), &imu.gyro_ranges()).ok_or(no(Key::GyroLsbPerUnit, g))?;
+        let mag_gauss =
+            range_of(f64::from(m) * 100.0, &mag.ranges()).ok_or(no(Key::MagLsbPerUnit, m))?;
         Ok(Fitted {
             imu,
             mag,
