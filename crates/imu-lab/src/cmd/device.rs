@@ -596,6 +596,43 @@ mod tests {
         c: CalArgs,
     }
 
+    /// The device's refusal (four numbers on the wire) reads as the host's own refusal of the
+    /// file; a key this host does not know is still shown with its numbers.
+    #[test]
+    fn a_device_refusal_reads_in_the_files_words() {
+        let p = imu_proto::CalProblem::Implausible {
+            key: imu_cal::device::Key::AccelScale as u8,
+            axis: Some(0),
+            value: 1.9,
+            lo: 0.91,
+            hi: 1.09,
+        };
+        assert_eq!(cal_problem(&p), "accel.scale[0] = 1.9 is outside 0.91–1.09");
+        let p = imu_proto::CalProblem::Implausible {
+            key: imu_cal::device::Key::MagSoftIronCondition as u8,
+            axis: None,
+            value: f32::INFINITY,
+            lo: 1.0,
+            hi: 3.0,
+        };
+        assert_eq!(
+            cal_problem(&p),
+            "mag.soft_iron condition number = ∞ is outside 1–3"
+        );
+        let p = imu_proto::CalProblem::Implausible {
+            key: 200,
+            axis: Some(1),
+            value: 5.0,
+            lo: -1.0,
+            hi: 1.0,
+        };
+        let s = cal_problem(&p);
+        assert!(
+            s.contains("200") && s.contains('5') && s.contains("unknown"),
+            "{s}"
+        );
+    }
+
     #[test]
     fn every_documented_calibrate_flag_combination_parses_and_no_other() {
         use clap::Parser;
