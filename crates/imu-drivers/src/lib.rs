@@ -8,7 +8,7 @@
 //! imu_drivers::recovery  recover_bus(): 9 SCL pulses + STOP for a stuck SDA
 //! ```
 //!
-//! The two driver flavours are one source text expanded twice (see `driver.rs`), so every
+//! The two driver flavours are one source text expanded twice (see `sequences.rs`), so every
 //! sequence is written once; all register values come from the pure register layer.
 //!
 //! # MPU-6050
@@ -71,18 +71,18 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 
-mod driver;
 pub mod mpu6050;
 pub mod qmc5883;
 pub mod recovery;
 pub mod register;
+mod sequences;
 
 /// Blocking drivers over `embedded_hal::i2c::I2c` and `embedded_hal::delay::DelayNs`.
 pub mod blocking {
-    crate::driver::drivers!(; ; embedded_hal::i2c::I2c; embedded_hal::delay::DelayNs);
+    crate::sequences::drivers!(; ; embedded_hal::i2c::I2c; embedded_hal::delay::DelayNs);
 }
 
 /// Async drivers over `embedded_hal_async::i2c::I2c` and `embedded_hal_async::delay::DelayNs`.
 pub mod asynch {
-    crate::driver::drivers!(async; await; embedded_hal_async::i2c::I2c; embedded_hal_async::delay::DelayNs);
+    crate::sequences::drivers!(async; await; embedded_hal_async::i2c::I2c; embedded_hal_async::delay::DelayNs);
 }

@@ -1,4 +1,5 @@
-//! The driver logic, written once and expanded twice: blocking (`embedded_hal::i2c::I2c`,
+//! Every bus sequence of both drivers (identify, configure, start, read, FIFO, self-test),
+//! written once and expanded twice: blocking (`embedded_hal::i2c::I2c`,
 //! `embedded_hal::delay::DelayNs`) and async (`embedded_hal_async::i2c::I2c`,
 //! `embedded_hal_async::delay::DelayNs`). The only difference between the two expansions is
 //! the `async` keyword on each method and `.await` after each bus or delay call; every
