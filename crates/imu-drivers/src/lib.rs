@@ -1,8 +1,8 @@
 //! MPU-6050 and QMC5883L/QMC5883P drivers on embedded-hal 1.0, blocking and async.
 //!
 //! ```text
-//! imu_drivers::mpu6050   register layer: reg/bits, Config (+ enums), ChipId, RawSample, Scale, Error
-//! imu_drivers::qmc5883   register layer: reg_l/reg_p, Config (+ enums), Chip, Variant, MagSample, Error
+//! imu_drivers::mpu6050   register layer: reg (addresses), registers (typed), Config (+ enums), ChipId, RawSample, Scale, Error
+//! imu_drivers::qmc5883   register layer: reg_l/reg_p (addresses), registers (typed), Config (+ enums), Chip, Variant, MagSample, Error
 //! imu_drivers::blocking  Mpu6050<I2C>, Qmc5883<I2C> over embedded_hal::i2c::I2c
 //! imu_drivers::asynch    Mpu6050<I2C>, Qmc5883<I2C> over embedded_hal_async::i2c::I2c (same methods, async)
 //! imu_drivers::recovery  recover_bus(): 9 SCL pulses + STOP for a stuck SDA
