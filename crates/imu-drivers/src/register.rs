@@ -1,7 +1,7 @@
 //! A register and its bit fields as one type: its address and its value to and from the byte
 //! on the bus. The drivers write and read configuration and status registers only through these
 //! types (`write_register`, `read_register`), so a field cannot land in the wrong register or
-//! the wrong bit. Each chip's registers are declared in one table, with [`register!`]:
+//! the wrong bit. Each chip's registers are declared in one table, with `register!`:
 //! [`crate::mpu6050::registers`], [`crate::qmc5883::registers`].
 
 /// A one-byte register of a chip.

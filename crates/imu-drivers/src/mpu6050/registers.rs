@@ -12,7 +12,7 @@ register! {
     /// SMPLRT_DIV (RM 4.2): Sample Rate = Gyroscope Output Rate / (1 + SMPLRT_DIV).
     #[derive(Default)]
     SmplrtDiv at reg::SMPLRT_DIV => {
-        /// SMPLRT_DIV[7:0].
+        /// `SMPLRT_DIV[7:0]`.
         divider: u8 [0, 8],
     }
 }
@@ -21,9 +21,9 @@ register! {
     /// CONFIG (RM 4.3): frame synchronisation and the digital low-pass filter.
     #[derive(Default)]
     ConfigReg at reg::CONFIG => {
-        /// EXT_SYNC_SET[5:3]: which sensor's LSB the FSYNC pin latches (0: input disabled).
+        /// `EXT_SYNC_SET[5:3]`: which sensor's LSB the FSYNC pin latches (0: input disabled).
         ext_sync_set: u8 [3, 3],
-        /// DLPF_CFG[2:0]: the filter ([`super::Dlpf`] as its code; 7 is reserved).
+        /// `DLPF_CFG[2:0]`: the filter ([`super::Dlpf`] as its code; 7 is reserved).
         dlpf_cfg: u8 [0, 3],
     }
 }
@@ -38,7 +38,7 @@ register! {
         yg_st: bool [6, 1],
         /// ZG_ST (bit 5).
         zg_st: bool [5, 1],
-        /// FS_SEL[4:3].
+        /// `FS_SEL[4:3]`.
         fs_sel: GyroRange [3, 2],
     }
 }
@@ -73,7 +73,7 @@ register! {
         ya_st: bool [6, 1],
         /// ZA_ST (bit 5).
         za_st: bool [5, 1],
-        /// AFS_SEL[4:3].
+        /// `AFS_SEL[4:3]`.
         afs_sel: AccelRange [3, 2],
     }
 }
@@ -106,7 +106,7 @@ register! {
     AccelConfig2 at reg::ACCEL_CONFIG2 => {
         /// ACCEL_FCHOICE_B (bit 3): 1 bypasses the filter.
         accel_fchoice_b: bool [3, 1],
-        /// A_DLPF_CFG[2:0].
+        /// `A_DLPF_CFG[2:0]`.
         a_dlpf_cfg: u8 [0, 3],
     }
 }
@@ -248,7 +248,7 @@ register! {
         cycle: bool [5, 1],
         /// TEMP_DIS (bit 3): temperature sensor off.
         temp_dis: bool [3, 1],
-        /// CLKSEL[2:0] (0 internal 8 MHz oscillator, 1 PLL with the X gyro as reference, …).
+        /// `CLKSEL[2:0]` (0 internal 8 MHz oscillator, 1 PLL with the X gyro as reference, …).
         clksel: u8 [0, 3],
     }
 }
@@ -279,7 +279,7 @@ register! {
     /// leaves every axis on).
     #[derive(Default)]
     PwrMgmt2 at reg::PWR_MGMT_2 => {
-        /// LP_WAKE_CTRL[7:6]: 1.25, 5, 20 or 40 Hz in cycle mode.
+        /// `LP_WAKE_CTRL[7:6]`: 1.25, 5, 20 or 40 Hz in cycle mode.
         lp_wake_ctrl: u8 [6, 2],
         /// STBY_XA (bit 5).
         stby_xa: bool [5, 1],

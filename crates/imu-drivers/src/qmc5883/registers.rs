@@ -7,7 +7,7 @@ use crate::register::{field_enum, register, Register};
 field_enum!(Osr, 2, [Max, High, Low; Min]);
 field_enum!(Odr, 2, [Hz10, Hz50, Hz100; Hz200]);
 
-/// QMC5883P CONTROL1 MODE[1:0] (QMC-P register map).
+/// QMC5883P CONTROL1 `MODE[1:0]` (QMC-P register map).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ModeP {
@@ -23,7 +23,7 @@ pub enum ModeP {
 }
 field_enum!(ModeP, 2, [Suspend, Normal, Single; Continuous]);
 
-/// QMC5883P CONTROL2 RNG[3:2] (QMC-P register map): the full-scale range.
+/// QMC5883P CONTROL2 `RNG[3:2]` (QMC-P register map): the full-scale range.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RangeP {
@@ -42,13 +42,13 @@ field_enum!(RangeP, 2, [G30, G12, G8; G2]);
 register! {
     /// QMC5883L CONTROL1 (QMC-L 9.2, control register 1).
     Control1L at reg_l::CONTROL1 => {
-        /// OSR[7:6]: over-sampling 512, 256, 128, 64.
+        /// `OSR[7:6]`: over-sampling 512, 256, 128, 64.
         osr: Osr [6, 2],
-        /// RNG[5:4]: [`Control1L::RNG_2G`] or [`Control1L::RNG_8G`] (10 and 11 reserved).
+        /// `RNG[5:4]`: [`Control1L::RNG_2G`] or [`Control1L::RNG_8G`] (10 and 11 reserved).
         rng: u8 [4, 2],
-        /// ODR[3:2]: 10, 50, 100, 200 Hz.
+        /// `ODR[3:2]`: 10, 50, 100, 200 Hz.
         odr: Odr [2, 2],
-        /// MODE[1:0]: [`Control1L::MODE_STANDBY`] or [`Control1L::MODE_CONTINUOUS`] (10 and 11
+        /// `MODE[1:0]`: [`Control1L::MODE_STANDBY`] or [`Control1L::MODE_CONTINUOUS`] (10 and 11
         /// reserved).
         mode: u8 [0, 2],
     }
@@ -91,7 +91,7 @@ register! {
     /// QMC5883L SET/RESET period (QMC-L 9.2, register 0BH: "recommended ... 0x01").
     #[derive(Default)]
     SetResetPeriod at reg_l::SET_RESET_PERIOD => {
-        /// FBR[7:0].
+        /// `FBR[7:0]`.
         fbr: u8 [0, 8],
     }
 }
@@ -99,13 +99,13 @@ register! {
 register! {
     /// QMC5883P CONTROL1 (QMC-P register map).
     Control1P at reg_p::CONTROL1 => {
-        /// OSR2[7:6]: down-sampling 1, 2, 4, 8 (as its code).
+        /// `OSR2[7:6]`: down-sampling 1, 2, 4, 8 (as its code).
         osr2: u8 [6, 2],
-        /// OSR1[5:4]: over-sampling 8, 4, 2, 1.
+        /// `OSR1[5:4]`: over-sampling 8, 4, 2, 1.
         osr1: Osr [4, 2],
-        /// ODR[3:2]: 10, 50, 100, 200 Hz.
+        /// `ODR[3:2]`: 10, 50, 100, 200 Hz.
         odr: Odr [2, 2],
-        /// MODE[1:0].
+        /// `MODE[1:0]`.
         mode: ModeP [0, 2],
     }
 }
@@ -118,9 +118,9 @@ register! {
         soft_reset: bool [7, 1],
         /// SELF_TEST (bit 6).
         self_test: bool [6, 1],
-        /// RNG[3:2].
+        /// `RNG[3:2]`.
         range: RangeP [2, 2],
-        /// SET/RESET mode[1:0]: 00 set and reset on, 01 set only, 1x set and reset off.
+        /// SET/RESET `mode[1:0]`: 00 set and reset on, 01 set only, 1x set and reset off.
         set_reset: u8 [0, 2],
     }
 }
