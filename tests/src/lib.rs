@@ -191,7 +191,8 @@ fn hmc_transaction(ops: &mut [Operation<'_>]) -> Result<(), SimError> {
 impl pico_imu_core::bus::TransferTime for SimBus {
     fn last_start(&self) -> pico_imu_core::clock::Fine {
         let ns = self.world.borrow().last_start_ns;
-        (u128::from(ns) * u128::from(pico_imu_core::clock::US) / 1000) as u64
+        let us = u128::from(pico_imu_core::clock::US.raw());
+        pico_imu_core::clock::Fine::from_raw((u128::from(ns) * us / 1000) as u64)
     }
 }
 

@@ -744,7 +744,7 @@ fn task_slots_match_the_division_and_skip_missed_ones() {
 #[test]
 fn the_device_refuses_calibrations_for_other_ranges_or_beyond_the_physical_bounds() {
     use imu_cal::file::CalFile;
-    use imu_proto::{CalCheck, CalSensor, ErrorCode};
+    use imu_proto::ErrorCode;
     let mut dev = Device::new(config::scales(), "test");
     let mut sink = Sink::roomy();
     let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
@@ -786,7 +786,8 @@ fn the_device_refuses_calibrations_for_other_ranges_or_beyond_the_physical_bound
         dev.cal_status().fault,
         Some(CalFault::Rejected(CalProblem::OtherRanges))
     );
-    // A zero accelerometer scale, encoded past the host's checks: refused by the device.
+    // A correction recording no parts (a zero accelerometer scale, assembled without them):
+    // refused as not fitted for the firmware's parts.
     let zero = imu_cal::device::Affine::from_float(
         imu_cal::device::Sensor::Accel,
         [[0.0; 3]; 3],
@@ -804,13 +805,137 @@ fn the_device_refuses_calibrations_for_other_ranges_or_beyond_the_physical_bound
         .to_vec();
     assert_eq!(
         upload(&mut dev, &blob),
-        (
-            false,
-            refused(CalProblem::Implausible {
-                sensor: CalSensor::Accel,
-                check: CalCheck::Singular,
-                axis: 0
-            })
-        )
+        (false, refused(CalProblem::OtherPart))
     );
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+
+    /// A parameter beyond its datasheet bound, encoded past the host's checks
+    /// (`to_device_unchecked`): the device refuses the upload (nothing to persist) and the
+    /// record in flash at boot (identity in use), and its refusal carries the file key, index,
+    /// value and bound, which read as the host's own refusal of the file.
+    #[test]
+    fn the_device_refuses_a_parameter_beyond_its_datasheet_bound(
+        which in 0usize..5, axis in 0usize..3, beyond in 0.01f64..2.0, above in proptest::bool::ANY,
+    ) {
+        use imu_cal::device::{BlobError, Key, Refusal};
+        use imu_cal::file::CalFile;
+        use imu_proto::ErrorCode;
+        let sign = if above { 1.0 } else { -1.0 };
+        let mut f = CalFile::default();
+        // Centre and half-width of each bound (docs/calibration.md, "Plausibility").
+        let (key, centre, half) = match which {
+            0 => (Key::AccelScale, 1.0, 0.09),
+            1 => (Key::GyroBias, 0.0, 60.0),
+            2 => (Key::AccelOffset, 0.0, if axis == 2 { 0.24 * 9.80665 } else { 0.15 * 9.80665 }),
+            3 => (Key::GyroScale, 1.0, 0.09),
+            _ => (Key::MagHardIron, 0.0, 130.0),
+        };
+        let value = centre + sign * (1.0 + beyond) * half;
+        match key {
+            Key::AccelScale => f.accel.scale[axis] = value,
+            Key::GyroBias => f.gyro.bias[axis] = value,
+            Key::AccelOffset => f.accel.offset[axis] = value,
+            Key::GyroScale => f.gyro.scale[axis] = value,
+            _ => f.mag.hard_iron[axis] = value,
+        }
+        let Err(BlobError::Implausible(host)) = f.to_device() else {
+            panic!("the host took {key:?}[{axis}] = {value}");
+        };
+        let cal = f.to_device_unchecked().unwrap();
+        let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+        let blob = imu_cal::device::encode_blob(&cal, &mut buf).unwrap().to_vec();
+        let mut dev = Device::new(config::scales(), "test");
+        let mut sink = Sink::roomy();
+        let req = Request::SetCalibration {
+            blob: imu_proto::Vec::from_slice(&blob).unwrap(),
+            persist: true,
+        };
+        let persist = dev.handle(HostFrame { id: 5, req }, 0, 0, &mut sink);
+        proptest::prop_assert!(persist.is_none(), "nothing to persist");
+        let Some(DeviceMsg::Reply { id: 5, reply: Reply::Error(ErrorCode::BadCalibration(p)) }) =
+            sink.messages().pop()
+        else {
+            panic!("no refusal of {key:?}[{axis}] = {value}");
+        };
+        dev.load_stored(Some(&blob));
+        proptest::prop_assert_eq!(dev.cal_status().source, CalSource::Identity);
+        proptest::prop_assert_eq!(dev.cal_status().fault, Some(CalFault::Rejected(p)));
+        let CalProblem::Implausible { key: k, axis: a, value: v, lo, hi } = p else {
+            panic!("{p:?}");
+        };
+        proptest::prop_assert_eq!((k, a), (key as u8, Some(axis as u8)));
+        proptest::prop_assert!((f64::from(v) - value).abs() <= 1e-5 * value.abs().max(1.0), "{v} vs {value}");
+        // In words, the device's refusal is the host's.
+        let words = Refusal { key, axis: a, value: v.into(), lo: lo.into(), hi: hi.into() }.to_string();
+        proptest::prop_assert_eq!(words, host.to_string());
+    }
+}
+
+/// A version-2 blob already in flash (sensitivities, no parts) is used when it is within the
+/// datasheet bounds, and refused with the parameter named when it is not (the old bounds took
+/// a 1.9 scale).
+#[test]
+fn a_version_2_blob_in_flash_loads_or_is_refused_with_the_reason() {
+    use imu_cal::file::CalFile;
+    // Version 2's payload was version 3's without the parts and ranges: the corrections, then
+    // `Some` (1) and the three f32 sensitivities. At ±4 g, ±250 °/s, ±2 G version 3 has, after
+    // its `Some`, the two parts (1 byte each) and the ranges 4, 250, 2 (1 + 2 + 1 varint bytes).
+    let v2 = |f: &CalFile| {
+        let cal = f.to_device_unchecked().unwrap();
+        let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+        let v3 = imu_cal::device::encode_blob(&cal, &mut buf).unwrap();
+        let n = u16::from_le_bytes([v3[6], v3[7]]) as usize;
+        let payload = &v3[8..8 + n];
+        let some = n - (1 + 2 + 4 + 12);
+        assert_eq!(&payload[some..some + 7], &[1, 0, 0, 4, 250, 1, 2]);
+        let mut b = b"PCAL".to_vec();
+        b.extend_from_slice(&2u16.to_le_bytes());
+        b.extend_from_slice(&((n - 6) as u16).to_le_bytes());
+        b.extend_from_slice(&payload[..=some]);
+        b.extend_from_slice(&payload[some + 7..]);
+        let crc = crc32(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        b
+    };
+    let mut dev = Device::new(config::scales(), "test");
+    let mut f = CalFile::default();
+    f.accel.scale = [1.02, 0.99, 0.98];
+    f.gyro.bias = [1.6, -0.3, 0.8];
+    dev.load_stored(Some(&v2(&f)));
+    assert_eq!(dev.cal_status().source, CalSource::Flash);
+    assert_eq!(dev.cal_status().fault, None);
+    assert_eq!(dev.calibration().accel(), f.to_device().unwrap().accel());
+    f.accel.scale = [1.9, 1.0, 1.0];
+    dev.load_stored(Some(&v2(&f)));
+    assert_eq!(dev.cal_status().source, CalSource::Identity);
+    let Some(CalFault::Rejected(CalProblem::Implausible {
+        key, axis, value, ..
+    })) = dev.cal_status().fault
+    else {
+        panic!("{:?}", dev.cal_status());
+    };
+    assert_eq!(
+        (key, axis),
+        (imu_cal::device::Key::AccelScale as u8, Some(0))
+    );
+    assert!((value - 1.9).abs() < 1e-6, "{value}");
+}
+
+/// CRC-32/ISO-HDLC (reflected 0x04C11DB7, init and final XOR all ones), bit by bit.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
 }

@@ -3,7 +3,7 @@
 //! step by step.
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{Event, FrameReader, GapCause, HostFrame, Sensor, SensorState, MAX_FRAME};
-use pico_imu_core::clock::{Stamps, US};
+use pico_imu_core::clock::{Fine, Stamps, US};
 use pico_imu_core::config;
 use pico_imu_core::device::Device;
 use pico_imu_core::health::{Health, LOSE_AFTER_US, RETRY_FIRST_MS, RETRY_MAX_MS, STALL_AFTER_US};
@@ -52,10 +52,10 @@ fn cause() -> impl Strategy<Value = Option<GapCause>> {
 }
 
 fn stamps() -> impl Strategy<Value = Stamps> {
-    (any::<u32>(), any::<u64>(), 0u64..(10_000 * US)).prop_map(|(k0, t0, period)| Stamps {
+    (any::<u32>(), any::<u64>(), 0u64..(10_000 * US).raw()).prop_map(|(k0, t0, period)| Stamps {
         k0,
-        t0: t0 >> 1,
-        period,
+        t0: Fine::from_raw(t0 >> 1),
+        period: Fine::from_raw(period),
     })
 }
 

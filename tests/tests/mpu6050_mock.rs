@@ -544,3 +544,61 @@ fn error_messages_name_the_register() {
     let msg = e.to_string();
     assert!(msg.contains("WHO_AM_I") && msg.contains("0x42"), "{msg}");
 }
+
+/// `config_intact` reads back SMPLRT_DIV..ACCEL_CONFIG (one burst), FIFO_EN, then USER_CTRL and
+/// PWR_MGMT_1 together; what `init` wrote reads as intact, a part back at its power-on values
+/// (PWR_MGMT_1 = 0x40, asleep, RM 4.28) or with the FIFO off does not.
+#[test]
+fn config_intact_reads_back_what_init_wrote() {
+    let readback = |power: u8, user: u8| {
+        inited(&[
+            T::write_read(A, vec![0x19], vec![0x00, 0x06, 0x00, 0x08]),
+            T::write_read(A, vec![0x23], vec![0x78]),
+            T::write_read(A, vec![0x6A], vec![user, power]),
+        ])
+    };
+    let check = |exp: &[T]| {
+        both(
+            exp,
+            |d| {
+                d.init(&mut NoopDelay, &Config::default()).unwrap();
+                d.config_intact().unwrap()
+            },
+            async |d| {
+                d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+                d.config_intact().await.unwrap()
+            },
+        )
+    };
+    assert!(check(&readback(0x01, 0x40)));
+    assert!(!check(&readback(0x40, 0x40)), "asleep after a power cycle");
+    assert!(!check(&readback(0x01, 0x00)), "FIFO off");
+}
+
+/// `stop_fifo` writes USER_CTRL = FIFO_RESET alone (0x04, RM 4.27: the reset acts only with
+/// FIFO_EN clear) and `start_fifo` USER_CTRL = FIFO_EN (0x40); `int_status` reads INT_STATUS
+/// (0x3A) and names its bits (FIFO_OFLOW_INT bit 4, DATA_RDY_INT bit 0, RM 4.16).
+#[test]
+fn fifo_stop_start_and_interrupt_status_transactions() {
+    let exp = inited(&[
+        T::write(A, vec![0x6A, 0x04]),
+        T::write(A, vec![0x6A, 0x40]),
+        T::write_read(A, vec![0x3A], vec![0x11]),
+    ]);
+    let st = both(
+        &exp,
+        |d| {
+            d.init(&mut NoopDelay, &Config::default()).unwrap();
+            d.stop_fifo().unwrap();
+            d.start_fifo().unwrap();
+            d.int_status().unwrap()
+        },
+        async |d| {
+            d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+            d.stop_fifo().await.unwrap();
+            d.start_fifo().await.unwrap();
+            d.int_status().await.unwrap()
+        },
+    );
+    assert!(st.fifo_overflow && st.data_ready && !st.i2c_master);
+}

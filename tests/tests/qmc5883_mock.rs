@@ -321,3 +321,61 @@ fn detect_each_chip() {
     assert_eq!(blocking::Qmc5883::detect(&mut m), Chip::None);
     m.done();
 }
+
+/// `config_intact` reads CONTROL1 and CONTROL2 in one burst (L: 0x09, 0x0A; P: 0x0A, 0x0B) and
+/// compares them with what `init` wrote; a soft reset's zeros do not match.
+#[test]
+fn config_intact_reads_back_both_controls() {
+    for (variant, addr, c1, written) in [
+        (Variant::L, L, 0x09, [0x0D, 0x00]),
+        (Variant::P, P, 0x0A, [0x0F, 0x0C]),
+    ] {
+        for (back, intact) in [(written, true), ([0x00, 0x00], false)] {
+            let control2 = written[1];
+            let mut exp = init_traffic(variant, control2, written[0]);
+            exp.push(T::write_read(addr, vec![c1], back.to_vec()));
+            let got = both(
+                variant,
+                &exp,
+                |d| {
+                    d.init(&mut NoopDelay, &Config::default()).unwrap();
+                    d.config_intact().unwrap()
+                },
+                async |d| {
+                    d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+                    d.config_intact().await.unwrap()
+                },
+            );
+            assert_eq!(got, intact, "{variant:?} read back {back:02x?}");
+        }
+    }
+}
+
+/// `status` reads the status register alone (L 0x06: DRDY bit 0, OVL bit 1, DOR bit 2; P 0x09:
+/// DOR does not exist) and `read_data` the six data bytes alone (L from 0x00, P from 0x01),
+/// little-endian.
+#[test]
+fn status_and_data_alone() {
+    for (variant, addr, status_reg, data_reg, skipped) in [
+        (Variant::L, L, 0x06, 0x00, true),
+        (Variant::P, P, 0x09, 0x01, false),
+    ] {
+        let exp = [
+            T::write_read(addr, vec![status_reg], vec![0b0000_0111]),
+            T::write_read(
+                addr,
+                vec![data_reg],
+                vec![0x01, 0x02, 0xFF, 0xFF, 0x00, 0x80],
+            ),
+        ];
+        let (st, xyz) = both(
+            variant,
+            &exp,
+            |d| (d.status().unwrap(), d.read_data().unwrap()),
+            async |d| (d.status().await.unwrap(), d.read_data().await.unwrap()),
+        );
+        assert!(st.ready && st.overflow, "{variant:?}");
+        assert_eq!(st.skipped, skipped, "{variant:?}");
+        assert_eq!(xyz, [0x0201, -1, i16::MIN], "{variant:?}");
+    }
+}

@@ -12,11 +12,11 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use imu_cal::device::Calibration;
 use imu_proto::{Event, SampleBatch, Sensor};
 
-use crate::emu::{arg_value, build_firmware, ensure_sim, out_dir, Sim};
+use crate::emu::{build_firmware, ensure_sim, out_dir, Sim};
 use crate::emu_check;
 use crate::run;
 mod checks;
@@ -108,30 +108,70 @@ fn spec_at(spec: &str, at_s: f64) -> String {
     }
 }
 
+/// The scenarios of `cargo xtask e2e --scenario`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Scenario {
+    /// The six faults, one at a time, with both parts' clocks 1.3 % slow (40 s).
+    Faults,
+    /// A sine on the gyro, no faults (20 s).
+    Sine,
+    /// The magnetometer stalled from boot (3 s).
+    BootStall,
+}
+
+impl Scenario {
+    /// The name on the command line and in the output folder and report.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scenario::Faults => "faults",
+            Scenario::Sine => "sine",
+            Scenario::BootStall => "boot-stall",
+        }
+    }
+}
+
 /// `cargo xtask e2e [--scenario faults|boot-stall|sine] [--seconds S] [--shift-ms MS] [--out DIR]`.
-///
-/// `--shift-ms` moves every fault of the scenario later by MS milliseconds (0 to 1000): the
-/// firmware's fault handling must not depend on where in its cycle of bus transfers and ticks
-/// a fault begins.
-pub fn e2e(args: &[String]) -> Result<()> {
-    let scenario = arg_value(args, "--scenario").unwrap_or_else(|| "faults".into());
+#[derive(Debug, Clone, clap::Args)]
+pub struct E2eArgs {
+    /// Which scenario to run.
+    #[arg(long, value_enum, default_value_t = Scenario::Faults)]
+    pub scenario: Scenario,
+    /// Emulated seconds (default: the scenario's own: faults 40, sine 20, boot-stall 3).
+    #[arg(long, value_name = "S")]
+    pub seconds: Option<f64>,
+    /// Move every fault of the scenario later by MS milliseconds (0 to 1000): the firmware's
+    /// fault handling must not depend on where in its cycle of bus transfers and ticks a
+    /// fault begins.
+    #[arg(long, value_name = "MS", default_value_t = 0.0)]
+    pub shift_ms: f64,
+    /// Output folder under out/ (default: e2e-SCENARIO).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<String>,
+}
+
+impl E2eArgs {
+    /// `scenario` with every other flag at its default.
+    pub fn scenario(scenario: Scenario) -> Self {
+        E2eArgs {
+            scenario,
+            seconds: None,
+            shift_ms: 0.0,
+            out: None,
+        }
+    }
+}
+
+/// Runs one end-to-end scenario (see [`E2eArgs`]).
+pub fn e2e(args: &E2eArgs) -> Result<()> {
+    let scenario = args.scenario.name();
     let (default_s, faults, clock, sine, stall_from_boot): (f64, &[Fault], Option<&str>, _, bool) =
-        match scenario.as_str() {
-            "faults" => (40.0, FAULTS, Some(SLOW_CLOCKS), None, false),
-            "sine" => (20.0, &[], None, Some("3,3"), false),
-            "boot-stall" => (3.0, &[], None, None, true),
-            other => bail!("unknown scenario `{other}` (faults, sine, boot-stall)"),
+        match args.scenario {
+            Scenario::Faults => (40.0, FAULTS, Some(SLOW_CLOCKS), None, false),
+            Scenario::Sine => (20.0, &[], None, Some("3,3"), false),
+            Scenario::BootStall => (3.0, &[], None, None, true),
         };
-    let seconds: f64 = arg_value(args, "--seconds")
-        .map(|s| s.parse())
-        .transpose()
-        .context("--seconds")?
-        .unwrap_or(default_s);
-    let shift_ms: f64 = arg_value(args, "--shift-ms")
-        .map(|s| s.parse())
-        .transpose()
-        .context("--shift-ms")?
-        .unwrap_or(0.0);
+    let seconds: f64 = args.seconds.unwrap_or(default_s);
+    let shift_ms = args.shift_ms;
     if !(0.0..=1000.0).contains(&shift_ms) {
         bail!("--shift-ms {shift_ms}: from 0 to 1000 ms");
     }
@@ -147,7 +187,12 @@ pub fn e2e(args: &[String]) -> Result<()> {
     let wall = Instant::now();
     let elf = build_firmware()?;
     let sim_dir = ensure_sim()?;
-    let out = out_dir(&arg_value(args, "--out").unwrap_or_else(|| format!("e2e-{scenario}")))?;
+    let out = out_dir(
+        &args
+            .out
+            .clone()
+            .unwrap_or_else(|| format!("e2e-{scenario}")),
+    )?;
     let stream = out.join("stream.csv");
     let mut gen = std::process::Command::new("node");
     gen.arg(sim_dir.join("src/cli.js"))

@@ -122,12 +122,6 @@ fn process_alive(pid: u32) -> bool {
     }
 }
 
-pub fn arg_value(args: &[String], name: &str) -> Option<String> {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1).cloned())
-}
-
 /// A running emulator with its USB port on TCP. Dropping it stops the emulator if it still runs
 /// and removes its port file.
 pub struct Sim {
@@ -231,16 +225,38 @@ impl Drop for Sim {
 /// cycle budget report in out/emu/bench.md (the warm-up before the windows, the stream's seed
 /// and the parts' oscillator errors as for the emulator's `run`; the goal is checked with the
 /// defaults: 1 s, nominal parts).
-pub fn bench(args: &[String]) -> Result<()> {
+#[derive(Debug, Clone, clap::Args)]
+pub struct BenchArgs {
+    /// Emulated time measured, as the emulator reads it (seconds, or with a unit: `1500ms`).
+    #[arg(long, value_name = "S", default_value = "12")]
+    pub seconds: String,
+    /// Emulated time run before the measured windows (the emulator's default: 1 s).
+    #[arg(long, value_name = "S")]
+    pub warmup: Option<String>,
+    /// Seed of the emulated sensors' stream.
+    #[arg(long, value_name = "N")]
+    pub seed: Option<u64>,
+    /// The parts' oscillator errors, e.g. `mpu:+1.3%,qmc:+1.3%` (default: nominal).
+    #[arg(long, value_name = "mpu:±P%,qmc:±P%", allow_hyphen_values = true)]
+    pub clock: Option<String>,
+}
+
+/// Runs the emulator's cycle budget report (see [`BenchArgs`]).
+pub fn bench(args: &BenchArgs) -> Result<()> {
     let elf = build_firmware()?;
     let sim = ensure_sim()?;
-    let seconds = arg_value(args, "--seconds").unwrap_or_else(|| "12".into());
+    let seconds = &args.seconds;
     let out = out_dir("emu")?;
     let mut node = Command::new("node");
     node.arg(sim.join("src/cli.js"))
-        .args(["bench", "--quiet", "--seconds", &seconds]);
-    for opt in ["--warmup", "--seed", "--clock"] {
-        if let Some(v) = arg_value(args, opt) {
+        .args(["bench", "--quiet", "--seconds", seconds]);
+    let opts = [
+        ("--warmup", args.warmup.clone()),
+        ("--seed", args.seed.map(|s| s.to_string())),
+        ("--clock", args.clock.clone()),
+    ];
+    for (opt, v) in opts {
+        if let Some(v) = v {
             node.args([opt, &v]);
         }
     }
@@ -284,16 +300,23 @@ fn imu_lab() -> Command {
 /// device's own Allan tables and the five-term fit); `imu-lab fit` on the recording, whose
 /// diagnosis names the missing effect; `imu-lab fit --add <it> --report` shows the error
 /// falling and writes the HTML report.
-pub fn demo(args: &[String]) -> Result<()> {
+#[derive(Debug, Clone, clap::Args)]
+pub struct DemoArgs {
+    /// A real Pico W running the firmware (e.g. /dev/ttyACM0) instead of the emulated board.
+    #[arg(long)]
+    pub port: Option<String>,
+    /// Seconds recorded.
+    #[arg(long, value_name = "S", default_value_t = 60.0)]
+    pub seconds: f64,
+}
+
+/// Runs the demo (see [`DemoArgs`]).
+pub fn demo(args: &DemoArgs) -> Result<()> {
     let out = out_dir("demo")?;
-    let seconds: f64 = arg_value(args, "--seconds")
-        .map(|s| s.parse())
-        .transpose()
-        .context("--seconds")?
-        .unwrap_or(60.0);
-    if let Some(port) = arg_value(args, "--port") {
+    let seconds = args.seconds;
+    if let Some(port) = &args.port {
         eprintln!("xtask: demo on the device at {port} (flash it first: cargo run --release)");
-        return demo_flow(&port, seconds, &out);
+        return demo_flow(port, seconds, &out);
     }
     let elf = build_firmware()?;
     ensure_sim()?;

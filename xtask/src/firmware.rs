@@ -33,12 +33,16 @@ const RAM: std::ops::Range<u64> = 0x2000_0000..0x2004_2000;
 const RAM_LINKED: u64 = 256 * 1024;
 
 /// `cargo xtask firmware [--no-build]`.
-pub fn main(args: &[String]) -> Result<()> {
-    let elf = if args.iter().any(|a| a == "--no-build") {
-        elf_path()?
-    } else {
-        build()?
-    };
+#[derive(Debug, Clone, clap::Args)]
+pub struct FirmwareArgs {
+    /// Report on the ELF already built instead of building it first.
+    #[arg(long)]
+    pub no_build: bool,
+}
+
+/// Builds the firmware (unless `--no-build`), prints and writes its size report, writes the UF2.
+pub fn main(args: &FirmwareArgs) -> Result<()> {
+    let elf = if args.no_build { elf_path()? } else { build()? };
     let data = fs::read(&elf).with_context(|| format!("reading {}", elf.display()))?;
     let report = size_report(&data)?;
     print!("{}", report.text);

@@ -7,6 +7,7 @@ use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
 
 mod e2e;
 mod emu;
@@ -17,23 +18,49 @@ mod firmware;
 /// Packages that only build for the device (thumbv6m-none-eabi).
 const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
 
+/// `cargo xtask <command>`: every command and flag declared here, so a misspelled one is
+/// refused with clap's message instead of being ignored.
+#[derive(Debug, Parser)]
+#[command(
+    name = "cargo xtask",
+    about = "pico-imu project automation",
+    bin_name = "cargo xtask"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Debug, Subcommand)]
+enum Cmd {
+    /// Run all host tests, build the firmware, run the emulator tests.
+    Test(TestArgs),
+    /// End-to-end test on the emulated board.
+    E2e(e2e::E2eArgs),
+    /// Emulated cycle budget report (out/emu/bench.md).
+    BenchEmu(emu::BenchArgs),
+    /// The main job: emulated IMU with a hidden effect, device tables, fit, HTML report.
+    Demo(emu::DemoArgs),
+    /// Release build of the firmware, size report, UF2 (out/pico-imu.uf2).
+    Firmware(firmware::FirmwareArgs),
+}
+
+/// `cargo xtask test [CARGO_TEST_ARGS…]`.
+#[derive(Debug, Args)]
+struct TestArgs {
+    /// Passed on to `cargo test` (a test name filter, `--nocapture` after `--`, …); cargo
+    /// refuses what it does not know.
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    cargo_test_args: Vec<String>,
+}
+
 fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let (cmd, rest) = args
-        .split_first()
-        .map(|(c, r)| (c.as_str(), r))
-        .unwrap_or(("help", &[]));
-    match cmd {
-        "test" => test(rest),
-        "e2e" => e2e::e2e(rest),
-        "bench-emu" => emu::bench(rest),
-        "demo" => emu::demo(rest),
-        "firmware" => firmware::main(rest),
-        "help" | "--help" | "-h" => {
-            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e [--scenario faults|boot-stall|sine] [--shift-ms MS]  end-to-end test on the emulated board (faults MS later)\n  bench-emu [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
-            Ok(())
-        }
-        other => bail!("unknown xtask command `{other}` (try `cargo xtask help`)"),
+    match Cli::parse().command {
+        Cmd::Test(a) => test(&a.cargo_test_args),
+        Cmd::E2e(a) => e2e::e2e(&a),
+        Cmd::BenchEmu(a) => emu::bench(&a),
+        Cmd::Demo(a) => emu::demo(&a),
+        Cmd::Firmware(a) => firmware::main(&a),
     }
 }
 
@@ -192,22 +219,22 @@ fn test(extra: &[String]) -> Result<()> {
     c.args(extra);
     run(&mut c)?;
     if emu::node_available() {
-        for scenario in ["faults", "boot-stall", "sine"] {
-            e2e::e2e(&["--scenario".to_string(), scenario.to_string()])?;
+        for scenario in [
+            e2e::Scenario::Faults,
+            e2e::Scenario::BootStall,
+            e2e::Scenario::Sine,
+        ] {
+            e2e::e2e(&e2e::E2eArgs::scenario(scenario))?;
         }
         // The fault scenario again with every fault later by a few ms: where in the firmware's
         // cycle of transfers a fault begins must not matter (these two shifts once put a CPU
         // stall between a magnetometer read and its processing, misdated as a held bus).
-        for shift_ms in ["3.3", "13.4"] {
-            let out = format!("e2e-faults-shift-{shift_ms}");
-            e2e::e2e(&[
-                "--scenario".into(),
-                "faults".into(),
-                "--shift-ms".into(),
-                shift_ms.into(),
-                "--out".into(),
-                out,
-            ])?;
+        for shift_ms in [3.3, 13.4] {
+            e2e::e2e(&e2e::E2eArgs {
+                shift_ms,
+                out: Some(format!("e2e-faults-shift-{shift_ms}")),
+                ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
+            })?;
         }
         // The Thumb differential test's program, for sim/test/thumb-diff.test.js.
         run(cargo().args(["build", "--release", "-p", "allan-thumb-check"]))?;
@@ -225,6 +252,70 @@ fn test(extra: &[String]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn parse(line: &str) -> Result<Cmd, clap::Error> {
+        Cli::try_parse_from(["cargo-xtask"].into_iter().chain(line.split_whitespace()))
+            .map(|c| c.command)
+    }
+
+    /// Every command and flag the README, docs/ and .ci/run use keeps its spelling, and a flag
+    /// no command declares is refused with clap's message naming it.
+    #[test]
+    fn every_command_and_flag_parses_and_an_unknown_flag_is_refused() {
+        for line in [
+            "test",
+            "test imu_drivers --nocapture",
+            "e2e",
+            "e2e --scenario faults --seconds 10 --shift-ms 3.3 --out e2e-x",
+            "e2e --scenario boot-stall",
+            "e2e --scenario sine",
+            "bench-emu --seconds 3 --warmup 0.2 --seed 7 --clock mpu:-1.3%,qmc:+1.3%",
+            "demo",
+            "demo --port /dev/ttyACM0 --seconds 60",
+            "firmware",
+            "firmware --no-build",
+        ] {
+            parse(line).unwrap_or_else(|e| panic!("`cargo xtask {line}`: {e}"));
+        }
+        match parse("e2e --scenario boot-stall --shift-ms 13.4").unwrap() {
+            Cmd::E2e(a) => {
+                assert_eq!(a.scenario, e2e::Scenario::BootStall);
+                assert_eq!(a.shift_ms, 13.4);
+                assert_eq!(a.seconds, None);
+            }
+            other => panic!("{other:?}"),
+        }
+        match parse("demo --port tcp:127.0.0.1:9000").unwrap() {
+            Cmd::Demo(a) => assert_eq!(
+                (a.port.as_deref(), a.seconds),
+                (Some("tcp:127.0.0.1:9000"), 60.0)
+            ),
+            other => panic!("{other:?}"),
+        }
+        match parse("firmware --no-build").unwrap() {
+            Cmd::Firmware(a) => assert!(a.no_build),
+            other => panic!("{other:?}"),
+        }
+        for (line, word) in [
+            ("demo --nonsense", "--nonsense"),
+            ("e2e --scenaro faults", "--scenaro"),
+            ("firmware --nobuild", "--nobuild"),
+            ("bench-emu --sed 3", "--sed"),
+        ] {
+            let e = parse(line).expect_err(line);
+            assert_eq!(e.kind(), clap::error::ErrorKind::UnknownArgument, "{line}");
+            assert!(
+                e.to_string()
+                    .contains(&format!("unexpected argument '{word}'")),
+                "{e}"
+            );
+        }
+        let e = parse("e2e --scenario fault").expect_err("a scenario that does not exist");
+        assert_eq!(e.kind(), clap::error::ErrorKind::InvalidValue);
+        let e = parse("demo --seconds many").expect_err("seconds that are not a number");
+        assert_eq!(e.kind(), clap::error::ErrorKind::ValueValidation);
+        assert!(parse("dmeo").is_err());
+    }
 
     #[test]
     fn a_long_child_is_reported_while_it_runs_and_a_quick_one_is_not() {

@@ -13,6 +13,26 @@
 //! finite differences of `θ`. References: NIST SP 1065 (Riley, *Handbook of Frequency Stability
 //! Analysis*, 2008) for each estimator, Greenhall & Riley (PTTI 2003) for the EDF; each function
 //! cites its equation. docs/allan.md explains the conventions and the streaming design.
+//!
+//! ```
+//! use allan::{stream::DEVICE_PARAMS, Engine};
+//!
+//! // The device's engine (8 differences per cluster, 24 octaves) on a rate that alternates
+//! // +1, −1 LSB: clusters of one sample differ by 2 LSB, so σ²(τ₀) = 2²/2 and σ(τ₀) = √2 LSB;
+//! // clusters of two (or any even number of) samples all average 0, so σ(2τ₀) = 0.
+//! const P: [usize; 4] = DEVICE_PARAMS;
+//! let mut e = Engine::<{ P[0] }, { P[1] }, { P[2] }, { P[3] }>::new();
+//! for i in 0..1000 {
+//!     e.push(if i % 2 == 0 { 1 } else { -1 });
+//! }
+//! assert_eq!(e.samples(), 1000);
+//! let l0 = e.level(0).unwrap();
+//! assert_eq!(l0.m, 1);
+//! assert!((l0.oadev(1.0).unwrap() - 2f64.sqrt()).abs() < 1e-12);
+//! assert_eq!(e.level(1).unwrap().oadev(1.0), Some(0.0));
+//! // In deg/s for a ±250 °/s gyro (131 LSB per °/s):
+//! assert!((l0.oadev(1.0 / 131.0).unwrap() - 2f64.sqrt() / 131.0).abs() < 1e-12);
+//! ```
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 

@@ -78,6 +78,11 @@
 //! offset 8  : n bytes                postcard encoding of `Calibration`
 //! offset 8+n: u32 LE                 CRC-32/ISO-HDLC over bytes 0 .. 8+n
 //! ```
+//!
+//! The `Calibration` holds the three corrections and what they were fitted for ([`Fitted`]:
+//! the parts, their full-scale ranges and the sensitivities), which [`plausible`] checks the
+//! corrections against (the parts' datasheet bounds, docs/calibration.md "Plausibility").
+//! Version 2 (no parts) is still read; see [`BLOB_VERSION`].
 
 // Fixed 3×3 index arithmetic reads closer to the equations than iterator chains.
 #![allow(clippy::needless_range_loop)]
@@ -85,14 +90,14 @@
 use serde::{Deserialize, Serialize};
 
 mod blob;
-mod physics;
+pub mod plausible;
 mod prepared;
 pub use blob::{decode_blob, encode_blob, BLOB_MAGIC, BLOB_VERSION, MAX_BLOB_LEN};
-pub use physics::{bounds, Check};
+pub use plausible::{Fitted, ImuPart, Key, MagPart, Ranges, Refusal};
 pub use prepared::Prepared;
 
 /// Why a blob or a parameter set was rejected. Each variant says what and where.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum BlobError {
     /// Fewer bytes than the 12-byte header + CRC, or than the header's payload length.
     Truncated { len: usize, needed: usize },
@@ -112,12 +117,15 @@ pub enum BlobError {
     },
     /// The output buffer given to [`encode_blob`] is too small.
     BufferTooSmall { len: usize },
-    /// A correction outside the physical bounds ([`bounds`]).
-    Implausible {
-        sensor: Sensor,
-        check: Check,
-        axis: u8,
-    },
+    /// A parameter outside its datasheet bound ([`plausible::BOUNDS`]): the file key, axis,
+    /// value and bound.
+    Implausible(Refusal),
+    /// A sensitivity (LSB per unit) that matches none of the part's ranges, or not its
+    /// temperature sensitivity.
+    NoRange { key: Key, value: f32 },
+    /// A correction other than identity that does not record the parts and ranges it was
+    /// fitted for.
+    NotFitted,
 }
 
 /// Which sensor a [`BlobError::OutOfRange`] refers to.
@@ -152,7 +160,7 @@ impl core::fmt::Display for BlobError {
             }
             BlobError::WrongVersion { found, expected } => write!(
                 f,
-                "calibration blob version {found} not supported (this build reads version {expected})"
+                "calibration blob version {found} not supported (this build reads versions 2 to {expected})"
             ),
             BlobError::CrcMismatch { stored, computed } => write!(
                 f,
@@ -166,22 +174,17 @@ impl core::fmt::Display for BlobError {
             BlobError::BufferTooSmall { len } => {
                 write!(f, "buffer of {len} bytes too small for a calibration blob")
             }
-            BlobError::Implausible {
-                sensor,
-                check,
-                axis,
-            } => write!(
+            BlobError::Implausible(r) => write!(f, "{r}"),
+            BlobError::NoRange { key, value } => write!(
                 f,
-                "calibration {sensor:?} axis {axis} implausible: {}",
-                match check {
-                    Check::Scale => "a scale factor outside [0.5, 2]",
-                    Check::Misalignment => "an axis turned by more than 10° (or flipped)",
-                    Check::Condition => "a soft-iron matrix with condition number over 3",
-                    Check::Singular => "a singular matrix",
-                    Check::Bias => "a gyro bias over a quarter of full scale",
-                    Check::Offset => "an offset beyond the sensor's range",
-                    Check::LsbFactor => "a non-positive or non-finite LSB-per-unit factor",
-                }
+                "{} = {}{} is none of the sensitivities of the part's ranges (see docs/calibration.md, \"Plausibility\")",
+                key.name(),
+                plausible::Num(f64::from(*value)),
+                key.unit()
+            ),
+            BlobError::NotFitted => write!(
+                f,
+                "the calibration does not record the parts and ranges it was fitted for"
             ),
         }
     }
@@ -454,10 +457,10 @@ pub struct Calibration {
     accel: Affine,
     gyro: GyroCorrection,
     mag: Affine,
-    /// LSB per unit of the accelerometer (m/s²), gyro (deg/s) and magnetometer (µT) at the
-    /// ranges the corrections were fitted for; `None` for corrections that apply at any range
-    /// (identity).
-    lsb_per_unit: Option<[f32; 3]>,
+    /// The parts, ranges and sensitivities the corrections were fitted for; `None` for
+    /// identity (which applies at any range; [`decode_blob`] refuses any other correction
+    /// without it).
+    fitted: Option<Fitted>,
 }
 
 impl Default for Calibration {
@@ -473,76 +476,85 @@ impl Calibration {
             accel: Affine::IDENTITY,
             gyro: GyroCorrection::IDENTITY,
             mag: Affine::IDENTITY,
-            lsb_per_unit: None,
+            fitted: None,
         }
     }
 
-    /// Assemble parts that fit the fixed-point path (no physical check, no sensor ranges:
-    /// see [`Calibration::fitted`] for a calibration a device may store).
-    pub fn new(accel: Affine, gyro: GyroCorrection, mag: Affine) -> Result<Calibration, BlobError> {
+    /// Assemble parts that fit the fixed-point path, with what they were fitted for if known,
+    /// without the physical check: for tests and tools that build a blob a device must
+    /// refuse. [`Calibration::fitted`] is the checked constructor.
+    pub fn assemble(
+        accel: Affine,
+        gyro: GyroCorrection,
+        mag: Affine,
+        fitted: Option<Fitted>,
+    ) -> Result<Calibration, BlobError> {
         let c = Calibration {
             accel,
             gyro,
             mag,
-            lsb_per_unit: None,
+            fitted,
         };
         c.validate()?;
         Ok(c)
     }
 
-    /// A calibration fitted at the ranges whose sensitivities are `lsb_per_unit` (accelerometer
-    /// LSB per m/s², gyro LSB per deg/s, magnetometer LSB per µT), checked against the
-    /// physical bounds ([`Calibration::check_physics`]).
+    /// Assemble parts that fit the fixed-point path, recording no parts (no physical check:
+    /// such a blob is refused by [`decode_blob`] unless it is identity).
+    pub fn new(accel: Affine, gyro: GyroCorrection, mag: Affine) -> Result<Calibration, BlobError> {
+        Calibration::assemble(accel, gyro, mag, None)
+    }
+
+    /// A calibration fitted for `fitted` (parts, ranges, sensitivities), checked against the
+    /// datasheet bounds ([`Calibration::check_physics`]).
     pub fn fitted(
         accel: Affine,
         gyro: GyroCorrection,
         mag: Affine,
-        lsb_per_unit: [f32; 3],
+        fitted: Fitted,
     ) -> Result<Calibration, BlobError> {
-        for (i, (l, sensor)) in lsb_per_unit
-            .iter()
-            .zip([Sensor::Accel, Sensor::Gyro, Sensor::Mag])
-            .enumerate()
-        {
-            if !(l.is_finite() && *l > 0.0) {
-                return Err(BlobError::Implausible {
-                    sensor,
-                    check: Check::LsbFactor,
-                    axis: i as u8,
-                });
-            }
-        }
-        let c = Calibration {
-            lsb_per_unit: Some(lsb_per_unit),
-            ..Calibration::new(accel, gyro, mag)?
-        };
+        let c = Calibration::assemble(accel, gyro, mag, Some(fitted))?;
         c.check_physics()?;
         Ok(c)
     }
 
-    /// The sensitivities the corrections were fitted for (see [`Calibration::fitted`]).
+    /// What the corrections were fitted for (see [`Calibration::fitted`]).
+    pub fn fitted_for(&self) -> Option<&Fitted> {
+        self.fitted.as_ref()
+    }
+
+    /// The sensitivities the corrections were fitted for (LSB per m/s², per deg/s, per µT).
     pub fn lsb_per_unit(&self) -> Option<[f32; 3]> {
-        self.lsb_per_unit
+        self.fitted.map(|f| f.lsb_per_unit)
     }
 
     /// Whether the corrections were fitted for sensitivities within 1 % of `lsb_per_unit`
     /// (the device's ranges); identity fits any.
     pub fn fits_ranges(&self, lsb_per_unit: [f32; 3]) -> bool {
-        self.lsb_per_unit.is_none_or(|have| {
+        self.lsb_per_unit().is_none_or(|have| {
             have.iter()
                 .zip(lsb_per_unit)
                 .all(|(h, l)| (h / l - 1.0).abs() <= 0.01)
         })
     }
 
-    /// The physical bounds ([`bounds`]) of every part; identity passes.
+    /// Whether every correction is identity.
+    pub fn is_identity(&self) -> bool {
+        self.accel == Affine::IDENTITY
+            && self.gyro == GyroCorrection::IDENTITY
+            && self.mag == Affine::IDENTITY
+    }
+
+    /// The datasheet bounds ([`plausible::check`]) on the parameters recovered from the
+    /// fixed-point corrections ([`plausible::Physical::of`]); identity passes, any other
+    /// correction must record what it was fitted for ([`BlobError::NotFitted`]).
     pub fn check_physics(&self) -> Result<(), BlobError> {
-        self.accel
-            .check_physics(Sensor::Accel, bounds::OFFSET_LSB)?;
-        self.gyro
-            .affine
-            .check_physics(Sensor::Gyro, bounds::GYRO_BIAS_LSB)?;
-        self.mag.check_physics(Sensor::Mag, bounds::OFFSET_LSB)
+        match &self.fitted {
+            None if self.is_identity() => Ok(()),
+            None => Err(BlobError::NotFitted),
+            Some(f) => plausible::check(&plausible::Physical::of(self, f), f)
+                .map_err(BlobError::Implausible),
+        }
     }
 
     /// Check every coefficient against the fixed-point ranges (module docs).

@@ -10,11 +10,13 @@
 //! ```toml
 //! version = 1
 //! [accel]                  # a_cal = T·K·(a − offset)
+//! part = "MPU-6050"        # the part whose datasheet bounds apply (optional, this default)
 //! lsb_per_unit = 835.3     # LSB per m/s² (8192 LSB/g at ±4 g)
 //! offset = [0.0, 0.0, 0.0] # m/s²
 //! scale = [1.0, 1.0, 1.0]
 //! misalignment_deg = [0.0, 0.0, 0.0]
 //! [gyro]                   # ω_cal = T_g·K_g·(ω − bias − temp_coeff·(T − temp_ref))
+//! part = "MPU-6050"        # optional; must be the accelerometer's
 //! lsb_per_unit = 131.0     # LSB per deg/s (±250 °/s)
 //! bias = [0.0, 0.0, 0.0]   # deg/s
 //! temp_coeff = [0.0, 0.0, 0.0]  # deg/s per °C
@@ -24,12 +26,21 @@
 //! scale = [1.0, 1.0, 1.0]  # optional (gyro_rot)
 //! misalignment_deg = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # optional (gyro_rot)
 //! [mag]                    # m_cal = soft_iron·(m − hard_iron)
+//! part = "QMC5883L"        # optional, this default
 //! lsb_per_unit = 120.0     # LSB per µT (QMC5883 ±2 G: 12000 LSB/G)
 //! hard_iron = [0.0, 0.0, 0.0]   # µT
 //! soft_iron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
 //! ```
+//!
+//! Every `lsb_per_unit` must be the part's nominal sensitivity at one of its ranges (within
+//! 1 %), which is how the blob records the ranges, and every parameter must lie within its
+//! datasheet bound ([`crate::device::plausible`]); a file without `part` keys (written before
+//! they existed) is read as MPU-6050 + QMC5883L, the parts the firmware drives.
 use crate::accel::correction_matrix;
-use crate::device::{Affine, BlobError, Calibration, Check, GyroCorrection, Sensor};
+use crate::device::plausible::{self, Physical};
+use crate::device::{
+    Affine, BlobError, Calibration, Fitted, GyroCorrection, ImuPart, Key, MagPart, Sensor,
+};
 use crate::lab::{CalError, Params};
 use serde::{Deserialize, Serialize};
 
@@ -40,6 +51,9 @@ pub const FILE_VERSION: u32 = 1;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AccelSection {
+    /// The part (`"MPU-6050"`); absent in files written before it existed: the default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<ImuPart>,
     /// Raw LSB per m/s².
     pub lsb_per_unit: f64,
     /// m/s².
@@ -54,6 +68,9 @@ pub struct AccelSection {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct GyroSection {
+    /// The part (`"MPU-6050"`, the accelerometer's); absent: the accelerometer's or the default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<ImuPart>,
     /// Raw LSB per deg/s.
     pub lsb_per_unit: f64,
     /// deg/s at `temp_ref`.
@@ -82,6 +99,9 @@ fn unit_scale() -> [f64; 3] {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MagSection {
+    /// The part (`"QMC5883L"`); absent: the default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part: Option<MagPart>,
     /// Raw LSB per µT.
     pub lsb_per_unit: f64,
     /// µT.
@@ -109,12 +129,14 @@ impl Default for CalFile {
         CalFile {
             version: FILE_VERSION,
             accel: AccelSection {
+                part: Some(ImuPart::Mpu6050),
                 lsb_per_unit: 8192.0 / crate::accel::G_STANDARD,
                 offset: [0.0; 3],
                 scale: [1.0; 3],
                 misalignment_deg: [0.0; 3],
             },
             gyro: GyroSection {
+                part: Some(ImuPart::Mpu6050),
                 lsb_per_unit: 131.0,
                 bias: [0.0; 3],
                 temp_coeff: [0.0; 3],
@@ -125,6 +147,7 @@ impl Default for CalFile {
                 misalignment_deg: [0.0; 6],
             },
             mag: MagSection {
+                part: Some(MagPart::Qmc5883l),
                 lsb_per_unit: 120.0,
                 hard_iron: [0.0; 3],
                 soft_iron: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
@@ -159,6 +182,11 @@ impl CalFile {
     /// reset to identity, so the file always describes exactly the last fitted model).
     /// `"gyro"` sets bias and temperature; `"gyro-rot"` sets the gyro scale and misalignment.
     pub fn set(&mut self, sensor: &str, p: &Params) -> Result<(), CalError> {
+        // A file without parts (older than them) names the ones it is read as from now on.
+        let (imu, mag) = self.parts();
+        self.accel.part = Some(imu);
+        self.gyro.part = Some(imu);
+        self.mag.part = Some(mag);
         match sensor {
             "accel" => {
                 self.accel.offset = p.offset.unwrap_or([0.0; 3]);
@@ -187,22 +215,75 @@ impl CalFile {
         Ok(())
     }
 
-    /// Convert to the device's fixed-point corrections (module docs).
+    /// The parts the file is for: its `part` keys, or the defaults (MPU-6050, QMC5883L) where
+    /// absent; the gyro's is the accelerometer's (one die).
+    pub fn parts(&self) -> (ImuPart, MagPart) {
+        (
+            self.accel
+                .part
+                .or(self.gyro.part)
+                .unwrap_or(ImuPart::Mpu6050),
+            self.mag.part.unwrap_or(MagPart::Qmc5883l),
+        )
+    }
+
+    /// The file's parameters as the plausibility check takes them.
+    pub fn physical(&self) -> Physical {
+        Physical {
+            accel_scale: self.accel.scale,
+            accel_offset: self.accel.offset,
+            accel_misalignment_deg: self.accel.misalignment_deg,
+            accel_upper: [0.0; 3],
+            gyro_scale: self.gyro.scale,
+            gyro_bias: self.gyro.bias,
+            gyro_temp_coeff: self.gyro.temp_coeff,
+            gyro_misalignment_deg: self.gyro.misalignment_deg,
+            soft_iron: self.mag.soft_iron,
+            hard_iron: self.mag.hard_iron,
+        }
+    }
+
+    /// Convert to the device's fixed-point corrections (module docs). Checks, in order: the
+    /// sensitivities against the parts' ranges ([`BlobError::NoRange`]), the file's own
+    /// parameters against the datasheet bounds ([`BlobError::Implausible`], naming the key,
+    /// axis, value and bound), the fixed-point ranges, and the bounds again on what the
+    /// device will hold (as the device does).
     pub fn to_device(&self) -> Result<Calibration, BlobError> {
+        self.convert(true)
+    }
+
+    /// [`CalFile::to_device`] without the datasheet bounds (the sensitivities and the
+    /// fixed-point ranges are still checked): for tests and tools that need a blob the device
+    /// must refuse.
+    pub fn to_device_unchecked(&self) -> Result<Calibration, BlobError> {
+        self.convert(false)
+    }
+
+    fn convert(&self, check: bool) -> Result<Calibration, BlobError> {
+        let (imu, mag_part) = self.parts();
         let lsb = [
-            (self.accel.lsb_per_unit, Sensor::Accel),
-            (self.gyro.lsb_per_unit, Sensor::Gyro),
-            (self.gyro.temp_lsb_per_c, Sensor::Gyro),
-            (self.mag.lsb_per_unit, Sensor::Mag),
+            (self.accel.lsb_per_unit, Key::AccelLsbPerUnit),
+            (self.gyro.lsb_per_unit, Key::GyroLsbPerUnit),
+            (self.mag.lsb_per_unit, Key::MagLsbPerUnit),
         ];
-        for (i, (l, sensor)) in lsb.into_iter().enumerate() {
+        for (l, key) in lsb {
             if !(l.is_finite() && l > 0.0 && l < f32::MAX as f64) {
-                return Err(BlobError::Implausible {
-                    sensor,
-                    check: Check::LsbFactor,
-                    axis: if i == 2 { 3 } else { 0 },
+                return Err(BlobError::NoRange {
+                    key,
+                    value: l as f32,
                 });
             }
+        }
+        let fitted = Fitted::new(imu, mag_part, lsb.map(|(l, _)| l as f32))?;
+        let t = self.gyro.temp_lsb_per_c;
+        if !((t / imu.temp_lsb_per_c() - 1.0).abs() <= plausible::LSB_MATCH) {
+            return Err(BlobError::NoRange {
+                key: Key::GyroTempLsbPerC,
+                value: t as f32,
+            });
+        }
+        if check {
+            plausible::check(&self.physical(), &fitted).map_err(BlobError::Implausible)?;
         }
         let a = &self.accel;
         let ap = Params {
@@ -239,15 +320,10 @@ impl CalFile {
             mg.soft_iron,
             mg.hard_iron.map(|h| h * mg.lsb_per_unit),
         )?;
-        Calibration::fitted(
-            accel,
-            gyro,
-            mag,
-            [
-                self.accel.lsb_per_unit as f32,
-                self.gyro.lsb_per_unit as f32,
-                self.mag.lsb_per_unit as f32,
-            ],
-        )
+        if check {
+            Calibration::fitted(accel, gyro, mag, fitted)
+        } else {
+            Calibration::assemble(accel, gyro, mag, Some(fitted))
+        }
     }
 }

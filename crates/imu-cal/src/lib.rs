@@ -9,6 +9,29 @@
 //!   diagnosis of the missing effect; `solve` (`std`) — Levenberg–Marquardt, uncertainties and
 //!   the statistics behind them; `error` (`std`) — the one error type; `sentinel` (`std`) — the
 //!   sensors' overflow values, excluded before fitting.
+//!
+//! ```
+//! use imu_cal::device::{
+//!     decode_blob, encode_blob, Affine, BlobError, Calibration, GyroCorrection, Sensor,
+//!     MAX_BLOB_LEN,
+//! };
+//!
+//! // A magnetometer with a hard-iron offset of (120, −40, 15) LSB and an X gain 2 % low:
+//! // out = diag(1/0.98, 1, 1)·(raw − offset), in the part's nominal LSB.
+//! let gain = [[1.0 / 0.98, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+//! let mag = Affine::from_float(Sensor::Mag, gain, [120.0, -40.0, 15.0]).unwrap();
+//! let cal = Calibration::new(Affine::IDENTITY, GyroCorrection::IDENTITY, mag).unwrap();
+//! // The part reports (1100, 460, −285) for a field of (1000, 500, −300) LSB: 980 / 0.98 = 1000.
+//! assert_eq!(cal.apply_mag([1100, 460, -285]), [1000, 500, -300]);
+//!
+//! // The device stores it as a CRC-checked blob; one changed byte is refused.
+//! let mut buf = [0u8; MAX_BLOB_LEN];
+//! let blob = encode_blob(&cal, &mut buf).unwrap().to_vec();
+//! assert_eq!(decode_blob(&blob).unwrap().apply_mag([1100, 460, -285]), [1000, 500, -300]);
+//! let mut bad = blob.clone();
+//! bad[20] ^= 1;
+//! assert!(matches!(decode_blob(&bad), Err(BlobError::CrcMismatch { .. })));
+//! ```
 #![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must be rejected too.

@@ -1,17 +1,26 @@
 //! The calibration blob: round trip, and every kind of corruption gives its own clear error.
 use imu_cal::device::*;
 
+/// A plausible calibration fitted for an MPU-6050 at ±4 g, ±250 °/s and a QMC5883L at ±2 G.
 fn sample() -> Calibration {
     let m = [
         [1.01, 0.002, -0.001],
         [0.003, 0.98, 0.0],
         [-0.01, 0.004, 1.02],
     ];
-    let acc = Affine::from_float(Sensor::Accel, m, [120.5, -340.25, 800.0]).unwrap();
+    // The accelerometer's model is lower-triangular.
+    let lower = [[1.01, 0.0, 0.0], [0.003, 0.98, 0.0], [-0.01, 0.004, 1.02]];
+    let acc = Affine::from_float(Sensor::Accel, lower, [120.5, -340.25, 800.0]).unwrap();
     let gyr =
         GyroCorrection::from_float(m, [-210.0, 38.0, 242.0], [0.01, -0.02, 0.005], -2300).unwrap();
     let mag = Affine::from_float(Sensor::Mag, m, [-927.3, -56.4, 167.7]).unwrap();
-    Calibration::new(acc, gyr, mag).unwrap()
+    let fitted = Fitted::new(
+        ImuPart::Mpu6050,
+        MagPart::Qmc5883l,
+        [8192.0 / 9.80665, 131.0, 120.0],
+    )
+    .unwrap();
+    Calibration::fitted(acc, gyr, mag, fitted).unwrap()
 }
 
 #[test]
@@ -57,15 +66,17 @@ fn errors_name_the_fault() {
     let mut b = blob.clone();
     b[0] = b'X';
     assert!(matches!(decode_blob(&b), Err(BlobError::BadMagic { .. })));
-    let mut b = blob.clone();
-    b[4] = 1;
-    assert_eq!(
-        decode_blob(&b),
-        Err(BlobError::WrongVersion {
-            found: 1,
-            expected: BLOB_VERSION
-        })
-    );
+    for v in [1u8, 4] {
+        let mut b = blob.clone();
+        b[4] = v;
+        assert_eq!(
+            decode_blob(&b),
+            Err(BlobError::WrongVersion {
+                found: v.into(),
+                expected: BLOB_VERSION
+            })
+        );
+    }
     let mut b = blob.clone();
     b[10] ^= 0x40;
     assert!(matches!(
@@ -130,9 +141,12 @@ mod fuzz {
         /// or returns a calibration that passes validation and whose every apply path is safe
         /// at the input extremes (no overflow panic in this debug build).
         #[test]
-        fn arbitrary_payload_with_valid_crc(p in proptest::collection::vec(any::<u8>(), 0..220)) {
+        fn arbitrary_payload_with_valid_crc(
+            p in proptest::collection::vec(any::<u8>(), 0..240),
+            version in 2u16..=BLOB_VERSION,
+        ) {
             let mut b = b"PCAL".to_vec();
-            b.extend_from_slice(&BLOB_VERSION.to_le_bytes());
+            b.extend_from_slice(&version.to_le_bytes());
             b.extend_from_slice(&(p.len() as u16).to_le_bytes());
             b.extend_from_slice(&p);
             if let Ok(cal) = decode_blob(&with_crc(b)) {

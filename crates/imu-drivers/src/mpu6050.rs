@@ -7,8 +7,8 @@
 //! - "MPU-6000 and MPU-6050 Product Specification", PS-MPU-6000A-00 rev 3.4 (PS).
 //! - "MPU-6500 Register Map and Descriptions", RM-MPU-6500A-00 rev 2.1 (RM-6500), for clones.
 
-pub mod bits;
 pub mod reg;
+pub mod registers;
 
 /// Delay after DEVICE_RESET before the registers are written again, in ms. PS 6.3 gives a
 /// 100 ms start-up time for register read/write; RM 4.28 notes the reset bit self-clears.
@@ -187,10 +187,6 @@ impl GyroRange {
             GyroRange::Dps2000 => 16.4,
         }
     }
-    /// GYRO_CONFIG value (FS_SEL in bits 4:3, self-test off).
-    pub const fn bits(self) -> u8 {
-        (self as u8) << 3
-    }
 }
 
 /// Accelerometer full-scale range, ACCEL_CONFIG.AFS_SEL (RM 4.5).
@@ -217,10 +213,6 @@ impl AccelRange {
             AccelRange::G8 => 4096.0,
             AccelRange::G16 => 2048.0,
         }
-    }
-    /// ACCEL_CONFIG value (AFS_SEL in bits 4:3, self-test off).
-    pub const fn bits(self) -> u8 {
-        (self as u8) << 3
     }
 }
 
@@ -255,11 +247,14 @@ impl Dlpf {
             _ => 1000,
         }
     }
-    /// MPU-6500 family ACCEL_CONFIG2.A_DLPF_CFG with the nearest bandwidth (RM-6500 register 29 ACCEL_CONFIG 2, A_DLPF_CFG table:
+    /// MPU-6500 family ACCEL_CONFIG2 with the nearest bandwidth (RM-6500 register 29 ACCEL_CONFIG 2, A_DLPF_CFG table:
     /// 0 = 218 Hz, 1 = 218 Hz, 2 = 99 Hz, 3 = 44.8 Hz, 4 = 21.2 Hz, 5 = 10.2 Hz, 6 = 5.05 Hz);
-    /// ACCEL_FCHOICE_B = 0 (bit 3) so the filter is in use.
-    pub const fn accel_config2_bits(self) -> u8 {
-        self as u8
+    /// ACCEL_FCHOICE_B = 0 so the filter is in use.
+    pub const fn accel_config2(self) -> registers::AccelConfig2 {
+        registers::AccelConfig2 {
+            accel_fchoice_b: false,
+            a_dlpf_cfg: self as u8,
+        }
     }
 }
 
@@ -284,11 +279,16 @@ impl FifoFrame {
         }
     }
     /// FIFO_EN for frames of this layout.
-    pub const fn fifo_en(self) -> bits::FifoEn {
-        bits::FifoEn {
+    pub const fn fifo_en(self) -> registers::FifoEn {
+        registers::FifoEn {
             temp: matches!(self, FifoFrame::AccelTempGyro),
-            gyro: true,
+            xg: true,
+            yg: true,
+            zg: true,
             accel: true,
+            slv2: false,
+            slv1: false,
+            slv0: false,
         }
     }
 }
@@ -327,18 +327,22 @@ impl Default for InterruptConfig {
 
 impl InterruptConfig {
     /// INT_PIN_CFG.
-    pub const fn pin_cfg(&self) -> bits::IntPinCfg {
-        bits::IntPinCfg {
+    pub const fn pin_cfg(&self) -> registers::IntPinCfg {
+        registers::IntPinCfg {
             active_low: self.active_low,
             open_drain: self.open_drain,
             latch: self.latch,
             clear_on_any_read: self.clear_on_any_read,
+            fsync_active_low: false,
+            fsync_int: false,
+            i2c_bypass: false,
         }
     }
     /// INT_ENABLE.
-    pub const fn enable(&self) -> bits::IntEnable {
-        bits::IntEnable {
+    pub const fn enable(&self) -> registers::IntEnable {
+        registers::IntEnable {
             fifo_overflow: self.fifo_overflow,
+            i2c_master: false,
             data_ready: self.data_ready,
         }
     }
@@ -388,11 +392,11 @@ impl Config {
     pub fn config_burst(&self, chip: ChipId) -> ([u8; 6], usize) {
         let mut b = [
             reg::SMPLRT_DIV,
-            self.sample_rate_divider,
-            self.dlpf as u8,
-            self.gyro_range.bits(),
-            self.accel_range.bits(),
-            self.dlpf.accel_config2_bits(),
+            self.smplrt_div().bits(),
+            self.config_reg().bits(),
+            GyroConfig::range(self.gyro_range).bits(),
+            AccelConfig::range(self.accel_range).bits(),
+            self.dlpf.accel_config2().bits(),
         ];
         let len = match chip.family() {
             Family::Mpu6050 => 5,
@@ -404,9 +408,24 @@ impl Config {
         (b, len)
     }
 
+    /// SMPLRT_DIV.
+    pub const fn smplrt_div(&self) -> registers::SmplrtDiv {
+        registers::SmplrtDiv {
+            divider: self.sample_rate_divider,
+        }
+    }
+
+    /// CONFIG: the low-pass filter, FSYNC off.
+    pub const fn config_reg(&self) -> registers::ConfigReg {
+        registers::ConfigReg {
+            ext_sync_set: 0,
+            dlpf_cfg: self.dlpf as u8,
+        }
+    }
+
     /// INT_ENABLE: the interrupt configuration, plus FIFO_OFLOW_EN whenever the FIFO is on, so
     /// that INT_STATUS.FIFO_OFLOW_INT reports an overflow (RM 4.15/4.16).
-    pub const fn int_enable(&self) -> bits::IntEnable {
+    pub const fn int_enable(&self) -> registers::IntEnable {
         let mut e = self.interrupt.enable();
         e.fifo_overflow |= self.fifo.is_some();
         e
@@ -532,7 +551,10 @@ pub fn decode_fifo_count(b: [u8; 2]) -> u16 {
     u16::from_be_bytes(b) & 0x1FFF
 }
 
-pub use bits::IntStatus;
+pub use registers::IntStatus;
+use registers::{AccelConfig, GyroConfig};
+
+use crate::register::Register;
 
 /// Result of the self-test: change of the self-test response (output with self-test on minus
 /// output with it off) from the factory value, in percent, per axis, with the pass window of

@@ -7,7 +7,9 @@
 //!   set-up example.
 //! - Honeywell HMC5883L datasheet (2013), register map table 2 (identification registers 10-12).
 
-use crate::register::{flag, flags_register, Register};
+pub mod registers;
+
+use registers::{Control1L, Control1P, Control2L, Control2P, ModeP, RangeP};
 
 /// QMC5883L 7-bit I²C address (QMC-L 9.1, register map).
 pub const QMC5883L_ADDR: u8 = 0x0D;
@@ -67,6 +69,16 @@ pub mod reg_p {
     pub const AXIS_SIGN: u8 = 0x29;
     /// Value the datasheet example writes to [`AXIS_SIGN`].
     pub const AXIS_SIGN_VALUE: u8 = 0x06;
+
+    /// Every register above by name: the one register table of the QMC5883P.
+    pub const TABLE: &[(&str, u8)] = &[
+        ("CHIP_ID", CHIP_ID),
+        ("DATA_X_LSB", DATA_X_LSB),
+        ("STATUS", STATUS),
+        ("CONTROL1", CONTROL1),
+        ("CONTROL2", CONTROL2),
+        ("AXIS_SIGN", AXIS_SIGN),
+    ];
 }
 
 /// HMC5883L identification registers A/B/C (10..12) read 'H', '4', '3'.
@@ -77,20 +89,14 @@ pub mod reg_hmc {
     pub const ID_VALUE: [u8; 3] = *b"H43";
 }
 
-/// Status bits (same positions on L and P; DOR exists only on the L).
-pub mod bits {
+/// The status register's bits (same positions on L and P; DOR exists only on the L).
+pub mod status_bits {
     /// Data ready.
     pub const DRDY: u8 = 1 << 0;
     /// Overflow: a channel exceeded the range.
     pub const OVL: u8 = 1 << 1;
     /// Data skipped: a measurement was overwritten before being read (QMC5883L only).
     pub const DOR: u8 = 1 << 2;
-    /// Control 2 soft reset.
-    pub const SOFT_RST: u8 = 1 << 7;
-    /// QMC5883L control 2 INT_ENB: 1 disables the DRDY pin.
-    pub const INT_DISABLE: u8 = 1 << 0;
-    /// QMC5883L control 2 ROL_PNT: a read that starts in 00H–06H rolls over from 06H to 00H.
-    pub const ROL_PNT: u8 = 1 << 6;
 }
 
 /// Soft-reset recovery time in ms (the QMC-L power-on time is 350 µs; 1 ms margin,
@@ -286,17 +292,22 @@ impl Default for Config {
 impl Config {
     /// QMC5883L CONTROL1 (0x09): `OSR[7:6]` `RNG[5:4]` `ODR[3:2]` `MODE[1:0]` (QMC-L 9.2, control register 1).
     /// `None` if the range is not available on the L.
-    pub const fn control1_l(&self) -> Option<u8> {
+    pub const fn control1_l(&self) -> Option<Control1L> {
         let rng = match self.range {
-            Range::G2 => 0,
-            Range::G8 => 1,
+            Range::G2 => Control1L::RNG_2G,
+            Range::G8 => Control1L::RNG_8G,
             _ => return None,
         };
         let mode = match self.mode {
-            Mode::Standby => 0,
-            Mode::Continuous => 1,
+            Mode::Standby => Control1L::MODE_STANDBY,
+            Mode::Continuous => Control1L::MODE_CONTINUOUS,
         };
-        Some(((self.osr as u8) << 6) | (rng << 4) | ((self.odr as u8) << 2) | mode)
+        Some(Control1L {
+            osr: self.osr,
+            rng,
+            odr: self.odr,
+            mode,
+        })
     }
 
     /// QMC5883L CONTROL2 (0x0A): INT_ENB in bit 0, ROL_PNT in bit 6, soft reset off.
@@ -308,14 +319,25 @@ impl Config {
         }
     }
 
+    /// QMC5883L SET/RESET period (0x0B).
+    pub const fn set_reset_period_l(&self) -> registers::SetResetPeriod {
+        registers::SetResetPeriod {
+            fbr: self.set_reset_period,
+        }
+    }
+
     /// QMC5883P CONTROL1 (0x0A): OSR2 = 0 (no down-sampling) `[7:6]`, OSR1 `[5:4]`, ODR `[3:2]`,
     /// MODE `[1:0]` with 0b11 = continuous, 0b00 = suspend (QMC-P register map).
-    pub const fn control1_p(&self) -> u8 {
-        let mode = match self.mode {
-            Mode::Standby => 0,
-            Mode::Continuous => 3,
-        };
-        ((self.osr as u8) << 4) | ((self.odr as u8) << 2) | mode
+    pub const fn control1_p(&self) -> Control1P {
+        Control1P {
+            osr2: 0,
+            osr1: self.osr,
+            odr: self.odr,
+            mode: match self.mode {
+                Mode::Standby => ModeP::Suspend,
+                Mode::Continuous => ModeP::Continuous,
+            },
+        }
     }
 
     /// QMC5883P CONTROL2 (0x0B): RNG `[3:2]` (0 = ±30 G, 1 = ±12 G, 2 = ±8 G, 3 = ±2 G),
@@ -323,70 +345,14 @@ impl Config {
     pub const fn control2_p(&self) -> Control2P {
         Control2P {
             soft_reset: false,
-            range: self.range,
-        }
-    }
-}
-
-flags_register! {
-    /// QMC5883L CONTROL2 (QMC-L 9.2.3).
-    Control2L at reg_l::CONTROL2 => {
-        /// SOFT_RST: restores every register's default; self-clearing.
-        soft_reset: bits::SOFT_RST,
-        /// ROL_PNT: a read that starts in 00H–06H rolls over from 06H to 00H.
-        roll_over: bits::ROL_PNT,
-        /// INT_ENB: 1 disables the DRDY pin.
-        drdy_pin_off: bits::INT_DISABLE,
-    }
-}
-
-impl Control2L {
-    /// A soft reset.
-    pub const RESET: Self = Control2L {
-        soft_reset: true,
-        roll_over: false,
-        drdy_pin_off: false,
-    };
-}
-
-/// QMC5883P CONTROL2 (QMC-P register map): SOFT_RST and `RNG[3:2]`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Control2P {
-    /// SOFT_RST.
-    pub soft_reset: bool,
-    /// RNG.
-    pub range: Range,
-}
-
-impl Control2P {
-    /// A soft reset (the range field then reads ±30 G, its reset value).
-    pub const RESET: Self = Control2P {
-        soft_reset: true,
-        range: Range::G30,
-    };
-}
-
-impl Register for Control2P {
-    const ADDR: u8 = reg_p::CONTROL2;
-    fn bits(self) -> u8 {
-        let rng = match self.range {
-            Range::G30 => 0,
-            Range::G12 => 1,
-            Range::G8 => 2,
-            Range::G2 => 3,
-        };
-        flag(self.soft_reset, bits::SOFT_RST) | rng << 2
-    }
-    fn from_bits(b: u8) -> Self {
-        Control2P {
-            soft_reset: b & bits::SOFT_RST != 0,
-            range: match (b >> 2) & 3 {
-                0 => Range::G30,
-                1 => Range::G12,
-                2 => Range::G8,
-                _ => Range::G2,
+            self_test: false,
+            range: match self.range {
+                Range::G30 => RangeP::G30,
+                Range::G12 => RangeP::G12,
+                Range::G8 => RangeP::G8,
+                Range::G2 => RangeP::G2,
             },
+            set_reset: 0,
         }
     }
 }
@@ -421,9 +387,9 @@ impl Status {
     /// Decode the status byte of `v`.
     pub const fn from_bits(b: u8, v: Variant) -> Self {
         Status {
-            ready: b & bits::DRDY != 0,
-            overflow: b & bits::OVL != 0,
-            skipped: matches!(v, Variant::L) && b & bits::DOR != 0,
+            ready: b & status_bits::DRDY != 0,
+            overflow: b & status_bits::OVL != 0,
+            skipped: matches!(v, Variant::L) && b & status_bits::DOR != 0,
         }
     }
 }
@@ -482,29 +448,3 @@ impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
 }
 
 impl<E: core::fmt::Debug> core::error::Error for Error<E> {}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// CONTROL2's fields sit on the documented bits (QMC-L 9.2.3; QMC-P register map) and
-    /// every byte they can express reads back as the same fields.
-    #[test]
-    fn control2_fields_sit_on_the_documented_bits() {
-        assert_eq!(Control2L::RESET.bits(), 0x80);
-        assert_eq!(Config::default().control2_l().bits(), 0x00);
-        let pinless = Config {
-            drdy_pin: false,
-            roll_over: true,
-            ..Config::default()
-        };
-        assert_eq!(pinless.control2_l().bits(), 0x41);
-        assert_eq!(Control2P::RESET.bits(), 0x80);
-        assert_eq!(Config::default().control2_p().bits(), 0x0C);
-        for b in 0..=255u8 {
-            assert_eq!(Control2L::from_bits(b).bits(), b & 0xC1, "L {b:#04x}");
-            assert_eq!(Control2P::from_bits(b).bits(), b & 0x8C, "P {b:#04x}");
-        }
-        assert_eq!((Control2L::ADDR, Control2P::ADDR), (0x0A, 0x0B));
-    }
-}

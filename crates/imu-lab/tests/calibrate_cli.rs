@@ -371,3 +371,81 @@ fn auto_on_the_real_tilt_sphere_names_soft_iron_and_says_what_is_left() {
     assert_eq!(v["stop"], "no effect of the vocabulary helps further");
     assert_eq!(v["diagnosis"]["adequate"], false);
 }
+
+/// A random value from the clock (printed with the failure): the refusals below are not tuned
+/// to one number.
+fn random_below(n: u64) -> u64 {
+    let t = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    let mut x = t | 1;
+    x ^= x << 13;
+    x ^= x >> 7;
+    x ^= x << 17;
+    x % n
+}
+
+/// A calibration file beyond a datasheet bound is refused before anything is sent: the error
+/// names the file key, index, value and bound, the exit code is non-zero, and the device port
+/// (a listening socket here) is never connected to.
+#[test]
+fn device_upload_of_an_implausible_file_is_refused_before_connecting() {
+    let dir = tempfile::tempdir().unwrap();
+    let k = 110 + random_below(90); // accel scale 1.10–1.99
+    let scale = k as f64 / 100.0;
+    let mut f = imu_cal::file::CalFile::default();
+    f.accel.scale[0] = scale;
+    let path = dir.path().join("bad.toml");
+    std::fs::write(&path, f.to_toml()).unwrap();
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    listener.set_nonblocking(true).unwrap();
+    let port = format!("tcp:{}", listener.local_addr().unwrap());
+    let err = run_err([
+        "device",
+        "--port",
+        &port,
+        "calibrate",
+        "--upload",
+        path.to_str().unwrap(),
+    ]);
+    let want = format!("accel.scale[0] = {scale} is outside 0.91–1.09");
+    assert!(
+        err.contains(&want) && err.contains("nothing uploaded"),
+        "{want:?} not in {err}"
+    );
+    assert_eq!(
+        listener.accept().map(|_| ()).unwrap_err().kind(),
+        std::io::ErrorKind::WouldBlock,
+        "the port was opened"
+    );
+}
+
+/// `calibrate … --out cal.toml` refuses to write a file that would hold a parameter beyond its
+/// datasheet bound (here the gyro bias already in it): the key, index, value and bound are
+/// named, the exit code is non-zero and the file is left as it was.
+#[test]
+fn calibrate_out_refuses_an_implausible_file_and_leaves_it_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let bias = 61 + random_below(100); // deg/s, beyond ±60
+    let mut f = imu_cal::file::CalFile::default();
+    f.gyro.bias[1] = -(bias as f64);
+    let out = dir.path().join("cal.toml");
+    let before = f.to_toml();
+    std::fs::write(&out, &before).unwrap();
+    let sphere = tilt_sphere();
+    let a = calibrate(
+        "mag",
+        &sphere,
+        &SPHERE,
+        &["--model", "hard_iron", "--out", out.to_str().unwrap()],
+    );
+    fails_with(
+        &a,
+        &[
+            &format!("gyro.bias[1] = −{bias} deg/s is outside ±60 deg/s"),
+            "not written",
+        ],
+    );
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), before);
+}

@@ -6,6 +6,52 @@
 //! warning per second at most, counted by reason. A frame whose CRC holds but whose protocol
 //! version is not this build's ends the link with both versions named: every later frame would
 //! be refused the same way.
+//!
+//! ```
+//! use std::io::{Cursor, Read, Write};
+//! use std::sync::{Arc, Mutex};
+//! use std::time::Duration;
+//! use imu_link::Link;
+//! use imu_proto::{decode, DeviceMsg, FrameEncoder, HostFrame, Reply, Request, MAX_FRAME};
+//!
+//! /// A device that has already answered: its bytes to read, what the host wrote.
+//! struct Scripted(Cursor<Vec<u8>>, Arc<Mutex<Vec<u8>>>);
+//! impl Read for Scripted {
+//!     fn read(&mut self, b: &mut [u8]) -> std::io::Result<usize> { self.0.read(b) }
+//! }
+//! impl Write for Scripted {
+//!     fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
+//!         self.1.lock().unwrap().extend_from_slice(b);
+//!         Ok(b.len())
+//!     }
+//!     fn flush(&mut self) -> std::io::Result<()> { Ok(()) }
+//! }
+//!
+//! let frame = |m: &DeviceMsg| {
+//!     let mut out = [0u8; MAX_FRAME];
+//!     let n = FrameEncoder::new().encode(m, &mut out).unwrap();
+//!     out[..n].to_vec()
+//! };
+//! // Noise on the line, a reply to someone else's request, then the reply to ours (id 1).
+//! let mut rx = vec![0x13, 0x37, 0x00];
+//! rx.extend(frame(&DeviceMsg::Reply { id: 99, reply: Reply::Ok }));
+//! rx.extend(frame(&DeviceMsg::Reply { id: 1, reply: Reply::Ok }));
+//! let wire = Arc::new(Mutex::new(Vec::new()));
+//! let port = Scripted(Cursor::new(rx), wire.clone());
+//! let mut link = Link::over("scripted", Box::new(port), |_| {});
+//! let mut others = Vec::new();
+//! let reply = link
+//!     .request_with(Request::ResetAllan, Duration::from_secs(1), |m| others.push(m))
+//!     .unwrap();
+//! assert_eq!(reply, Reply::Ok);
+//! assert_eq!(others, [DeviceMsg::Reply { id: 99, reply: Reply::Ok }]);
+//! assert_eq!(link.rx_stats().rejected(), 1, "the noise, skipped and counted");
+//! // What went to the device: one frame, request id 1.
+//! let mut sent = wire.lock().unwrap().clone();
+//! assert_eq!(sent.pop(), Some(0));
+//! let req: HostFrame = decode(&mut sent).unwrap();
+//! assert_eq!(req, HostFrame { id: 1, req: Request::ResetAllan });
+//! ```
 use std::collections::VecDeque;
 use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;

@@ -21,6 +21,32 @@
 //! frames are [`DeviceMsg`]. A frame that is unknown, truncated, oversized or fails its CRC is
 //! rejected with a [`DecodeError`] and counted in [`RxStats`]; no input can panic the decoder
 //! (hammered by the proptests in `tests/`).
+//!
+//! ```
+//! use imu_proto::{DecodeError, FrameEncoder, FrameReader, HostFrame, Request, MAX_FRAME};
+//!
+//! let msg = HostFrame { id: 7, req: Request::GetStatus };
+//! let mut out = [0u8; MAX_FRAME];
+//! let n = FrameEncoder::new().encode(&msg, &mut out).unwrap();
+//! let frame = &out[..n];
+//! // COBS: the one zero byte is the delimiter at the end.
+//! assert_eq!(frame.iter().position(|&b| b == 0), Some(n - 1));
+//!
+//! let mut rx = FrameReader::<MAX_FRAME>::new();
+//! let mut got = Vec::new();
+//! rx.feed(frame, |r: Result<HostFrame, DecodeError>| got.push(r));
+//! assert_eq!(got, [Ok(msg.clone())]);
+//!
+//! // A flipped bit anywhere in the frame is rejected and counted, never read as a message.
+//! for i in 0..n - 1 {
+//!     let mut bad = frame.to_vec();
+//!     bad[i] ^= 0x10;
+//!     let mut got = Vec::new();
+//!     rx.feed(&bad, |r: Result<HostFrame, DecodeError>| got.push(r));
+//!     assert!(got.iter().all(|r| r.is_err()), "byte {i}: {got:?}");
+//! }
+//! assert!(rx.stats().rejected() >= (n - 1) as u32);
+//! ```
 mod batch;
 mod contract;
 /// The CSV recording contract (columns, units, reading, writing, timing).

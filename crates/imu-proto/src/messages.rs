@@ -127,37 +127,8 @@ pub enum CalSource {
     Host,
 }
 
-/// Which sensor's correction a [`CalProblem`] is about.
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CalSensor {
-    Accel,
-    Gyro,
-    Mag,
-}
-
-/// Which plausibility check a correction failed (`imu_cal::device::plausible` has the bounds).
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum CalCheck {
-    /// A scale factor (singular value of the correction matrix) outside [0.5, 2].
-    Scale,
-    /// An axis turned by more than 10° (or flipped).
-    Misalignment,
-    /// The soft-iron matrix's condition number is over 3.
-    Condition,
-    /// The matrix is singular (a zero scale).
-    Singular,
-    /// The gyro bias is over a quarter of full scale.
-    Bias,
-    /// The hard iron (or accelerometer offset) is beyond the sensor's range.
-    Offset,
-    /// A non-positive or non-finite LSB factor (calibration file).
-    LsbFactor,
-}
-
 /// Why a calibration was refused, by the device or by the host (the same checks).
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum CalProblem {
     /// Not a calibration blob: length, magic, CRC or payload.
@@ -166,20 +137,24 @@ pub enum CalProblem {
     Version(u16),
     /// A coefficient outside the fixed-point range.
     OutOfRange,
-    /// Physically implausible.
+    /// A parameter outside its datasheet bound (docs/calibration.md, "Plausibility"): the
+    /// calibration file's key (`imu_cal::device::Key` as u8), the index within it (`None` for a
+    /// whole-matrix quantity), the value and the bound, in the key's unit.
     Implausible {
-        sensor: CalSensor,
-        check: CalCheck,
-        axis: u8,
+        key: u8,
+        axis: Option<u8>,
+        value: f32,
+        lo: f32,
+        hi: f32,
     },
     /// Fitted for other full-scale ranges than the firmware uses.
     OtherRanges,
-    /// Fitted for another sensor part than the one found.
+    /// Fitted for other sensor parts than the firmware's, or recording none.
     OtherPart,
 }
 
 /// Why the stored calibration is not in use.
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum CalFault {
     /// The flash could not be read or written.
@@ -189,7 +164,7 @@ pub enum CalFault {
 }
 
 /// Calibration state.
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CalStatus {
     pub source: CalSource,
@@ -355,7 +330,7 @@ pub struct HostFrame {
 }
 
 /// Why a request failed.
-#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ErrorCode {
     /// The calibration was refused, with the reason.

@@ -68,14 +68,18 @@ fn problem(c: &mut Cursor<'_, true>, p: CalProblem) {
         }
         CalProblem::OutOfRange => c.varint(2),
         CalProblem::Implausible {
-            sensor,
-            check,
+            key,
             axis,
+            value,
+            lo,
+            hi,
         } => {
             c.varint(3);
-            c.varint(sensor as u32);
-            c.varint(check as u32);
-            c.byte(axis);
+            c.byte(key);
+            c.option(axis, |c, a| c.byte(a));
+            c.f32(value);
+            c.f32(lo);
+            c.f32(hi);
         }
         CalProblem::OtherRanges => c.varint(4),
         CalProblem::OtherPart => c.varint(5),

@@ -153,9 +153,11 @@ fn all_device_msgs() -> std::vec::Vec<DeviceMsg> {
         DeviceMsg::Reply {
             id: 9,
             reply: Reply::Error(ErrorCode::BadCalibration(CalProblem::Implausible {
-                sensor: CalSensor::Mag,
-                check: CalCheck::Condition,
-                axis: 2
+                key: 3,
+                axis: Some(0),
+                value: 1.9,
+                lo: 0.91,
+                hi: 1.09
             }))
         },
         DeviceMsg::Reply {

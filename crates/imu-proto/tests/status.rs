@@ -25,29 +25,33 @@ fn arb_state() -> impl Strategy<Value = SensorState> {
 }
 
 fn arb_problem() -> impl Strategy<Value = CalProblem> {
-    let sensors = vec![CalSensor::Accel, CalSensor::Gyro, CalSensor::Mag];
-    let checks = vec![
-        CalCheck::Scale,
-        CalCheck::Misalignment,
-        CalCheck::Condition,
-        CalCheck::Singular,
-        CalCheck::Bias,
-        CalCheck::Offset,
-        CalCheck::LsbFactor,
-    ];
+    let f32s = || {
+        // Not NaN: the decoded status is compared with the original.
+        prop_oneof![
+            -3e38f32..3e38,
+            Just(f32::INFINITY),
+            Just(f32::NEG_INFINITY),
+            Just(0.0f32),
+            -1e4f32..1e4
+        ]
+    };
     prop_oneof![
         Just(CalProblem::Corrupt),
         arb_bits(16).prop_map(|v| CalProblem::Version(v as u16)),
         Just(CalProblem::OutOfRange),
         (
-            prop::sample::select(sensors),
-            prop::sample::select(checks),
-            any::<u8>()
+            any::<u8>(),
+            prop::option::of(any::<u8>()),
+            f32s(),
+            f32s(),
+            f32s()
         )
-            .prop_map(|(sensor, check, axis)| CalProblem::Implausible {
-                sensor,
-                check,
-                axis
+            .prop_map(|(key, axis, value, lo, hi)| CalProblem::Implausible {
+                key,
+                axis,
+                value,
+                lo,
+                hi
             }),
         Just(CalProblem::OtherRanges),
         Just(CalProblem::OtherPart),

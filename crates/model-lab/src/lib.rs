@@ -8,6 +8,51 @@
 //! how to summarise a fitted model, and which candidates it has, each refitted, tested by a
 //! nested-model test and ranked by the lab's own rule (its evidence gates, its penalised
 //! criterion). [`walk`] is the loop; [`Step`] is the before → after record the reports print.
+//!
+//! ```
+//! use model_lab::{walk, Candidate, Candidates, Edit, Lab, Stop, Summary};
+//!
+//! /// A toy lab: the measurement holds effects 1 and 2; each one the model lacks adds 1 to
+//! /// χ²/dof, and effect 3, never in the measurement, would not lower it.
+//! struct Toy;
+//! impl Lab for Toy {
+//!     type Effect = u32;
+//!     type Model = Vec<u32>;
+//!     type Error = String;
+//!     fn summary(&self, m: &Vec<u32>) -> Summary {
+//!         let missing = [1, 2].iter().filter(|e| !m.contains(e)).count();
+//!         Summary {
+//!             chi2_dof: 1.0 + missing as f64,
+//!             rms_residual: missing as f64,
+//!             rms_unit: String::new(),
+//!             adequate: missing == 0,
+//!             params: m.len(),
+//!         }
+//!     }
+//!     fn candidates(&self, m: &Vec<u32>) -> Result<Candidates<Self>, String> {
+//!         let now = self.summary(m).chi2_dof;
+//!         Ok([1, 2, 3].into_iter().filter(|e| !m.contains(e)).map(|e| {
+//!             let model = [m.clone(), vec![e]].concat();
+//!             let summary = self.summary(&model);
+//!             let delta = now - summary.chi2_dof;
+//!             Candidate {
+//!                 edit: Edit { add: vec![e], remove: vec![] },
+//!                 model, summary, delta, extra_params: 1,
+//!                 p_value: if delta > 0.0 { 1e-6 } else { 1.0 },
+//!                 admissible: delta > 0.0,
+//!                 reason: String::new(), reading: format!("effect {e}"),
+//!             }
+//!         }).collect())
+//!     }
+//! }
+//!
+//! let w = walk(&Toy, vec![], 10).unwrap();
+//! assert_eq!(w.stop, Stop::Adequate);
+//! assert_eq!(w.last(), &vec![1, 2]);
+//! // The error falls at each step: χ²/dof 3 → 2 → 1.
+//! let falls: Vec<(f64, f64)> = w.steps.iter().map(|s| (s.before.chi2_dof, s.after.chi2_dof)).collect();
+//! assert_eq!(falls, [(3.0, 2.0), (2.0, 1.0)]);
+//! ```
 use std::fmt;
 
 /// How a fitted model compares with its measurement.

@@ -30,6 +30,13 @@ pub fn mag_config() -> qmc::Config {
     qmc::Config::default()
 }
 
+/// The parts the firmware drives, whose datasheet bounds a calibration must have been checked
+/// against (`imu_cal::device::plausible`): a blob fitted for others is refused.
+pub const PARTS: (imu_cal::device::ImuPart, imu_cal::device::MagPart) = (
+    imu_cal::device::ImuPart::Mpu6050,
+    imu_cal::device::MagPart::Qmc5883l,
+);
+
 /// Contract-unit scales of the configured ranges (corrected counts keep the nominal LSB, see
 /// `imu_cal::device`): m/s² = LSB·g₀/(LSB/g), deg/s = LSB/(LSB/(deg/s)), µT = LSB·100/(LSB/G).
 pub fn scales() -> Scales {

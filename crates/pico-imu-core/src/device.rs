@@ -55,7 +55,7 @@ impl Device {
             tables_ms: 10_000,
             counters: Counters::default(),
             state: [SensorState::Unknown; 2],
-            period: [0; 2],
+            period: [Fine::ZERO; 2],
             firmware,
             last_status_us: None,
         }
@@ -270,7 +270,7 @@ impl Device {
 
 /// A [`Fine`] period in ns.
 fn period_ns(p: Fine) -> u32 {
-    ((p * 1000 + (crate::clock::US >> 1)) >> crate::clock::FINE_BITS) as u32
+    p.ns() as u32
 }
 
 #[cfg(test)]

@@ -26,7 +26,7 @@ use imu_drivers::mpu6050 as mpu;
 use imu_proto::{GapCause, Sensor, SensorState, Vec, IMU_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
-use crate::clock::{self, fine, whole_us, BusTiming, Fit, SampleClock, US};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::imu_config;
 use crate::msg::{Out, SensorMsg, BURST_MAX};
 use crate::service::{delay_until, Core, Lead, Phase, Tick, SETUP, WRITE_MARGIN};
@@ -36,7 +36,7 @@ use crate::stage::{self, Stage};
 const FRAME: u16 = 14;
 /// How far ahead a burst may wait for a probe instant (the burst must be done before the next
 /// magnetometer read, 5 ms after the one that started it).
-const PROBE_WAIT: u64 = 1200 * US;
+const PROBE_WAIT: Fine = fine(1200);
 /// Messages kept free in a tick's output for reports.
 const REPORT_ROOM: usize = 3;
 /// Count reads of one tick that may be repeated because the bus held them.
@@ -183,7 +183,7 @@ impl ImuService {
     async fn drain<I: I2c + TransferTime, D: DelayNs>(&mut self, cx: &mut Tick<'_, Mpu6050<I>, D>) {
         // A probe instant shortly ahead: wait for it, so the count read halves the clock's
         // uncertainty about where the samples fall.
-        let count_latch = self.core.timing.latch(0, clock::READ_SECOND_BIT);
+        let count_latch = self.core.timing.latch(Fine::ZERO, clock::READ_SECOND_BIT);
         let t0 = fine((cx.now)());
         // The count read's start if it is placed (begun early by the learnt lead).
         let mut aimed = None;
@@ -241,7 +241,12 @@ impl ImuService {
                 // the frames of this read looks the same once, and then the next read finds
                 // none.
                 let trust = frames > 0 && self.late_before;
-                let fit = self.core.clock.observe(tau, newest, true, trust);
+                let seen = if trust {
+                    Seen::NextNotYetTrusted
+                } else {
+                    Seen::NextNotYet
+                };
+                let fit = self.core.clock.observe(tau, newest, seen);
                 self.late_before = frames > 0 && fit == Fit::Late;
             }
             if frames == 0 {
@@ -316,7 +321,7 @@ impl ImuService {
         cx: &mut Tick<'_, Mpu6050<I>, D>,
         cause: GapCause,
     ) {
-        let latch = self.core.timing.latch(0, clock::WRITE_DATA_BIT);
+        let latch = self.core.timing.latch(Fine::ZERO, clock::WRITE_DATA_BIT);
         for _ in 0..3 {
             if let Err(e) = cx.dev.stop_fifo().await {
                 self.failed(&e, (cx.now)(), cx.out);
@@ -335,8 +340,8 @@ impl ImuService {
                 .core
                 .timing
                 .latch(cx.dev.bus().last_start(), clock::WRITE_DATA_BIT);
-            let margin = if self.core.timing.bit == 0 {
-                0
+            let margin = if self.core.timing.bit == Fine::ZERO {
+                Fine::ZERO
             } else {
                 WRITE_MARGIN
             };

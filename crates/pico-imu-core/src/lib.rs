@@ -17,6 +17,27 @@
 //!
 //! `replay` (feature `std`) replays served samples through the same corrections and engines,
 //! for the host tests and the emulator's end-to-end check.
+//!
+//! ```
+//! use pico_imu_core::clock::{fine, Fine, SampleClock, Seen, US};
+//!
+//! // A 1 kHz part woken so that its first sample lands near 2 ms: its phase is known to half
+//! // a period until observations bracket a sample instant.
+//! let mut c = SampleClock::new(1000);
+//! c.start(0, fine(2000), false, Fine::ZERO);
+//! assert_eq!(c.width(), fine(1000));
+//! // Sample 5 had been produced by a read latched at 7002 µs; at 6998 µs sample 4 had, 5 not.
+//! c.observe(fine(7002), 5, Seen::Produced);
+//! c.observe(fine(6998), 4, Seen::NextNotYet);
+//! // Sample 5 is now located to within the latches' 4 µs plus their jitter and drift allowance.
+//! assert!(c.width() <= 42 * US);
+//! assert_eq!(c.newest_at(fine(7500), 10 * US), Some(5));
+//! assert_eq!(c.newest_at(fine(7005), 10 * US), None, "too near sample 5 to tell");
+//! // The stamps of samples 5, 6, 7, in whole µs: one period apart, on the located instant.
+//! let s: Vec<u64> = c.stamps(5, 3).iter_us().take(3).collect();
+//! assert!(s[0].abs_diff(7000) <= 21, "{s:?}");
+//! assert_eq!([s[1] - s[0], s[2] - s[1]], [1000, 1000]);
+//! ```
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #[cfg(feature = "std")]
 extern crate std;

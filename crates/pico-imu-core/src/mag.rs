@@ -22,18 +22,18 @@ use imu_drivers::qmc5883 as qmc;
 use imu_proto::{GapCause, Sensor, SensorState, MAG_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
-use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, US};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, Seen};
 use crate::config::mag_config;
 use crate::msg::{Out, SensorMsg};
 use crate::service::{delay_until, Core, Phase, Tick, SETUP};
 
 /// How long after the late end of the clock's uncertainty a poll is latched.
-pub const POLL_MARGIN: u64 = 20 * US;
+pub const POLL_MARGIN: Fine = fine(20);
 /// Margin around a sample instant within which a read's side is uncertain (beyond the clock's
 /// own interval).
-const READ_MARGIN: u64 = 10 * US;
+const READ_MARGIN: Fine = fine(10);
 /// Shortest wait between two status polls of one tick.
-const REPOLL_MIN: u64 = 100 * US;
+const REPOLL_MIN: Fine = fine(100);
 /// Status polls in one tick (the first and its re-polls).
 const POLLS: u32 = 4;
 
@@ -157,17 +157,17 @@ impl MagService {
     /// wide (a probe). A landing already past (samples missed, a stall) gives way to the next
     /// one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
-        let latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
+        let latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
         let offset = if self.core.clock.wants_probe() {
             0
         } else {
-            (self.core.clock.width() / 2 + POLL_MARGIN) as i64
+            (self.core.clock.width() / 2 + POLL_MARGIN).raw() as i64
         };
         let due = self
             .core
             .clock
             .time(self.core.next_k)
-            .wrapping_add(offset as u64);
+            .wrapping_add_signed(offset);
         let earliest = fine(now_us) + SETUP + latch;
         let at = if due >= earliest {
             due
@@ -179,7 +179,7 @@ impl MagService {
 
     /// Poll the status (again, up to [`POLLS`] times) and read the sample when DRDY is set.
     async fn read<I: I2c + TransferTime, D: DelayNs>(&mut self, cx: &mut Tick<'_, Qmc5883<I>, D>) {
-        let status_latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
+        let status_latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
         // A "not yet" seen this tick, kept to be trusted if a later poll finds the sample (the
         // part is producing, so the phase was late, not the part stalled).
         let mut not_yet: Option<Fine> = None;
@@ -200,9 +200,11 @@ impl MagService {
             if !status.ready {
                 if timely && !self.core.fresh {
                     // Sample `next_k` not yet landed: a lower bound, unless the part stalled.
-                    self.core
-                        .clock
-                        .observe(tau, self.core.next_k.wrapping_sub(1), true, false);
+                    self.core.clock.observe(
+                        tau,
+                        self.core.next_k.wrapping_sub(1),
+                        Seen::NextNotYet,
+                    );
                 }
                 if timely {
                     not_yet = Some(tau);
@@ -223,13 +225,17 @@ impl MagService {
             }
             if let Some(before) = not_yet {
                 if !self.core.fresh {
-                    self.core
-                        .clock
-                        .observe(before, self.core.next_k.wrapping_sub(1), true, true);
+                    self.core.clock.observe(
+                        before,
+                        self.core.next_k.wrapping_sub(1),
+                        Seen::NextNotYetTrusted,
+                    );
                 }
             }
             if timely {
-                self.core.clock.observe(tau, self.core.next_k, false, false);
+                self.core
+                    .clock
+                    .observe(tau, self.core.next_k, Seen::Produced);
             }
             // A data read that a landing may fall inside would be torn (the part rewrites its
             // data registers, the bytes already read belong to the sample before): wait for
@@ -244,7 +250,7 @@ impl MagService {
                 && clock.newest_at(now + half, half + READ_MARGIN).is_none()
             {
                 let late = clock.width() / 2 + POLL_MARGIN;
-                let after = clock.instant_after(now, late as i64);
+                let after = clock.instant_after(now, late.raw() as i64);
                 delay_until(cx.delay, cx.now, after).await;
             }
             let xyz = match cx.dev.read_data().await {
@@ -356,7 +362,7 @@ impl MagService {
         t_data: Fine,
     ) -> u32 {
         let j = self.core.clock.nearest(t_data);
-        let latch = self.core.timing.latch(0, clock::READ_FIRST_BIT);
+        let latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
         let after = self.core.clock.time(j) + self.core.clock.width() / 2 + POLL_MARGIN;
         delay_until(cx.delay, cx.now, after - latch).await;
         match cx.dev.status().await {

@@ -1,9 +1,8 @@
 //! Host requests: identity, status, calibration, streaming mode, intervals, tables.
 use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
 use imu_proto::{
-    CalCheck, CalFault, CalProblem, CalSensor, CalSource, CalStatus, DeviceMsg, ErrorCode,
-    HostFrame, Identity, Reply, Request, Scales, Vec, IMU_RATE_HZ, MAG_RATE_HZ, MAX_CAL_BLOB,
-    PROTOCOL_VERSION,
+    CalFault, CalProblem, CalSource, CalStatus, DeviceMsg, ErrorCode, HostFrame, Identity, Reply,
+    Request, Scales, Vec, IMU_RATE_HZ, MAG_RATE_HZ, MAX_CAL_BLOB, PROTOCOL_VERSION,
 };
 
 use crate::device::Device;
@@ -26,39 +25,31 @@ pub struct PersistRequest {
 
 /// The wire's reason for a blob the device refuses.
 pub fn cal_problem(e: BlobError) -> CalProblem {
-    use imu_cal::device::{Check, Sensor};
     match e {
         BlobError::WrongVersion { found, .. } => CalProblem::Version(found),
         BlobError::OutOfRange { .. } => CalProblem::OutOfRange,
-        BlobError::Implausible {
-            sensor,
-            check,
-            axis,
-        } => CalProblem::Implausible {
-            sensor: match sensor {
-                Sensor::Accel => CalSensor::Accel,
-                Sensor::Gyro => CalSensor::Gyro,
-                Sensor::Mag => CalSensor::Mag,
-            },
-            check: match check {
-                Check::Scale => CalCheck::Scale,
-                Check::Misalignment => CalCheck::Misalignment,
-                Check::Condition => CalCheck::Condition,
-                Check::Singular => CalCheck::Singular,
-                Check::Bias => CalCheck::Bias,
-                Check::Offset => CalCheck::Offset,
-                Check::LsbFactor => CalCheck::LsbFactor,
-            },
-            axis,
+        BlobError::Implausible(r) => CalProblem::Implausible {
+            key: r.key as u8,
+            axis: r.axis,
+            value: r.value as f32,
+            lo: r.lo as f32,
+            hi: r.hi as f32,
         },
+        BlobError::NoRange { .. } => CalProblem::OtherRanges,
+        BlobError::NotFitted => CalProblem::OtherPart,
         _ => CalProblem::Corrupt,
     }
 }
 
-/// Decode a blob and check it was fitted for the ranges the device runs (`scales`: the
-/// physical unit per LSB of each sensor).
+/// Decode a blob and check it was fitted for the parts and ranges the device runs (`scales`:
+/// the physical unit per LSB of each sensor; the parts: [`crate::config::PARTS`]).
 pub fn decode_for(blob: &[u8], scales: &Scales) -> Result<Calibration, CalProblem> {
     let cal = decode_blob(blob).map_err(cal_problem)?;
+    if let Some(f) = cal.fitted_for() {
+        if (f.imu, f.mag) != crate::config::PARTS {
+            return Err(CalProblem::OtherPart);
+        }
+    }
     let lsb = [1.0 / scales.accel, 1.0 / scales.gyro, 1.0 / scales.mag];
     if !cal.fits_ranges(lsb) {
         return Err(CalProblem::OtherRanges);

@@ -5,19 +5,19 @@ use embedded_hal_async::delay::DelayNs;
 use imu_proto::{Event, GapCause, Sensor, SensorState};
 
 use crate::bus::Failure;
-use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, US};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock};
 use crate::health::{Health, STALL_AFTER_US};
 use crate::msg::{Out, Report, SensorMsg};
 
 /// Time to set up a transfer after a wait, before its first bit.
-pub const SETUP: u64 = 150 * US;
+pub const SETUP: Fine = fine(150);
 /// Margin around the latch of a part's waking write (an interrupt-driven transfer: its latch
 /// varies by this beyond the clock's own uncertainty).
-pub const WRITE_MARGIN: u64 = 120 * US;
+pub const WRITE_MARGIN: Fine = fine(120);
 
 /// How much longer than its bits a transfer may take (set-up, the task being polled late) before
 /// it counts as held on the bus.
-pub const HELD_MARGIN: u64 = 1500 * US;
+pub const HELD_MARGIN: Fine = fine(1500);
 
 /// Where a service is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -68,10 +68,10 @@ pub struct Lead(Fine);
 
 impl Lead {
     /// The largest lead learnt (a wait that ended late by more is an outlier, not latency).
-    pub const MAX: Fine = 200 * US;
+    pub const MAX: Fine = fine(200);
 
     pub const fn new() -> Self {
-        Lead(0)
+        Lead(Fine::ZERO)
     }
 
     /// When to begin a transfer that should start at `start`.
@@ -82,8 +82,9 @@ impl Lead {
     /// A transfer meant to start at `aimed` (begun at [`Lead::begin`] of it) started at
     /// `started`.
     pub fn learn(&mut self, aimed: Fine, started: Fine) {
-        let residual = started as i64 - aimed as i64;
-        self.0 = (self.0 as i64 + residual / 2).clamp(0, Self::MAX as i64) as Fine;
+        let residual = started.since(aimed);
+        let lead = (self.0.raw() as i64 + residual / 2).clamp(0, Self::MAX.raw() as i64);
+        self.0 = Fine::from_raw(lead as u64);
     }
 
     pub fn get(&self) -> Fine {
@@ -198,11 +199,11 @@ impl Core {
             return;
         }
         let period = self.clock.period();
-        let latch = self.timing.latch(0, clock::WRITE_DATA_BIT);
+        let latch = self.timing.latch(Fine::ZERO, clock::WRITE_DATA_BIT);
         let earliest = fine(now()) + SETUP + latch + period;
         let planned = self
             .clock
-            .newest_at(earliest, 0)
+            .newest_at(earliest, Fine::ZERO)
             .unwrap_or(self.next_k)
             .wrapping_add(1);
         delay_until(delay, now, self.clock.time(planned) - period - latch).await;
@@ -219,7 +220,7 @@ impl Core {
             self.next_k = k;
             self.after.get_or_insert(cause);
         } else {
-            self.clock.start(0, first, false, 0);
+            self.clock.start(0, first, false, Fine::ZERO);
             self.next_k = 0;
         }
         self.fresh = true;
@@ -266,6 +267,7 @@ pub async fn delay_until<D: DelayNs>(delay: &mut D, now: &dyn Fn() -> u64, t: Fi
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::clock::US;
 
     /// Transfers that start a fixed latency after their wait ends: within a few transfers they
     /// start where they are aimed, to well under a µs; a latency that changes is followed; a
@@ -275,7 +277,7 @@ mod tests {
         let mut lead = Lead::default();
         let mut aimed = fine(1_000_000);
         let mut run = |lead: &mut Lead, latency: Fine, n: usize| {
-            let mut miss = 0;
+            let mut miss = Fine::ZERO;
             for _ in 0..n {
                 let started = lead.begin(aimed) + latency;
                 miss = started.abs_diff(aimed);
@@ -295,6 +297,6 @@ mod tests {
         lead.learn(aimed, aimed + fine(10_000));
         assert_eq!(lead.get(), Lead::MAX);
         lead.learn(aimed, aimed - fine(10_000));
-        assert_eq!(lead.get(), 0);
+        assert_eq!(lead.get(), Fine::ZERO);
     }
 }

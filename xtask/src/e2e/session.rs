@@ -4,17 +4,21 @@ use std::fmt::Write as _;
 use std::time::Duration;
 
 use anyhow::{bail, Result};
-use imu_cal::device::{encode_blob, Affine, Calibration, GyroCorrection, Sensor as CalSensor};
+use imu_cal::device::{
+    encode_blob, Affine, Calibration, Fitted, GyroCorrection, Sensor as CalSensor,
+};
 use imu_proto::{Channel, Reply, Request, StreamMode, Vec as HVec};
 
 use super::*;
 use crate::emu_link::Link;
 
 /// A calibration far enough from identity that its effect on every channel is visible, within
-/// the physical bounds the device checks.
+/// the datasheet bounds the device checks (docs/calibration.md, "Plausibility").
 fn test_calibration() -> Result<Calibration> {
     let m = [[1.02, 0.01, 0.0], [0.0, 0.98, -0.02], [0.005, 0.0, 1.01]];
-    let accel = Affine::from_float(CalSensor::Accel, m, [12.0, -30.0, 250.0])
+    // The accelerometer's model is lower-triangular (T·K).
+    let lower = [[1.02, 0.0, 0.0], [0.01, 0.98, 0.0], [0.005, -0.02, 1.01]];
+    let accel = Affine::from_float(CalSensor::Accel, lower, [12.0, -30.0, 250.0])
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let gyro = GyroCorrection::from_float(m, [-40.0, 25.0, 13.0], [0.01, -0.02, 0.0], -3000)
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
@@ -22,8 +26,10 @@ fn test_calibration() -> Result<Calibration> {
         .map_err(|e| anyhow::anyhow!("{e:?}"))?;
     // Fitted at the ranges the firmware runs, as the host's calibration file would say.
     let s = pico_imu_core::config::scales();
-    Calibration::fitted(accel, gyro, mag, [1.0 / s.accel, 1.0 / s.gyro, 1.0 / s.mag])
-        .map_err(|e| anyhow::anyhow!("{e:?}"))
+    let (imu, mag_part) = pico_imu_core::config::PARTS;
+    let fitted = Fitted::new(imu, mag_part, [1.0 / s.accel, 1.0 / s.gyro, 1.0 / s.mag])
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    Calibration::fitted(accel, gyro, mag, fitted).map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 pub(super) fn session(port: u16, seconds: f64, calibrate: bool) -> Result<Session> {

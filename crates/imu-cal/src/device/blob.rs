@@ -1,15 +1,32 @@
 //! The calibration blob: the bytes the host sends and the device persists (layout in the
 //! module docs of [`super`]).
-use super::{BlobError, Calibration};
+use serde::Deserialize;
+
+use super::plausible::{Fitted, ImuPart, MagPart};
+use super::{Affine, BlobError, Calibration, GyroCorrection};
 
 /// Magic bytes at the start of every calibration blob.
 pub const BLOB_MAGIC: [u8; 4] = *b"PCAL";
-/// The blob format version this build reads and writes.
-pub const BLOB_VERSION: u16 = 2;
+/// The blob format version this build writes. Version 3 records the parts and ranges
+/// ([`Fitted`]); version 2 (sensitivities only) is still read, its parts taken to be the
+/// MPU-6050 and QMC5883L, the only ones a version-2 host wrote blobs for.
+pub const BLOB_VERSION: u16 = 3;
+/// The oldest version read.
+const OLDEST_READ: u16 = 2;
 /// Upper bound of an encoded blob (header + worst-case postcard varints + CRC).
 /// Payload worst case: three affine parts of 12 i32 varints (≤ 5 bytes each), 3 more i32 and
-/// one i16 (≤ 3 bytes) for the gyro temperature term, the optional sensitivities (1 + 3 × 4).
-pub const MAX_BLOB_LEN: usize = 8 + (3 * 12 * 5 + 3 * 5 + 3) + 13 + 4;
+/// one i16 (≤ 3 bytes) for the gyro temperature term, and what it was fitted for: 1 (option)
+/// + 2 parts (1 each) + 3 ranges (u16, ≤ 3 each) + 3 sensitivities (4 each).
+pub const MAX_BLOB_LEN: usize = 8 + (3 * 12 * 5 + 3 * 5 + 3) + (1 + 2 + 9 + 12) + 4;
+
+/// The version-2 payload: the corrections and the sensitivities, no parts.
+#[derive(Deserialize)]
+struct PayloadV2 {
+    accel: Affine,
+    gyro: GyroCorrection,
+    mag: Affine,
+    lsb_per_unit: Option<[f32; 3]>,
+}
 
 const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
@@ -31,8 +48,9 @@ pub fn encode_blob<'a>(cal: &Calibration, buf: &'a mut [u8]) -> Result<&'a [u8],
     Ok(&buf[..12 + n])
 }
 
-/// Decode and validate a blob. Checks, in order: length, magic, version, CRC, payload, the
-/// fixed-point ranges, the physical bounds ([`super::bounds`]).
+/// Decode and validate a blob. Checks, in order: length, magic, version, CRC, payload (and for
+/// version 3 that the recorded ranges are the sensitivities'), the fixed-point ranges, the
+/// datasheet bounds ([`super::plausible`]).
 pub fn decode_blob(bytes: &[u8]) -> Result<Calibration, BlobError> {
     if bytes.len() < 12 {
         return Err(BlobError::Truncated {
@@ -45,7 +63,7 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Calibration, BlobError> {
         return Err(BlobError::BadMagic { found: magic });
     }
     let version = u16::from_le_bytes([bytes[4], bytes[5]]);
-    if version != BLOB_VERSION {
+    if !(OLDEST_READ..=BLOB_VERSION).contains(&version) {
         return Err(BlobError::WrongVersion {
             found: version,
             expected: BLOB_VERSION,
@@ -63,12 +81,40 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Calibration, BlobError> {
     if stored != computed {
         return Err(BlobError::CrcMismatch { stored, computed });
     }
-    let (cal, rest): (Calibration, &[u8]) =
-        postcard::take_from_bytes(&bytes[8..8 + n]).map_err(|_| BlobError::Malformed)?;
-    if !rest.is_empty() {
-        return Err(BlobError::Malformed);
-    }
+    let payload = &bytes[8..8 + n];
+    let cal = if version == BLOB_VERSION {
+        let cal: Calibration = whole(payload)?;
+        // The recorded ranges must be the ones the sensitivities give.
+        if let Some(f) = cal.fitted_for() {
+            let again =
+                Fitted::new(f.imu, f.mag, f.lsb_per_unit).map_err(|_| BlobError::Malformed)?;
+            if again.ranges != f.ranges {
+                return Err(BlobError::Malformed);
+            }
+        }
+        cal
+    } else {
+        let old: PayloadV2 = whole(payload)?;
+        let fitted = match old.lsb_per_unit {
+            None => None,
+            Some(lsb) => Some(Fitted {
+                parts_assumed: true,
+                ..Fitted::new(ImuPart::Mpu6050, MagPart::Qmc5883l, lsb)?
+            }),
+        };
+        Calibration::assemble(old.accel, old.gyro, old.mag, fitted)?
+    };
     cal.validate()?;
     cal.check_physics()?;
     Ok(cal)
+}
+
+/// A postcard value that takes the whole of `payload`.
+fn whole<'a, T: Deserialize<'a>>(payload: &'a [u8]) -> Result<T, BlobError> {
+    let (v, rest): (T, &[u8]) =
+        postcard::take_from_bytes(payload).map_err(|_| BlobError::Malformed)?;
+    if !rest.is_empty() {
+        return Err(BlobError::Malformed);
+    }
+    Ok(v)
 }

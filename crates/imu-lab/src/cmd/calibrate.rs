@@ -204,9 +204,9 @@ pub fn run(a: Args) -> Result<()> {
             _ => p.sensor(),
         };
         file.set(section, &run.report.model.fitted.params)?;
-        // The device must be able to hold it.
+        // The device must be able to hold it, within the parts' datasheet bounds.
         file.to_device()
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            .map_err(|e| anyhow::anyhow!("{}: refused, not written: {e}", path.display()))?;
         std::fs::write(path, file.to_toml())
             .with_context(|| format!("cannot write {}", path.display()))?;
         if !a.json {

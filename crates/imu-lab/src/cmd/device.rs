@@ -80,11 +80,19 @@ pub struct CalArgs {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    // A calibration to upload is read and checked before the port is opened: a file the host
+    // refuses never reaches the device.
+    let upload = match &a.cmd {
+        Cmd::Calibrate(CalArgs {
+            upload: Some(path), ..
+        }) => Some(upload_blob(path)?),
+        _ => None,
+    };
     let mut link = a.port.open()?;
     match a.cmd {
         Cmd::Status => status(&mut link),
         Cmd::Tables(t) => tables(&mut link, &t),
-        Cmd::Calibrate(c) => calibrate(&mut link, &c),
+        Cmd::Calibrate(c) => calibrate(&mut link, &c, upload),
         Cmd::ResetAllan => {
             link.request_ok(Request::ResetAllan)?;
             println!("Allan state reset");
@@ -184,33 +192,39 @@ fn format_cal(c: &CalStatus) -> String {
     }
 }
 
-/// Why the device refused a calibration, in words.
+/// Why the device refused a calibration, in words: an implausible parameter in the calibration
+/// file's words (`imu_cal::device::Refusal`), key, index, value and bound.
 pub fn cal_problem(p: &imu_proto::CalProblem) -> String {
-    use imu_proto::{CalCheck, CalProblem};
-    match p {
+    use imu_proto::CalProblem;
+    match *p {
         CalProblem::Corrupt => {
             "not a valid calibration blob (length, magic, CRC or payload)".into()
         }
-        CalProblem::Version(v) => format!("blob format version {v}, not the firmware's"),
+        CalProblem::Version(v) => format!("blob format version {v}, not one the firmware reads"),
         CalProblem::OutOfRange => "a coefficient outside the fixed-point range".into(),
         CalProblem::Implausible {
-            sensor,
-            check,
+            key,
             axis,
-        } => {
-            let what = match check {
-                CalCheck::Scale => "a scale factor outside [0.5, 2]",
-                CalCheck::Misalignment => "an axis turned by more than 10° (or flipped)",
-                CalCheck::Condition => "a condition number over 3",
-                CalCheck::Singular => "a singular correction matrix",
-                CalCheck::Bias => "a bias over a quarter of full scale",
-                CalCheck::Offset => "an offset beyond the sensor's range",
-                CalCheck::LsbFactor => "a non-positive LSB factor",
-            };
-            format!("{sensor:?} correction implausible: {what} (axis {axis})")
-        }
+            value,
+            lo,
+            hi,
+        } => match imu_cal::device::Key::from_u8(key) {
+            Some(key) => imu_cal::device::Refusal {
+                key,
+                axis,
+                value: value.into(),
+                lo: lo.into(),
+                hi: hi.into(),
+            }
+            .to_string(),
+            None => format!(
+                "parameter {key} (unknown to this host) index {axis:?} = {value} is outside {lo}–{hi}"
+            ),
+        },
         CalProblem::OtherRanges => "fitted for other full-scale ranges than the firmware's".into(),
-        CalProblem::OtherPart => "fitted for another sensor part than the one found".into(),
+        CalProblem::OtherPart => {
+            "fitted for other sensor parts than the firmware's, or recording none".into()
+        }
     }
 }
 
@@ -450,37 +464,43 @@ fn fit_table(t: &AllanTable, rows: &[Row]) {
     }
 }
 
-fn calibrate(link: &mut Link, a: &CalArgs) -> Result<()> {
-    if let Some(path) = &a.upload {
-        let blob = if path.extension().is_some_and(|e| e == "bin") {
-            let b = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-            imu_cal::device::decode_blob(&b).map_err(|e| {
-                anyhow::anyhow!("{}: not a valid calibration blob: {e}", path.display())
-            })?;
-            b
-        } else {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            let file = imu_cal::file::CalFile::from_toml(&text)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            let cal = file.to_device().map_err(|e| {
-                anyhow::anyhow!(
-                    "{}: cannot be represented on the device: {e}",
-                    path.display()
-                )
-            })?;
-            let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
-            imu_cal::device::encode_blob(&cal, &mut buf)
-                .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?
-                .to_vec()
-        };
-        let blob = imu_proto::Vec::from_slice(&blob).map_err(|_| {
-            anyhow::anyhow!(
-                "calibration blob of {} B exceeds {} B",
-                blob.len(),
-                imu_proto::MAX_CAL_BLOB
-            )
-        })?;
+/// The blob to upload from `path`: a `.bin` blob, decoded and checked as the device will, or a
+/// TOML calibration file converted and checked (`CalFile::to_device`: the datasheet bounds
+/// on the file's own numbers, named by key, index, value and bound).
+fn upload_blob(path: &std::path::Path) -> Result<imu_proto::Vec<u8, { imu_proto::MAX_CAL_BLOB }>> {
+    let blob = if path.extension().is_some_and(|e| e == "bin") {
+        let b = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+        imu_cal::device::decode_blob(&b)
+            .map_err(|e| anyhow::anyhow!("{}: refused, nothing uploaded: {e}", path.display()))?;
+        b
+    } else {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let file = imu_cal::file::CalFile::from_toml(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        let cal = file
+            .to_device()
+            .map_err(|e| anyhow::anyhow!("{}: refused, nothing uploaded: {e}", path.display()))?;
+        let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+        imu_cal::device::encode_blob(&cal, &mut buf)
+            .map_err(|e| anyhow::anyhow!("encoding the blob: {e}"))?
+            .to_vec()
+    };
+    imu_proto::Vec::from_slice(&blob).map_err(|_| {
+        anyhow::anyhow!(
+            "calibration blob of {} B exceeds {} B",
+            blob.len(),
+            imu_proto::MAX_CAL_BLOB
+        )
+    })
+}
+
+fn calibrate(
+    link: &mut Link,
+    a: &CalArgs,
+    upload: Option<imu_proto::Vec<u8, { imu_proto::MAX_CAL_BLOB }>>,
+) -> Result<()> {
+    if let (Some(path), Some(blob)) = (&a.upload, upload) {
         let persist = !a.no_persist;
         // A flash write pauses sampling and can take a few hundred ms (sector erase).
         match link.request_with(
@@ -522,8 +542,25 @@ fn calibrate(link: &mut Link, a: &CalArgs) -> Result<()> {
     }
 }
 
-/// The fixed-point corrections as numbers: out = M·raw − c (− κ·ΔT for the gyro), in nominal LSB.
+/// The fixed-point corrections as numbers: out = M·raw − c (− κ·ΔT for the gyro), in nominal
+/// LSB, and what they were fitted for.
 fn print_cal(cal: &imu_cal::device::Calibration) {
+    match cal.fitted_for() {
+        None => println!("fitted for: nothing recorded (identity)"),
+        Some(f) => println!(
+            "fitted for: {} at ±{} g and ±{} deg/s, {} at ±{} G{}",
+            f.imu.name(),
+            f.ranges.accel_g,
+            f.ranges.gyro_dps,
+            f.mag.name(),
+            f.ranges.mag_gauss,
+            if f.parts_assumed {
+                " (parts not recorded in this version-2 blob: taken to be the firmware's)"
+            } else {
+                ""
+            }
+        ),
+    }
     let show = |name: &str, a: &imu_cal::device::Affine| {
         let m = a.matrix();
         let c = a.folded_offset();
@@ -557,6 +594,43 @@ mod tests {
     struct Cal {
         #[command(flatten)]
         c: CalArgs,
+    }
+
+    /// The device's refusal (four numbers on the wire) reads as the host's own refusal of the
+    /// file; a key this host does not know is still shown with its numbers.
+    #[test]
+    fn a_device_refusal_reads_in_the_files_words() {
+        let p = imu_proto::CalProblem::Implausible {
+            key: imu_cal::device::Key::AccelScale as u8,
+            axis: Some(0),
+            value: 1.9,
+            lo: 0.91,
+            hi: 1.09,
+        };
+        assert_eq!(cal_problem(&p), "accel.scale[0] = 1.9 is outside 0.91–1.09");
+        let p = imu_proto::CalProblem::Implausible {
+            key: imu_cal::device::Key::MagSoftIronCondition as u8,
+            axis: None,
+            value: f32::INFINITY,
+            lo: 1.0,
+            hi: 3.0,
+        };
+        assert_eq!(
+            cal_problem(&p),
+            "mag.soft_iron condition number = ∞ is outside 1–3"
+        );
+        let p = imu_proto::CalProblem::Implausible {
+            key: 200,
+            axis: Some(1),
+            value: 5.0,
+            lo: -1.0,
+            hi: 1.0,
+        };
+        let s = cal_problem(&p);
+        assert!(
+            s.contains("200") && s.contains('5') && s.contains("unknown"),
+            "{s}"
+        );
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! The driver logic, written once and expanded twice: blocking (`embedded_hal::i2c::I2c`,
+//! Every bus sequence of both drivers (identify, configure, start, read, FIFO, self-test),
+//! written once and expanded twice: blocking (`embedded_hal::i2c::I2c`,
 //! `embedded_hal::delay::DelayNs`) and async (`embedded_hal_async::i2c::I2c`,
 //! `embedded_hal_async::delay::DelayNs`). The only difference between the two expansions is
 //! the `async` keyword on each method and `.await` after each bus or delay call; every
@@ -10,10 +11,10 @@ macro_rules! drivers {
         use embedded_hal::i2c::ErrorType;
 
         use crate::mpu6050::{
-            self as m, bits as mb, reg as mr, Address, ChipId, Config, Family, IntStatus,
+            self as m, registers as mb, reg as mr, Address, ChipId, Config, Family, IntStatus,
             RawSample, Scale, SelfTestReport,
         };
-        use crate::qmc5883::{self as q, Chip, MagSample, Status, Variant};
+        use crate::qmc5883::{self as q, registers as qr, Chip, MagSample, Status, Variant};
         use crate::register::Register;
 
         /// Error type of [`Mpu6050`] on bus `I2C`.
@@ -75,18 +76,16 @@ macro_rules! drivers {
                 self.config.scale(self.chip.unwrap_or(ChipId::Mpu6050))
             }
 
-            $($async)? fn write_reg(&mut self, reg: u8, value: u8) -> Result<(), MpuError<I2C>> {
-                self.i2c.write(self.address, &[reg, value]) $(.$await)? ?;
-                Ok(())
-            }
-
             $($async)? fn read_regs(&mut self, reg: u8, buf: &mut [u8]) -> Result<(), MpuError<I2C>> {
                 self.i2c.write_read(self.address, &[reg], buf) $(.$await)? ?;
                 Ok(())
             }
 
-            $($async)? fn write_register<R: Register>(&mut self, r: R) -> Result<(), MpuError<I2C>> {
-                self.write_reg(R::ADDR, r.bits()) $(.$await)?
+            /// Write one register: `bytes` from [`Register::write_bytes`], taken before the call so
+            /// that an async write holds two bytes, not the register's fields.
+            $($async)? fn write_register(&mut self, bytes: [u8; 2]) -> Result<(), MpuError<I2C>> {
+                self.i2c.write(self.address, &bytes) $(.$await)? ?;
+                Ok(())
             }
 
             $($async)? fn read_register<R: Register>(&mut self) -> Result<R, MpuError<I2C>> {
@@ -136,22 +135,22 @@ macro_rules! drivers {
                 config: &Config,
             ) -> Result<ChipId, MpuError<I2C>> {
                 let chip = self.probe() $(.$await)? ?;
-                self.write_register(mb::PwrMgmt1::RESET) $(.$await)? ?;
+                self.write_register(mb::PwrMgmt1::RESET.write_bytes()) $(.$await)? ?;
                 delay.delay_ms(m::RESET_DELAY_MS) $(.$await)?;
                 let (burst, len) = config.config_burst(chip);
                 self.i2c.write(self.address, &burst[..len]) $(.$await)? ?;
-                self.write_register(config.interrupt.pin_cfg()) $(.$await)? ?;
-                self.write_register(config.int_enable()) $(.$await)? ?;
+                self.write_register(config.interrupt.pin_cfg().write_bytes()) $(.$await)? ?;
+                self.write_register(config.int_enable().write_bytes()) $(.$await)? ?;
                 self.config = *config;
                 match config.fifo {
                     Some(frame) => {
-                        self.write_register(mb::UserCtrl::FIFO_EMPTIED) $(.$await)? ?;
-                        self.write_register(frame.fifo_en()) $(.$await)? ?;
-                        self.write_register(mb::UserCtrl::FIFO_ON) $(.$await)? ?;
+                        self.write_register(mb::UserCtrl::FIFO_EMPTIED.write_bytes()) $(.$await)? ?;
+                        self.write_register(frame.fifo_en().write_bytes()) $(.$await)? ?;
+                        self.write_register(mb::UserCtrl::FIFO_ON.write_bytes()) $(.$await)? ?;
                     }
                     None => {
-                        self.write_register(mb::FifoEn::default()) $(.$await)? ?;
-                        self.write_register(mb::UserCtrl::default()) $(.$await)? ?;
+                        self.write_register(mb::FifoEn::default().write_bytes()) $(.$await)? ?;
+                        self.write_register(mb::UserCtrl::default().write_bytes()) $(.$await)? ?;
                     }
                 }
                 Ok(chip)
@@ -160,7 +159,7 @@ macro_rules! drivers {
             /// Wake the chip: PWR_MGMT_1 = 0x01 (awake, PLL with gyro X reference). Its sample
             /// clock starts with this write; the first sample follows one sample period later.
             pub $($async)? fn start(&mut self) -> Result<(), MpuError<I2C>> {
-                self.write_register(mb::PwrMgmt1::RUNNING) $(.$await)?
+                self.write_register(mb::PwrMgmt1::RUNNING.write_bytes()) $(.$await)?
             }
 
             /// Whether the chip still holds what [`Self::init`] configured (read back:
@@ -300,7 +299,7 @@ macro_rules! drivers {
                 if self.config.fifo.is_none() {
                     return Err(m::Error::NotConfigured);
                 }
-                self.write_register(mb::UserCtrl::FIFO_EMPTIED) $(.$await)?
+                self.write_register(mb::UserCtrl::FIFO_EMPTIED.write_bytes()) $(.$await)?
             }
 
             /// Fill the FIFO again (USER_CTRL = FIFO_EN): the first frame in it is the first
@@ -309,7 +308,7 @@ macro_rules! drivers {
                 if self.config.fifo.is_none() {
                     return Err(m::Error::NotConfigured);
                 }
-                self.write_register(mb::UserCtrl::FIFO_ON) $(.$await)?
+                self.write_register(mb::UserCtrl::FIFO_ON.write_bytes()) $(.$await)?
             }
 
             $($async)? fn average<D: $Delay>(&mut self, delay: &mut D) -> Result<([f32; 3], [f32; 3]), MpuError<I2C>> {
@@ -340,14 +339,13 @@ macro_rules! drivers {
                     Family::Mpu6500 => m::AccelRange::G2,
                     Family::Icm => return Err(m::Error::SelfTestUnsupported),
                 };
-                let g = m::GyroRange::Dps250.bits();
-                let a = a_range.bits();
-                self.write_reg(mr::GYRO_CONFIG, g | mb::SELF_TEST_XYZ) $(.$await)? ?;
-                self.write_reg(mr::ACCEL_CONFIG, a | mb::SELF_TEST_XYZ) $(.$await)? ?;
+                let g = m::GyroRange::Dps250;
+                self.write_register(mb::GyroConfig::self_test(g).write_bytes()) $(.$await)? ?;
+                self.write_register(mb::AccelConfig::self_test(a_range).write_bytes()) $(.$await)? ?;
                 delay.delay_ms(m::SELF_TEST_SETTLE_MS) $(.$await)?;
                 let (on_a, on_g) = self.average(delay) $(.$await)? ?;
-                self.write_reg(mr::GYRO_CONFIG, g) $(.$await)? ?;
-                self.write_reg(mr::ACCEL_CONFIG, a) $(.$await)? ?;
+                self.write_register(mb::GyroConfig::range(g).write_bytes()) $(.$await)? ?;
+                self.write_register(mb::AccelConfig::range(a_range).write_bytes()) $(.$await)? ?;
                 delay.delay_ms(m::SELF_TEST_SETTLE_MS) $(.$await)?;
                 let (off_a, off_g) = self.average(delay) $(.$await)? ?;
                 let report = if chip.family() == Family::Mpu6050 {
@@ -361,8 +359,8 @@ macro_rules! drivers {
                     self.read_regs(mr::SELF_TEST_X_ACCEL_6500, &mut ac) $(.$await)? ?;
                     m::self_test_report_6500(on_a, on_g, off_a, off_g, gc, ac)
                 };
-                self.write_reg(mr::GYRO_CONFIG, self.config.gyro_range.bits()) $(.$await)? ?;
-                self.write_reg(mr::ACCEL_CONFIG, self.config.accel_range.bits()) $(.$await)? ?;
+                self.write_register(mb::GyroConfig::range(self.config.gyro_range).write_bytes()) $(.$await)? ?;
+                self.write_register(mb::AccelConfig::range(self.config.accel_range).write_bytes()) $(.$await)? ?;
                 Ok(report)
             }
         }
@@ -430,13 +428,10 @@ macro_rules! drivers {
                 Chip::None
             }
 
-            $($async)? fn write_reg(&mut self, reg: u8, value: u8) -> Result<(), MagError<I2C>> {
-                self.i2c.write(self.variant.addr(), &[reg, value]) $(.$await)? ?;
+            /// Write one register: `bytes` from [`Register::write_bytes`] (see `Mpu6050`).
+            $($async)? fn write_register(&mut self, bytes: [u8; 2]) -> Result<(), MagError<I2C>> {
+                self.i2c.write(self.variant.addr(), &bytes) $(.$await)? ?;
                 Ok(())
-            }
-
-            $($async)? fn write_register<R: Register>(&mut self, r: R) -> Result<(), MagError<I2C>> {
-                self.write_reg(R::ADDR, r.bits()) $(.$await)?
             }
 
             $($async)? fn read_regs(&mut self, reg: u8, buf: &mut [u8]) -> Result<(), MagError<I2C>> {
@@ -475,16 +470,16 @@ macro_rules! drivers {
                 }
                 match self.variant {
                     Variant::L => {
-                        self.write_register(q::Control2L::RESET) $(.$await)? ?;
+                        self.write_register(qr::Control2L::RESET.write_bytes()) $(.$await)? ?;
                         delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
-                        self.write_reg(q::reg_l::SET_RESET_PERIOD, config.set_reset_period) $(.$await)? ?;
-                        self.write_register(config.control2_l()) $(.$await)? ?;
+                        self.write_register(config.set_reset_period_l().write_bytes()) $(.$await)? ?;
+                        self.write_register(config.control2_l().write_bytes()) $(.$await)? ?;
                     }
                     Variant::P => {
-                        self.write_register(q::Control2P::RESET) $(.$await)? ?;
+                        self.write_register(qr::Control2P::RESET.write_bytes()) $(.$await)? ?;
                         delay.delay_ms(q::SOFT_RESET_DELAY_MS) $(.$await)?;
-                        self.write_reg(q::reg_p::AXIS_SIGN, q::reg_p::AXIS_SIGN_VALUE) $(.$await)? ?;
-                        self.write_register(config.control2_p()) $(.$await)? ?;
+                        self.write_register(qr::AxisSign::DATASHEET.write_bytes()) $(.$await)? ?;
+                        self.write_register(config.control2_p().write_bytes()) $(.$await)? ?;
                     }
                 }
                 self.config = *config;
@@ -497,9 +492,9 @@ macro_rules! drivers {
                 match self.variant {
                     Variant::L => {
                         let c1 = self.config.control1_l().ok_or(q::Error::InvalidConfig)?;
-                        self.write_reg(q::reg_l::CONTROL1, c1) $(.$await)?
+                        self.write_register(c1.write_bytes()) $(.$await)?
                     }
-                    Variant::P => self.write_reg(q::reg_p::CONTROL1, self.config.control1_p()) $(.$await)?,
+                    Variant::P => self.write_register(self.config.control1_p().write_bytes()) $(.$await)?,
                 }
             }
 
@@ -508,11 +503,15 @@ macro_rules! drivers {
             pub $($async)? fn config_intact(&mut self) -> Result<bool, MagError<I2C>> {
                 let (c1_reg, c1, c2) = match self.variant {
                     Variant::L => (
-                        q::reg_l::CONTROL1,
-                        self.config.control1_l().ok_or(q::Error::InvalidConfig)?,
+                        qr::Control1L::ADDR,
+                        self.config.control1_l().ok_or(q::Error::InvalidConfig)?.bits(),
                         self.config.control2_l().bits(),
                     ),
-                    Variant::P => (q::reg_p::CONTROL1, self.config.control1_p(), self.config.control2_p().bits()),
+                    Variant::P => (
+                        qr::Control1P::ADDR,
+                        self.config.control1_p().bits(),
+                        self.config.control2_p().bits(),
+                    ),
                 };
                 let mut b = [0u8; 2];
                 self.read_regs(c1_reg, &mut b) $(.$await)? ?;
