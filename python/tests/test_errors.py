@@ -52,7 +52,7 @@ def test_the_stream_refuses_what_is_not_a_count_and_keeps_its_state():
     s.push(np.arange(50.0))
     with pytest.raises(ValueError, match=r"chunk\[3\] \(sample 53 of the stream\) is 0.5"):
         s.push([1.0, 2.0, 3.0, 0.5])
-    with pytest.raises(ValueError, match=r"chunk\[0\].*nan"):
+    with pytest.raises(ValueError, match=r"chunk\[0\].*NaN"):
         s.push([np.nan])
     with pytest.raises(ValueError, match=r"chunk\[1\]"):
         s.push([1.0, 2.0**40])
