@@ -79,15 +79,9 @@ def _compat(stat: str, data, rate: float, data_type: str, taus):
     ms = tau_ms(n_phase, rate, taus)
     if len(ms) == 0:
         raise ValueError(f"taus={taus!r}: no τ between 1 and {n_phase - 1} samples at rate={rate} Hz")
-    if stat in ("oadev", "ohdev"):
-        # The table's cache-blocked pass over all m at once is the faster one for the
-        # overlapping statistics; it keeps exactly the rows with at least 2 terms.
-        d = _native.deviation(x, float(rate), stat, data_type, ms=[int(m) for m in ms])
-        ms, devs, ns = d["m"], d["dev"], d["n"].astype(np.float64)
-    else:
-        devs, ns = _native.plain_deviations(x, float(rate), stat, data_type, [int(m) for m in ms])
-        keep = ns > 1
-        ms, devs, ns = ms[keep], devs[keep], ns[keep].astype(np.float64)
+    devs, ns = _native.plain_deviations(x, float(rate), stat, data_type, [int(m) for m in ms])
+    keep = ns > 1
+    ms, devs, ns = ms[keep], devs[keep], ns[keep].astype(np.float64)
     if len(ms) == 0:
         raise ValueError(f"{stat}: no τ has at least 2 terms in a record of {len(x)} samples")
     taus_used = ms.astype(np.float64) / float(rate)

@@ -386,8 +386,9 @@ struct PhaseSums {
 
 /// [`PhaseSums`] of the phase `x`: overlapping sums in fused passes over groups of m, each
 /// split by start index over the cores, carrying the identification sums of the short τ; the
-/// other statistics one m at a time. Identification of the rest is O(N/m) per m.
-fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
+/// other statistics one m at a time. Identification of the rest is O(N/m) per m. Without
+/// `with_ident` only the sums are taken (the idents are left empty).
+fn phase_sums(x: &[f64], ms: &[u64], stat: Stat, with_ident: bool) -> PhaseSums {
     let d = stat.difference_order();
     let fused = matches!(stat, Stat::Oadev | Stat::Ohdev);
     let groups: Vec<&[u64]> = if fused {
@@ -400,7 +401,8 @@ fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
         .map(|g| g.iter().map(|&m| m as usize).collect())
         .collect();
     let acf_fused = |m: u64| {
-        m as usize <= ACF_FUSED_MAX
+        with_ident
+            && m as usize <= ACF_FUSED_MAX
             && noise_id::averages(x.len(), m as usize) >= noise_id::ACF_MIN_AVERAGES
     };
     // Fused identification sums are taken for a prefix of each group (ascending m).
@@ -432,7 +434,7 @@ fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
     }
     jobs.extend(
         (0..ms.len())
-            .filter(|&row| idents[row] != Ident::Fused)
+            .filter(|&row| with_ident && idents[row] != Ident::Fused)
             .map(|row| Job::Identify { row }),
     );
     let done = par_map(&jobs, |job| match *job {
@@ -507,7 +509,7 @@ fn deviation_of_phases(
         if own == 0 {
             continue;
         }
-        let ps = phase_sums(x, &ms[..own], stat);
+        let ps = phase_sums(x, &ms[..own], stat, true);
         for (t, v) in sums.iter_mut().zip(&ps.sums) {
             *t += v;
         }
@@ -600,6 +602,27 @@ pub fn plain_deviations(
         phase_from_rate_checked(data)?
     };
     let np = x.len();
+    if matches!(stat, Stat::Oadev | Stat::Ohdev) {
+        // One cache-blocked pass for all m (ascending, each with a term), no identification.
+        let mut own: Vec<u64> = ms
+            .iter()
+            .copied()
+            .filter(|&m| stat_norm(np, m as usize, stat).0 >= 1)
+            .collect();
+        own.sort_unstable();
+        own.dedup();
+        let sums = phase_sums(&x, &own, stat, false).sums;
+        return Ok(ms
+            .iter()
+            .map(|&m| match own.binary_search(&m) {
+                Ok(k) => {
+                    let (n, denom) = stat_norm(np, m as usize, stat);
+                    ((sums[k] / (denom * n as f64)).sqrt(), n)
+                }
+                Err(_) => (f64::NAN, 0),
+            })
+            .collect());
+    }
     Ok(par_map(ms, |&m| {
         let m = m as usize;
         let (n, denom) = stat_norm(np, m, stat);
@@ -808,6 +831,20 @@ mod tests {
                     (dev / row.dev - 1.0).abs() < 1e-12,
                     "key {key} {stat:?} m {}",
                     row.m
+                );
+            }
+        }
+        // Any order, repeats allowed: each m answered where it stands.
+        let shuffled: Vec<u64> = ms.iter().rev().chain(&ms[..5]).copied().collect();
+        for stat in [Stat::Oadev, Stat::Ohdev, Stat::Mdev] {
+            let sorted = plain_deviations(&y, tau0, stat, &ms, false).unwrap();
+            let any = plain_deviations(&y, tau0, stat, &shuffled, false).unwrap();
+            for (m, got) in shuffled.iter().zip(&any) {
+                let want = sorted[*m as usize - 1];
+                assert_eq!(got.1, want.1, "{stat:?} m {m}");
+                assert!(
+                    got.0 == want.0 || (got.0.is_nan() && want.0.is_nan()),
+                    "{stat:?} m {m}"
                 );
             }
         }
