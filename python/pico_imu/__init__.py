@@ -75,12 +75,13 @@ class Table:
 
     def __str__(self) -> str:
         u = self.dev_unit()
-        head = f"{'tau [s]':>12} {'m':>10} {self.stat + ' [' + u + ']':>22} {'-1σ':>12} {'+1σ':>12} {'n':>10} {'alpha':>5} {'edf':>10}"
-        lines = [head]
+        head = (f"{'tau [s]':>12} {'m':>10} {self.stat + ' [' + u + ']':>22} {'lo [' + u + ']':>16} "
+                f"{'hi [' + u + ']':>16} {'n':>10} {'alpha':>5} {'edf':>10}")
+        lines = [f"{self.stat.upper()}; bounds are 68.3 % (Greenhall EDF, χ²)", head]
         for i in range(len(self)):
             lines.append(
                 f"{self.tau[i]:>12.6g} {int(self.m[i]):>10d} {self.dev[i]:>22.6g} "
-                f"{self.lo[i]:>12.6g} {self.hi[i]:>12.6g} {int(self.n[i]):>10d} "
+                f"{self.lo[i]:>16.6g} {self.hi[i]:>16.6g} {int(self.n[i]):>10d} "
                 f"{int(self.alpha[i]):>5d} {self.edf[i]:>10.4g}"
             )
         return "\n".join(lines)
@@ -94,8 +95,8 @@ class Table:
             for i in range(len(self))
         )
         return (
-            f"<table><tr><th>τ [s]</th><th>m</th><th>{self.stat} [{u}]</th><th>−1σ</th>"
-            f"<th>+1σ</th><th>n</th><th>α</th><th>EDF</th></tr>{rows}</table>"
+            f"<table><tr><th>τ [s]</th><th>m</th><th>{self.stat} [{u}]</th><th>lo (68.3 %) [{u}]</th>"
+            f"<th>hi (68.3 %) [{u}]</th><th>n</th><th>α</th><th>EDF</th></tr>{rows}</table>"
         )
 
 
