@@ -6,7 +6,9 @@
   freedom and 68.3 % confidence bounds, as ``imu-lab adev`` prints it.
 * :class:`Stream` — the device's bounded streaming engine fed chunk by chunk: a day at 1 kHz in
   a few KiB.
-* :func:`read_csv` — a recording that follows the CSV contract (time from ``t``, gaps, units).
+* :func:`read_csv` — a recording that follows the CSV contract (time from ``t``, gaps, units);
+  :func:`read_csv_chunks` the same in chunks of rows, and :func:`stream_csv` a column of any
+  length through the streaming engine in bounded memory.
 
 Every function releases the GIL while it computes. Bad arguments raise ``ValueError`` naming
 the argument (and the index of a bad sample); a file that cannot be opened raises ``OSError``.
@@ -21,7 +23,8 @@ import numpy as np
 from . import _native
 from . import allantools
 
-__all__ = ["allantools", "deviation", "Table", "Stream", "read_csv", "Recording", "STATS"]
+__all__ = ["allantools", "deviation", "Table", "Stream", "read_csv", "Recording", "read_csv_chunks",
+           "stream_csv", "STATS"]
 
 #: The statistics :func:`deviation` computes.
 STATS = ("adev", "oadev", "mdev", "hdev", "ohdev", "tdev", "totdev")
@@ -186,3 +189,38 @@ def read_csv(path, skip_lines: int = 0) -> Recording:
     missing file ``OSError``."""
     d = _native.read_csv(str(path), int(skip_lines))
     return Recording(path=str(path), **d)
+
+
+def read_csv_chunks(path, columns: Optional[List[str]] = None, rows: int = 65536, skip_lines: int = 0):
+    """A recording read ``rows`` rows at a time, in bounded memory: an iterator of dicts with
+    ``start`` (index of the chunk's first row), ``columns`` (name → array, contract units) and
+    ``gaps`` (offsets in the chunk of the rows a gap precedes; each starts a new segment). Its
+    ``rate_hz`` (Hz, from the median spacing of the first 65 536 stamps; None without ``t``) is
+    known before the first chunk. Errors as :func:`read_csv`."""
+    return _native.CsvChunks(str(path), columns, int(rows), int(skip_lines))
+
+
+def stream_csv(path, column: str, scale: float = 1.0, unit: Optional[str] = None, rows: int = 65536,
+               rate: Optional[float] = None) -> Stream:
+    """A column of whole counts fed from the file through the streaming engine chunk by chunk,
+    a gap in ``t`` (or ``gap_before``) closing the engine's segment as on the device: a day at
+    1 kHz in constant memory. ``scale`` is one count in ``unit`` (default: the contract's unit
+    of the column); ``rate`` (Hz) defaults to the file's. Returns the fed :class:`Stream`."""
+    chunks = read_csv_chunks(path, [column], rows)
+    rate = rate if rate is not None else chunks.rate_hz
+    if rate is None:
+        raise ValueError(f"{path}: no t column to read the rate from; give rate= (Hz)")
+    if unit is None:
+        unit = chunks.units.get(column, "")
+    s = Stream(rate, scale, unit)
+    for chunk in chunks:
+        y = chunk["columns"][column]
+        cuts = [0] + [int(g) for g in chunk["gaps"]] + [len(y)]
+        for k in range(len(cuts) - 1):
+            if k > 0:
+                s.gap()
+            try:
+                s.push(y[cuts[k]:cuts[k + 1]])
+            except ValueError as e:
+                raise ValueError(f"{path}: rows from {chunk['start'] + cuts[k]}: {e}") from None
+    return s

@@ -81,3 +81,34 @@ class Recording:
 def read_csv(path: Union[str, PathLike], skip_lines: int = 0) -> Recording:
     """Reads a contract recording; ValueError names a malformed line and field, OSError a file
     that cannot be opened."""
+
+class CsvChunks:
+    """Iterator of chunk dicts: ``start`` (row index), ``columns`` (name → array), ``gaps``
+    (offsets of rows a gap precedes)."""
+
+    @property
+    def names(self) -> List[str]: ...
+    @property
+    def units(self) -> Dict[str, str]:
+        """The contract unit of each chosen column."""
+    @property
+    def rate_hz(self) -> Optional[float]:
+        """Hz, from the median spacing of the first 65 536 stamps; None without ``t``."""
+    def __iter__(self) -> "CsvChunks": ...
+    def __next__(self) -> Dict[str, object]: ...
+
+def read_csv_chunks(
+    path: Union[str, PathLike], columns: Optional[List[str]] = None, rows: int = 65536, skip_lines: int = 0
+) -> CsvChunks:
+    """A recording ``rows`` rows at a time, in bounded memory, with the gaps found on the way."""
+
+def stream_csv(
+    path: Union[str, PathLike],
+    column: str,
+    scale: float = 1.0,
+    unit: Optional[str] = None,
+    rows: int = 65536,
+    rate: Optional[float] = None,
+) -> Stream:
+    """A column of whole counts through the streaming engine chunk by chunk (gaps close the
+    engine's segment); ``scale``: one count in ``unit``; ``rate``: Hz (default: the file's)."""
