@@ -89,6 +89,28 @@ class Table:
             )
         return "\n".join(lines)
 
+    def plot(self, ax=None, label: Optional[str] = None):
+        """Draws the deviation against τ on log-log axes with its 68.3 % bounds as error bars
+        (matplotlib, the ``plot`` extra: ``pip install './python[plot]'``). Returns the axes."""
+        try:
+            import matplotlib.pyplot as plt
+        except ImportError:
+            raise ImportError("Table.plot needs matplotlib: pip install './python[plot]'") from None
+        if ax is None:
+            _, ax = plt.subplots()
+        ok = np.isfinite(self.lo) & np.isfinite(self.hi)
+        ax.errorbar(self.tau[ok], self.dev[ok], yerr=[self.dev[ok] - self.lo[ok], self.hi[ok] - self.dev[ok]],
+                    fmt="o-", ms=3, capsize=2, label=label or self.stat.upper())
+        if not ok.all():
+            ax.plot(self.tau[~ok], self.dev[~ok], "o", ms=3, mfc="none", color=ax.lines[-1].get_color())
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("τ [s]")
+        ax.set_ylabel(f"{self.stat.upper()} [{self.dev_unit()}]" if self.unit else self.stat.upper())
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+        return ax
+
     def _repr_html_(self) -> str:
         u = self.dev_unit()
         rows = "".join(

@@ -33,6 +33,8 @@ class Table:
     def to_dict(self) -> Dict[str, object]:
         """Plain lists, JSON-ready."""
     def __len__(self) -> int: ...
+    def plot(self, ax: object = None, label: Optional[str] = None) -> object:
+        """Deviation against τ (s), log-log, 68.3 % bounds as error bars (matplotlib)."""
     def _repr_html_(self) -> str: ...
 
 def deviation(

@@ -66,3 +66,22 @@ def test_deviation_table_is_the_clis(rng, tmp_path, stat):
     assert "±" not in str(table) and "[deg/s]" in str(table)
     d = table.to_dict()
     assert d["unit"] == "deg/s" and len(d["dev"]) == len(table)
+
+
+def test_table_plot_draws_the_rows_with_their_bounds(rng):
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    y = rng.normal(0, 0.05, int(rng.integers(2_000, 10_000)))
+    table = pico_imu.deviation(y, rate=100.0, stat="oadev", unit="deg/s")
+    ax = table.plot()
+    line = ax.lines[0]
+    ok = np.isfinite(table.lo)
+    np.testing.assert_array_equal(line.get_xdata(), table.tau[ok])
+    np.testing.assert_array_equal(line.get_ydata(), table.dev[ok])
+    assert ax.get_xscale() == "log" and ax.get_ylabel() == "OADEV [deg/s]"
+    # the error bars reach the bounds
+    segs = ax.collections[0].get_segments()
+    lows = np.array([s[0][1] for s in segs])
+    highs = np.array([s[1][1] for s in segs])
+    np.testing.assert_allclose(lows, table.lo[ok], rtol=1e-12)
+    np.testing.assert_allclose(highs, table.hi[ok], rtol=1e-12)

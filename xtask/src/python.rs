@@ -8,8 +8,14 @@ use anyhow::{bail, Context, Result};
 
 use crate::{root, run, target_dir};
 
-/// The reference the drop-in is compared with, pinned so a new release cannot move the test.
-const TEST_PACKAGES: &[&str] = &["maturin>=1.9,<2", "pytest>=7", "allantools==2024.6"];
+/// The build backend, the test runner, the reference the drop-in is compared with (pinned so a
+/// new release cannot move the test) and matplotlib for `Table.plot`.
+const TEST_PACKAGES: &[&str] = &[
+    "maturin>=1.9,<2",
+    "pytest>=7",
+    "allantools==2024.6",
+    "matplotlib>=3.5",
+];
 
 /// Creates (or reuses) the venv, installs the test packages and `pip install ./python`, then
 /// runs `python -m pytest python/tests`. Without a Python ≥ 3.9 it says so and skips.
