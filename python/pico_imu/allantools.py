@@ -75,6 +75,8 @@ def _compat(stat: str, data, rate: float, data_type: str, taus):
     if data_type not in ("phase", "freq"):
         raise ValueError(f"data_type={data_type!r}: expected \"phase\" (s) or \"freq\" (rate samples)")
     x = _as_data(data)
+    if len(x) < 3:
+        raise ValueError(f"data has {len(x)} samples, at least 3 are needed")
     n_phase = len(x) + 1 if data_type == "freq" else len(x)
     ms = tau_ms(n_phase, rate, taus)
     if len(ms) == 0:

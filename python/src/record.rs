@@ -77,10 +77,6 @@ pub fn read_csv<'py>(
         }
         if let Some(u) = imu_proto::csv::unit(n) {
             units.set_item(n, u)?;
-        } else if n == TIME {
-            units.set_item(n, "s")?;
-        } else if n == GAP_BEFORE {
-            units.set_item(n, "samples")?;
         }
         columns.set_item(n, c.into_pyarray(py))?;
     }

@@ -37,6 +37,9 @@ def test_bad_arguments_are_named():
         allantools.oadev(y, rate=1.0, taus=[1000.0])
     with pytest.raises(ValueError, match="stat=\"allan\""):
         pico_imu.deviation(y, rate=1.0, stat="allan")
+    for short in ([], [1.0], [1.0, 2.0]):
+        with pytest.raises(ValueError, match=f"data has {len(short)} samples, at least 3"):
+            allantools.totdev(short)
     with pytest.raises(ValueError, match="1-D"):
         allantools.oadev(np.ones((10, 10)))
     with pytest.raises(ValueError, match="data has 2 samples, at least 3 are needed"):
