@@ -14,6 +14,7 @@ mod emu;
 mod emu_check;
 mod emu_link;
 mod firmware;
+mod python;
 
 /// Packages that only build for the device (thumbv6m-none-eabi).
 const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
@@ -218,6 +219,7 @@ fn test(extra: &[String]) -> Result<()> {
     }
     c.args(extra);
     run(&mut c)?;
+    python::test()?;
     if emu::node_available() {
         for scenario in [
             e2e::Scenario::Faults,

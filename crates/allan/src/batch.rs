@@ -386,8 +386,9 @@ struct PhaseSums {
 
 /// [`PhaseSums`] of the phase `x`: overlapping sums in fused passes over groups of m, each
 /// split by start index over the cores, carrying the identification sums of the short τ; the
-/// other statistics one m at a time. Identification of the rest is O(N/m) per m.
-fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
+/// other statistics one m at a time. Identification of the rest is O(N/m) per m. Without
+/// `with_ident` only the sums are taken (the idents are left empty).
+fn phase_sums(x: &[f64], ms: &[u64], stat: Stat, with_ident: bool) -> PhaseSums {
     let d = stat.difference_order();
     let fused = matches!(stat, Stat::Oadev | Stat::Ohdev);
     let groups: Vec<&[u64]> = if fused {
@@ -400,7 +401,8 @@ fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
         .map(|g| g.iter().map(|&m| m as usize).collect())
         .collect();
     let acf_fused = |m: u64| {
-        m as usize <= ACF_FUSED_MAX
+        with_ident
+            && m as usize <= ACF_FUSED_MAX
             && noise_id::averages(x.len(), m as usize) >= noise_id::ACF_MIN_AVERAGES
     };
     // Fused identification sums are taken for a prefix of each group (ascending m).
@@ -432,7 +434,7 @@ fn phase_sums(x: &[f64], ms: &[u64], stat: Stat) -> PhaseSums {
     }
     jobs.extend(
         (0..ms.len())
-            .filter(|&row| idents[row] != Ident::Fused)
+            .filter(|&row| with_ident && idents[row] != Ident::Fused)
             .map(|row| Job::Identify { row }),
     );
     let done = par_map(&jobs, |job| match *job {
@@ -507,7 +509,7 @@ fn deviation_of_phases(
         if own == 0 {
             continue;
         }
-        let ps = phase_sums(x, &ms[..own], stat);
+        let ps = phase_sums(x, &ms[..own], stat, true);
         for (t, v) in sums.iter_mut().zip(&ps.sums) {
             *t += v;
         }
@@ -576,6 +578,63 @@ fn deviation_of_phases(
         });
     }
     Ok(rows)
+}
+
+/// The plain estimate of `stat` at each averaging factor in `ms`: (deviation, number of terms),
+/// without noise identification or bounds — what AllanTools returns. `data` is rate samples, or
+/// phase in s when `is_phase`, every `tau0` s. Every m with at least one term is computed, TOTDEV
+/// at any m below the number of phase points N as AllanTools does (the tables stop at
+/// (N − 1)/2, [`deviation`]); an m with no term gives (NaN, 0). The m are shared among the cores.
+pub fn plain_deviations(
+    data: &[f64],
+    tau0: f64,
+    stat: Stat,
+    ms: &[u64],
+    is_phase: bool,
+) -> Result<Vec<(f64, u64)>, AllanError> {
+    check(data, tau0)?;
+    if ms.contains(&0) {
+        return Err(AllanError::BadTauSet("m = 0 in the list"));
+    }
+    let x = if is_phase {
+        data.iter().map(|v| v / tau0).collect()
+    } else {
+        phase_from_rate_checked(data)?
+    };
+    let np = x.len();
+    if matches!(stat, Stat::Oadev | Stat::Ohdev) {
+        // One cache-blocked pass for all m (ascending, each with a term), no identification.
+        let mut own: Vec<u64> = ms
+            .iter()
+            .copied()
+            .filter(|&m| stat_norm(np, m as usize, stat).0 >= 1)
+            .collect();
+        own.sort_unstable();
+        own.dedup();
+        let sums = phase_sums(&x, &own, stat, false).sums;
+        return Ok(ms
+            .iter()
+            .map(|&m| match own.binary_search(&m) {
+                Ok(k) => {
+                    let (n, denom) = stat_norm(np, m as usize, stat);
+                    ((sums[k] / (denom * n as f64)).sqrt(), n)
+                }
+                Err(_) => (f64::NAN, 0),
+            })
+            .collect());
+    }
+    Ok(par_map(ms, |&m| {
+        let m = m as usize;
+        let (n, denom) = stat_norm(np, m, stat);
+        if n == 0 || m >= np {
+            return (f64::NAN, 0);
+        }
+        let mut dev = (stat_sum(&x, m, stat) / (denom * n as f64)).sqrt();
+        if stat == Stat::Tdev {
+            dev *= m as f64 * tau0 / 3f64.sqrt();
+        }
+        (dev, n)
+    }))
 }
 
 /// (number of terms, normaliser) of `stat` at `m` for `np` phase points, without touching the
@@ -742,5 +801,92 @@ mod tests {
                 w[1].m
             );
         }
+    }
+
+    #[test]
+    fn plain_deviations_are_the_table_without_bounds_and_totdev_reaches_n_minus_1() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(7, |d| d.subsec_nanos() | 1);
+        let mut r = crate::test_rng::rng(key);
+        let np = 300 + (key % 200) as usize;
+        let y: Vec<f64> = (0..np).map(|_| r() + 3.0).collect();
+        let tau0 = 0.01;
+        let ms: Vec<u64> = (1..np as u64 + 2).collect();
+        for stat in [
+            Stat::Adev,
+            Stat::Oadev,
+            Stat::Mdev,
+            Stat::Tdev,
+            Stat::Hdev,
+            Stat::Ohdev,
+            Stat::Totdev,
+        ] {
+            let rows = deviation(&y, tau0, stat, &TauSet::All).unwrap();
+            let plain = plain_deviations(&y, tau0, stat, &ms, false).unwrap();
+            for row in &rows {
+                let (dev, n) = plain[row.m as usize - 1];
+                assert_eq!(n, row.n, "key {key} {stat:?} m {}", row.m);
+                assert!(
+                    (dev / row.dev - 1.0).abs() < 1e-12,
+                    "key {key} {stat:?} m {}",
+                    row.m
+                );
+            }
+        }
+        // Any order, repeats allowed: each m answered where it stands.
+        let shuffled: Vec<u64> = ms.iter().rev().chain(&ms[..5]).copied().collect();
+        for stat in [Stat::Oadev, Stat::Ohdev, Stat::Mdev] {
+            let sorted = plain_deviations(&y, tau0, stat, &ms, false).unwrap();
+            let any = plain_deviations(&y, tau0, stat, &shuffled, false).unwrap();
+            for (m, got) in shuffled.iter().zip(&any) {
+                let want = sorted[*m as usize - 1];
+                assert_eq!(got.1, want.1, "{stat:?} m {m}");
+                assert!(
+                    got.0 == want.0 || (got.0.is_nan() && want.0.is_nan()),
+                    "{stat:?} m {m}"
+                );
+            }
+        }
+        // TOTDEV past the table's (N−1)/2, against SP 1065 eq. 25 written out: the phase
+        // reflected at both ends, N − 2 terms.
+        let x: Vec<f64> = std::iter::once(0.0)
+            .chain(y.iter().scan(0.0, |s, v| {
+                *s += v - y.iter().sum::<f64>() / y.len() as f64;
+                Some(*s)
+            }))
+            .collect();
+        let n = x.len() as isize;
+        let at = |i: isize| {
+            if i < 0 {
+                2.0 * x[0] - x[(-i) as usize]
+            } else if i >= n {
+                2.0 * x[n as usize - 1] - x[(2 * (n - 1) - i) as usize]
+            } else {
+                x[i as usize]
+            }
+        };
+        let plain = plain_deviations(&y, tau0, Stat::Totdev, &ms, false).unwrap();
+        for m in [n / 2 + 1, n - 2, n - 1] {
+            let s: f64 = (1..n - 1)
+                .map(|i| (at(i - m) - 2.0 * at(i) + at(i + m)).powi(2))
+                .sum();
+            let want = (s / (2.0 * (m * m) as f64 * (n - 2) as f64)).sqrt();
+            let (dev, terms) = plain[m as usize - 1];
+            assert_eq!(terms, (n - 2) as u64);
+            assert!(
+                (dev / want - 1.0).abs() < 1e-9,
+                "key {key} m {m}: {dev} vs {want}"
+            );
+        }
+        // No term: NaN and 0; bad input named.
+        assert_eq!(plain[np].1, 0);
+        assert!(plain[np].0.is_nan());
+        let mut bad = y.clone();
+        bad[17] = f64::NAN;
+        assert_eq!(
+            plain_deviations(&bad, tau0, Stat::Oadev, &[1], false),
+            Err(AllanError::NotFinite { index: 17 })
+        );
     }
 }

@@ -115,7 +115,8 @@ fn moments(v: &[f64], own: usize, pairs: usize) -> (f64, f64, f64) {
         s[0] += w;
         q[0] += w * w;
     }
-    let (lo, hi) = (&v[..pairs], &v[1..pairs + 1]);
+    // (An empty chunk, the last one of a high difference order, has no pairs and no v[1].)
+    let (lo, hi) = (&v[..pairs], v.get(1..pairs + 1).unwrap_or(&[]));
     let mut c = lo.chunks_exact(4).zip(hi.chunks_exact(4));
     for (a, b) in &mut c {
         for l in 0..4 {
@@ -575,6 +576,40 @@ mod tests {
                         "case {c} m={m}"
                     );
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn differences_of_a_last_chunk_shorter_than_their_order_add_nothing() {
+        // n averages with n mod CHUNK ≤ 3 leave the third (and second) differences no term in
+        // the last chunk; each r must still equal the formula on the whole series.
+        let mut r = crate::test_rng::rng(0x5eed_1234);
+        for extra in 1..=3usize {
+            let m = 2;
+            let n = CHUNK + extra;
+            let mut x = vec![0.0f64];
+            for _ in 0..n * m {
+                let last = *x.last().unwrap();
+                x.push(last + r());
+            }
+            let got = lag1_differences(&x, m, 3);
+            let b: Vec<f64> = (0..n)
+                .map(|j| (x[(j + 1) * m] - x[j * m]) / m as f64)
+                .collect();
+            let mut d = b.clone();
+            for (k, g) in got.iter().enumerate() {
+                d = d.windows(2).map(|w| w[1] - w[0]).collect();
+                let mean = d.iter().sum::<f64>() / d.len() as f64;
+                let c: Vec<f64> = d.iter().map(|v| v - mean).collect();
+                let num: f64 = c.windows(2).map(|w| w[0] * w[1]).sum();
+                let den: f64 = c.iter().map(|v| v * v).sum();
+                assert!(
+                    (g - num / den).abs() < 1e-9,
+                    "extra {extra} order {}: {g} vs {}",
+                    k + 1,
+                    num / den
+                );
             }
         }
     }

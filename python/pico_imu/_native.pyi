@@ -1,0 +1,57 @@
+"""Type stubs of the Rust extension module (python/src/). Use the package's public API
+(:mod:`pico_imu`, :mod:`pico_imu.allantools`); these are its building blocks."""
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+def deviation(
+    data: npt.NDArray[np.float64],
+    rate: float,
+    stat: str,
+    data_type: str = "freq",
+    taus: str = "octave",
+    ms: Optional[List[int]] = None,
+) -> Dict[str, np.ndarray]:
+    """Table of ``stat`` over ``data`` (rate samples, or phase in s) sampled at ``rate`` Hz:
+    arrays ``tau`` (s), ``m``, ``dev``, ``n``, ``alpha``, ``edf``, ``lo``, ``hi`` (68.3 %)."""
+
+def plain_deviations(
+    data: npt.NDArray[np.float64], rate: float, stat: str, data_type: str, ms: List[int]
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.uint64]]:
+    """(deviations, term counts) at each m; NaN and 0 where an m has no term."""
+
+def read_csv(path: str, skip_lines: int = 0) -> dict:
+    """A contract recording: columns, units, t (s), rate_hz (Hz), segments, timing."""
+
+def panic_for_test() -> None:
+    """Raises RuntimeError from a deliberate Rust panic (for the tests)."""
+
+class Stream:
+    """The device's streaming engine (overlap 8, 32 octave levels) on whole counts."""
+
+    def __init__(self, rate: float, scale: float = 1.0) -> None: ...
+    def push(self, chunk: npt.NDArray[np.float64]) -> None:
+        """Feeds whole counts; the GIL is released while they are summed."""
+    def gap(self) -> None:
+        """Marks lost samples: no difference spans the gap."""
+    @property
+    def samples(self) -> int: ...
+    @property
+    def gaps(self) -> int: ...
+    def table(self, stat: str = "oadev") -> Dict[str, np.ndarray]:
+        """``tau`` (s), ``m``, ``dev`` (count × scale), ``n``, ``alpha``, ``edf``, ``lo``,
+        ``hi``, ``stride``."""
+
+class CsvChunks:
+    """A contract recording in chunks of rows with the gaps found on the way."""
+
+    def __init__(self, path: str, columns: Optional[List[str]] = None, rows: int = 65536, skip_lines: int = 0) -> None: ...
+    @property
+    def names(self) -> List[str]: ...
+    @property
+    def units(self) -> Dict[str, str]: ...
+    @property
+    def rate_hz(self) -> Optional[float]: ...
+    def __iter__(self) -> "CsvChunks": ...
+    def __next__(self) -> Dict[str, object]: ...
