@@ -23,39 +23,38 @@ export const WINDOW_NS = 100e6;
 export const BUCKET_NS = 10e6;
 
 /**
- * Executed cycles per bucket of emulated time (`BUCKET_NS`), closed by a poll hook (run every RTT
- * poll, 200 µs) when the clock passes the bucket's end; aligned windows (`WINDOW_NS`) are made of
- * whole buckets. `counter` (optional): a running count read at each bucket's ends, its increase
- * recorded as the window's `count`. Returns the meter: `windows` ([{ from_s, cycles, count,
- * stages }], aligned) and `buckets` ([{ from_s, cycles }]).
+ * Runs the session from the current instant for `seconds`, in buckets of `BUCKET_NS` that end
+ * on the exact instant (the emulator stops within one instruction of it), and returns
+ * { stop, buckets: [{ from_s, cycles, count, stages }], windows } with aligned windows of
+ * `WINDOW_NS` made of whole buckets. `counter`: a running count read at each bucket's ends,
+ * its increase recorded as the bucket's `count`; `stages`: the markers' cumulative report at
+ * each aligned window's end.
  */
-export function windowMeter(emu, fromNanos, counter = () => 0) {
+export async function runMetered(s, seconds, counter = () => 0) {
   const per = Math.round(WINDOW_NS / BUCKET_NS);
-  const m = { windows: [], buckets: [], start: fromNanos, cycles0: null, count0: 0, open: null };
-  emu.pollHooks.push((nanos) => {
-    if (nanos < m.start) return;
-    if (m.cycles0 === null) {
-      m.cycles0 = emu.core.cycles;
-      m.count0 = counter();
-      m.open = { from_s: m.start / 1e9, cycles: 0, count: 0 };
-      return;
+  const buckets = [];
+  const windows = [];
+  const start = s.emu.clock.nanos;
+  const n = Math.round((seconds * 1e9) / BUCKET_NS);
+  let stop = null;
+  let open = null;
+  const w0 = performance.now();
+  for (let i = 0; i < n && !stop; i++) {
+    const c0 = s.emu.core.cycles;
+    const k0 = counter();
+    // The emulator directly: `Session.run` adds a poll hook each call.
+    stop = await s.emu.run(start + (i + 1) * BUCKET_NS);
+    const b = { from_s: (start + i * BUCKET_NS) / 1e9, cycles: s.emu.core.cycles - c0, count: counter() - k0 };
+    buckets.push(b);
+    open = open ? { ...open, cycles: open.cycles + b.cycles, count: open.count + b.count } : { ...b };
+    if (buckets.length % per === 0) {
+      const marks = s.emu.markReport();
+      windows.push({ ...open, stages: marks ? Object.fromEntries(marks.cycles) : null });
+      open = null;
     }
-    if (nanos >= m.start + BUCKET_NS) {
-      const count = counter();
-      m.buckets.push({ from_s: m.start / 1e9, cycles: emu.core.cycles - m.cycles0 });
-      m.open.cycles += emu.core.cycles - m.cycles0;
-      m.open.count += count - m.count0;
-      m.start += BUCKET_NS;
-      m.cycles0 = emu.core.cycles;
-      m.count0 = count;
-      if (m.buckets.length % per === 0) {
-        const marks = emu.markReport();
-        m.windows.push({ ...m.open, stages: marks ? Object.fromEntries(marks.cycles) : null });
-        m.open = { from_s: m.start / 1e9, cycles: 0, count: 0 };
-      }
-    }
-  });
-  return m;
+  }
+  s.wallSeconds = (s.wallSeconds ?? 0) + (performance.now() - w0) / 1000;
+  return { stop, buckets, windows };
 }
 
 /** The worst window of `WINDOW_NS` sliding over `buckets` one bucket at a time: { from_s, cycles }. */
@@ -96,7 +95,6 @@ export async function benchReport(v) {
   const s = new Session({ elf: v.elf, stream, clock, echoLog: !v.quiet });
   // Per window, the magnetometer's status reads that found no sample yet: each costs the
   // firmware a second poll (a probe of its sample clock that came early, or a late landing).
-  const meter = windowMeter(s.emu, warmup * 1e9, () => s.qmc.stats.statusNotReady);
   let stop = await s.run(warmup * 1e9);
   const cycles0 = s.emu.core.cycles;
   const served0 = s.mpu.stats.servedFifo + s.mpu.stats.servedRegs;
@@ -104,7 +102,8 @@ export async function benchReport(v) {
   const exc0 = { ...s.emu.exceptions };
   const t0 = s.emu.clock.nanos;
   const w0 = s.wallSeconds;
-  if (!stop) stop = await s.run((warmup + seconds) * 1e9);
+  const meter = stop ? { buckets: [], windows: [] } : await runMetered(s, seconds, () => s.qmc.stats.statusNotReady);
+  stop = stop ?? meter.stop;
   await s.close();
   if (stop) throw new Error(`bench: firmware stopped at ${(stop.nanos / 1e9).toFixed(6)} s: ${stop.message}\n${s.logLines.slice(-40).join('\n')}`);
   const elapsedCycles = ((s.emu.clock.nanos - t0) * 125e6) / 1e9;
