@@ -27,10 +27,12 @@ export const BUCKET_NS = 10e6;
  * on the exact instant (the emulator stops within one instruction of it), and returns
  * { stop, buckets: [{ from_s, cycles, count, stages }], windows } with aligned windows of
  * `WINDOW_NS` made of whole buckets. `counter`: a running count read at each bucket's ends,
- * its increase recorded as the bucket's `count`; `stages`: the markers' cumulative report at
+ * its increase recorded as the bucket's `count`, and likewise `served`, the sample sets the
+ * MPU-6050 model served (read out of its FIFO); `stages`: the markers' cumulative report at
  * each aligned window's end.
  */
 export async function runMetered(s, seconds, counter = () => 0) {
+  const served = () => s.mpu.stats.servedFifo + s.mpu.stats.servedRegs;
   const per = Math.round(WINDOW_NS / BUCKET_NS);
   const buckets = [];
   const windows = [];
@@ -42,11 +44,12 @@ export async function runMetered(s, seconds, counter = () => 0) {
   for (let i = 0; i < n && !stop; i++) {
     const c0 = s.emu.core.cycles;
     const k0 = counter();
+    const s0 = served();
     // The emulator directly: `Session.run` adds a poll hook each call.
     stop = await s.emu.run(start + (i + 1) * BUCKET_NS);
-    const b = { from_s: (start + i * BUCKET_NS) / 1e9, cycles: s.emu.core.cycles - c0, count: counter() - k0 };
+    const b = { from_s: (start + i * BUCKET_NS) / 1e9, cycles: s.emu.core.cycles - c0, count: counter() - k0, served: served() - s0 };
     buckets.push(b);
-    open = open ? { ...open, cycles: open.cycles + b.cycles, count: open.count + b.count } : { ...b };
+    open = open ? { ...open, cycles: open.cycles + b.cycles, count: open.count + b.count, served: open.served + b.served } : { ...b };
     if (buckets.length % per === 0) {
       const marks = s.emu.markReport();
       windows.push({ ...open, stages: marks ? Object.fromEntries(marks.cycles) : null });
@@ -147,6 +150,7 @@ export async function benchReport(v) {
     window_cycles: meter.windows.map((w) => w.cycles),
     bucket_cycles: meter.buckets.map((b) => b.cycles),
     window_mag_not_ready: meter.windows.map((w) => w.count),
+    window_sample_sets: meter.windows.map((w) => w.served),
     window_stages: meter.windows.map((w) => w.stages),
   };
   const md = [];
@@ -166,6 +170,8 @@ export async function benchReport(v) {
   const notReady = meter.windows.map((w) => w.count);
   const mostNotReady = Math.max(0, ...notReady);
   md.push(`- magnetometer status reads that found no sample yet (each a second poll): ${notReady.reduce((a, b) => a + b, 0)} in all, at most ${mostNotReady} in one window${mostNotReady ? ` (from ${meter.windows[notReady.indexOf(mostNotReady)].from_s.toFixed(1)} s)` : ''}`);
+  const setsPer = meter.windows.map((w) => w.served);
+  md.push(`- sample sets read out of the MPU-6050's FIFO per window: ${Math.min(...setsPer)} to ${Math.max(...setsPer)}; the worst window read ${worst.served ?? '–'}`);
   md.push(`- I2C0 bus occupancy: ${result.i2c_bus_busy_percent.toFixed(1)} % of the time`);
   md.push(`- speed: ${seconds} s emulated in ${result.wall_s.toFixed(2)} s wall (${(seconds / result.wall_s).toFixed(3)} emulated s per wall s)`);
   md.push('');
