@@ -11,6 +11,7 @@
 //!   [`engines`];
 //! * host requests: [`requests`];
 //! * tables: [`tables`] (rounds of snapshots, spaced out);
+//! * when each task's burst runs: [`schedule`] (the instants and turns the tasks wait for);
 //! * [`device`] ties them together for the processing task; [`outbox`] queues frames whole or
 //!   drops and counts them; [`stage`] marks the budget stages for the emulator; [`config`]
 //!   holds the sensors' configuration; [`msg`] the messages between the tasks.
@@ -56,6 +57,7 @@ pub mod pipeline;
 #[cfg(feature = "std")]
 pub mod replay;
 pub mod requests;
+pub mod schedule;
 pub mod service;
 pub mod stage;
 pub mod tables;
