@@ -9,6 +9,7 @@
 //!   owner of timestamps) and [`bus`] (what a bus must tell them);
 //! * samples: [`pipeline`] (corrections → Allan engines → batches, losses and splits) over
 //!   [`engines`];
+//! * orientation: [`ahrs`] (attitude and heading from the calibrated samples);
 //! * host requests: [`requests`];
 //! * tables: [`tables`] (rounds of snapshots, spaced out);
 //! * [`device`] ties them together for the processing task; [`outbox`] queues frames whole or
@@ -21,6 +22,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod ahrs;
 pub mod bus;
 pub mod clock;
 pub mod config;
