@@ -5,7 +5,7 @@ use serde::{de::DeserializeOwned, Serialize};
 use crate::{batch, status, table, AllanTable, SampleBatch, Status};
 
 /// Wire-format version carried in the first byte of every frame.
-pub const PROTOCOL_VERSION: u8 = 4;
+pub const PROTOCOL_VERSION: u8 = 5;
 /// Largest serialised message (version + postcard + CRC), bytes, before COBS.
 pub const MAX_PAYLOAD: usize = 3072;
 /// Largest encoded frame, bytes, including the trailing `0x00` delimiter.

@@ -49,6 +49,7 @@
 //!   Newton step from 1 (`q (3 − |q|²)/2`, error O((|q|² − 1)²), ≈ 1e-7 at 200 Hz).
 //!   micromath's `asin` (atan of x/√(1−x²) with the raw `invsqrt`) errs by up to 0.8° at 60°
 //!   of pitch, so pitch is `atan2(−r₃₁, √(r₃₂² + r₃₃²))` instead.
+pub use imu_proto::AhrsState;
 use micromath::{Quaternion, F32};
 
 /// Proportional gain while tracking, rad/s per unit error (time constant 1 s).
@@ -69,19 +70,6 @@ const MIN_CONVERGE_UPDATES: u32 = 50;
 /// IMU samples summed at most before an update without the magnetometer (100 ms at 1 kHz;
 /// full-scale counts × this stay far inside i32).
 pub const MAX_SUM: u32 = 100;
-
-/// What the filter reports with each attitude.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum AhrsState {
-    /// Since the start (or a new calibration): the estimate is still pulling in.
-    Converging,
-    /// Tracking, the magnetometer within its expected band.
-    Tracking,
-    /// |B| outside its band: heading from the gyro alone.
-    MagField,
-    /// The dip outside its band: heading from the gyro alone.
-    MagDip,
-}
 
 /// The 1 kHz path's sums since the last update: corrected counts.
 #[derive(Debug, Clone, Copy, Default)]
@@ -158,8 +146,10 @@ enum Reference {
 #[derive(Debug, Clone)]
 pub struct Ahrs {
     q: Quaternion,
-    /// Gyro bias estimate, rad/s (body).
-    bias: [f32; 3],
+    /// The rotation's rows for `q` ([`rows`]).
+    rows: [[f32; 3]; 3],
+    /// Gyro bias estimate times half the magnetometer's period, rad (body).
+    bias_h: [f32; 3],
     started: bool,
     converging: bool,
     updates: u32,
@@ -175,6 +165,24 @@ impl Default for Ahrs {
     fn default() -> Self {
         Self::new()
     }
+}
+
+/// The magnetometer's period, s: the step the bias estimate is kept in.
+const MAG_DT: f32 = imu_proto::MAG_PERIOD_US as f32 * 1e-6;
+
+/// The first three rows of the body → NED rotation of a unit quaternion (the body's north,
+/// east and down axes): 9 products, 15 sums.
+fn rows(q: &Quaternion) -> [[f32; 3]; 3] {
+    let (w, x, y, z) = (q.w(), q.x(), q.y(), q.z());
+    let (x2, y2, z2) = (x + x, y + y, z + z);
+    let (xx, yy, zz) = (x * x2, y * y2, z * z2);
+    let (xy, xz, yz) = (x * y2, x * z2, y * z2);
+    let (wx, wy, wz) = (w * x2, w * y2, w * z2);
+    [
+        [1.0 - yy - zz, xy - wz, xz + wy],
+        [xy + wz, 1.0 - xx - zz, yz - wx],
+        [xz - wy, yz + wx, 1.0 - xx - yy],
+    ]
 }
 
 /// `1/√x` to ≈ 0.2 %: micromath's bit-trick guess and one Newton step.
@@ -193,7 +201,8 @@ impl Ahrs {
     pub fn new() -> Self {
         Ahrs {
             q: Quaternion::IDENTITY,
-            bias: [0.0; 3],
+            rows: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            bias_h: [0.0; 3],
             started: false,
             converging: true,
             updates: 0,
@@ -259,6 +268,11 @@ impl Ahrs {
         }
     }
 
+    /// Whether the expected field is (or is being) learnt rather than the host's.
+    pub fn reference_learnt(&self) -> bool {
+        !matches!(self.reference, Reference::Set { .. })
+    }
+
     /// The attitude now.
     pub fn quaternion(&self) -> [f32; 4] {
         self.q.to_array()
@@ -269,6 +283,10 @@ impl Ahrs {
     /// for an update without it; `dt`: the time since the last update, s (the correction's
     /// step). Returns the attitude once the filter has started (it starts at the first update
     /// with both an accelerometer and a magnetometer reading).
+    ///
+    /// Soft float on the M0+ (≈ 150 cycles an operation in the emulator): the rotation's rows
+    /// are kept from the previous update, the gains are folded into the constants, and the
+    /// convergence and learning sums only run while they are needed.
     pub fn update(
         &mut self,
         acc: &mut Accum,
@@ -276,14 +294,16 @@ impl Ahrs {
         mag: Option<&[i32; 3]>,
         dt: f32,
     ) -> Option<Attitude> {
-        // Sensor (forward-left-up) → body (forward-right-down).
-        let dtheta = [
-            acc.gyro[0] as f32 * rad_per_count,
-            -(acc.gyro[1] as f32) * rad_per_count,
-            -(acc.gyro[2] as f32) * rad_per_count,
+        // Half the rotation since the last update, body axes (sensor forward-left-up →
+        // forward-right-down: the sign flips are free).
+        let k = 0.5 * rad_per_count;
+        let mut v = [
+            acc.gyro[0] as f32 * k,
+            -(acc.gyro[1] as f32 * k),
+            -(acc.gyro[2] as f32 * k),
         ];
         if acc.n > 0 {
-            // The mean's scale does not matter: the direction is normalised below.
+            // The sum's scale does not matter: the direction is normalised below.
             self.accel = [
                 acc.accel[0] as f32,
                 -(acc.accel[1] as f32),
@@ -300,86 +320,82 @@ impl Ahrs {
             return None;
         }
         let a = self.accel;
-        let (w, x, y, z) = (self.q.w(), self.q.x(), self.q.y(), self.q.z());
-        // The body's down axis, R̂ᵀe_z (third row of R̂).
-        let d = [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
+        let [r1, r2, d] = self.rows;
+        // Gravity: â × (−d) = (d × a)/|a|; the gain and the half step folded into one factor.
+        let kph = 0.5 * KP * dt;
+        let da = [
+            d[1] * a[2] - d[2] * a[1],
+            d[2] * a[0] - d[0] * a[2],
+            d[0] * a[1] - d[1] * a[0],
         ];
-        // Gravity: â × (−d).
-        let na = F32(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).invsqrt().0;
-        let ua = [a[0] * na, a[1] * na, a[2] * na];
-        let mut e = [
-            ua[2] * d[1] - ua[1] * d[2],
-            ua[0] * d[2] - ua[2] * d[0],
-            ua[1] * d[0] - ua[0] * d[1],
-        ];
-        let mut err2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2];
+        let ca = kph * F32(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).invsqrt().0;
+        let mut cm = 0.0;
         let mut state = AhrsState::Tracking;
         if let Some(m) = m {
             let m2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
-            let inv_m = inv_sqrt(m2);
-            let sin_dip = (m[0] * d[0] + m[1] * d[1] + m[2] * d[2]) * inv_m;
-            state = self.check_field(m2, inv_m, sin_dip);
+            let md = m[0] * d[0] + m[1] * d[1] + m[2] * d[2];
+            state = self.check_field(m2, md);
             if state == AhrsState::Tracking {
-                // h = R̂ m, its north and east components.
-                let hx = (1.0 - 2.0 * (y * y + z * z)) * m[0]
-                    + 2.0 * (x * y - w * z) * m[1]
-                    + 2.0 * (x * z + w * y) * m[2];
-                let hy = 2.0 * (x * y + w * z) * m[0]
-                    + (1.0 - 2.0 * (x * x + z * z)) * m[1]
-                    + 2.0 * (y * z - w * x) * m[2];
-                let s = -hy * inv_sqrt(hx * hx + hy * hy);
-                e = [e[0] + s * d[0], e[1] + s * d[1], e[2] + s * d[2]];
-                err2 += s * s;
+                // h = R̂ m, north and east: the heading error about the vertical, sin of the
+                // angle of h's horizontal part from north (its scale only scales the gain).
+                let hx = r1[0] * m[0] + r1[1] * m[1] + r1[2] * m[2];
+                let hy = r2[0] * m[0] + r2[1] * m[1] + r2[2] * m[2];
+                cm = -hy * kph * F32(hx * hx + hy * hy).invsqrt().0;
             }
         }
-        // The smoothed error starts at the first update's.
-        if self.updates == 0 {
-            self.err2 = err2;
-        }
-        self.updates = self.updates.saturating_add(1);
-        self.err2 += (err2 - self.err2) * (1.0 / 16.0);
-        if self.converging && self.updates >= MIN_CONVERGE_UPDATES && self.err2 < CONVERGED_ERR2 {
-            self.converging = false;
-        }
-        if !self.converging {
-            for (b, e) in self.bias.iter_mut().zip(e) {
-                *b += KI * e * dt;
+        // The correction, kP e Δt/2, per axis.
+        let c = [0, 1, 2].map(|i| ca * da[i] + cm * d[i]);
+        if self.converging {
+            // The squared error, smoothed; from the first update's on.
+            let e2 = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) * (1.0 / (kph * kph));
+            if self.updates == 0 {
+                self.err2 = e2;
+            }
+            self.err2 += (e2 - self.err2) * (1.0 / 16.0);
+            self.updates = self.updates.saturating_add(1);
+            if self.updates >= MIN_CONVERGE_UPDATES && self.err2 < CONVERGED_ERR2 {
+                self.converging = false;
+            }
+        } else {
+            // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2).
+            let kb = (KI / KP) * dt;
+            for i in 0..3 {
+                self.bias_h[i] += kb * c[i];
             }
         }
-        let h = 0.5;
-        let step = Quaternion::new(
-            1.0,
-            h * (dtheta[0] + (KP * e[0] + self.bias[0]) * dt),
-            h * (dtheta[1] + (KP * e[1] + self.bias[1]) * dt),
-            h * (dtheta[2] + (KP * e[2] + self.bias[2]) * dt),
+        for i in 0..3 {
+            v[i] += c[i] + self.bias_h[i] * (dt * (1.0 / MAG_DT));
+        }
+        // q ← q + q ⊗ (0, v), then back to unit norm by a Newton step from 1.
+        let (w, x, y, z) = (self.q.w(), self.q.x(), self.q.y(), self.q.z());
+        let q = Quaternion::new(
+            w - x * v[0] - y * v[1] - z * v[2],
+            x + w * v[0] + y * v[2] - z * v[1],
+            y + w * v[1] - x * v[2] + z * v[0],
+            z + w * v[2] + x * v[1] - y * v[0],
         );
-        let q = self.q * step;
         self.q = q * (1.5 - 0.5 * q.norm());
+        self.rows = rows(&self.q);
         if self.converging {
             state = AhrsState::Converging;
         }
         Some(self.attitude(state))
     }
 
-    /// The field checks; while learning, learn from tracking updates.
-    fn check_field(&mut self, m2: f32, inv_m: f32, sin_dip: f32) -> AhrsState {
+    /// The field checks on |m|² and m·d (d the body's down axis); while learning, learn from
+    /// tracking updates.
+    fn check_field(&mut self, m2: f32, md: f32) -> AhrsState {
         let bands = match &mut self.reference {
             Reference::Set { bands, .. } | Reference::Learnt(bands) => *bands,
-            Reference::Learning {
-                field,
-                sin_dip: s,
-                n,
-            } => {
+            Reference::Learning { field, sin_dip, n } => {
                 if !self.converging {
-                    *field += m2 * inv_m;
-                    *s += sin_dip;
+                    let inv = inv_sqrt(m2);
+                    *field += m2 * inv;
+                    *sin_dip += md * inv;
                     *n += 1;
                     if *n >= LEARN_UPDATES {
                         let k = 1.0 / *n as f32;
-                        let dip = libm::asinf((*s * k).clamp(-1.0, 1.0)).to_degrees();
+                        let dip = libm::asinf((*sin_dip * k).clamp(-1.0, 1.0)).to_degrees();
                         self.reference = Reference::Learnt(Bands::new(*field * k, dip));
                     }
                 }
@@ -387,33 +403,32 @@ impl Ahrs {
             }
         };
         if m2 < bands.field2[0] || m2 > bands.field2[1] {
-            AhrsState::MagField
-        } else if sin_dip < bands.sin_dip[0] || sin_dip > bands.sin_dip[1] {
+            return AhrsState::MagField;
+        }
+        // sin δ = m·d/|m| within [lo, hi], without the square root: compare m·d with lo·|m|
+        // and hi·|m|, |m| = m2 · (1/√m2).
+        let norm = m2 * inv_sqrt(m2);
+        if md < bands.sin_dip[0] * norm || md > bands.sin_dip[1] * norm {
             AhrsState::MagDip
         } else {
             AhrsState::Tracking
         }
     }
 
-    /// Roll, pitch, heading from the quaternion.
+    /// Roll, pitch, heading from the rotation's rows.
     fn attitude(&self, state: AhrsState) -> Attitude {
-        let (w, x, y, z) = (self.q.w(), self.q.x(), self.q.y(), self.q.z());
-        let r31 = 2.0 * (x * z - w * y);
-        let r32 = 2.0 * (y * z + w * x);
-        let r33 = 1.0 - 2.0 * (x * x + y * y);
-        let r21 = 2.0 * (x * y + w * z);
-        let r11 = 1.0 - 2.0 * (y * y + z * z);
-        let c2 = r32 * r32 + r33 * r33;
-        let mut heading = atan2_deg(r21, r11) + self.declination_deg;
+        let [r1, r2, d] = self.rows;
+        let c2 = d[1] * d[1] + d[2] * d[2];
+        let mut heading = atan2_deg(r2[0], r1[0]) + self.declination_deg;
         if heading < 0.0 {
             heading += 360.0;
         } else if heading >= 360.0 {
             heading -= 360.0;
         }
         Attitude {
-            q: [w, x, y, z],
-            roll_deg: atan2_deg(r32, r33),
-            pitch_deg: atan2_deg(-r31, c2 * inv_sqrt(c2)),
+            q: self.q.to_array(),
+            roll_deg: atan2_deg(d[1], d[2]),
+            pitch_deg: atan2_deg(-d[0], c2 * inv_sqrt(c2)),
             heading_deg: heading,
             state,
         }
@@ -483,6 +498,7 @@ impl Ahrs {
         let n = libm::sqrtf(q.norm());
         if n.is_finite() && n > 0.0 {
             self.q = q * (1.0 / n);
+            self.rows = rows(&self.q);
             self.started = true;
         }
     }

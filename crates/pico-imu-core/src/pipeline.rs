@@ -1,6 +1,8 @@
 //! The sample path: per burst, in a straight line, fixed-point corrections (`imu_cal::device`)
 //! → the Allan engines (`allan::stream`) → the sample batch → one frame per full batch. Nothing
-//! on it allocates, divides or touches floating point.
+//! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
+//! and accelerometer for the attitude filter ([`crate::ahrs`]), which runs once per
+//! magnetometer sample (200 Hz, soft float) and sends its estimates four to a frame.
 //!
 //! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
 //! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
@@ -8,10 +10,12 @@
 use imu_cal::device::{Calibration, Prepared};
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
-    DeviceMsg, Event, GapCause, ImuSample, MagSample, SampleBatch, Scales, Sensor, StreamMode, Vec,
+    DeviceMsg, Event, GapCause, ImuSample, MagSample, Orientation, SampleBatch, Scales, Sensor,
+    StreamMode, Vec, MAG_PERIOD_US, MAX_ORIENTATIONS,
 };
 
-use crate::clock::Stamps;
+use crate::ahrs::{Accum, Ahrs, MAX_SUM};
+use crate::clock::{Fine, Stamps, US};
 use crate::engines::{Engines, ImuInputs};
 use crate::msg::BURST_MAX;
 use crate::outbox::{FrameSink, Outbox};
@@ -23,6 +27,11 @@ use crate::stage::{self, Stage};
 /// batch of any length up to it is the same message.
 pub const BATCH_IMU: usize = 25;
 const _: () = assert!(BATCH_IMU <= imu_proto::MAX_BATCH_IMU && 100 % BATCH_IMU == 0);
+
+/// Attitude estimates per frame: four, one magnetometer hand-over (20 ms), so every 100 ms
+/// carries five such frames.
+pub const ORIENTATIONS_PER_FRAME: usize = 4;
+const _: () = assert!(ORIENTATIONS_PER_FRAME <= MAX_ORIENTATIONS);
 
 /// What the sample path counts.
 #[derive(Debug, Clone, Copy, Default)]
@@ -48,6 +57,16 @@ pub struct Pipeline {
     /// The latest raw temperature, for the gyro's temperature term and the status.
     pub(crate) last_temp: Option<i16>,
     pub(crate) counts: SampleCounts,
+    /// The attitude filter and the 1 kHz path's sums for its next update.
+    pub(crate) ahrs: Ahrs,
+    acc: Accum,
+    /// Estimates not sent yet.
+    orient: Vec<Orientation, MAX_ORIENTATIONS>,
+    /// The IMU's period ([`Fine`], 0: not known yet) and the stamp of its latest sample, µs.
+    imu_period: Fine,
+    imu_t_us: u64,
+    /// rad per gyro count per second (the scale, in radians).
+    gyro_rad: f32,
 }
 
 impl Pipeline {
@@ -67,12 +86,38 @@ impl Pipeline {
             next_k: [None; 2],
             last_temp: None,
             counts: SampleCounts::default(),
+            ahrs: Ahrs::new(),
+            acc: Accum::default(),
+            orient: Vec::new(),
+            imu_period: 0,
+            imu_t_us: 0,
+            gyro_rad: scales.gyro * (core::f32::consts::PI / 180.0),
         }
     }
 
+    /// New corrections: the attitude filter starts again (a learnt field reference too: the
+    /// magnetometer's correction changes what |B| reads).
     pub(crate) fn set_cal(&mut self, cal: Calibration) {
         self.cal = cal;
         self.fast = Prepared::new(&cal);
+        self.ahrs.reset();
+        self.acc = Accum::default();
+    }
+
+    /// One attitude update (soft float): the IMU sums since the last one and, at a
+    /// magnetometer sample, its corrected reading.
+    fn attitude(&mut self, mag: Option<&[i32; 3]>) -> Option<crate::ahrs::Attitude> {
+        let period_s = if self.imu_period == 0 {
+            1e-3
+        } else {
+            self.imu_period as f32 * (1.0 / (US as f32 * 1e6))
+        };
+        let dt = match mag {
+            Some(_) => MAG_PERIOD_US as f32 * 1e-6,
+            None => self.acc.n as f32 * period_s,
+        };
+        self.ahrs
+            .update(&mut self.acc, self.gyro_rad * period_s, mag, dt)
     }
 
     /// A discontinuity before slot `k` of `sensor`: the slots skipped since the last sample are
@@ -148,12 +193,19 @@ impl Pipeline {
             if s.temp.is_some() {
                 self.last_temp = s.temp;
             }
+            let accel = self.fast.apply_accel(s.accel);
+            let gyro = self.fast.apply_gyro_opt(s.gyro, self.last_temp);
+            self.acc.add(&accel, &gyro);
             // At most BURST_MAX samples (cut above): never full.
-            let _ = fixed.push((
-                self.fast.apply_accel(s.accel),
-                self.fast.apply_gyro_opt(s.gyro, self.last_temp),
-                s.temp.map(i32::from),
-            ));
+            let _ = fixed.push((accel, gyro, s.temp.map(i32::from)));
+        }
+        self.imu_period = stamps.period;
+        self.imu_t_us = stamps.us(samples.len() as u32 - 1);
+        // No magnetometer update for 100 ms (sensor missing or stalled): one without it, so
+        // the sums stay bounded and the attitude follows the gyro and gravity.
+        if self.acc.n >= MAX_SUM {
+            stage::enter(Stage::Ahrs);
+            let _ = self.attitude(None);
         }
         stage::enter(Stage::Allan);
         self.engines.push_imu(&fixed);
@@ -204,7 +256,24 @@ impl Pipeline {
         let mag = self.fast.apply_mag(xyz);
         stage::enter(Stage::Allan);
         self.engines.push_mag(&mag);
+        stage::enter(Stage::Ahrs);
+        let att = self.attitude(Some(&mag));
         stage::enter(Stage::Usb);
+        if let (Some(a), false) = (att, self.mode == StreamMode::Off) {
+            let _ = self.orient.push(Orientation {
+                seq: k,
+                t_us: self.imu_t_us,
+                q: a.q,
+                roll_deg: a.roll_deg,
+                pitch_deg: a.pitch_deg,
+                heading_deg: a.heading_deg,
+                state: a.state,
+            });
+            if self.orient.len() >= ORIENTATIONS_PER_FRAME {
+                let o = core::mem::take(&mut self.orient);
+                outbox.send(&DeviceMsg::Orientation(o), sink);
+            }
+        }
         self.counts.mag_taken += 1;
         self.next_k[1] = Some(k.wrapping_add(1));
         if self.mode != StreamMode::Off {
