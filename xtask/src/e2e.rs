@@ -6,7 +6,9 @@
 //!   (NACK bursts, parts unpowered, SDA held with arbitration lost or with a hung START, CPU
 //!   stalls that overflow the FIFO, parts that stop producing), then the calibration round trip;
 //! * `boot-stall`: the magnetometer never sets DRDY from boot;
-//! * `sine`: no faults, a sine on the x gyro (the device's 64-bit squares in the Allan engine).
+//! * `sine`: no faults, a sine on the x gyro (the device's 64-bit squares in the Allan engine);
+//! * `orientation`: the board turned through a known trajectory, the device's attitude and
+//!   heading against the truth, with the identity calibration and the part's (`orientation.rs`).
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -21,6 +23,7 @@ use crate::emu_check;
 use crate::run;
 mod checks;
 mod faults;
+mod orientation;
 mod session;
 use checks::{check_calibration, check_losses, check_stamps, check_tables};
 use faults::{check_boot_stall, check_faults};
@@ -108,19 +111,22 @@ fn spec_at(spec: &str, at_s: f64) -> String {
     }
 }
 
-/// `cargo xtask e2e [--scenario faults|boot-stall|sine] [--seconds S] [--shift-ms MS] [--out DIR]`.
+/// `cargo xtask e2e [--scenario faults|boot-stall|sine|orientation] [--seconds S] [--shift-ms MS] [--out DIR]`.
 ///
 /// `--shift-ms` moves every fault of the scenario later by MS milliseconds (0 to 1000): the
 /// firmware's fault handling must not depend on where in its cycle of bus transfers and ticks
 /// a fault begins.
 pub fn e2e(args: &[String]) -> Result<()> {
     let scenario = arg_value(args, "--scenario").unwrap_or_else(|| "faults".into());
+    if scenario == "orientation" {
+        return orientation::orientation(args);
+    }
     let (default_s, faults, clock, sine, stall_from_boot): (f64, &[Fault], Option<&str>, _, bool) =
         match scenario.as_str() {
             "faults" => (40.0, FAULTS, Some(SLOW_CLOCKS), None, false),
             "sine" => (20.0, &[], None, Some("3,3"), false),
             "boot-stall" => (3.0, &[], None, None, true),
-            other => bail!("unknown scenario `{other}` (faults, sine, boot-stall)"),
+            other => bail!("unknown scenario `{other}` (faults, sine, boot-stall, orientation)"),
         };
     let seconds: f64 = arg_value(args, "--seconds")
         .map(|s| s.parse())

@@ -30,7 +30,7 @@ fn main() -> Result<()> {
         "demo" => emu::demo(rest),
         "firmware" => firmware::main(rest),
         "help" | "--help" | "-h" => {
-            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e [--scenario faults|boot-stall|sine] [--shift-ms MS]  end-to-end test on the emulated board (faults MS later)\n  bench-emu [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
+            println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e [--scenario faults|boot-stall|sine|orientation] [--shift-ms MS]  end-to-end test on the emulated board (faults MS later)\n  bench-emu [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
             Ok(())
         }
         other => bail!("unknown xtask command `{other}` (try `cargo xtask help`)"),
@@ -192,7 +192,7 @@ fn test(extra: &[String]) -> Result<()> {
     c.args(extra);
     run(&mut c)?;
     if emu::node_available() {
-        for scenario in ["faults", "boot-stall", "sine"] {
+        for scenario in ["faults", "boot-stall", "sine", "orientation"] {
             e2e::e2e(&["--scenario".to_string(), scenario.to_string()])?;
         }
         // The fault scenario again with every fault later by a few ms: where in the firmware's

@@ -75,46 +75,42 @@ impl Trajectory {
         self.keys[self.keys.len() - 1].0
     }
 
-    /// The emulator's orientation run: still and level (3 s, convergence), a level turn of
-    /// 180° at 45°/s, rolls and pitches to ±60° at 30°/s with holds, then a tumble through the
-    /// sphere (roll through 360°, pitch ±50°, heading through 360°, ≈ 30–45°/s), back level.
+    /// The emulator's orientation run, 28 s: still and level at 30° (3 s: convergence), a
+    /// level turn of 180° at 45°/s, a roll to 60° and back and a pitch to 60° and back (30°/s),
+    /// then a tumble through the sphere (eight legs of 1.5 s: roll and heading through 360° at
+    /// 30°/s, pitch swinging ±40° at up to 53°/s), back level.
     pub fn standard() -> Trajectory {
         let mut keys = vec![(0.0, Euler::new(0.0, 0.0, 30.0))];
         let mut t = 3.0;
-        let mut push = |dt: f64, e: Euler, keys: &mut Vec<(f64, Euler)>| {
+        keys.push((t, Euler::new(0.0, 0.0, 30.0)));
+        let mut push = |dt: f64, e: Euler| {
             t += dt;
             keys.push((t, e));
         };
-        push(0.0, Euler::new(0.0, 0.0, 30.0), &mut keys);
-        push(4.0, Euler::new(0.0, 0.0, 210.0), &mut keys); // level turn, 45°/s
-        push(1.0, Euler::new(0.0, 0.0, 210.0), &mut keys);
-        push(2.0, Euler::new(60.0, 0.0, 210.0), &mut keys); // roll to 60°
-        push(1.0, Euler::new(60.0, 0.0, 210.0), &mut keys);
-        push(4.0, Euler::new(-60.0, 0.0, 210.0), &mut keys);
-        push(1.0, Euler::new(-60.0, 0.0, 210.0), &mut keys);
-        push(2.0, Euler::new(0.0, 0.0, 210.0), &mut keys);
-        push(2.0, Euler::new(0.0, 60.0, 210.0), &mut keys); // pitch to 60°
-        push(1.0, Euler::new(0.0, 60.0, 210.0), &mut keys);
-        push(4.0, Euler::new(0.0, -60.0, 210.0), &mut keys);
-        push(1.0, Euler::new(0.0, -60.0, 210.0), &mut keys);
-        push(2.0, Euler::new(0.0, 0.0, 210.0), &mut keys);
-        // The sphere: eight legs of 45° of roll and heading, pitch alternating ±50°.
+        push(4.0, Euler::new(0.0, 0.0, 210.0)); // level turn, 45°/s
+        push(2.0, Euler::new(60.0, 0.0, 210.0)); // roll to 60°
+        push(2.0, Euler::new(0.0, 0.0, 210.0));
+        push(2.0, Euler::new(0.0, 60.0, 210.0)); // pitch to 60°
+        push(2.0, Euler::new(0.0, 0.0, 210.0));
+        // The sphere: eight legs of 45° of roll and heading, pitch alternating ±40°.
         for j in 1..=8 {
-            let pitch = if j == 8 {
-                0.0
-            } else if j % 2 == 1 {
-                50.0
-            } else {
-                -50.0
+            let pitch = match j {
+                8 => 0.0,
+                j if j % 2 == 1 => 40.0,
+                _ => -40.0,
             };
             push(
                 1.5,
                 Euler::new(45.0 * j as f64, pitch, 210.0 + 45.0 * j as f64),
-                &mut keys,
             );
         }
-        push(2.0, Euler::new(360.0, 0.0, 570.0), &mut keys);
+        push(1.0, Euler::new(360.0, 0.0, 570.0));
         Trajectory { keys }
+    }
+
+    /// Whether the board is still at `t` (no key moves it there).
+    pub fn is_still(&self, t: f64) -> bool {
+        self.at(t).1 == [0.0; 3]
     }
 }
 

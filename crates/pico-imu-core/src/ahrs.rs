@@ -359,12 +359,18 @@ impl Ahrs {
         } else {
             // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2).
             let kb = (KI / KP) * dt;
-            for i in 0..3 {
-                self.bias_h[i] += kb * c[i];
+            for (b, c) in self.bias_h.iter_mut().zip(c) {
+                *b += kb * c;
             }
         }
+        // The bias is kept per magnetometer period: scaled only for an update without it.
+        let bias = if mag.is_some() {
+            self.bias_h
+        } else {
+            self.bias_h.map(|b| b * (dt * (1.0 / MAG_DT)))
+        };
         for i in 0..3 {
-            v[i] += c[i] + self.bias_h[i] * (dt * (1.0 / MAG_DT));
+            v[i] += c[i] + bias[i];
         }
         // q ← q + q ⊗ (0, v), then back to unit norm by a Newton step from 1.
         let (w, x, y, z) = (self.q.w(), self.q.x(), self.q.y(), self.q.z());

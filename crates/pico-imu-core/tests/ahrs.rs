@@ -270,7 +270,7 @@ fn hard_iron_without_calibration_is_far_off_and_reported() {
     );
     assert!(r.heading > 10.0, "seed {s}: {r:?}");
     assert!(
-        r.states.iter().any(|&x| x == AhrsState::MagField),
+        r.states.contains(&AhrsState::MagField),
         "seed {s}: no field disturbance reported"
     );
     // Roll and pitch do not take the magnetometer's errors (tilt-decoupled correction).
