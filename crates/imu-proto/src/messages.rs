@@ -409,8 +409,9 @@ pub enum Request {
     /// [`Reply::Tables`]); a round in progress is abandoned.
     GetTables,
     /// The attitude filter's declination (0.01°, east positive, within ±180°) and expected
-    /// field (`None`: learn it; strength 1–1000 µT, dip within ±90°). Held in RAM: lost at a
-    /// reset (the flash holds the calibration only). Answered `Ok` or `Error(OutOfRange)`.
+    /// field (strength 1–1000 µT, dip within ±90°; `None`: learnt by the device, a reference
+    /// already learnt kept). Held in RAM: lost at a reset (the flash holds the calibration
+    /// only). Answered `Ok` or `Error(OutOfRange)`.
     SetOrientation {
         declination_cdeg: i16,
         reference: Option<MagReference>,

@@ -75,10 +75,11 @@ impl Trajectory {
         self.keys[self.keys.len() - 1].0
     }
 
-    /// The emulator's orientation run, 28 s: still and level at 30° (3 s: convergence), a
-    /// level turn of 180° at 45°/s, a roll to 60° and back and a pitch to 60° and back (30°/s),
+    /// The emulator's orientation run, 32 s: still and level at 30° (3 s: convergence), a
+    /// level turn of 360° at 45°/s, a roll to 60° and back and a pitch to 60° and back (30°/s),
     /// then a tumble through the sphere (eight legs of 1.5 s: roll and heading through 360° at
-    /// 30°/s, pitch swinging ±40° at up to 53°/s), back level.
+    /// 30°/s, pitch swinging ±40° at up to 53°/s), back level at 30°: it ends where it starts,
+    /// so a stream repeating it is continuous.
     pub fn standard() -> Trajectory {
         let mut keys = vec![(0.0, Euler::new(0.0, 0.0, 30.0))];
         let mut t = 3.0;
@@ -87,11 +88,11 @@ impl Trajectory {
             t += dt;
             keys.push((t, e));
         };
-        push(4.0, Euler::new(0.0, 0.0, 210.0)); // level turn, 45°/s
-        push(2.0, Euler::new(60.0, 0.0, 210.0)); // roll to 60°
-        push(2.0, Euler::new(0.0, 0.0, 210.0));
-        push(2.0, Euler::new(0.0, 60.0, 210.0)); // pitch to 60°
-        push(2.0, Euler::new(0.0, 0.0, 210.0));
+        push(8.0, Euler::new(0.0, 0.0, 390.0)); // level turn, 45°/s
+        push(2.0, Euler::new(60.0, 0.0, 390.0)); // roll to 60°
+        push(2.0, Euler::new(0.0, 0.0, 390.0));
+        push(2.0, Euler::new(0.0, 60.0, 390.0)); // pitch to 60°
+        push(2.0, Euler::new(0.0, 0.0, 390.0));
         // The sphere: eight legs of 45° of roll and heading, pitch alternating ±40°.
         for j in 1..=8 {
             let pitch = match j {
@@ -101,10 +102,10 @@ impl Trajectory {
             };
             push(
                 1.5,
-                Euler::new(45.0 * j as f64, pitch, 210.0 + 45.0 * j as f64),
+                Euler::new(45.0 * j as f64, pitch, 390.0 + 45.0 * j as f64),
             );
         }
-        push(1.0, Euler::new(360.0, 0.0, 570.0));
+        push(1.0, Euler::new(360.0, 0.0, 750.0));
         Trajectory { keys }
     }
 
@@ -312,6 +313,18 @@ mod tests {
                     (r[a][b] - truth[a][b]).abs() < 2e-3,
                     "{a}{b}: {r:?} vs {truth:?}"
                 );
+            }
+        }
+    }
+
+    /// The standard run ends at the attitude it starts from (a repeated stream is continuous).
+    #[test]
+    fn the_standard_run_ends_where_it_starts() {
+        let traj = Trajectory::standard();
+        let (a, b) = (traj.at(0.0).0.matrix(), traj.at(traj.duration()).0.matrix());
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((a[i][j] - b[i][j]).abs() < 1e-12, "{a:?} {b:?}");
             }
         }
     }

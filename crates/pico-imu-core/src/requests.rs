@@ -190,12 +190,15 @@ impl Device {
         let ahrs = &mut self.pipeline.ahrs;
         ahrs.set_declination(f32::from(declination_cdeg) * 0.01);
         let ut_per_count = self.pipeline.scales.mag;
-        ahrs.set_reference(reference.map(|r| {
-            (
-                r.field_nt as f32 * 1e-3 / ut_per_count,
-                f32::from(r.dip_cdeg) * 0.01,
-            )
-        }));
+        // `None` asks for a learnt reference: one learnt (or being learnt) stays.
+        if reference.is_some() || !ahrs.reference_learnt() {
+            ahrs.set_reference(reference.map(|r| {
+                (
+                    r.field_nt as f32 * 1e-3 / ut_per_count,
+                    f32::from(r.dip_cdeg) * 0.01,
+                )
+            }));
+        }
         Reply::Ok
     }
 

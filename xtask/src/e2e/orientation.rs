@@ -170,7 +170,7 @@ pub fn orientation(args: &[String]) -> Result<()> {
     writeln!(
         r.text,
         "# End-to-end emulator test: scenario `orientation`\n\nThe board turned through \
-         `imu_sim::trajectory::Trajectory::standard` ({period} s: still 3 s, level turn 180° at \
+         `imu_sim::trajectory::Trajectory::standard` ({period} s: still 3 s, level turn 360° at \
          45°/s, roll and pitch to 60° and back at 30°/s, a tumble through the sphere at 30–53°/s) \
          twice, by `Part::hard_iron` (hard iron {:?} µT, soft iron, gyro bias {:?} deg/s, noise \
          {:?}). Firmware {}.\n",
