@@ -256,7 +256,7 @@ pub fn bench(args: &[String]) -> Result<()> {
 }
 
 /// `imu-lab` from this workspace (release build), run in the workspace root.
-fn imu_lab() -> Command {
+pub(crate) fn imu_lab() -> Command {
     let mut c = cargo();
     c.args([
         "run",
@@ -327,7 +327,11 @@ pub fn demo(args: &[String]) -> Result<()> {
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
     // Dropping the emulator at the end of the flow, or on its error, stops it.
-    demo_flow(&port, seconds, &out)
+    demo_flow(&port, seconds, &out)?;
+    drop(sim);
+    // Heading before → after calibration, on a second emulated board turned through a known
+    // trajectory (its truth is what the heading is judged against).
+    crate::demo_heading::heading_demo(&elf, &out)
 }
 
 fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {

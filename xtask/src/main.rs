@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 
+mod demo_heading;
 mod e2e;
 mod emu;
 mod emu_check;

@@ -35,6 +35,11 @@ pub struct Args {
     /// from the device's boot).
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// A recording made after the calibration was uploaded to the device (`imu-lab record`):
+    /// its `heading` column, the device's own estimate, is judged against the truth beside the
+    /// REC's (made with the calibration the device had then). Needs --truth.
+    #[arg(long, requires = "truth")]
+    pub device: Option<PathBuf>,
     /// Window of the gyro consistency check, s.
     #[arg(long, default_value_t = 2.0)]
     pub window: f64,
@@ -46,11 +51,12 @@ pub struct Args {
 
 const COLUMNS: [&str; 9] = ["ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz"];
 
-/// The truth: heading (degrees) at a time, from the stream, repeating.
+/// The truth: heading and pitch (degrees) at a time, from the stream, repeating.
 struct Truth {
     t0: f64,
     rate: f64,
     heading: Vec<f64>,
+    pitch: Vec<f64>,
 }
 
 impl Truth {
@@ -75,8 +81,8 @@ impl Truth {
                     )
                 })
         };
-        let (it, ih) = (col("t")?, col("heading_true")?);
-        let (mut t, mut heading) = (Vec::new(), Vec::new());
+        let (it, ih, ip) = (col("t")?, col("heading_true")?, col("pitch_true")?);
+        let (mut t, mut heading, mut pitch) = (Vec::new(), Vec::new(), Vec::new());
         for (i, rec) in r.records().enumerate() {
             let rec = rec.with_context(|| format!("{shown}: row {}", i + 2))?;
             let num = |k: usize, name: &str| -> Result<f64> {
@@ -94,6 +100,7 @@ impl Truth {
             };
             t.push(num(it, "t")?);
             heading.push(num(ih, "heading_true")?);
+            pitch.push(num(ip, "pitch_true")?);
         }
         if t.len() < 2 {
             bail!("{shown}: needs at least 2 rows, has {}", t.len());
@@ -106,14 +113,66 @@ impl Truth {
             t0: t[0],
             rate: 1.0 / step,
             heading,
+            pitch,
         })
+    }
+
+    fn index(&self, t: f64) -> usize {
+        (((t - self.t0) * self.rate + 1e-9).floor().max(0.0) as usize) % self.heading.len()
     }
 
     /// The heading at `t` s (zero-order hold; the stream repeats).
     fn at(&self, t: f64) -> f64 {
-        let i = (((t - self.t0) * self.rate + 1e-9).floor().max(0.0) as usize) % self.heading.len();
-        self.heading[i]
+        self.heading[self.index(t)]
     }
+
+    fn pitch_at(&self, t: f64) -> f64 {
+        self.pitch[self.index(t)]
+    }
+}
+
+/// The device's heading column of a recording against the truth: rows with an estimate, the
+/// filter not converging (`ahrs` ≠ 0), the truth's pitch within `max_pitch`.
+fn device_errors(path: &PathBuf, truth: &Truth, max_pitch: f64) -> Result<Vec<f64>> {
+    let shown = path.display();
+    let mut r = csv::Reader::from_path(path).with_context(|| format!("cannot open {shown}"))?;
+    let header = r
+        .headers()
+        .with_context(|| format!("{shown}: header"))?
+        .clone();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| h.trim() == name)
+            .with_context(|| format!("{shown}: no `{name}` column: not a recording of `imu-lab record` with the device's estimates"))
+    };
+    let (it, ih, is) = (col("t")?, col("heading")?, col("ahrs")?);
+    let mut out = Vec::new();
+    for (i, rec) in r.records().enumerate() {
+        let rec = rec.with_context(|| format!("{shown}: row {}", i + 2))?;
+        let field = |k: usize| rec.get(k).unwrap_or("").trim();
+        if field(ih).is_empty() || field(is) == "0" {
+            continue;
+        }
+        let num = |k: usize, name: &str| -> Result<f64> {
+            field(k)
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .with_context(|| {
+                    format!(
+                        "{shown}: line {}: `{name}` is not a finite number: {:?}",
+                        i + 2,
+                        field(k)
+                    )
+                })
+        };
+        let t = num(it, "t")?;
+        if truth.pitch_at(t).abs() <= max_pitch {
+            out.push(angle_diff(num(ih, "heading")?, truth.at(t)));
+        }
+    }
+    Ok(out)
 }
 
 /// The file's accelerometer and magnetometer corrections, in the recording's units (m/s², µT).
@@ -236,6 +295,22 @@ pub fn run(a: Args) -> Result<()> {
                 "heading error before → after calibration: {:.2} → {:.2}° rms (against the truth)",
                 b.rms, f.rms
             );
+        }
+    }
+    if let (Some(dev), Some(truth)) = (&a.device, &truth) {
+        let (e0, e1) = (
+            rms(&device_errors(&a.input.file, truth, a.max_pitch)?, block),
+            rms(&device_errors(dev, truth, a.max_pitch)?, block),
+        );
+        println!("the device's own attitude filter (its `heading` column; converging rows left out) against the truth:");
+        println!(
+            "  {} (the calibration the device had):   {}",
+            a.input.file.display(),
+            show(e0)
+        );
+        println!("  {} (after the upload):   {}", dev.display(), show(e1));
+        if let (Some(b), Some(f)) = (e0, e1) {
+            println!("device heading error before → after calibration: {:.2} → {:.2}° rms (against the truth)", b.rms, f.rms);
         }
     }
     let w = a.window;
