@@ -45,8 +45,10 @@
 //!   only scales the correction gain;
 //! * `invsqrt` + one Newton step for `cos θ` in the pitch and for |h_xy| and |m| (≤ 0.2 %);
 //! * `atan2` (≤ 0.16°) for roll, pitch and heading;
-//! * the quaternion (micromath's `Quaternion`: the product and the scaling) is renormalised by a
-//!   Newton step from 1 (`q (3 − |q|²)/2`, error O((|q|² − 1)²), ≈ 1e-7 at 200 Hz).
+//! * the quaternion (micromath's `Quaternion`: its norm and scaling) is renormalised by a
+//!   Newton step from 1 (`q (3 − |q|²)/2`, error O((|q|² − 1)²)) every fourth update; the
+//!   rotation step `q + q ⊗ (0, v)` is written out (12 products, where the general product
+//!   with `(1, v)` takes 16).
 //!   micromath's `asin` (atan of x/√(1−x²) with the raw `invsqrt`) errs by up to 0.8° at 60°
 //!   of pitch, so pitch is `atan2(−r₃₁, √(r₃₂² + r₃₃²))` instead.
 pub use imu_proto::AhrsState;
@@ -109,7 +111,9 @@ pub struct Attitude {
 #[derive(Debug, Clone, Copy)]
 struct Bands {
     field2: [f32; 2],
-    sin_dip: [f32; 2],
+    /// The dip band's edges as `s·|s|`, `s = sin δ`: compared with `(m·d)·|m·d|/|m|²`, which
+    /// needs no square root (`x·|x|` is monotonic).
+    sin_dip_sq: [f32; 2],
 }
 
 impl Bands {
@@ -119,7 +123,7 @@ impl Bands {
         let d = |x: f32| libm::sinf(x.clamp(-90.0, 90.0).to_radians());
         Bands {
             field2: [lo * lo, hi * hi],
-            sin_dip: [d(dip_deg - DIP_BAND_DEG), d(dip_deg + DIP_BAND_DEG)],
+            sin_dip_sq: [d(dip_deg - DIP_BAND_DEG), d(dip_deg + DIP_BAND_DEG)].map(|s| s * s.abs()),
         }
     }
 }
@@ -146,6 +150,8 @@ enum Reference {
 #[derive(Debug, Clone)]
 pub struct Ahrs {
     q: Quaternion,
+    /// Updates since the start, for the renormalisation's turn.
+    steps: u32,
     /// The rotation's rows for `q` ([`rows`]).
     rows: [[f32; 3]; 3],
     /// Gyro bias estimate times half the magnetometer's period, rad (body).
@@ -166,6 +172,9 @@ impl Default for Ahrs {
         Self::new()
     }
 }
+
+/// The quaternion is renormalised every this many updates.
+const RENORM_EVERY: u32 = 4;
 
 /// The magnetometer's period, s: the step the bias estimate is kept in.
 const MAG_DT: f32 = imu_proto::MAG_PERIOD_US as f32 * 1e-6;
@@ -201,6 +210,7 @@ impl Ahrs {
     pub fn new() -> Self {
         Ahrs {
             q: Quaternion::IDENTITY,
+            steps: 0,
             rows: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             bias_h: [0.0; 3],
             started: false,
@@ -261,8 +271,9 @@ impl Ahrs {
             Reference::Set { field, dip_deg, .. } => Some((field, dip_deg)),
             Reference::Learnt(b) => {
                 let field = libm::sqrtf(b.field2[0]) / (1.0 - FIELD_BAND);
-                let dip = libm::asinf(b.sin_dip[0]).to_degrees() + DIP_BAND_DEG;
-                Some((field, dip))
+                let s = b.sin_dip_sq[0];
+                let lo = libm::copysignf(libm::sqrtf(s.abs()), s);
+                Some((field, libm::asinf(lo).to_degrees() + DIP_BAND_DEG))
             }
             Reference::Learning { .. } => None,
         }
@@ -372,7 +383,9 @@ impl Ahrs {
         for i in 0..3 {
             v[i] += c[i] + bias[i];
         }
-        // q ← q + q ⊗ (0, v), then back to unit norm by a Newton step from 1.
+        // q ← q + q ⊗ (0, v), then back to unit norm by a Newton step from 1: every fourth
+        // update (each step grows |q|² by |v|² ≲ 1e-5 at the rates the part measures), and
+        // after every update without the magnetometer (a longer step).
         let (w, x, y, z) = (self.q.w(), self.q.x(), self.q.y(), self.q.z());
         let q = Quaternion::new(
             w - x * v[0] - y * v[1] - z * v[2],
@@ -380,7 +393,12 @@ impl Ahrs {
             y + w * v[1] - x * v[2] + z * v[0],
             z + w * v[2] + x * v[1] - y * v[0],
         );
-        self.q = q * (1.5 - 0.5 * q.norm());
+        self.steps = self.steps.wrapping_add(1);
+        self.q = if mag.is_none() || self.steps % RENORM_EVERY == 0 {
+            q * (1.5 - 0.5 * q.norm())
+        } else {
+            q
+        };
         self.rows = rows(&self.q);
         if self.converging {
             state = AhrsState::Converging;
@@ -411,10 +429,9 @@ impl Ahrs {
         if m2 < bands.field2[0] || m2 > bands.field2[1] {
             return AhrsState::MagField;
         }
-        // sin δ = m·d/|m| within [lo, hi], without the square root: compare m·d with lo·|m|
-        // and hi·|m|, |m| = m2 · (1/√m2).
-        let norm = m2 * inv_sqrt(m2);
-        if md < bands.sin_dip[0] * norm || md > bands.sin_dip[1] * norm {
+        // sin δ = m·d/|m| within [lo, hi] ⟺ (m·d)|m·d| within [lo|lo|, hi|hi|]·|m|².
+        let md2 = md * md.abs();
+        if md2 < bands.sin_dip_sq[0] * m2 || md2 > bands.sin_dip_sq[1] * m2 {
             AhrsState::MagDip
         } else {
             AhrsState::Tracking

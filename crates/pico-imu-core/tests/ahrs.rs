@@ -308,6 +308,14 @@ fn a_field_disturbance_is_reported_and_ignored() {
     );
     let before = &r.states[(2.0 * 200.0) as usize..(2.9 * 200.0) as usize];
     assert!(before.iter().all(|&x| x == AhrsState::Tracking), "seed {s}");
+    // What it learnt: the part's field (counts) and dip.
+    let (field, dip) = ahrs.reference().expect("learnt");
+    let want = part.field_ut / pico_imu_core::config::scales().mag as f64;
+    assert!(
+        (field as f64 / want - 1.0).abs() < 0.01 && (dip as f64 - part.dip_deg).abs() < 0.5,
+        "seed {s}: learnt {field} counts, dip {dip}°; part {want} counts, {}°",
+        part.dip_deg
+    );
     assert!(r.heading < 1.0, "seed {s}: {r:?}");
     // A reference set by the host: a dip 20° off the real one is a dip disturbance.
     let mut ahrs = Ahrs::new();
