@@ -63,15 +63,9 @@ pub fn heading_demo(elf: &Path, out: &Path) -> Result<()> {
         .arg(&raw)
         .args(["--model", "hard_iron,soft_iron", "--out"])
         .arg(&cal))?;
-    run(imu_lab()
-        .arg("heading")
-        .arg(&raw)
-        .arg("--cal")
-        .arg(&cal)
-        .arg("--truth")
-        .arg(&stream))?;
     // The device's own attitude filter, before (the raw recording's estimates ran on the
-    // identity calibration) and after the fitted calibration is uploaded.
+    // identity calibration) and after the fitted calibration is uploaded; then `imu-lab
+    // heading` judges both, the lab's heading and the device's, against the truth.
     let calibrated = out.join("heading-calibrated.csv");
     run(imu_lab()
         .args([
