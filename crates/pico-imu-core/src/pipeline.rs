@@ -1,8 +1,10 @@
 //! The sample path: per burst, in a straight line, fixed-point corrections (`imu_cal::device`)
 //! → the Allan engines (`allan::stream`) → the sample batch → one frame per full batch. Nothing
 //! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
-//! and accelerometer for the attitude filter ([`crate::ahrs`]), which runs once per
-//! magnetometer sample (200 Hz, soft float) and sends its estimates four to a frame.
+//! and accelerometer for the attitude filter ([`crate::ahrs`]). Each magnetometer sample queues
+//! one filter update with those sums; the processing task runs the queued updates one at a time
+//! ([`Pipeline::attitude_step`], ≈ 0.25 ms of soft float each) and lets the sensor tasks run
+//! between them, and the estimates go out four to a frame.
 //!
 //! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
 //! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
@@ -42,6 +44,16 @@ pub struct SampleCounts {
     pub mag_lost: u64,
 }
 
+/// One attitude update waiting to run.
+#[derive(Debug, Clone, Copy)]
+struct Queued {
+    acc: Accum,
+    mag: Option<[i32; 3]>,
+    k: u32,
+    t_us: u64,
+    imu_period: Fine,
+}
+
 /// The sample path's state.
 pub struct Pipeline {
     /// The calibration as stored and reported.
@@ -62,6 +74,9 @@ pub struct Pipeline {
     acc: Accum,
     /// Estimates not sent yet.
     orient: Vec<Orientation, MAX_ORIENTATIONS>,
+    /// Updates waiting to run: the sums, the magnetometer sample (none for an update without
+    /// it), its slot, the instant the sums end at, the IMU period.
+    queued: heapless::Deque<Queued, 8>,
     /// The IMU's period ([`Fine`], 0: not known yet) and the stamp of its latest sample, µs.
     imu_period: Fine,
     imu_t_us: u64,
@@ -89,6 +104,7 @@ impl Pipeline {
             ahrs: Ahrs::new(),
             acc: Accum::default(),
             orient: Vec::new(),
+            queued: heapless::Deque::new(),
             imu_period: 0,
             imu_t_us: 0,
             gyro_rad: scales.gyro * (core::f32::consts::PI / 180.0),
@@ -102,22 +118,72 @@ impl Pipeline {
         self.fast = Prepared::new(&cal);
         self.ahrs.reset();
         self.acc = Accum::default();
+        self.queued.clear();
     }
 
-    /// One attitude update (soft float): the IMU sums since the last one and, at a
-    /// magnetometer sample, its corrected reading.
-    fn attitude(&mut self, mag: Option<&[i32; 3]>) -> Option<crate::ahrs::Attitude> {
-        let period_s = if self.imu_period == 0 {
+    /// Queue one attitude update with the IMU sums so far (emptied) and, at a magnetometer
+    /// sample, its corrected reading. A full queue (the task has not run them) folds the sums
+    /// into the next update instead: no rotation is lost, an estimate is.
+    fn queue_attitude(&mut self, mag: Option<[i32; 3]>, k: u32) {
+        let q = Queued {
+            acc: self.acc,
+            mag,
+            k,
+            t_us: self.imu_t_us,
+            imu_period: self.imu_period,
+        };
+        if self.queued.push_back(q).is_ok() {
+            self.acc = Accum::default();
+        }
+    }
+
+    /// Whether the queue of attitude updates is full.
+    pub fn attitude_backlog(&self) -> bool {
+        self.queued.is_full()
+    }
+
+    /// Whether attitude updates wait to run.
+    pub fn attitude_pending(&self) -> bool {
+        !self.queued.is_empty()
+    }
+
+    /// Run the oldest queued attitude update (soft float, ≈ 30,000 cycles on the M0+); its
+    /// estimate is streamed (not in mode `Off`), four to a frame. Returns whether more wait.
+    pub fn attitude_step(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) -> bool {
+        let Some(mut q) = self.queued.pop_front() else {
+            return false;
+        };
+        stage::enter(Stage::Ahrs);
+        let period_s = if q.imu_period == 0 {
             1e-3
         } else {
-            self.imu_period as f32 * (1.0 / (US as f32 * 1e6))
+            q.imu_period as f32 * (1.0 / (US as f32 * 1e6))
         };
-        let dt = match mag {
+        let dt = match q.mag {
             Some(_) => MAG_PERIOD_US as f32 * 1e-6,
-            None => self.acc.n as f32 * period_s,
+            None => q.acc.n as f32 * period_s,
         };
-        self.ahrs
-            .update(&mut self.acc, self.gyro_rad * period_s, mag, dt)
+        let att = self
+            .ahrs
+            .update(&mut q.acc, self.gyro_rad * period_s, q.mag.as_ref(), dt);
+        stage::enter(Stage::Usb);
+        if let (Some(a), Some(_), false) = (att, q.mag, self.mode == StreamMode::Off) {
+            let _ = self.orient.push(Orientation {
+                seq: q.k,
+                t_us: q.t_us,
+                q: a.q,
+                roll_deg: a.roll_deg,
+                pitch_deg: a.pitch_deg,
+                heading_deg: a.heading_deg,
+                state: a.state,
+            });
+            if self.orient.len() >= ORIENTATIONS_PER_FRAME {
+                let o = core::mem::take(&mut self.orient);
+                outbox.send(&DeviceMsg::Orientation(o), sink);
+            }
+        }
+        stage::leave();
+        !self.queued.is_empty()
     }
 
     /// A discontinuity before slot `k` of `sensor`: the slots skipped since the last sample are
@@ -204,8 +270,7 @@ impl Pipeline {
         // No magnetometer update for 100 ms (sensor missing or stalled): one without it, so
         // the sums stay bounded and the attitude follows the gyro and gravity.
         if self.acc.n >= MAX_SUM {
-            stage::enter(Stage::Ahrs);
-            let _ = self.attitude(None);
+            self.queue_attitude(None, 0);
         }
         stage::enter(Stage::Allan);
         self.engines.push_imu(&fixed);
@@ -256,24 +321,8 @@ impl Pipeline {
         let mag = self.fast.apply_mag(xyz);
         stage::enter(Stage::Allan);
         self.engines.push_mag(&mag);
-        stage::enter(Stage::Ahrs);
-        let att = self.attitude(Some(&mag));
+        self.queue_attitude(Some(mag), k);
         stage::enter(Stage::Usb);
-        if let (Some(a), false) = (att, self.mode == StreamMode::Off) {
-            let _ = self.orient.push(Orientation {
-                seq: k,
-                t_us: self.imu_t_us,
-                q: a.q,
-                roll_deg: a.roll_deg,
-                pitch_deg: a.pitch_deg,
-                heading_deg: a.heading_deg,
-                state: a.state,
-            });
-            if self.orient.len() >= ORIENTATIONS_PER_FRAME {
-                let o = core::mem::take(&mut self.orient);
-                outbox.send(&DeviceMsg::Orientation(o), sink);
-            }
-        }
         self.counts.mag_taken += 1;
         self.next_k[1] = Some(k.wrapping_add(1));
         if self.mode != StreamMode::Off {
