@@ -1,7 +1,7 @@
 //! Attitude and heading on the device (AHRS): Mahony's explicit complementary filter on the
 //! calibrated samples — R. Mahony, T. Hamel, J.-M. Pflimlin, "Nonlinear Complementary Filters on
 //! the Special Orthogonal Group", IEEE Transactions on Automatic Control 53(5), 2008 (the
-//! "explicit complementary filter with bias correction", its eq. (32) in quaternion form).
+//! explicit complementary filter with bias correction, in quaternion form).
 //!
 //! # What runs where
 //! * the 1 kHz path only sums the corrected gyro and accelerometer counts ([`Accum::add`]: seven
@@ -9,7 +9,8 @@
 //! * one filter update per magnetometer sample (200 Hz): the summed gyro is the rotation since
 //!   the last update (`Σ g · T`, the IMU's measured period), the mean accelerometer and the
 //!   magnetometer reading correct it; when no magnetometer sample comes for
-//!   [`MAX_SUM`] IMU samples, the IMU path runs an update without it (the sums stay bounded).
+//!   [`MAX_SUM`] IMU samples, the IMU path queues an update without it (the sums stay
+//!   bounded). The updates are queued and run by the processing task (`crate::pipeline`).
 //!
 //! # Frames
 //! The filter works in NED (x magnetic north, y east, z down) with a forward-right-down body.
@@ -394,7 +395,7 @@ impl Ahrs {
             z + w * v[2] + x * v[1] - y * v[0],
         );
         self.steps = self.steps.wrapping_add(1);
-        self.q = if mag.is_none() || self.steps % RENORM_EVERY == 0 {
+        self.q = if mag.is_none() || self.steps.is_multiple_of(RENORM_EVERY) {
             q * (1.5 - 0.5 * q.norm())
         } else {
             q

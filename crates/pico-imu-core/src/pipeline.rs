@@ -2,9 +2,10 @@
 //! → the Allan engines (`allan::stream`) → the sample batch → one frame per full batch. Nothing
 //! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
 //! and accelerometer for the attitude filter ([`crate::ahrs`]). Each magnetometer sample queues
-//! one filter update with those sums; the processing task runs the queued updates one at a time
-//! ([`Pipeline::attitude_step`], ≈ 0.25 ms of soft float each) and lets the sensor tasks run
-//! between them, and the estimates go out four to a frame.
+//! one filter update with those sums; the processing task runs the queued updates
+//! ([`Pipeline::attitude_step`], ≈ 0.24 ms of soft float each) where their delay does not
+//! disturb the sensor tasks (src/main.rs: in line with an IMU burst's processing), and the
+//! estimates go out four to a frame.
 //!
 //! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
 //! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
