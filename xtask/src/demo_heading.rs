@@ -13,8 +13,23 @@ use std::path::Path;
 
 use anyhow::Result;
 
-use crate::emu::{imu_lab, Sim};
+use crate::emu::{imu_lab, out_dir, Sim};
 use crate::run;
+
+/// `cargo xtask demo`: the noise lab's walk (`emu::demo`), then, on the emulator, the heading.
+pub fn demo(args: &[String]) -> Result<()> {
+    match crate::emu::demo(args)? {
+        // Heading before → after calibration, on a second emulated board turned through a
+        // known trajectory (its truth is what the heading is judged against).
+        Some(elf) => heading_demo(&elf, &out_dir("demo")?),
+        None => {
+            eprintln!(
+                "xtask: the heading part of the demo needs a known trajectory: emulator only"
+            );
+            Ok(())
+        }
+    }
+}
 
 /// The trajectory's length, s (`imu_sim::trajectory::Trajectory::standard`).
 fn period() -> f64 {

@@ -284,7 +284,9 @@ pub(crate) fn imu_lab() -> Command {
 /// device's own Allan tables and the five-term fit); `imu-lab fit` on the recording, whose
 /// diagnosis names the missing effect; `imu-lab fit --add <it> --report` shows the error
 /// falling and writes the HTML report.
-pub fn demo(args: &[String]) -> Result<()> {
+/// The noise part of the demo; returns the firmware it ran in the emulator (`None` on a real
+/// device).
+pub fn demo(args: &[String]) -> Result<Option<PathBuf>> {
     let out = out_dir("demo")?;
     let seconds: f64 = arg_value(args, "--seconds")
         .map(|s| s.parse())
@@ -293,7 +295,8 @@ pub fn demo(args: &[String]) -> Result<()> {
         .unwrap_or(60.0);
     if let Some(port) = arg_value(args, "--port") {
         eprintln!("xtask: demo on the device at {port} (flash it first: cargo run --release)");
-        return demo_flow(&port, seconds, &out);
+        demo_flow(&port, seconds, &out)?;
+        return Ok(None);
     }
     let elf = build_firmware()?;
     ensure_sim()?;
@@ -328,10 +331,7 @@ pub fn demo(args: &[String]) -> Result<()> {
     let port = format!("tcp:127.0.0.1:{}", sim.port);
     // Dropping the emulator at the end of the flow, or on its error, stops it.
     demo_flow(&port, seconds, &out)?;
-    drop(sim);
-    // Heading before → after calibration, on a second emulated board turned through a known
-    // trajectory (its truth is what the heading is judged against).
-    crate::demo_heading::heading_demo(&elf, &out)
+    Ok(Some(elf))
 }
 
 fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {

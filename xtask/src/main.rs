@@ -28,7 +28,7 @@ fn main() -> Result<()> {
         "test" => test(rest),
         "e2e" => e2e::e2e(rest),
         "bench-emu" => emu::bench(rest),
-        "demo" => emu::demo(rest),
+        "demo" => demo_heading::demo(rest),
         "firmware" => firmware::main(rest),
         "help" | "--help" | "-h" => {
             println!("cargo xtask <command>\n\n  test    run all host tests, build the firmware, run the emulator tests\n  e2e [--scenario faults|boot-stall|sine|orientation] [--shift-ms MS]  end-to-end test on the emulated board (faults MS later)\n  bench-emu [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]  emulated cycle budget report (out/emu/bench.md)\n  firmware  release build of the firmware, size report, UF2 (out/pico-imu.uf2)\n  demo [--port PORT]  the main job: emulated IMU with a hidden effect, device tables, fit, HTML report");
