@@ -366,3 +366,79 @@ impl Pipeline {
         self.engines.reset();
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imu_proto::FrameReader;
+
+    struct Sink(std::vec::Vec<u8>);
+
+    impl FrameSink for Sink {
+        fn room(&self) -> usize {
+            usize::MAX
+        }
+        fn put(&mut self, frame: &[u8]) {
+            self.0.extend_from_slice(frame);
+        }
+    }
+
+    fn burst(k0: u32, gyro_z: i16) -> (Vec<RawSample, BURST_MAX>, Stamps) {
+        let mut v = Vec::new();
+        for _ in 0..10 {
+            let _ = v.push(RawSample {
+                accel: [0, 0, 8192],
+                temp: None,
+                gyro: [0, 0, gyro_z],
+            });
+        }
+        let stamps = Stamps {
+            k0,
+            t0: u64::from(k0) * 1000 * US,
+            period: 1000 * US,
+        };
+        (v, stamps)
+    }
+
+    /// Magnetometer samples queue updates; stepping runs them and sends the estimates four to
+    /// a frame; a full queue keeps the gyro's sums for the next update (no rotation lost).
+    #[test]
+    fn updates_queue_run_and_fold_when_full() {
+        let mut p = Pipeline::new(crate::config::scales());
+        let mut out = Outbox::new();
+        let mut sink = Sink(std::vec::Vec::new());
+        let (b, st) = burst(0, 0);
+        p.imu_burst(&b, &st, None, &mut out, &mut sink);
+        for k in 0..12u32 {
+            p.mag_sample(
+                k,
+                1000 + 5000 * u64::from(k),
+                [3000, 0, -5000],
+                None,
+                &mut out,
+                &mut sink,
+            );
+            let (b, st) = burst(10 + 10 * k, 131);
+            p.imu_burst(&b, &st, None, &mut out, &mut sink);
+        }
+        // Eight queued (samples 0 … 7), the sums of the five bursts since kept.
+        assert!(p.attitude_backlog());
+        assert_eq!(p.acc.n, 50);
+        assert_eq!(p.acc.gyro[2], 50 * 131);
+        let mut steps = 0;
+        while p.attitude_step(&mut out, &mut sink) {
+            steps += 1;
+        }
+        assert_eq!(steps + 1, 8);
+        let mut reader = FrameReader::<4096>::new();
+        let mut estimates = std::vec::Vec::new();
+        for &byte in &sink.0 {
+            if let Some(Ok(DeviceMsg::Orientation(o))) = reader.push::<DeviceMsg>(byte) {
+                estimates.extend(o);
+            }
+        }
+        // The first update starts the filter (no estimate); seven more, four sent.
+        assert_eq!(estimates.len(), 4, "{estimates:?}");
+        assert!(estimates.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+    }
+}
