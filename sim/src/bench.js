@@ -13,7 +13,7 @@ import { Session, parseClock, parseDuration } from './session.js';
 import { generateStream, loadStreamCsv } from './stream.js';
 import { EXC_ENTRY_CYCLES, EXC_RETURN_CYCLES } from './emulator.js';
 
-export const STAGES = { 0: 'other (executor, sensor tasks, USB class, defmt, CPU meter)', 1: 'I2C service', 2: 'corrections', 3: 'Allan update', 4: 'framing (postcard, CRC, COBS)', 9: 'interrupt handlers (I2C, timer, USB)' };
+export const STAGES = { 0: 'other (executor, sensor tasks, USB class, defmt, CPU meter)', 1: 'I2C service', 2: 'corrections', 3: 'Allan update', 4: 'framing (postcard, CRC, COBS)', 5: 'attitude filter (AHRS, 200 Hz)', 9: 'interrupt handlers (I2C, timer, USB)' };
 /** The CPU goal: ≤ 5 % at 1 kHz, i.e. 5 % of 125,000 cycles per ms = 6,250 cycles per sample set. */
 export const BUDGET_CYCLES_PER_SET = 0.05 * 125_000;
 /** The goal holds in every window of this length, not only on average. */

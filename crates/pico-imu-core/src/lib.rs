@@ -9,6 +9,7 @@
 //!   owner of timestamps) and [`bus`] (what a bus must tell them);
 //! * samples: [`pipeline`] (corrections → Allan engines → batches, losses and splits) over
 //!   [`engines`];
+//! * orientation: [`ahrs`] (attitude and heading from the calibrated samples);
 //! * host requests: [`requests`];
 //! * tables: [`tables`] (rounds of snapshots, spaced out);
 //! * when each task's burst runs: [`schedule`] (the instants and turns the tasks wait for);
@@ -43,6 +44,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod ahrs;
 pub mod bus;
 pub mod clock;
 pub mod config;
