@@ -22,7 +22,7 @@ use imu_drivers::qmc5883 as qmc;
 use imu_proto::{GapCause, Sensor, SensorState, MAG_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
-use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, Seen};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::mag_config;
 use crate::msg::{Out, SensorMsg};
 use crate::service::{delay_until, Core, Phase, Tick, SETUP};
@@ -36,6 +36,10 @@ const READ_MARGIN: Fine = fine(10);
 const REPOLL_MIN: Fine = fine(100);
 /// Status polls in one tick (the first and its re-polls).
 const POLLS: u32 = 4;
+/// Every this many slots the tick's first poll is a guard poll, before the early end of the
+/// clock's uncertainty (see [`MagService::schedule`]); normally it finds DRDY clear and costs
+/// one re-poll.
+const GUARD_EVERY: u32 = 16;
 
 /// The magnetometer side.
 pub struct MagService {
@@ -158,10 +162,17 @@ impl MagService {
     /// one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
         let latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
-        let offset = if self.core.clock.wants_probe() {
+        let clock = &self.core.clock;
+        let late = (clock.width() / 2 + POLL_MARGIN).raw() as i64;
+        let offset = if clock.wants_probe() {
             0
+        } else if self.core.next_k % GUARD_EVERY == 0 {
+            // A guard poll before the early end: polls after the late end find DRDY set whether
+            // the line is right or runs late (a period too long), so only one before the early
+            // end can show the sample coming earlier than the clock allows.
+            -late
         } else {
-            (self.core.clock.width() / 2 + POLL_MARGIN).raw() as i64
+            late
         };
         let due = self
             .core
@@ -232,10 +243,16 @@ impl MagService {
                     );
                 }
             }
-            if timely {
-                self.core
+            if timely
+                && self
+                    .core
                     .clock
-                    .observe(tau, self.core.next_k, Seen::Produced);
+                    .observe(tau, self.core.next_k, Seen::Produced)
+                    == Fit::Early
+            {
+                // The sample came before the interval allowed: the line ran late, so the period
+                // that carried it here is wrong by more than its bound. Measure it again.
+                self.core.clock.distrust_period();
             }
             // A data read that a landing may fall inside would be torn (the part rewrites its
             // data registers, the bytes already read belong to the sample before): wait for

@@ -165,20 +165,9 @@ impl SampleClock {
     /// replaces the interval only with [`Seen::NextNotYetTrusted`] (the caller has seen the
     /// part go on producing since) and when it is late by at most a period beyond the interval,
     /// and otherwise only bounds it. Returns how the observation fitted.
-    #[inline(always)]
     pub fn observe(&mut self, tau: Fine, newest: u32, seen: Seen) -> Fit {
-        self.observe_facts(tau, newest, seen.next_not_yet(), seen.trust_late())
-    }
-
-    /// [`Self::observe`] on the two facts of its [`Seen`], out of line: each call site folds its
-    /// `Seen` into constants, and the one body is what the firmware has always run.
-    fn observe_facts(
-        &mut self,
-        tau: Fine,
-        newest: u32,
-        next_not_yet: bool,
-        trust_late: bool,
-    ) -> Fit {
+        let next_not_yet = seen.next_not_yet();
+        let trust_late = seen.trust_late();
         if !self.known {
             return Fit::Fits;
         }
@@ -299,6 +288,18 @@ impl SampleClock {
                 self.coarse_span = span;
             }
         }
+    }
+
+    /// The period is wrong by more than its bound (an observation showed the line running
+    /// late): allow the drift of a period known to a thousandth, so the interval widens and is
+    /// located again by probes, and measure the period again from the instants located from
+    /// now on ([`FINE_SPAN_FIRST`] samples apart first, as after a start).
+    pub fn distrust_period(&mut self) {
+        self.period_err = self
+            .period_err
+            .max(Fine::from_raw(self.period.raw() / 1024));
+        self.edge = None;
+        self.fine_span = 0;
     }
 
     /// Whether the interval is wide enough for a placed observation to narrow it (see
