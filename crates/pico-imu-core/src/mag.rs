@@ -36,10 +36,6 @@ const READ_MARGIN: Fine = fine(10);
 const REPOLL_MIN: Fine = fine(100);
 /// Status polls in one tick (the first and its re-polls).
 const POLLS: u32 = 4;
-/// Every this many slots the tick's first poll is a guard poll, before the early end of the
-/// clock's uncertainty (see [`MagService::schedule`]); normally it finds DRDY clear and costs
-/// one re-poll.
-const GUARD_EVERY: u32 = 16;
 
 /// The magnetometer side.
 pub struct MagService {
@@ -158,22 +154,12 @@ impl MagService {
 
     /// The next tick: the first poll's latch just after the late end of the uncertainty about
     /// the next sample's landing, or at the predicted landing itself when the uncertainty is
-    /// wide (a probe). A landing already past (samples missed, a stall) gives way to the next
+    /// wide (a probe), or before its early end now and then (a guard;
+    /// [`SampleClock::poll_offset`]). A landing already past (samples missed, a stall) gives way to the next
     /// one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
         let latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
-        let clock = &self.core.clock;
-        let late = (clock.width() / 2 + POLL_MARGIN).raw() as i64;
-        let offset = if clock.wants_probe() {
-            0
-        } else if self.core.next_k % GUARD_EVERY == 0 {
-            // A guard poll before the early end: polls after the late end find DRDY set whether
-            // the line is right or runs late (a period too long), so only one before the early
-            // end can show the sample coming earlier than the clock allows.
-            -late
-        } else {
-            late
-        };
+        let offset = self.core.clock.poll_offset(POLL_MARGIN);
         let due = self
             .core
             .clock
