@@ -55,7 +55,7 @@ pub(crate) use arithmetic::mul;
 pub use bus_timing::{read_bits, BusTiming, READ_FIRST_BIT, READ_SECOND_BIT, WRITE_DATA_BIT};
 pub use fine::{fine, whole_us, Fine, FINE_BITS, US};
 pub use observation::{Fit, Seen};
-pub use sample_clock::{SampleClock, GUARD_EVERY, JITTER, LOCKED_WIDTH, PROBE_WIDTH};
+pub use sample_clock::{SampleClock, GUARD_EVERY, GUARD_MARGIN, JITTER, LOCKED_WIDTH, PROBE_WIDTH};
 pub use stamps::Stamps;
 
 #[cfg(test)]

@@ -324,7 +324,7 @@ impl SampleClock {
     /// The period is wrong by more than its bound (an observation showed the line running
     /// late): allow the drift of a period known to a thousandth, so the interval widens and is
     /// located again by probes, and measure the period again from the instants located from
-    /// now on ([`FINE_SPAN_FIRST`] samples apart first, as after a start).
+    /// now on (`FINE_SPAN_FIRST` samples apart first, as after a start).
     pub fn distrust_period(&mut self) {
         self.period_err = self
             .period_err
