@@ -333,13 +333,14 @@ impl SampleClock {
         self.fine_span = 0;
     }
 
-    /// Where to latch a reader's first look for sample `k` (a data-ready poll), relative to its
-    /// predicted instant [`Self::time`]`(k)`: once [`GUARD_EVERY`] samples have passed since
-    /// an observation last latched before the early end of the interval, [`GUARD_MARGIN`]
+    /// Where to latch a reader's first look for the next sample (a data-ready poll), relative
+    /// to its predicted instant ([`Self::time`]): once [`GUARD_EVERY`] samples have passed
+    /// since an observation last latched before the early end of the interval, [`GUARD_MARGIN`]
     /// before it (a guard, again at the next sample if this one latched later than that);
     /// otherwise in the middle of the interval while it is wide (a probe,
-    /// [`Self::wants_probe`]), or `margin` after its late end, where the sample has landed. Looks after the late end find the sample whether the line is right or runs late
-    /// (a period too long), so without guards a late line is never contradicted and its drift
+    /// [`Self::wants_probe`]), or `margin` after its late end, where the sample has landed.
+    /// Looks after the late end find the sample whether the line is right or runs late (a
+    /// period too long), so without guards a late line is never contradicted and its drift
     /// never stops; a guard that finds the sample already there ([`Fit::Early`]) shows it, and
     /// the reader then calls [`Self::distrust_period`]. A guard normally finds it not yet there
     /// and costs one more look at the late end.
@@ -721,10 +722,10 @@ mod late_line_tests {
     /// A magnetometer clock whose period goes wrong by 0.3–1.2 µs per sample, too long (the
     /// line runs late), with a bound twenty times smaller (the emulator, from code timing
     /// alone: 0.83 µs per sample, its stamps 1.3 ms late after 18 s), is caught by the guard
-    /// polls: two seconds on, its stamps are within 20 µs rms and 100 µs at most. Then the part is restarted as the service does
-    /// (`Core::started`): the waking write aimed one period before a predicted instant, held
-    /// up to 0.4 period (the task's wake-up, the bus), its first sample numbered by the nearest
-    /// predicted instant. That is the part's own slot in every trial. Without the guards the
+    /// polls: two seconds on, its stamps are within 20 µs rms and 100 µs at most. Then the part
+    /// is restarted as the service does (`Core::started`): the waking write aimed one period
+    /// before a predicted instant, held up to 0.4 period (the task's wake-up, the bus), its
+    /// first sample numbered by the nearest predicted instant. That is the part's own slot in every trial. Without the guards the
     /// line drifts by a period's fraction and the restart lands on the neighbouring slot.
     #[test]
     fn a_line_running_late_is_caught_and_a_restart_keeps_the_parts_slot() {
