@@ -155,8 +155,8 @@ impl MagService {
     /// The next tick: the first poll's latch just after the late end of the uncertainty about
     /// the next sample's landing, or at the predicted landing itself when the uncertainty is
     /// wide (a probe), or before its early end now and then (a guard;
-    /// [`SampleClock::poll_offset`]). A landing already past (samples missed, a stall) gives way to the next
-    /// one predicted after `now_us`.
+    /// [`SampleClock::poll_offset`]). A landing already past (samples missed, a stall) gives
+    /// way to the next one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
         let latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
         let offset = self.core.clock.poll_offset(POLL_MARGIN);

@@ -725,8 +725,9 @@ mod late_line_tests {
     /// polls: two seconds on, its stamps are within 20 µs rms and 100 µs at most. Then the part
     /// is restarted as the service does (`Core::started`): the waking write aimed one period
     /// before a predicted instant, held up to 0.4 period (the task's wake-up, the bus), its
-    /// first sample numbered by the nearest predicted instant. That is the part's own slot in every trial. Without the guards the
-    /// line drifts by a period's fraction and the restart lands on the neighbouring slot.
+    /// first sample numbered by the nearest predicted instant. That is the part's own slot in
+    /// every trial. Without the guards the line drifts by a period's fraction and the restart
+    /// lands on the neighbouring slot.
     #[test]
     fn a_line_running_late_is_caught_and_a_restart_keeps_the_parts_slot() {
         let mut rnd = xorshift(0x6d61_6766_6978_2d31);
