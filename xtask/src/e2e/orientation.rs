@@ -43,8 +43,12 @@ pub fn part_calibration(part: &Part) -> Result<Calibration> {
             .map_err(|e| anyhow::anyhow!("gyro correction: {e:?}"))?;
     let accel = Affine::from_float(CalSensor::Accel, one, [0.0; 3])
         .map_err(|e| anyhow::anyhow!("accelerometer correction: {e:?}"))?;
-    Calibration::fitted(accel, gyro, mag, [1.0 / s.accel, 1.0 / s.gyro, 1.0 / s.mag])
-        .map_err(|e| anyhow::anyhow!("{e:?}"))
+    // fitted at the ranges the firmware runs, as the host's calibration file would say
+    let (imu, mag_part) = pico_imu_core::config::PARTS;
+    let fitted =
+        imu_cal::device::Fitted::new(imu, mag_part, [1.0 / s.accel, 1.0 / s.gyro, 1.0 / s.mag])
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+    Calibration::fitted(accel, gyro, mag, fitted).map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 fn invert(m: &[[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
