@@ -12,15 +12,19 @@
 //!
 //! ```
 //! use imu_cal::device::{
-//!     decode_blob, encode_blob, Affine, BlobError, Calibration, GyroCorrection, Sensor,
-//!     MAX_BLOB_LEN,
+//!     decode_blob, encode_blob, Affine, BlobError, Calibration, Fitted, GyroCorrection, ImuPart,
+//!     MagPart, Sensor, MAX_BLOB_LEN,
 //! };
 //!
 //! // A magnetometer with a hard-iron offset of (120, −40, 15) LSB and an X gain 2 % low:
 //! // out = diag(1/0.98, 1, 1)·(raw − offset), in the part's nominal LSB.
 //! let gain = [[1.0 / 0.98, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 //! let mag = Affine::from_float(Sensor::Mag, gain, [120.0, -40.0, 15.0]).unwrap();
-//! let cal = Calibration::new(Affine::IDENTITY, GyroCorrection::IDENTITY, mag).unwrap();
+//! // Fitted for an MPU-6050 at ±2 g and ±250 °/s and a QMC5883L at ±2 G (LSB per m/s², per
+//! // deg/s and per µT): a correction records the parts and ranges it is for.
+//! let parts = Fitted::new(ImuPart::Mpu6050, MagPart::Qmc5883l, [16384.0 / 9.80665, 131.0, 120.0])
+//!     .unwrap();
+//! let cal = Calibration::fitted(Affine::IDENTITY, GyroCorrection::IDENTITY, mag, parts).unwrap();
 //! // The part reports (1100, 460, −285) for a field of (1000, 500, −300) LSB: 980 / 0.98 = 1000.
 //! assert_eq!(cal.apply_mag([1100, 460, -285]), [1000, 500, -300]);
 //!

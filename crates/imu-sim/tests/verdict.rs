@@ -161,6 +161,33 @@ fn resolution_is_named_only_when_it_changes_the_fit() {
     }
 }
 
+/// The default model holds the data's resolution only where the lattice changes the fit: a
+/// coarse LSB (a part's own counts) is in it, a CSV's sixth decimal is not.
+#[test]
+fn the_resolution_is_in_the_default_model_only_when_it_matters() {
+    let mut rng = Rng::new(0x7e5_0111);
+    for _ in 0..3 {
+        let n = 3e-3 + 4e-3 * rng.uniform();
+        // per-sample σ of the white noise at 100 Hz is 10·n
+        for (lsb, want) in [
+            (10.0 * n * (0.6 + 0.6 * rng.uniform()), true),
+            (1e-6, false),
+        ] {
+            let mut c = cfg(100.0, 600.0, rng.next_u64() % 10_000, gyro_background(true));
+            c.effects.retain(|e| !matches!(e, SimEffect::White { .. }));
+            c.effects.push(SimEffect::White { n });
+            c.lsb = Some(lsb);
+            let a = c.analyse();
+            let lab = NoiseLab::new(a.record(None)).expect("lab");
+            let has = lab
+                .default_specs()
+                .iter()
+                .any(|s| s.effect == Effect::Resolution);
+            assert_eq!(has, want, "LSB {lsb:.3e} on N {n:.3e}");
+        }
+    }
+}
+
 /// Random mixtures of every effect the simulator makes, at random levels, rates and lengths, some
 /// with lines far above the background: every model of every walk has finite statistics, and a
 /// fit that cannot be made is an error that says why, never a verdict.

@@ -359,11 +359,18 @@ impl<'a> NoiseLab<'a> {
     }
 
     /// The default model: the five terms of eqs. 10–14 (Jaime et al.), plus the data's
-    /// resolution when its values sit on a lattice (a known white floor, no free parameter).
+    /// resolution when its values sit on a lattice coarse enough to change the fit (a known white
+    /// floor, no free parameter): its variance LSB²/12/m at the shortest τ at least one standard
+    /// error of that point's estimate. A finer lattice (a CSV written with a fixed number of
+    /// decimals) is left out; the walk still adds it if it lowers the criterion.
     pub fn default_specs(&self) -> Vec<TermSpec> {
         let mut v: Vec<TermSpec> = DEFAULT_TERMS.iter().cloned().map(TermSpec::new).collect();
-        if let Some(s) = self.resolution_spec() {
-            v.push(s);
+        if let (Some(s), Some(p)) = (self.resolution_spec(), self.meas.points.first()) {
+            let lsb = self.lsb.unwrap_or(0.0);
+            let share = lsb * lsb / 12.0 / p.m.max(1) as f64 / (p.dev * p.dev);
+            if share >= (2.0 / p.edf).sqrt() {
+                v.push(s);
+            }
         }
         v
     }

@@ -31,9 +31,10 @@ pub struct Args {
     #[arg(long)]
     pub column: String,
     /// Model terms, comma-separated (default: the five power-law terms of Jaime et al., eqs.
-    /// 10–14, plus the data's resolution when its values sit on a lattice). Effects:
-    /// quantization, white, flicker, rate_random_walk, rate_ramp, markov, sinusoid, resolution,
-    /// lowpass, lowpass2, boxcar, bartlett, resonance, and user effects by their file's name.
+    /// 10–14, plus the data's resolution when its values sit on a lattice coarse enough to
+    /// change the fit). Effects: quantization, white, flicker, rate_random_walk, rate_ramp,
+    /// markov, sinusoid, resolution, lowpass, lowpass2, boxcar, bartlett, resonance, and user
+    /// effects by their file's name (drift, bias_step and a warm-up come from --auto).
     #[arg(long, value_delimiter = ',')]
     pub terms: Vec<String>,
     /// Add an effect to the model and show the step before → after (repeatable, comma-separated).
