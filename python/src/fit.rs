@@ -24,6 +24,16 @@ impl NativeFit {
         self.session.json_string()
     }
 
+    /// The verdict sentence on the last model, as the CLI prints it.
+    fn verdict(&self) -> String {
+        self.session.verdict()
+    }
+
+    /// Effect name → its physical mechanism, for the last model's effects and the missing one.
+    fn physics(&self) -> Vec<(String, String)> {
+        self.session.physics()
+    }
+
     /// One dict per model analysed (the start model first): `effects` (names), `tau` (s),
     /// `dev`, `lo`, `hi` (68.3 %), `model` (the model's deviation), `residual` ((measured −
     /// model)/CI half-width), `terms` (name → each term's deviation at the points), `adequate`.

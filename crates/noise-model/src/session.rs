@@ -10,7 +10,7 @@ use allan::{deviation_segments, Stat, TauSet};
 use crate::diagnose::{diagnose, Diagnosis};
 use crate::lab::{reading, Model, NoiseLab, Record, Timing};
 use crate::practical::{recalibration, Recalibration};
-use crate::{Edit, Effect, Fit, Point, Step, Stop, TermSpec};
+use crate::{Assessment, Edit, Effect, Fit, Point, Step, Stop, TermSpec};
 
 mod json;
 pub use json::*;
@@ -133,6 +133,31 @@ impl Session {
         self.stages
             .last()
             .expect("a session has one stage at least")
+    }
+
+    /// The verdict sentence on the last model.
+    pub fn verdict(&self) -> String {
+        let l = self.last();
+        verdict(&l.model.fit, &l.model.assessment, l.diagnosis.adequate)
+    }
+
+    /// (name, physical mechanism) of the last model's effects and of the effect the diagnosis
+    /// names, each once.
+    pub fn physics(&self) -> Vec<(String, String)> {
+        let l = self.last();
+        let mut out: Vec<(String, String)> = Vec::new();
+        for e in l
+            .model
+            .fit
+            .effects()
+            .iter()
+            .chain(l.diagnosis.missing.iter())
+        {
+            if !out.iter().any(|(n, _)| n == e.name()) {
+                out.push((e.name().to_string(), e.physics().to_string()));
+            }
+        }
+        out
     }
 }
 
@@ -412,4 +437,65 @@ pub fn drift_terms(f: &Fit) -> (f64, f64, f64, f64, f64) {
     let (k, kc) = get(Effect::RateRandomWalk);
     let (r, rc) = get(Effect::RateRamp);
     (b, k, r, kc, rc)
+}
+
+/// `x` with `sig` significant digits, fixed notation for 1e-3 ≤ |x| < 1e5, else scientific.
+pub fn sig(x: f64, sig: usize) -> String {
+    if !x.is_finite() {
+        return "—".into();
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let e = x.abs().log10().floor() as i32;
+    if (-3..5).contains(&e) {
+        let dec = (sig as i32 - 1 - e).max(0) as usize;
+        format!("{:.*}", dec, x)
+    } else {
+        format!("{:.*e}", sig.saturating_sub(1), x)
+    }
+}
+
+/// The verdict sentence. `adequate` is the lab's whole verdict (the Allan test, the time-domain
+/// checks and the candidates' nested tests).
+pub fn verdict(fit: &Fit, a: &Assessment, adequate: bool) -> String {
+    if a.adequate && !adequate {
+        return format!(
+            "NOT ADEQUATE — the Allan curve alone passes (χ²/dof = {}, global p = {}), but the \
+             record shows an effect the model lacks (see the diagnosis).",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2)
+        );
+    }
+    if a.adequate {
+        format!(
+            "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (all |z| ≤ {:.1}).",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2),
+            a.threshold
+        )
+    } else {
+        let ranges: Vec<String> = if a.failing.is_empty() {
+            vec!["(no single range: the misfit is spread over all τ)".into()]
+        } else {
+            a.failing
+                .iter()
+                .map(|r| {
+                    format!(
+                        "τ = {}–{} s (measured {} model, up to |z| = {:.1})",
+                        sig(r.lo, 3),
+                        sig(r.hi, 3),
+                        if r.sign > 0 { "above" } else { "below" },
+                        r.worst_z
+                    )
+                })
+                .collect()
+        };
+        format!(
+            "NOT ADEQUATE — χ²/dof = {}, global p = {}; failing: {}.",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2),
+            ranges.join("; ")
+        )
+    }
 }
