@@ -55,3 +55,29 @@ class CsvChunks:
     def rate_hz(self) -> Optional[float]: ...
     def __iter__(self) -> "CsvChunks": ...
     def __next__(self) -> Dict[str, object]: ...
+
+class NativeFit:
+    """A finished noise-lab session (``noise_model::session``)."""
+
+    def json(self) -> str:
+        """The object ``imu-lab fit --json`` prints."""
+    def verdict(self) -> str: ...
+    def physics(self) -> List[Tuple[str, str]]: ...
+    def stages(self) -> List[Dict[str, object]]: ...
+
+def fit(
+    y: npt.NDArray[np.float64],
+    rate: Optional[float] = None,
+    unit: str = "",
+    column: str = "y",
+    t: Optional[npt.NDArray[np.float64]] = None,
+    gap_before: Optional[npt.NDArray[np.float64]] = None,
+    temp: Optional[npt.NDArray[np.float64]] = None,
+    terms: List[str] = ...,
+    add: List[str] = ...,
+    effects: List[Tuple[str, str]] = ...,
+    auto: bool = False,
+    max_steps: int = 6,
+    tolerance: Optional[float] = None,
+) -> NativeFit:
+    """The session on ``y`` (``rate`` Hz, or from ``t`` in s); ``effects``: (TOML text, name)."""
