@@ -11,6 +11,8 @@
   length through the streaming engine in bounded memory.
 * :func:`fit` — the noise lab (``imu-lab fit``): the model of Jaime et al. and the effects the
   diagnosis names, each estimate with its uncertainty, the verdict, the walk; a :class:`Fit`.
+* :func:`calibrate` — the calibration lab (``imu-lab calibrate``): a :class:`Calibration` whose
+  ``save`` writes the TOML file the CLI and the device read.
 
 Every function releases the GIL while it computes. Bad arguments raise ``ValueError`` naming
 the argument (and the index of a bad sample); a file that cannot be opened raises ``OSError``.
@@ -26,7 +28,7 @@ from . import _native
 from . import allantools
 
 __all__ = ["allantools", "deviation", "Table", "Stream", "read_csv", "Recording", "read_csv_chunks",
-           "stream_csv", "STATS", "fit", "Fit", "Term", "Step"]
+           "stream_csv", "STATS", "fit", "Fit", "Term", "Step", "calibrate", "Calibration"]
 
 #: The statistics :func:`deviation` computes.
 STATS = ("adev", "oadev", "mdev", "hdev", "ohdev", "tdev", "totdev")
@@ -250,4 +252,4 @@ def stream_csv(path, column: str, scale: float = 1.0, unit: Optional[str] = None
     return s
 
 
-from .lab import Fit, Step, Term, fit  # noqa: E402  (lab imports Recording from here)
+from .lab import Calibration, Fit, Step, Term, calibrate, fit  # noqa: E402  (lab imports Recording from here)

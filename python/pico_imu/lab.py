@@ -237,3 +237,137 @@ def fit(y, rate: Optional[float] = None, unit: Optional[str] = None, terms: Sequ
                          list(terms), list(add), texts, bool(auto), int(max_steps),
                          None if tolerance is None else float(tolerance))
     return Fit(native)
+
+
+#: The contract's unit of each sensor column (the calibration file holds these).
+_CONTRACT_UNITS = {"ax": "m/s²", "ay": "m/s²", "az": "m/s²", "gx": "deg/s", "gy": "deg/s",
+                   "gz": "deg/s", "mx": "µT", "my": "µT", "mz": "µT", "temp": "°C"}
+
+
+class Calibration:
+    """The result of :func:`calibrate`: the last model of the calibration session.
+
+    ``sensor``, ``unit`` (of the columns and of offsets/biases), ``model`` (effect names),
+    ``params`` and ``sigma`` (1σ) by parameter (offsets in ``unit``; scale factors and
+    misalignments dimensionless; the soft-iron matrix dimensionless), ``residual_rms`` and
+    ``noise_floor`` (in ``unit``: what the model leaves and what the data's own noise would),
+    ``adequate``, ``verdict``, ``missing`` (the effect the diagnosis names), ``explanation``,
+    ``steps`` and ``stop`` of the walk. :meth:`to_dict` is ``imu-lab calibrate --json``'s object;
+    :meth:`save` writes the TOML calibration file the CLI and the device read."""
+
+    def __init__(self, native):
+        self._native = native
+        d = json.loads(native.json())
+        self.sensor: str = d["sensor"]
+        self.unit: str = d["unit"]
+        self.model: List[str] = d["model"]
+        self.params: dict = d["params"]
+        self.sigma: dict = d["sigma"]
+        self.residual_rms: float = d["residual_rms"]
+        self.noise_floor: float = d["noise_floor"]
+        diag = d["diagnosis"]
+        self.adequate: bool = diag["adequate"]
+        self.verdict: str = diag["verdict"]
+        self.missing: Optional[str] = diag["missing"]
+        self.explanation: str = diag["explanation"]
+        self.steps: List[dict] = d.get("steps") or []
+        self.stop: Optional[str] = d.get("stop")
+
+    def to_dict(self) -> dict:
+        """The JSON object ``imu-lab calibrate --json`` prints."""
+        return json.loads(self._native.json())
+
+    def save(self, path) -> None:
+        """Writes (or updates this sensor's section of) the TOML calibration file at ``path``,
+        as ``imu-lab calibrate --out`` does. The device must be able to hold it within the
+        parts' datasheet bounds: otherwise ``ValueError`` naming the key, axis, value and bound,
+        and nothing is written. A file that cannot be read or written raises ``OSError``."""
+        existing = None
+        if os.path.exists(path):
+            with open(path, encoding="utf-8") as f:
+                existing = f.read()
+        try:
+            text = self._native.toml(existing)
+        except ValueError as e:
+            raise ValueError(f"{os.fspath(path)}: {e}") from None
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+
+    def __repr__(self) -> str:
+        return (f"<Calibration {self.sensor} [{self.unit}]: {' + '.join(self.model)}; residual "
+                f"{self.residual_rms:.3g} {self.unit} against a noise floor of {self.noise_floor:.3g} "
+                f"{self.unit}; {'adequate' if self.adequate else 'not adequate'}>")
+
+    def _repr_html_(self) -> str:
+        e = html.escape
+        out = [f"<p><b>{e(self.sensor)}</b> [{e(self.unit)}]: {e(' + '.join(self.model))}; residual "
+               f"RMS {self.residual_rms:.4g} {e(self.unit)}, noise floor {self.noise_floor:.4g} "
+               f"{e(self.unit)}; {'ADEQUATE' if self.adequate else 'NOT ADEQUATE'}</p>"]
+        if self.steps:
+            rows = "".join(
+                f"<tr><td>{i + 1}</td><td>{e(', '.join(s['added']))}</td>"
+                f"<td>{s['rms_residual_before']:.4g} → {s['rms_residual_after']:.4g} {e(s['rms_unit'])}</td>"
+                f"<td>{'yes' if s['adequate_before'] else 'no'} → {'yes' if s['adequate_after'] else 'no'}</td></tr>"
+                for i, s in enumerate(self.steps)
+            )
+            out.append(f"<table><tr><th>step</th><th>added</th><th>residual RMS</th><th>adequate</th></tr>{rows}</table>")
+        out.append(f"<p>{e(self.explanation)}</p>")
+        return "".join(out)
+
+
+def calibrate(sensor: str, samples, model: Sequence[str] = (), auto: bool = False,
+              rate: Optional[float] = None, units: Optional[Dict[str, str]] = None,
+              g: Optional[float] = None, field: Optional[float] = None, window: float = 1.0,
+              threshold_k: float = 6.0, min_static: float = 1.5, saturation: Optional[float] = None,
+              blocks: int = 50, max_steps: int = 4) -> Calibration:
+    """Calibrates ``sensor`` (``"accel"``, ``"gyro"``, ``"mag"``) as ``imu-lab calibrate`` does
+    and returns a :class:`Calibration`.
+
+    ``samples``: a :class:`~pico_imu.Recording` (its rate, gaps and units are used) or a dict of
+    column name → array (``ax ay az`` m/s², ``gx gy gz`` deg/s, ``mx my mz`` µT, ``temp`` °C; or
+    other units given in ``units``) with ``rate`` in Hz. ``model``: effect names (default
+    offset,scale | bias | hard_iron); ``auto``: walk diagnose → add → refit (at most
+    ``max_steps``). ``g`` and ``field`` in the columns' unit; ``window`` and ``min_static`` in
+    s; ``threshold_k`` a multiple of the at-rest variance; ``saturation`` in deg/s; ``blocks``
+    for the gyro at rest. Bad data (a non-finite sample with its row) and options raise
+    ``ValueError`` naming them."""
+    from . import Recording, _as_samples
+
+    if isinstance(samples, Recording):
+        cols, u = samples.columns, dict(samples.units)
+        rate = samples.rate_hz if rate is None else rate
+        segments = list(samples.segments)
+    elif isinstance(samples, dict):
+        cols, u = samples, {}
+        segments = None
+    else:
+        raise ValueError("samples: give a Recording (pico_imu.read_csv) or a dict of column → array")
+    if rate is None:
+        raise ValueError("rate: give the sample rate in Hz")
+    u.update(units or {})
+    wanted = {"accel": ["ax", "ay", "az"], "gyro": ["gx", "gy", "gz", "ax", "ay", "az", "temp"],
+              "mag": ["mx", "my", "mz"]}.get(sensor)
+    if wanted is None:
+        raise ValueError(f"sensor={sensor!r}: expected \"accel\", \"gyro\" or \"mag\"")
+    if isinstance(model, str):
+        raise ValueError("model: give a list of effect names, e.g. model=['hard_iron', 'soft_iron']")
+    for k in wanted[:3]:
+        if k not in cols:
+            raise ValueError(f"samples: column {k} missing (columns: {', '.join(cols)})")
+    arrays = {k: _as_samples(cols[k], k) for k in wanted if k in cols}
+    n = len(next(iter(arrays.values()))) if arrays else 0
+    if segments is None:
+        segments = [(0, n)]
+    for name, v in (("window", window), ("threshold_k", threshold_k), ("min_static", min_static)):
+        if not isinstance(v, (int, float, np.integer, np.floating)) or isinstance(v, bool):
+            raise ValueError(f"{name}={v!r}: give a number")
+    for name, v in (("blocks", blocks), ("max_steps", max_steps)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise ValueError(f"{name}={v!r}: give a whole number")
+    units_of = {k: u.get(k, _CONTRACT_UNITS.get(k, "")) for k in arrays}
+    native = _native.calibrate(sensor, arrays, units_of, float(rate), segments, list(model),
+                               None if g is None else float(g), None if field is None else float(field),
+                               float(window), float(threshold_k), float(min_static),
+                               None if saturation is None else float(saturation), int(blocks),
+                               bool(auto), int(max_steps))
+    return Calibration(native)

@@ -284,10 +284,12 @@ fn gravity(o: &Options, unit: &str) -> Result<f64, String> {
     let g = match (o.g, default) {
         (Some(g), _) => g,
         (None, Some(d)) => d,
-        (None, None) if unit == COUNTS => return Err(format!(
+        (None, None) if unit == COUNTS => {
+            return Err(format!(
             "the accelerometer columns are raw counts (LSB): give gravity in counts with {flag} \
                  (e.g. {flag} 16384 for a ±2 g MPU-6050), or convert them to m/s² with --scale"
-        )),
+        ))
+        }
         (None, None) => {
             return Err(format!(
                 "the accelerometer columns are in {unit}: give gravity in {unit} with {flag}"
