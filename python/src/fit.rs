@@ -146,7 +146,7 @@ pub fn fit(
             }
             let segments = match &tm {
                 Some(tm) => tm.segments(),
-                None => vec![0..y.len()],
+                None => std::iter::once(0..y.len()).collect(),
             };
             let user = effects
                 .iter()

@@ -32,7 +32,7 @@ def record(rng, tmp_path):
     """A gyro column with white noise, a rate random walk, a first-order Gauss–Markov process of
     random size and time constant, and a gap of random length, with a temperature column."""
     rate = float(rng.choice([100.0, 200.0, 400.0]))
-    n = int(rng.integers(12_000, 30_000))
+    n = int(rng.integers(8_000, 16_000))
     white = rng.uniform(0.005, 0.05)
     y = rng.uniform(-1, 1) + rng.normal(0, white, n)
     y += white * rng.uniform(1e-4, 3e-3) * np.cumsum(rng.normal(size=n))
