@@ -201,3 +201,49 @@ def fit(
 ) -> Fit:
     """The noise lab on rate samples (``rate`` Hz; ``t`` s, ``temp`` °C; ``tolerance`` in
     ``unit``) or on a recording's ``column``: ``imu-lab fit``'s session."""
+
+class Calibration:
+    """The last model of a calibration session (``imu-lab calibrate``)."""
+
+    sensor: str
+    unit: str
+    """Unit of the columns, of offsets and biases, of ``residual_rms`` and ``noise_floor``."""
+    model: List[str]
+    params: Dict[str, object]
+    """By parameter: offsets in ``unit``; scale factors, misalignments, soft iron dimensionless."""
+    sigma: Dict[str, object]
+    """1σ of ``params``, same layout."""
+    residual_rms: float
+    noise_floor: float
+    adequate: bool
+    verdict: str
+    missing: Optional[str]
+    explanation: str
+    steps: List[Dict[str, object]]
+    stop: Optional[str]
+    def to_dict(self) -> Dict[str, object]:
+        """The object ``imu-lab calibrate --json`` prints."""
+    def save(self, path: Union[str, PathLike]) -> None:
+        """Writes (or updates this sensor's section of) the TOML calibration file; ValueError
+        naming key, axis, value and bound when the device could not hold it."""
+    def _repr_html_(self) -> str: ...
+
+def calibrate(
+    sensor: str,
+    samples: Union[Recording, Dict[str, npt.ArrayLike]],
+    model: Sequence[str] = (),
+    auto: bool = False,
+    rate: Optional[float] = None,
+    units: Optional[Dict[str, str]] = None,
+    g: Optional[float] = None,
+    field: Optional[float] = None,
+    window: float = 1.0,
+    threshold_k: float = 6.0,
+    min_static: float = 1.5,
+    saturation: Optional[float] = None,
+    blocks: int = 50,
+    max_steps: int = 4,
+) -> Calibration:
+    """The calibration lab on ``accel``/``gyro``/``mag`` columns (m/s², deg/s, µT unless
+    ``units`` says otherwise; ``rate`` Hz; ``g``, ``field`` in the columns' unit; ``window``,
+    ``min_static`` s; ``saturation`` deg/s): ``imu-lab calibrate``'s session."""
