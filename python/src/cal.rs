@@ -71,13 +71,15 @@ pub fn calibrate(
             "sensor={sensor:?}: expected \"accel\", \"gyro\" or \"mag\""
         ))
     })?;
-    let cols: Vec<(String, String, Vec<f64>)> = columns
+    let mut cols: Vec<(String, String, Vec<f64>)> = columns
         .into_iter()
         .map(|(n, a)| {
             let u = units.get(&n).cloned().unwrap_or_default();
             (n, u, a.as_array().to_vec())
         })
         .collect();
+    // by name, so that messages do not depend on the dict's hashing
+    cols.sort_by(|a, b| a.0.cmp(&b.0));
     py.detach(move || {
         guarded("calibrate", || {
             let model = model
