@@ -131,6 +131,8 @@ class Term:
     known: bool
     tau_range_s: Optional[List[float]]
     reading: str
+    units: Dict[str, str]
+    """Parameter name → unit."""
 
 @dataclass
 class Step:

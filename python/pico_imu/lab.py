@@ -5,7 +5,7 @@ from __future__ import annotations
 import html
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field as _field
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -21,7 +21,7 @@ class Term:
     constant in s). ``detected``: the amplitude's interval excludes zero; ``upper_bound``: the
     95 % upper end of an undetected amplitude; ``known``: estimated outside the Allan fit (time
     domain or the data's lattice); ``tau_range_s``: where it dominates (s); ``reading``: what
-    it says in words."""
+    it says in words; ``units``: each parameter's unit."""
 
     effect: str
     params: Dict[str, Optional[float]]
@@ -32,6 +32,8 @@ class Term:
     known: bool
     tau_range_s: Optional[List[float]]
     reading: str
+    #: parameter name → its unit (e.g. ``{"N": "deg/s·√s"}``, ``{"cutoff_hz": "Hz"}``).
+    units: Dict[str, str] = _field(default_factory=dict)
 
 
 @dataclass
@@ -75,7 +77,7 @@ class Fit:
         self.unit: str = d["unit"]
         self.rate_hz: float = d["rate_hz"]
         self.samples: int = d["samples"]
-        self.terms: List[Term] = [Term(**t) for t in d["terms"]]
+        self.terms: List[Term] = [Term(**t, units=dict(u)) for t, u in zip(d["terms"], native.param_units())]
         self.chi2_dof: float = d["chi2_dof"]
         self.dof: float = d["dof"]
         self.p_value: Optional[float] = d["p_value"]
@@ -137,7 +139,7 @@ class Fit:
             if self.stop:
                 out.append(f"<p>Stop: {e(self.stop)}.</p>")
         rows = "".join(
-            f"<tr><td>{e(t.effect)}</td><td>{e(', '.join(f'{k} = {_fmt(v)} ± {_fmt(t.sigma.get(k))}' for k, v in t.params.items()))}</td>"
+            f"<tr><td>{e(t.effect)}</td><td>{e(_estimates(t))}</td>"
             f"<td>{'yes' if t.detected else 'no'}</td><td>{e(t.reading)}</td></tr>"
             for t in self.terms
         )
@@ -189,6 +191,12 @@ class Fit:
 
 def _fmt(v) -> str:
     return "—" if v is None else f"{v:.4g}"
+
+
+def _estimates(t: Term) -> str:
+    """``name = value ± σ unit`` of each parameter of a term."""
+    return ", ".join(f"{k} = {_fmt(v)} ± {_fmt(t.sigma.get(k))} {t.units.get(k, '')}".rstrip()
+                     for k, v in t.params.items())
 
 
 def fit(y, rate: Optional[float] = None, unit: Optional[str] = None, terms: Sequence[str] = (),

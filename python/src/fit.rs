@@ -29,6 +29,11 @@ impl NativeFit {
         self.session.verdict()
     }
 
+    /// Per term of the last model: (parameter name, unit), the amplitude first.
+    fn param_units(&self) -> Vec<Vec<(String, String)>> {
+        self.session.param_units()
+    }
+
     /// Effect name → its physical mechanism, for the last model's effects and the missing one.
     fn physics(&self) -> Vec<(String, String)> {
         self.session.physics()

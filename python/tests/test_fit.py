@@ -82,6 +82,7 @@ def test_to_dict_is_the_clis_json(rng, tmp_path, how):
     assert f.verdict.startswith("ADEQUATE" if f.adequate else "NOT ADEQUATE")
     for t in f.terms:
         assert t.effect in f.physics and f.physics[t.effect]
+        assert list(t.units) == list(t.params) and t.units[next(iter(t.units))], t
     if how == "add":
         assert f.steps[0].added == ["markov"]
     # an array with its rate (no time column: no timing, one segment) is the same session as a

@@ -141,6 +141,25 @@ impl Session {
         verdict(&l.model.fit, &l.model.assessment, l.diagnosis.adequate)
     }
 
+    /// The unit of every parameter of the last model's terms, term by term: (parameter name,
+    /// unit), the amplitude first (in the column's unit × s^k, e.g. N in deg/s·√s), then the
+    /// shape parameters (Hz, s, …).
+    pub fn param_units(&self) -> Vec<Vec<(String, String)>> {
+        let f = &self.last().model.fit;
+        let warm_up = f.ctx.temp_avar.is_none();
+        f.terms
+            .iter()
+            .map(|t| {
+                std::iter::once((
+                    t.effect.amp_name().to_string(),
+                    t.effect.amp_unit(&self.unit, warm_up),
+                ))
+                .chain(t.specs.iter().map(|s| (s.name.clone(), s.unit.clone())))
+                .collect()
+            })
+            .collect()
+    }
+
     /// (name, physical mechanism) of the last model's effects and of the effect the diagnosis
     /// names, each once.
     pub fn physics(&self) -> Vec<(String, String)> {
