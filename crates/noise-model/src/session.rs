@@ -518,3 +518,90 @@ pub fn verdict(fit: &Fit, a: &Assessment, adequate: bool) -> String {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn white(n: usize, key: u64, sigma: f64) -> Vec<f64> {
+        let mut g = crate::test_noise(key);
+        (0..n).map(|_| sigma * g()).collect()
+    }
+
+    fn input<'a>(y: &'a [f64], segments: &'a [Range<usize>]) -> Input<'a> {
+        Input {
+            column: "gx",
+            unit: "deg/s",
+            y,
+            rate_hz: 100.0,
+            segments,
+            temp: None,
+            timing: None,
+            label: "test",
+        }
+    }
+
+    /// White noise of a known size: the session's white term finds it within its σ-based
+    /// interval, the JSON says what the session holds, and the walk's first model is the start.
+    #[test]
+    fn white_noise_session_and_its_json() {
+        for key in [3u64, 17, 91] {
+            let sigma = 0.01 + 0.01 * (key % 5) as f64;
+            let y = white(20_000, key, sigma);
+            let segs = [0..y.len()];
+            let s = run(&input(&y, &segs), &Options::default()).unwrap();
+            assert_eq!(s.stages.len(), 1);
+            assert!(s.steps.is_empty() && s.stop.is_none());
+            // N = σ·√τ0 for white rate noise sampled at 100 Hz
+            let n_true = sigma * (0.01f64).sqrt();
+            let t = s.last().model.fit.term(&Effect::White).unwrap();
+            assert!(
+                (t.amplitude() - n_true).abs() < 4.0 * t.amplitude_sigma() + 0.03 * n_true,
+                "N = {} ± {} against {n_true}",
+                t.amplitude(),
+                t.amplitude_sigma()
+            );
+            let j: serde_json::Value = serde_json::from_str(&s.json_string()).unwrap();
+            assert_eq!(j["samples"], 20_000);
+            assert_eq!(j["column"], "gx");
+            assert_eq!(j["adev"].as_array().unwrap().len(), s.points.len());
+            assert!(j["timing"].is_null());
+            let units = s.param_units();
+            assert_eq!(units.len(), s.last().model.fit.terms.len());
+            assert!(units.iter().all(|u| !u[0].1.is_empty()));
+        }
+    }
+
+    #[test]
+    fn options_and_segments_are_refused_by_name() {
+        let y = white(3000, 5, 0.01);
+        let segs = [0..y.len()];
+        let tol = Options {
+            tolerance: Some(-1.0),
+            ..Options::default()
+        };
+        assert!(run(&input(&y, &segs), &tol)
+            .unwrap_err()
+            .starts_with("--tolerance -1"));
+        let py = Options {
+            max_steps: 0,
+            flags: Flags::PYTHON,
+            ..Options::default()
+        };
+        assert!(run(&input(&y, &segs), &py)
+            .unwrap_err()
+            .starts_with("max_steps 0"));
+        let unknown = Options {
+            terms: vec!["whit".into()],
+            ..Options::default()
+        };
+        assert!(run(&input(&y, &segs), &unknown)
+            .unwrap_err()
+            .starts_with("--terms \"whit\": unknown effect"));
+        let bad = [0..10, 5..20];
+        let e = run(&input(&y, &bad), &Options::default()).unwrap_err();
+        assert!(e.contains("segment 1 (5..20)"), "{e}");
+        let beyond = [0..y.len() + 1];
+        assert!(run(&input(&y, &beyond), &Options::default()).is_err());
+    }
+}
