@@ -548,7 +548,10 @@ mod tests {
         for key in [3u64, 17, 91] {
             let sigma = 0.01 + 0.01 * (key % 5) as f64;
             let y = white(20_000, key, sigma);
-            let segs = [0..y.len()];
+            let segs = [Range {
+                start: 0,
+                end: y.len(),
+            }];
             let s = run(&input(&y, &segs), &Options::default()).unwrap();
             assert_eq!(s.stages.len(), 1);
             assert!(s.steps.is_empty() && s.stop.is_none());
@@ -575,7 +578,10 @@ mod tests {
     #[test]
     fn options_and_segments_are_refused_by_name() {
         let y = white(3000, 5, 0.01);
-        let segs = [0..y.len()];
+        let segs = [Range {
+            start: 0,
+            end: y.len(),
+        }];
         let tol = Options {
             tolerance: Some(-1.0),
             ..Options::default()
@@ -601,7 +607,10 @@ mod tests {
         let bad = [0..10, 5..20];
         let e = run(&input(&y, &bad), &Options::default()).unwrap_err();
         assert!(e.contains("segment 1 (5..20)"), "{e}");
-        let beyond = [0..y.len() + 1];
+        let beyond = [Range {
+            start: 0,
+            end: y.len() + 1,
+        }];
         assert!(run(&input(&y, &beyond), &Options::default()).is_err());
     }
 }
