@@ -46,14 +46,15 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::UsbDevice;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
 use imu_drivers::mpu6050::Address;
-use imu_proto::{DecodeError, FrameReader, HostFrame, SensorState, MAG_PERIOD_US};
+use imu_proto::{DecodeError, FrameReader, HostFrame};
 use pico_imu_core::clock::BusTiming;
 use pico_imu_core::config;
 use pico_imu_core::device::Device;
 use pico_imu_core::imu::ImuService;
-use pico_imu_core::mag::{MagService, Slots};
+use pico_imu_core::mag::MagService;
 use pico_imu_core::msg::{self, SensorMsg};
 use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::schedule::{self, Housekeeping, MagTicks, StatusLog};
 use pico_imu_core::service::Tick;
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
@@ -84,24 +85,12 @@ unsafe fn make_i2c(config: i2c::Config) -> I2c<'static, I2C0, i2c::Async> {
     let (p, scl, sda) = unsafe { (I2C0::steal(), PIN_5::steal(), PIN_4::steal()) };
     I2c::new_async(p, scl, sda, Irqs, config)
 }
-/// The IMU FIFO is drained every 10 ms (≈ 10 frames of 14 bytes, ≈ 3.3 ms of bus time at
-/// 400 kHz; the 1024-byte FIFO holds 73 ms): each burst costs a FIFO-count read, a data read and
-/// a round of task wake-ups whatever its length, and 10 ms instead of 5 ms saved ≈ 750 cycles
-/// per sample set (docs/firmware.md, "Budgets"). A burst starts right after every second
-/// magnetometer tick: the next one is due 5 ms later, and the burst is done well before, so a
-/// magnetometer read never queues behind it. The magnetometer task ticks every 5 ms also while
-/// its sensor is missing; only if it stops ticking (a flash-write pause, a transfer running into
-/// its 25 ms deadline) does a burst come this long after the previous one, well within the
-/// FIFO's 73 ms. (The fallback waits on a TIMER alarm of its own, `alarm::IMU_FALLBACK`,
-/// disarmed when the signal wins: no timer is left behind to wake the task later.)
-const IMU_FALLBACK_US: u64 = 50_000;
-/// Until the magnetometer service knows the sensor's phase (at boot, while it is out), its ticks
-/// come on a 5 ms grid, 2.75 ms past whole multiples.
-const MAG_SLOT_OFFSET_US: u64 = IMU_SLOT_OFFSET_US + MAG_PERIOD_US / 2;
-/// Timer slots sit 250 µs off whole milliseconds. On silicon this changes nothing; in rp2040js
-/// 1.4.1 an alarm that falls on the very instant the harness starts a CPU stall (its faults are
-/// scheduled on whole seconds) was lost and the firmware slept for ever (docs/firmware.md).
-const IMU_SLOT_OFFSET_US: u64 = 250;
+/// The IMU FIFO is drained every 10 ms, right after every second magnetometer tick, or at
+/// the fallback instant when that tick does not come; when each burst runs is
+/// `pico_imu_core::schedule`'s. Bursts every 10 ms instead of 5 ms saved ≈ 750 cycles per
+/// sample set (docs/firmware.md, "Budgets"). (The fallback waits on a TIMER alarm of its own,
+/// `alarm::IMU_FALLBACK`, disarmed when the signal wins: no timer is left behind to wake the
+/// task later.)
 /// Encoded device→host frames waiting for USB; a full pipe drops whole frames (counted).
 const OUT_PIPE: usize = 8192;
 /// Largest host frame accepted (a SetCalibration with a 256-byte blob is ~270 bytes).
@@ -127,14 +116,6 @@ type TickSignal = Signal<NoopRawMutex, ()>;
 /// Every second magnetometer tick, just finished (mag_task → imu_task): the bus is free for
 /// ≈ 4.5 ms.
 type MagReadSignal = Signal<NoopRawMutex, ()>;
-/// Magnetometer ticks whose messages share one slot of its channel: the processing task wakes
-/// once per 20 ms for the magnetometer, each wake-up a poll of all its inputs (docs/benchmarks.md
-/// has the cost). Events carry their own time, so a report waiting up to 20 ms in the slot is
-/// still dated when it happened.
-const MAG_TICKS_PER_SLOT: u32 = 4;
-/// Housekeeping period.
-const TICK_MS: u64 = 100;
-
 /// What the USB receiver passes on.
 #[allow(clippy::large_enum_variant)] // no heap: requests travel inline
 enum HostIn {
@@ -299,7 +280,7 @@ async fn start(spawner: Spawner) {
 /// The housekeeping tick (`TickSignal`).
 #[embassy_executor::task]
 async fn tick_task(tick: &'static TickSignal) -> ! {
-    let mut t = Ticker::every(Duration::from_millis(TICK_MS));
+    let mut t = Ticker::every(Duration::from_millis(schedule::TICK_MS));
     loop {
         t.next().await;
         tick.signal(());
@@ -402,9 +383,7 @@ async fn imu_task(
     let mut last_us = now_us();
     let mut was = svc.state();
     loop {
-        // An odd µs is never on a whole millisecond (see IMU_SLOT_OFFSET_US), and needs no
-        // 64-bit division to get there.
-        let fallback = Instant::from_micros((last_us + IMU_FALLBACK_US) | 1);
+        let fallback = Instant::from_micros(schedule::imu_fallback_at(last_us));
         // Either result starts a burst.
         let _ = select(mag_read.wait(), alarm::IMU_FALLBACK.wait_until(fallback)).await;
         last_us = now_us();
@@ -444,19 +423,14 @@ async fn mag_task(
     let mut run = run.receiver().expect("watch receiver for mag_task");
     let mut mag = Qmc5883::new(BusDevice::new(bus));
     let mut svc = MagService::new(BusTiming::from_hz(I2C_HZ));
-    let mut slots = Slots::new(MAG_PERIOD_US, MAG_SLOT_OFFSET_US);
-    let mut ticks = 0u32;
-    let mut fresh = true;
+    let mut turns = MagTicks::new();
     let mut was = svc.state();
     loop {
-        let at = match svc.next_poll_us() {
-            Some(t) => Instant::from_micros(t),
-            None => Instant::from_micros(slots.next_after(now_us())),
-        };
+        let at = Instant::from_micros(turns.next_at(svc.next_poll_us(), now_us()));
         alarm::MAG_TICK.wait_until(at).await;
-        // MAG_TICKS_PER_SLOT ticks' messages share a slot: the slot stays ours until `send_done`.
+        // A few ticks' messages share a slot: the slot stays ours until `send_done`.
         let msgs = out.send().await;
-        if fresh {
+        if turns.fresh() {
             msgs.clear();
         }
         if wait_running(&mut run).await {
@@ -479,16 +453,12 @@ async fn mag_task(
             warn!("mag: {} -> {}", was, svc.state());
             was = svc.state();
         }
-        // The bus is free until the next tick: every second tick (reading or not, so bursts
-        // keep their 10 ms with the magnetometer missing too) lets imu_task start a burst.
-        ticks += 1;
-        let second = ticks.is_multiple_of(2);
-        if second {
+        let next = turns.done(msgs.len(), msgs.capacity());
+        if next.burst {
+            // The bus is free until the next tick.
             mag_read.signal(());
         }
-        let due = ticks.is_multiple_of(MAG_TICKS_PER_SLOT);
-        fresh = !msgs.is_empty() && (due || msgs.len() + 3 > msgs.capacity());
-        if fresh {
+        if next.hand_over {
             out.send_done();
         }
     }
@@ -500,50 +470,6 @@ struct Inputs {
     mag: SensorRx,
     host: &'static HostChannel,
     tick: &'static TickSignal,
-}
-
-/// Status frames between two status lines in the defmt log when nothing changed.
-const STATUS_LOG_EVERY: u32 = 10;
-
-/// When the status frame is also logged: at once when a count or state it reports changed (a
-/// loss, an overflow, a bus error, a sensor's state), otherwise every [`STATUS_LOG_EVERY`]
-/// frames. A defmt line with a dozen fields costs as much CPU as the status frame itself, so a
-/// quiet device logs it rarely; the host gets every frame. Before the first line the reference
-/// is a device with nothing lost and both sensors delivering: a healthy start is logged with the
-/// tenth frame, anything else at once.
-struct StatusLog {
-    last: (u64, u64, u32, u32, u32, SensorState, SensorState),
-    quiet: u32,
-}
-
-impl Default for StatusLog {
-    fn default() -> Self {
-        Self {
-            last: (0, 0, 0, 0, 0, SensorState::Ok, SensorState::Ok),
-            quiet: 0,
-        }
-    }
-}
-
-impl StatusLog {
-    fn due(&mut self, st: &imu_proto::Status) -> bool {
-        let key = (
-            st.samples_dropped,
-            st.mag_dropped,
-            st.fifo_overflows,
-            st.i2c_errors,
-            st.bus_faults,
-            st.imu,
-            st.mag,
-        );
-        self.quiet += 1;
-        if self.last == key && self.quiet < STATUS_LOG_EVERY {
-            return false;
-        }
-        self.last = key;
-        self.quiet = 0;
-        true
-    }
 }
 
 /// The pipeline, host requests, periodic status/tables, and flash writes on request.
@@ -561,8 +487,7 @@ async fn process_task(
         host,
         tick,
     } = inputs;
-    let mut last_status = Instant::now();
-    let mut last_tables = Instant::now();
+    let mut housekeeping = Housekeeping::new(now_us());
     let mut cpu = cpu::Meter::new();
     let mut status_log = StatusLog::default();
     loop {
@@ -585,6 +510,19 @@ async fn process_task(
                     device.on_sensor(m, &mut sink);
                 }
                 imu.receive_done();
+                // The queued attitude updates (one per magnetometer sample, ≈ 0.25 ms of soft
+                // float each) run here, in line with the IMU burst's processing, at most three
+                // (two queue per 10 ms; the third drains a backlog): the sensor tasks are then
+                // between their transfers and see the same delay every time. Run right after
+                // the magnetometer's hand-over instead, four back to back misdated
+                // magnetometer reads under bus faults; run one at a time with the tasks polled
+                // in between, they delayed the IMU's count reads at random (stamps 25 µs rms
+                // off instead of 2).
+                for _ in 0..3 {
+                    if !device.attitude_step(&mut sink) {
+                        break;
+                    }
+                }
             }
             Either4::Second(msgs) => {
                 for m in msgs.iter() {
@@ -604,9 +542,9 @@ async fn process_task(
                     if let Some(req) = device.handle(f, now_us(), load, &mut sink) {
                         // Flash write: pause sampling, let the tasks see it, write, resume.
                         // With the magnetometer task paused, imu_task wakes on its fallback
-                        // timer at the latest, IMU_FALLBACK_US after its last burst.
+                        // timer at the latest, schedule::IMU_FALLBACK_US after its last burst.
                         run.sender().send(false);
-                        Timer::after_micros(IMU_FALLBACK_US + 10_000).await;
+                        Timer::after_micros(schedule::IMU_FALLBACK_US + 10_000).await;
                         let ok = store.save(&req.blob).await.is_ok();
                         run.sender().send(true);
                         info!("calibration persisted: {}", ok);
@@ -615,14 +553,23 @@ async fn process_task(
                 }
             },
             Either4::Fourth(()) => {
-                table_turn = !device.mag_ok();
-                let now = Instant::now();
-                let status_ms = u64::from(device.status_interval_ms());
-                let status_due = status_ms > 0 && (now - last_status).as_millis() >= status_ms;
-                if status_due {
-                    last_status = now;
+                // Without IMU bursts (the IMU missing or stalled), the queued attitude updates
+                // run on the 100 ms tick.
+                if device.attitude_backlog() {
+                    while device.attitude_step(&mut sink) {}
+                }
+                let now = now_us();
+                let plan = housekeeping.on_tick(
+                    now,
+                    device.status_interval_ms(),
+                    device.tables_interval_ms(),
+                    device.tables_pending(),
+                    device.mag_ok(),
+                );
+                table_turn = plan.table_turn;
+                if plan.status {
                     let load = cpu.sample();
-                    let st = device.send_status(now.as_micros(), load, &mut sink);
+                    let st = device.send_status(now, load, &mut sink);
                     if status_log.due(&st) {
                         info!(
                             "status: {} samples, {} lost, {} overflows, {} I2C errors, cpu {}‰, imu {} ({} ns), mag {} ({} ns, {} lost)",
@@ -630,23 +577,11 @@ async fn process_task(
                         );
                     }
                 }
-                // A round's snapshot waits for the next tick rather than share one with a
-                // status frame.
-                let tables_ms = u64::from(device.tables_interval_ms());
-                if tables_ms > 0
-                    && !status_due
-                    && (now - last_tables).as_millis() >= tables_ms
-                    && !device.tables_pending()
-                {
-                    last_tables = now;
-                    let round = device.start_tables(now.as_micros());
+                if plan.tables {
+                    let round = device.start_tables(now);
                     // Debug level: the host sees every table, and a line would cost as much as
                     // the snapshot.
-                    debug!(
-                        "tables: round {} (snapshot at {} µs)",
-                        round,
-                        now.as_micros()
-                    );
+                    debug!("tables: round {} (snapshot at {} µs)", round, now);
                 }
             }
         }

@@ -9,6 +9,17 @@ import { patchDmaAbort, patchI2cDreq, patchI2cInterruptMask, patchSevLogger, pat
 import { RttReader } from './rtt.js';
 
 const FLASH_BASE = 0x10000000;
+/**
+ * Cycles of an exception's entry and return that rp2040js 1.4.1 does not charge (it stacks and
+ * unstacks the eight-word frame at no cost). Entry: the Cortex-M0+'s interrupt latency with
+ * zero-wait-state memory, 15 cycles (Cortex-M0+ TRM, ARM DDI 0484C, 3.6.1), stacking included.
+ * Return: the instruction that loads EXC_RETURN is charged as executed; on top of it the eight
+ * words are unstacked (8 cycles) and the pipeline refilled (2), a model good to ± 3 cycles
+ * (the TRM gives no figure). Tail-chaining, which skips an unstack and stack on silicon, is
+ * charged as a full return and entry: the count is an upper bound there.
+ */
+export const EXC_ENTRY_CYCLES = 15;
+export const EXC_RETURN_CYCLES = 10;
 const ROM_LIMIT = 0x4000;
 /** Typical W25Q16JV timings (Winbond datasheet rev H, §9.6): sector erase 45 ms, page program 0.4 ms. */
 const SECTOR_ERASE_NS = 45e6;
@@ -59,6 +70,7 @@ export class Emulator {
     this.rttPollNanos = opts.rttPollNanos ?? 200_000;
     this.nextPoll = 0;
     this.pollHooks = [];
+    this.chargeExceptions();
     // Cycle markers
     this.marks = null;
     const markerSymbol = opts.markerSymbol ?? 'PICO_IMU_STAGE';
@@ -94,6 +106,31 @@ export class Emulator {
     this.core.VTOR = vt;
     this.core.SP = sp;
     this.core.PC = pc & ~1;
+  }
+
+  /**
+   * Charges exception entry and return (`EXC_ENTRY_CYCLES`, `EXC_RETURN_CYCLES`) to
+   * `core.cycles`, and to the clock through `pendingCycles` (taken by `runUntil` with the next
+   * instruction: an entry that ends a WFE sleep happens outside any instruction).
+   */
+  chargeExceptions() {
+    const core = this.core;
+    this.pendingCycles = 0;
+    this.exceptions = { entries: 0, returns: 0 };
+    const entry = core.exceptionEntry.bind(core);
+    core.exceptionEntry = (n) => {
+      entry(n);
+      core.cycles += EXC_ENTRY_CYCLES;
+      this.pendingCycles += EXC_ENTRY_CYCLES;
+      this.exceptions.entries++;
+    };
+    const ret = core.exceptionReturn.bind(core);
+    core.exceptionReturn = (r) => {
+      ret(r);
+      core.cycles += EXC_RETURN_CYCLES;
+      this.pendingCycles += EXC_RETURN_CYCLES;
+      this.exceptions.returns++;
+    };
   }
 
   installMarker(address) {
@@ -321,7 +358,8 @@ export class Emulator {
       const limit = Math.min(this.nextPoll, untilNanos);
       let t = now;
       do {
-        const c = core.executeInstruction();
+        const c = core.executeInstruction() + this.pendingCycles;
+        this.pendingCycles = 0;
         t += c * cycleNanos;
         clock.tick(c * cycleNanos);
       } while (t < limit && !core.waiting && !this.stopReason && this.stallNanos === 0);

@@ -1,6 +1,6 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Emulator, EmulatorStop, IRQ_STAGE } from '../src/emulator.js';
+import { Emulator, EmulatorStop, IRQ_STAGE, EXC_ENTRY_CYCLES, EXC_RETURN_CYCLES } from '../src/emulator.js';
 import { buildElf, flashImage } from './helpers.js';
 
 const elf = (code, symbols) => buildElf([flashImage(code)], symbols);
@@ -75,4 +75,15 @@ test('stage markers: interrupt handlers are charged to their own stage, not to t
   assert.equal(a.entries.get(IRQ_STAGE), 1);
   assert.equal(b.cycles.get(1), a.cycles.get(1), 'stage 1 does not pay for the handler');
   assert.equal(b.cycles.get(IRQ_STAGE) - a.cycles.get(IRQ_STAGE), 90 * 3);
+});
+
+test('exception entry and return are charged (rp2040js charges none), to the handler stage and to the clock', () => {
+  const emu = new Emulator({ elfBytes: interruptedLoop(10) });
+  const stop = emu.runUntil(1e9);
+  assert.equal(stop?.kind, 'break');
+  assert.deepEqual(emu.exceptions, { entries: 1, returns: 1 });
+  // movs (1) + 10 turns of subs (1) and bne (2 taken, 1 the last), entry and return; the bx lr's
+  // own 2 cycles are added when it has returned, to the stage returned to.
+  assert.equal(emu.markReport().cycles.get(IRQ_STAGE), 1 + 10 + 19 + EXC_ENTRY_CYCLES + EXC_RETURN_CYCLES);
+  assert.equal(emu.clock.nanos, emu.core.cycles * 8, 'the clock advances by the charged cycles too');
 });

@@ -6,7 +6,9 @@
 //!   (NACK bursts, parts unpowered, SDA held with arbitration lost or with a hung START, CPU
 //!   stalls that overflow the FIFO, parts that stop producing), then the calibration round trip;
 //! * `boot-stall`: the magnetometer never sets DRDY from boot;
-//! * `sine`: no faults, a sine on the x gyro (the device's 64-bit squares in the Allan engine).
+//! * `sine`: no faults, a sine on the x gyro (the device's 64-bit squares in the Allan engine);
+//! * `orientation`: the board turned through a known trajectory, the device's attitude and
+//!   heading against the truth, with the identity calibration and the part's (`orientation.rs`).
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -21,6 +23,7 @@ use crate::emu_check;
 use crate::run;
 mod checks;
 mod faults;
+mod orientation;
 mod session;
 use checks::{check_calibration, check_losses, check_stamps, check_tables};
 use faults::{check_boot_stall, check_faults};
@@ -117,6 +120,9 @@ pub enum Scenario {
     Sine,
     /// The magnetometer stalled from boot (3 s).
     BootStall,
+    /// The board turned through the standard trajectory twice, identity calibration then the
+    /// part's: attitude and heading against the truth.
+    Orientation,
 }
 
 impl Scenario {
@@ -126,11 +132,12 @@ impl Scenario {
             Scenario::Faults => "faults",
             Scenario::Sine => "sine",
             Scenario::BootStall => "boot-stall",
+            Scenario::Orientation => "orientation",
         }
     }
 }
 
-/// `cargo xtask e2e [--scenario faults|boot-stall|sine] [--seconds S] [--shift-ms MS] [--out DIR]`.
+/// `cargo xtask e2e [--scenario faults|boot-stall|sine|orientation] [--seconds S] [--shift-ms MS] [--out DIR]`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct E2eArgs {
     /// Which scenario to run.
@@ -169,6 +176,7 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
             Scenario::Faults => (40.0, FAULTS, Some(SLOW_CLOCKS), None, false),
             Scenario::Sine => (20.0, &[], None, Some("3,3"), false),
             Scenario::BootStall => (3.0, &[], None, None, true),
+            Scenario::Orientation => return orientation::orientation(args),
         };
     let seconds: f64 = args.seconds.unwrap_or(default_s);
     let shift_ms = args.shift_ms;

@@ -272,7 +272,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
 }
 
 /// `imu-lab` from this workspace (release build), run in the workspace root.
-fn imu_lab() -> Command {
+pub(crate) fn imu_lab() -> Command {
     let mut c = cargo();
     c.args([
         "run",
@@ -310,13 +310,15 @@ pub struct DemoArgs {
     pub seconds: f64,
 }
 
-/// Runs the demo (see [`DemoArgs`]).
-pub fn demo(args: &DemoArgs) -> Result<()> {
+/// Runs the noise part of the demo (see [`DemoArgs`]); returns the firmware it ran in the
+/// emulator (`None` on a real device).
+pub fn demo(args: &DemoArgs) -> Result<Option<PathBuf>> {
     let out = out_dir("demo")?;
     let seconds = args.seconds;
     if let Some(port) = &args.port {
         eprintln!("xtask: demo on the device at {port} (flash it first: cargo run --release)");
-        return demo_flow(port, seconds, &out);
+        demo_flow(port, seconds, &out)?;
+        return Ok(None);
     }
     let elf = build_firmware()?;
     ensure_sim()?;
@@ -350,7 +352,8 @@ pub fn demo(args: &DemoArgs) -> Result<()> {
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
     // Dropping the emulator at the end of the flow, or on its error, stops it.
-    demo_flow(&port, seconds, &out)
+    demo_flow(&port, seconds, &out)?;
+    Ok(Some(elf))
 }
 
 fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use imu_proto::{AllanTable, DeviceMsg, Event, Reply, Request, SampleBatch, Status};
+use imu_proto::{AllanTable, DeviceMsg, Event, Orientation, Reply, Request, SampleBatch, Status};
 
 /// How long one wait for device traffic lasts before the caller's condition is looked at again.
 const POLL: Duration = Duration::from_millis(200);
@@ -18,6 +18,8 @@ pub struct Collected {
     pub statuses: Vec<Status>,
     pub events: Vec<Event>,
     pub batches: Vec<SampleBatch>,
+    /// Attitude estimates, in arrival order.
+    pub orientations: Vec<Orientation>,
 }
 
 impl Collected {
@@ -34,6 +36,7 @@ impl Collected {
             }
             DeviceMsg::Status(s) => self.statuses.push(s),
             DeviceMsg::Event(e) => self.events.push(e),
+            DeviceMsg::Orientation(o) => self.orientations.extend(o),
         }
     }
 }
@@ -45,6 +48,7 @@ fn describe(m: &DeviceMsg) -> String {
         DeviceMsg::Table(t) => format!("table {} pushed={}", t.channel.name(), t.pushed),
         DeviceMsg::Status(s) => format!("status uptime={} µs", s.uptime_us),
         DeviceMsg::Event(e) => format!("event {e:?}"),
+        DeviceMsg::Orientation(o) => format!("orientation ×{}", o.len()),
     }
 }
 

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 
+mod demo_heading;
 mod e2e;
 mod emu;
 mod emu_check;
@@ -60,7 +61,7 @@ fn main() -> Result<()> {
         Cmd::Test(a) => test(&a.cargo_test_args),
         Cmd::E2e(a) => e2e::e2e(&a),
         Cmd::BenchEmu(a) => emu::bench(&a),
-        Cmd::Demo(a) => emu::demo(&a),
+        Cmd::Demo(a) => demo_heading::demo(&a),
         Cmd::Firmware(a) => firmware::main(&a),
     }
 }
@@ -225,6 +226,7 @@ fn test(extra: &[String]) -> Result<()> {
             e2e::Scenario::Faults,
             e2e::Scenario::BootStall,
             e2e::Scenario::Sine,
+            e2e::Scenario::Orientation,
         ] {
             e2e::e2e(&e2e::E2eArgs::scenario(scenario))?;
         }

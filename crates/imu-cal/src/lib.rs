@@ -51,6 +51,9 @@ pub mod file;
 pub mod gyro;
 #[cfg(feature = "std")]
 pub mod gyro_rot;
+/// Tilt-compensated heading and what a calibration buys in degrees of it.
+#[cfg(feature = "std")]
+pub mod heading;
 #[cfg(feature = "std")]
 pub mod lab;
 #[cfg(feature = "std")]

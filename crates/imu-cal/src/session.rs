@@ -378,6 +378,24 @@ fn gap_note(segments: &[Range<usize>]) -> Option<String> {
     })
 }
 
+/// The rows that repeat the row before them exactly, when the record is a zero-order hold of a
+/// slower sensor (at least half of the rows repeat: a 200 Hz magnetometer in a 1 kHz record
+/// repeats each value five times); none otherwise, since a quiet quantized part can repeat a
+/// value by chance and those repeats are samples. Counting a held value five times would make
+/// the residuals' scatter, the noise floor the verdict is judged by, look five times too
+/// precise.
+fn held_rows(c: &[Vec<f64>; 3]) -> Vec<bool> {
+    let n = c[0].len();
+    let repeat: Vec<bool> = (0..n)
+        .map(|i| i > 0 && (0..3).all(|a| c[a][i] == c[a][i - 1]))
+        .collect();
+    if 2 * repeat.iter().filter(|&&r| r).count() >= n && n > 0 {
+        repeat
+    } else {
+        vec![false; n]
+    }
+}
+
 /// Keep the samples not flagged.
 fn keep(v: &[f64], flagged: &[bool]) -> Vec<f64> {
     v.iter()
@@ -510,8 +528,18 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
             let (c, unit) = columns(input, ["mx", "my", "mz"])?;
             let f = field(o, &unit)?;
             let s = sentinel::find([&c[0], &c[1], &c[2]], &unit, Part::for_sensor("mag"));
+            let held = held_rows(&c);
+            if held.iter().filter(|&&h| h).count() > 0 {
+                notes.push(format!(
+                    "{} of {} rows repeat the row before them exactly: the record holds a slower \
+                     magnetometer between its samples (zero-order hold), so each held value is \
+                     counted once",
+                    held.iter().filter(|&&h| h).count(),
+                    held.len()
+                ));
+            }
             let m = (0..c[0].len())
-                .filter(|&i| !s.flagged[i])
+                .filter(|&i| !s.flagged[i] && !held[i])
                 .map(|i| Vector3::new(c[0][i], c[1][i], c[2][i]))
                 .collect();
             Loaded {

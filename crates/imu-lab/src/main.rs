@@ -31,6 +31,9 @@ enum Command {
     Calibrate(cmd::calibrate::Args),
     /// Noise-model lab: fit Allan terms with uncertainties, judge the model, name the missing effect.
     Fit(cmd::fit::Args),
+    /// Heading error before and after a calibration, on one raw recording (against a truth or
+    /// the gyro).
+    Heading(cmd::heading::Args),
     /// Simulate IMU rate data with any mix of noise effects, as CSV in the contract.
     Simulate(cmd::simulate::Args),
     /// Export noise parameters for other tools (Kalibr imu.yaml).
@@ -47,6 +50,7 @@ fn main() {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
+        Command::Heading(a) => cmd::heading::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

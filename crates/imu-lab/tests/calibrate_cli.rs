@@ -310,6 +310,54 @@ fn soft_iron_sphere(dir: &Path) -> PathBuf {
 }
 
 #[test]
+fn a_magnetometer_held_in_a_faster_record_counts_each_value_once() {
+    // the same sphere written as `imu-lab record` writes a 200 Hz magnetometer in a 1 kHz
+    // record: each value held for five rows
+    let dir = tempfile::tempdir().unwrap();
+    let f = soft_iron_sphere(dir.path());
+    let text = std::fs::read_to_string(&f).unwrap();
+    let mut held = String::from("t,mx,my,mz\n");
+    for (k, line) in text.lines().skip(1).enumerate() {
+        let v = line.split_once(',').unwrap().1;
+        for j in 0..5 {
+            held += &format!("{:.3},{v}\n", (5 * k + j) as f64 * 0.002);
+        }
+    }
+    let h = dir.path().join("held.csv");
+    std::fs::write(&h, held).unwrap();
+    let json = |p: &Path| {
+        stdout_json(&run_ok([
+            "calibrate",
+            "mag",
+            p.to_str().unwrap(),
+            "--auto",
+            "--json",
+        ]))
+    };
+    let (a, b) = (json(&f), json(&h));
+    assert_eq!(b["stop"], "the model is adequate", "{b}");
+    assert_eq!(b["model"], a["model"], "{b}");
+    for i in 0..3 {
+        let (x, y) = (
+            a["params"]["hard_iron"][i].as_f64().unwrap(),
+            b["params"]["hard_iron"][i].as_f64().unwrap(),
+        );
+        assert!(
+            (x - y).abs() < 1e-9 * (1.0 + x.abs()),
+            "hard iron {i}: {x} vs {y}"
+        );
+    }
+    let notes = b["notes"].as_array().unwrap();
+    assert!(
+        notes.iter().any(|n| n
+            .as_str()
+            .unwrap()
+            .starts_with("12000 of 15000 rows repeat")),
+        "{notes:?}"
+    );
+}
+
+#[test]
 fn auto_walks_from_hard_iron_to_soft_iron_and_stops_adequate() {
     let dir = tempfile::tempdir().unwrap();
     let f = soft_iron_sphere(dir.path());

@@ -297,6 +297,21 @@ fn messages() -> (Vec<DeviceMsg>, Vec<HostFrame>) {
             id: 4,
             reply: Reply::Ok,
         },
+        DeviceMsg::Orientation(
+            [imu_proto::AhrsState::Tracking, imu_proto::AhrsState::MagDip]
+                .iter()
+                .enumerate()
+                .map(|(i, &state)| imu_proto::Orientation {
+                    seq: 100 + i as u32,
+                    t_us: 500_000 + 5_000 * i as u64,
+                    q: [0.9, 0.1, -0.2, 0.3],
+                    roll_deg: 12.5,
+                    pitch_deg: -3.25,
+                    heading_deg: 271.0,
+                    state,
+                })
+                .collect(),
+        ),
     ];
     let host = vec![
         HostFrame {
@@ -315,6 +330,16 @@ fn messages() -> (Vec<DeviceMsg>, Vec<HostFrame>) {
             req: Request::SetIntervals {
                 status_ms: 1000,
                 tables_ms: 0,
+            },
+        },
+        HostFrame {
+            id: 4,
+            req: Request::SetOrientation {
+                declination_cdeg: -350,
+                reference: Some(imu_proto::MagReference {
+                    field_nt: 48_000,
+                    dip_cdeg: 6_000,
+                }),
             },
         },
     ];

@@ -9,8 +9,12 @@
 //!   (FIFO overflow, a dropped batch). Optional; absent means "none reported".
 //! * `ax ay az` (m/s²), `gx gy gz` (deg/s), `mx my mz` (µT), `temp` (°C): the channels of
 //!   [`Channel`], in that order. Any subset may be present; other columns are ignored.
-//! * A missing value is an empty field. Only [`may_be_empty`] columns (`temp`) may have one: a
-//!   sensor that reports no temperature leaves the field empty. Anywhere else an empty field is
+//! * `q0 q1 q2 q3` (body → NED quaternion, `q0` the scalar), `roll pitch heading` (degrees),
+//!   `ahrs` (the filter's state: 0 converging, 1 tracking, 2 |B| out of its band, 3 dip out of
+//!   its band): the device's attitude estimate ([`ORIENTATION`]), optional.
+//! * A missing value is an empty field. Only [`may_be_empty`] columns (`temp`, the orientation
+//!   columns before the device's first estimate) may have one: a sensor that reports no
+//!   temperature leaves the field empty. Anywhere else an empty field is
 //!   an error naming the line and the column.
 //! * A header naming a column twice is refused (which of the two would be meant?).
 //!
@@ -63,6 +67,10 @@ pub const HEADER: [&str; 12] = [
     "temp",
 ];
 
+/// The orientation columns a recorder may add after [`HEADER`]'s (the device's attitude
+/// estimate, `imu_proto::Orientation`, held from the latest estimate at or before the row).
+pub const ORIENTATION: [&str; 8] = ["q0", "q1", "q2", "q3", "roll", "pitch", "heading", "ahrs"];
+
 /// The channel a contract column name stands for.
 pub fn channel(name: &str) -> Option<Channel> {
     Channel::ALL.into_iter().find(|c| c.name() == name)
@@ -74,13 +82,16 @@ pub fn unit(name: &str) -> Option<&'static str> {
     match name {
         TIME => Some("s"),
         GAP_BEFORE => Some("samples"),
+        "q0" | "q1" | "q2" | "q3" => Some("1"),
+        "roll" | "pitch" | "heading" => Some("deg"),
+        "ahrs" => Some("state"),
         _ => channel(name).map(Channel::unit),
     }
 }
 
 /// Whether a column may hold empty (missing) fields.
 pub fn may_be_empty(name: &str) -> bool {
-    name == Channel::Temp.name()
+    name == Channel::Temp.name() || ORIENTATION.contains(&name)
 }
 
 /// A reading or writing error: what, where (file and line, when known).

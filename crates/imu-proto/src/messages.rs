@@ -296,6 +296,70 @@ pub enum GapCause {
     Paused,
 }
 
+/// What the device's attitude filter says about an [`Orientation`] (docs/firmware.md,
+/// "Orientation").
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AhrsState {
+    /// Since the start or a new calibration: the estimate is still pulling in.
+    Converging,
+    /// Tracking; the magnetometer within its expected band.
+    Tracking,
+    /// |B| outside its band around the expected field strength: a magnetic disturbance; the
+    /// heading is held by the gyro alone.
+    MagField,
+    /// The dip (inclination) outside its band around the expected dip: as `MagField`.
+    MagDip,
+}
+
+/// One attitude estimate, made at a magnetometer sample (200 Hz).
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Orientation {
+    /// The magnetometer sample (its slot, [`MagSample::seq`]) whose update this is.
+    pub seq: u32,
+    /// The instant the attitude refers to: the stamp of the last IMU sample integrated, µs
+    /// since boot.
+    pub t_us: u64,
+    /// Body (sensor x forward, y left, z up, taken as forward-right-down) → local NED (x
+    /// magnetic north), `[w, x, y, z]`, unit norm.
+    pub q: [f32; 4],
+    /// Aerospace Z-Y-X angles, degrees: roll in (−180, 180], pitch in [−90, 90].
+    pub roll_deg: f32,
+    pub pitch_deg: f32,
+    /// Tilt-compensated heading, degrees in [0, 360): magnetic plus the declination set by
+    /// [`Request::SetOrientation`] (true heading when it is the place's declination).
+    pub heading_deg: f32,
+    pub state: AhrsState,
+}
+
+/// Most [`Orientation`]s in one [`DeviceMsg::Orientation`] (the device sends one frame per
+/// magnetometer hand-over: four, every 20 ms).
+pub const MAX_ORIENTATIONS: usize = 8;
+
+/// The expected geomagnetic field, against which the device flags a magnetic disturbance.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MagReference {
+    /// Field strength, nT (as the corrected magnetometer reads it).
+    pub field_nt: u32,
+    /// Dip (inclination), 0.01°, positive when the field points down.
+    pub dip_cdeg: i16,
+}
+
+/// The attitude filter's settings in use.
+#[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct OrientationConfig {
+    /// Declination, 0.01° (east positive), added to the magnetic heading.
+    pub declination_cdeg: i16,
+    /// The expected field, `None` while it is being learnt.
+    pub reference: Option<MagReference>,
+    /// `true`: the reference was learnt by the device (from its first converged second after
+    /// the start or a new calibration); `false`: set by the host.
+    pub learnt: bool,
+}
+
 /// Host → device request.
 #[derive(Serialize, Deserialize, Debug, Clone, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -319,6 +383,16 @@ pub enum Request {
     /// Take a snapshot of every channel's table now and send them (answered by
     /// [`Reply::Tables`]); a round in progress is abandoned.
     GetTables,
+    /// The attitude filter's declination (0.01°, east positive, within ±180°) and expected
+    /// field (strength 1–1000 µT, dip within ±90°; `None`: learnt by the device, a reference
+    /// already learnt kept). Held in RAM: lost at a reset (the flash holds the calibration
+    /// only). Answered `Ok` or `Error(OutOfRange)`.
+    SetOrientation {
+        declination_cdeg: i16,
+        reference: Option<MagReference>,
+    },
+    /// Answered by [`Reply::Orientation`].
+    GetOrientation,
 }
 
 /// A request with the id its reply will carry.
@@ -339,6 +413,8 @@ pub enum ErrorCode {
     FlashWrite,
     /// The device cannot take this request now.
     Busy,
+    /// A request's value is outside its documented range.
+    OutOfRange,
 }
 
 /// The answer to a [`HostFrame`].
@@ -357,6 +433,7 @@ pub enum Reply {
     Tables {
         snapshot: u32,
     },
+    Orientation(OrientationConfig),
 }
 
 /// Device → host message.
@@ -364,9 +441,14 @@ pub enum Reply {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[allow(clippy::large_enum_variant)]
 pub enum DeviceMsg {
-    Reply { id: u16, reply: Reply },
+    Reply {
+        id: u16,
+        reply: Reply,
+    },
     Samples(SampleBatch),
     Table(AllanTable),
     Status(Status),
     Event(Event),
+    /// Attitude estimates, oldest first.
+    Orientation(Vec<Orientation, MAX_ORIENTATIONS>),
 }

@@ -183,6 +183,41 @@ fn all_device_msgs() -> std::vec::Vec<DeviceMsg> {
                 allan_levels_mag: 22,
             }),
         },
+        DeviceMsg::Orientation(
+            [
+                AhrsState::Converging,
+                AhrsState::Tracking,
+                AhrsState::MagField,
+                AhrsState::MagDip,
+            ]
+            .iter()
+            .enumerate()
+            .map(|(i, &state)| Orientation {
+                seq: u32::MAX - i as u32,
+                t_us: u64::MAX - 7 * i as u64,
+                q: [0.5, -0.5, 0.5, f32::MIN_POSITIVE],
+                roll_deg: -179.99,
+                pitch_deg: 90.0,
+                heading_deg: 359.99,
+                state,
+            })
+            .collect(),
+        ),
+        DeviceMsg::Reply {
+            id: 11,
+            reply: Reply::Orientation(OrientationConfig {
+                declination_cdeg: -18_000,
+                reference: Some(MagReference {
+                    field_nt: 1_000_000,
+                    dip_cdeg: i16::MIN,
+                }),
+                learnt: true,
+            }),
+        },
+        DeviceMsg::Reply {
+            id: 12,
+            reply: Reply::Error(ErrorCode::OutOfRange),
+        },
     ]
 }
 
@@ -204,6 +239,18 @@ fn all_host_msgs() -> std::vec::Vec<HostFrame> {
             tables_ms: 0,
         },
         Request::GetTables,
+        Request::SetOrientation {
+            declination_cdeg: 1234,
+            reference: Some(MagReference {
+                field_nt: 48_000,
+                dip_cdeg: -6_000,
+            }),
+        },
+        Request::SetOrientation {
+            declination_cdeg: i16::MIN,
+            reference: None,
+        },
+        Request::GetOrientation,
     ]
     .into_iter()
     .enumerate()

@@ -37,6 +37,8 @@
 use noise_model::effect::{markov_avar_unit, resonance_avar_unit, sinusoid_avar_unit};
 use std::io::{self, Write};
 
+pub mod trajectory;
+
 /// xoshiro256++ (Blackman & Vigna 2019), seeded through SplitMix64.
 #[derive(Debug, Clone)]
 pub struct Rng {

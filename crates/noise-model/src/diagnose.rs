@@ -185,8 +185,8 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
             explanation: format!(
                 "The model describes the measurement: χ²/dof = {:.2} ({} with {} dof, from the \
                  estimates' own covariance), no τ where it leaves the confidence interval \
-                 significantly (all |z| ≤ {:.1}), and no step, temperature dependence or warm-up \
-                 in the time series. No effect is missing.",
+                 significantly (all |z| ≤ {:.1}), and no step, temperature dependence, warm-up or \
+                 drift in the time series. No effect is missing.",
                 m.fit.chi2_dof(),
                 fmt_p(m.assessment.p_value),
                 m.fit.dof,
@@ -248,6 +248,38 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
                 },
                 e.signature(),
                 e.physics()
+            )
+        }
+        None if m.assessment.adequate && !m.findings.is_empty() => {
+            // what is left is in the time series alone, and the criterion does not take it
+            let refused: Vec<String> = candidates
+                .iter()
+                .filter(|c| {
+                    c.edit
+                        .add
+                        .first()
+                        .is_some_and(|e| e.kind() == crate::effect::Kind::Signal)
+                })
+                .map(|c| format!("{} ({}: {})", c.edit, fmt_p(c.p_value), c.reason))
+                .collect();
+            format!(
+                "The Allan curve passes (χ²/dof = {:.2}, {}); what is left is in the time series \
+                 alone: {}. Added to the model, {} — the record cannot tell {} from the model's \
+                 own noise at this length. Nothing else is missing; a longer record or a repeated \
+                 run decides.",
+                m.fit.chi2_dof(),
+                fmt_p(m.assessment.p_value),
+                m.findings
+                    .iter()
+                    .map(|f| f.text.as_str())
+                    .collect::<Vec<_>>()
+                    .join("; "),
+                if refused.is_empty() {
+                    "it could not be refitted".to_string()
+                } else {
+                    format!("it does not lower the criterion: {}", refused.join(", "))
+                },
+                if m.findings.len() == 1 { "it" } else { "them" }
             )
         }
         None => {

@@ -9,8 +9,10 @@
 //!   owner of timestamps) and [`bus`] (what a bus must tell them);
 //! * samples: [`pipeline`] (corrections → Allan engines → batches, losses and splits) over
 //!   [`engines`];
+//! * orientation: [`ahrs`] (attitude and heading from the calibrated samples);
 //! * host requests: [`requests`];
 //! * tables: [`tables`] (rounds of snapshots, spaced out);
+//! * when each task's burst runs: [`schedule`] (the instants and turns the tasks wait for);
 //! * [`device`] ties them together for the processing task; [`outbox`] queues frames whole or
 //!   drops and counts them; [`stage`] marks the budget stages for the emulator; [`config`]
 //!   holds the sensors' configuration; [`msg`] the messages between the tasks.
@@ -42,6 +44,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod ahrs;
 pub mod bus;
 pub mod clock;
 pub mod config;
@@ -56,6 +59,7 @@ pub mod pipeline;
 #[cfg(feature = "std")]
 pub mod replay;
 pub mod requests;
+pub mod schedule;
 pub mod service;
 pub mod stage;
 pub mod tables;

@@ -22,7 +22,7 @@ use imu_drivers::qmc5883 as qmc;
 use imu_proto::{GapCause, Sensor, SensorState, MAG_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
-use crate::clock::{self, fine, whole_us, BusTiming, Fine, SampleClock, Seen};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::mag_config;
 use crate::msg::{Out, SensorMsg};
 use crate::service::{delay_until, Core, Phase, Tick, SETUP};
@@ -154,15 +154,12 @@ impl MagService {
 
     /// The next tick: the first poll's latch just after the late end of the uncertainty about
     /// the next sample's landing, or at the predicted landing itself when the uncertainty is
-    /// wide (a probe). A landing already past (samples missed, a stall) gives way to the next
-    /// one predicted after `now_us`.
+    /// wide (a probe), or before its early end now and then (a guard;
+    /// [`SampleClock::poll_offset`]). A landing already past (samples missed, a stall) gives
+    /// way to the next one predicted after `now_us`.
     fn schedule(&mut self, now_us: u64) {
         let latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
-        let offset = if self.core.clock.wants_probe() {
-            0
-        } else {
-            (self.core.clock.width() / 2 + POLL_MARGIN).raw() as i64
-        };
+        let offset = self.core.clock.poll_offset(POLL_MARGIN);
         let due = self
             .core
             .clock
@@ -232,10 +229,16 @@ impl MagService {
                     );
                 }
             }
-            if timely {
-                self.core
+            if timely
+                && self
+                    .core
                     .clock
-                    .observe(tau, self.core.next_k, Seen::Produced);
+                    .observe(tau, self.core.next_k, Seen::Produced)
+                    == Fit::Early
+            {
+                // The sample came before the interval allowed: the line ran late, so the period
+                // that carried it here is wrong by more than its bound. Measure it again.
+                self.core.clock.distrust_period();
             }
             // A data read that a landing may fall inside would be torn (the part rewrites its
             // data registers, the bytes already read belong to the sample before): wait for

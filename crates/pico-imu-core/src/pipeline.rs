@@ -1,6 +1,11 @@
 //! The sample path: per burst, in a straight line, fixed-point corrections (`imu_cal::device`)
 //! → the Allan engines (`allan::stream`) → the sample batch → one frame per full batch. Nothing
-//! on it allocates, divides or touches floating point.
+//! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
+//! and accelerometer for the attitude filter ([`crate::ahrs`]). Each magnetometer sample queues
+//! one filter update with those sums; the processing task runs the queued updates
+//! ([`Pipeline::attitude_step`], ≈ 0.24 ms of soft float each) where their delay does not
+//! disturb the sensor tasks (src/main.rs: in line with an IMU burst's processing), and the
+//! estimates go out four to a frame.
 //!
 //! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
 //! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
@@ -8,10 +13,12 @@
 use imu_cal::device::{Calibration, Prepared};
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
-    DeviceMsg, Event, GapCause, ImuSample, MagSample, SampleBatch, Scales, Sensor, StreamMode, Vec,
+    DeviceMsg, Event, GapCause, ImuSample, MagSample, Orientation, SampleBatch, Scales, Sensor,
+    StreamMode, Vec, MAG_PERIOD_US, MAX_ORIENTATIONS,
 };
 
-use crate::clock::Stamps;
+use crate::ahrs::{Accum, Ahrs, MAX_SUM};
+use crate::clock::{Fine, Stamps, US};
 use crate::engines::{Engines, ImuInputs};
 use crate::msg::BURST_MAX;
 use crate::outbox::{FrameSink, Outbox};
@@ -24,6 +31,11 @@ use crate::stage::{self, Stage};
 pub const BATCH_IMU: usize = 25;
 const _: () = assert!(BATCH_IMU <= imu_proto::MAX_BATCH_IMU && 100 % BATCH_IMU == 0);
 
+/// Attitude estimates per frame: four, one magnetometer hand-over (20 ms), so every 100 ms
+/// carries five such frames.
+pub const ORIENTATIONS_PER_FRAME: usize = 4;
+const _: () = assert!(ORIENTATIONS_PER_FRAME <= MAX_ORIENTATIONS);
+
 /// What the sample path counts.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct SampleCounts {
@@ -31,6 +43,16 @@ pub struct SampleCounts {
     pub imu_lost: u64,
     pub mag_taken: u64,
     pub mag_lost: u64,
+}
+
+/// One attitude update waiting to run.
+#[derive(Debug, Clone, Copy)]
+struct Queued {
+    acc: Accum,
+    mag: Option<[i32; 3]>,
+    k: u32,
+    t_us: u64,
+    imu_period: Fine,
 }
 
 /// The sample path's state.
@@ -48,6 +70,19 @@ pub struct Pipeline {
     /// The latest raw temperature, for the gyro's temperature term and the status.
     pub(crate) last_temp: Option<i16>,
     pub(crate) counts: SampleCounts,
+    /// The attitude filter and the 1 kHz path's sums for its next update.
+    pub(crate) ahrs: Ahrs,
+    acc: Accum,
+    /// Estimates not sent yet.
+    orient: Vec<Orientation, MAX_ORIENTATIONS>,
+    /// Updates waiting to run: the sums, the magnetometer sample (none for an update without
+    /// it), its slot, the instant the sums end at, the IMU period.
+    queued: heapless::Deque<Queued, 8>,
+    /// The IMU's period ([`Fine`], 0: not known yet) and the stamp of its latest sample, µs.
+    imu_period: Fine,
+    imu_t_us: u64,
+    /// rad per gyro count per second (the scale, in radians).
+    gyro_rad: f32,
 }
 
 impl Pipeline {
@@ -67,12 +102,89 @@ impl Pipeline {
             next_k: [None; 2],
             last_temp: None,
             counts: SampleCounts::default(),
+            ahrs: Ahrs::new(),
+            acc: Accum::default(),
+            orient: Vec::new(),
+            queued: heapless::Deque::new(),
+            imu_period: Fine::ZERO,
+            imu_t_us: 0,
+            gyro_rad: scales.gyro * (core::f32::consts::PI / 180.0),
         }
     }
 
+    /// New corrections: the attitude filter starts again (a learnt field reference too: the
+    /// magnetometer's correction changes what |B| reads).
     pub(crate) fn set_cal(&mut self, cal: Calibration) {
         self.cal = cal;
         self.fast = Prepared::new(&cal);
+        self.ahrs.reset();
+        self.acc = Accum::default();
+        self.queued.clear();
+    }
+
+    /// Queue one attitude update with the IMU sums so far (emptied) and, at a magnetometer
+    /// sample, its corrected reading. A full queue (the task has not run them) folds the sums
+    /// into the next update instead: no rotation is lost, an estimate is.
+    fn queue_attitude(&mut self, mag: Option<[i32; 3]>, k: u32) {
+        let q = Queued {
+            acc: self.acc,
+            mag,
+            k,
+            t_us: self.imu_t_us,
+            imu_period: self.imu_period,
+        };
+        if self.queued.push_back(q).is_ok() {
+            self.acc = Accum::default();
+        }
+    }
+
+    /// Whether the queue of attitude updates is full.
+    pub fn attitude_backlog(&self) -> bool {
+        self.queued.is_full()
+    }
+
+    /// Whether attitude updates wait to run.
+    pub fn attitude_pending(&self) -> bool {
+        !self.queued.is_empty()
+    }
+
+    /// Run the oldest queued attitude update (soft float, ≈ 30,000 cycles on the M0+); its
+    /// estimate is streamed (not in mode `Off`), four to a frame. Returns whether more wait.
+    pub fn attitude_step(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) -> bool {
+        let Some(mut q) = self.queued.pop_front() else {
+            return false;
+        };
+        stage::enter(Stage::Ahrs);
+        let period_s = if q.imu_period == Fine::ZERO {
+            1e-3
+        } else {
+            q.imu_period.raw() as f32 * (1.0 / (US.raw() as f32 * 1e6))
+        };
+        let dt = match q.mag {
+            Some(_) => MAG_PERIOD_US as f32 * 1e-6,
+            None => q.acc.n as f32 * period_s,
+        };
+        let att = self
+            .ahrs
+            .update(&mut q.acc, self.gyro_rad * period_s, q.mag.as_ref(), dt);
+        stage::enter(Stage::Usb);
+        if let (Some(a), Some(_), false) = (att, q.mag, self.mode == StreamMode::Off) {
+            let _ = self.orient.push(Orientation {
+                seq: q.k,
+                t_us: q.t_us,
+                q: a.q,
+                roll_deg: a.roll_deg,
+                pitch_deg: a.pitch_deg,
+                heading_deg: a.heading_deg,
+                state: a.state,
+            });
+            if self.orient.len() >= ORIENTATIONS_PER_FRAME {
+                let o = core::mem::take(&mut self.orient);
+                outbox.send(&DeviceMsg::Orientation(o), sink);
+            }
+        }
+        stage::leave();
+        !self.queued.is_empty()
     }
 
     /// A discontinuity before slot `k` of `sensor`: the slots skipped since the last sample are
@@ -148,12 +260,18 @@ impl Pipeline {
             if s.temp.is_some() {
                 self.last_temp = s.temp;
             }
+            let accel = self.fast.apply_accel(s.accel);
+            let gyro = self.fast.apply_gyro_opt(s.gyro, self.last_temp);
+            self.acc.add(&accel, &gyro);
             // At most BURST_MAX samples (cut above): never full.
-            let _ = fixed.push((
-                self.fast.apply_accel(s.accel),
-                self.fast.apply_gyro_opt(s.gyro, self.last_temp),
-                s.temp.map(i32::from),
-            ));
+            let _ = fixed.push((accel, gyro, s.temp.map(i32::from)));
+        }
+        self.imu_period = stamps.period;
+        self.imu_t_us = stamps.us(samples.len() as u32 - 1);
+        // No magnetometer update for 100 ms (sensor missing or stalled): one without it, so
+        // the sums stay bounded and the attitude follows the gyro and gravity.
+        if self.acc.n >= MAX_SUM {
+            self.queue_attitude(None, 0);
         }
         stage::enter(Stage::Allan);
         self.engines.push_imu(&fixed);
@@ -204,6 +322,7 @@ impl Pipeline {
         let mag = self.fast.apply_mag(xyz);
         stage::enter(Stage::Allan);
         self.engines.push_mag(&mag);
+        self.queue_attitude(Some(mag), k);
         stage::enter(Stage::Usb);
         self.counts.mag_taken += 1;
         self.next_k[1] = Some(k.wrapping_add(1));
@@ -245,5 +364,81 @@ impl Pipeline {
     /// numbers and loss accounting are not the engines'.
     pub fn reset_allan(&mut self) {
         self.engines.reset();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imu_proto::FrameReader;
+
+    struct Sink(std::vec::Vec<u8>);
+
+    impl FrameSink for Sink {
+        fn room(&self) -> usize {
+            usize::MAX
+        }
+        fn put(&mut self, frame: &[u8]) {
+            self.0.extend_from_slice(frame);
+        }
+    }
+
+    fn burst(k0: u32, gyro_z: i16) -> (Vec<RawSample, BURST_MAX>, Stamps) {
+        let mut v = Vec::new();
+        for _ in 0..10 {
+            let _ = v.push(RawSample {
+                accel: [0, 0, 8192],
+                temp: None,
+                gyro: [0, 0, gyro_z],
+            });
+        }
+        let stamps = Stamps {
+            k0,
+            t0: u64::from(k0) * 1000 * US,
+            period: 1000 * US,
+        };
+        (v, stamps)
+    }
+
+    /// Magnetometer samples queue updates; stepping runs them and sends the estimates four to
+    /// a frame; a full queue keeps the gyro's sums for the next update (no rotation lost).
+    #[test]
+    fn updates_queue_run_and_fold_when_full() {
+        let mut p = Pipeline::new(crate::config::scales());
+        let mut out = Outbox::new();
+        let mut sink = Sink(std::vec::Vec::new());
+        let (b, st) = burst(0, 0);
+        p.imu_burst(&b, &st, None, &mut out, &mut sink);
+        for k in 0..12u32 {
+            p.mag_sample(
+                k,
+                1000 + 5000 * u64::from(k),
+                [3000, 0, -5000],
+                None,
+                &mut out,
+                &mut sink,
+            );
+            let (b, st) = burst(10 + 10 * k, 131);
+            p.imu_burst(&b, &st, None, &mut out, &mut sink);
+        }
+        // Eight queued (samples 0 … 7), the sums of the five bursts since kept.
+        assert!(p.attitude_backlog());
+        assert_eq!(p.acc.n, 50);
+        assert_eq!(p.acc.gyro[2], 50 * 131);
+        let mut steps = 0;
+        while p.attitude_step(&mut out, &mut sink) {
+            steps += 1;
+        }
+        assert_eq!(steps + 1, 8);
+        let mut reader = FrameReader::<4096>::new();
+        let mut estimates = std::vec::Vec::new();
+        for &byte in &sink.0 {
+            if let Some(Ok(DeviceMsg::Orientation(o))) = reader.push::<DeviceMsg>(byte) {
+                estimates.extend(o);
+            }
+        }
+        // The first update starts the filter (no estimate); seven more, four sent.
+        assert_eq!(estimates.len(), 4, "{estimates:?}");
+        assert!(estimates.windows(2).all(|w| w[1].seq == w[0].seq + 1));
     }
 }

@@ -1,8 +1,10 @@
-//! Host requests: identity, status, calibration, streaming mode, intervals, tables.
+//! Host requests: identity, status, calibration, streaming mode, intervals, tables, the
+//! attitude filter's declination and expected field.
 use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
 use imu_proto::{
-    CalFault, CalProblem, CalSource, CalStatus, DeviceMsg, ErrorCode, HostFrame, Identity, Reply,
-    Request, Scales, Vec, IMU_RATE_HZ, MAG_RATE_HZ, MAX_CAL_BLOB, PROTOCOL_VERSION,
+    CalFault, CalProblem, CalSource, CalStatus, DeviceMsg, ErrorCode, HostFrame, Identity,
+    MagReference, OrientationConfig, Reply, Request, Scales, Vec, IMU_RATE_HZ, MAG_RATE_HZ,
+    MAX_CAL_BLOB, PROTOCOL_VERSION,
 };
 
 use crate::device::Device;
@@ -158,9 +160,52 @@ impl Device {
             Request::GetTables => Reply::Tables {
                 snapshot: self.start_tables(uptime_us),
             },
+            Request::SetOrientation {
+                declination_cdeg,
+                reference,
+            } => self.set_orientation(declination_cdeg, reference),
+            Request::GetOrientation => Reply::Orientation(self.orientation_config()),
         };
         self.send(&DeviceMsg::Reply { id, reply }, sink);
         None
+    }
+
+    /// The attitude filter's declination and expected field (RAM only: lost at a reset).
+    fn set_orientation(&mut self, declination_cdeg: i16, reference: Option<MagReference>) -> Reply {
+        let ok_decl = (-18_000..=18_000).contains(&declination_cdeg);
+        let ok_ref = reference.is_none_or(|r| {
+            (1_000..=1_000_000).contains(&r.field_nt) && (-9_000..=9_000).contains(&r.dip_cdeg)
+        });
+        if !ok_decl || !ok_ref {
+            return Reply::Error(ErrorCode::OutOfRange);
+        }
+        let ahrs = &mut self.pipeline.ahrs;
+        ahrs.set_declination(f32::from(declination_cdeg) * 0.01);
+        let ut_per_count = self.pipeline.scales.mag;
+        // `None` asks for a learnt reference: one learnt (or being learnt) stays.
+        if reference.is_some() || !ahrs.reference_learnt() {
+            ahrs.set_reference(reference.map(|r| {
+                (
+                    r.field_nt as f32 * 1e-3 / ut_per_count,
+                    f32::from(r.dip_cdeg) * 0.01,
+                )
+            }));
+        }
+        Reply::Ok
+    }
+
+    /// The attitude filter's settings in use.
+    pub fn orientation_config(&self) -> OrientationConfig {
+        let ahrs = &self.pipeline.ahrs;
+        let ut_per_count = self.pipeline.scales.mag;
+        OrientationConfig {
+            declination_cdeg: libm::roundf(ahrs.declination() * 100.0) as i16,
+            reference: ahrs.reference().map(|(field, dip)| MagReference {
+                field_nt: libm::roundf(field * ut_per_count * 1e3) as u32,
+                dip_cdeg: libm::roundf(dip * 100.0) as i16,
+            }),
+            learnt: ahrs.reference_learnt(),
+        }
     }
 
     /// Report the outcome of a [`PersistRequest`].

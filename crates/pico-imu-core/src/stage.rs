@@ -15,6 +15,8 @@ pub enum Stage {
     Corrections = 2,
     Allan = 3,
     Usb = 4,
+    /// The attitude filter's update (200 Hz).
+    Ahrs = 5,
 }
 
 #[inline(always)]

@@ -5,6 +5,8 @@
 //!   its own integer sums; `--fit` runs the noise-model lab on each channel;
 //! * `calibrate --upload cal.toml|cal.bin` / `--download [--out cal.bin]` — the calibration in
 //!   flash (`imu_cal::file` TOML → fixed-point blob);
+//! * `orientation [--declination DEG] [--field-ut B --dip-deg D | --learn]` — the attitude
+//!   filter's declination and expected field (RAM only on the device: lost at a reset);
 //! * `reset-allan`, `mode off|calibrated|raw`.
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -38,6 +40,28 @@ pub enum Cmd {
         #[arg(value_parser = ["off", "calibrated", "raw"])]
         mode: String,
     },
+    /// The attitude filter's declination and expected field: set them (any given) and show
+    /// them. Held in the device's RAM until a reset.
+    Orientation(OrientationArgs),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct OrientationArgs {
+    /// Declination, degrees east positive, added to the magnetic heading (true heading).
+    #[arg(long, allow_hyphen_values = true)]
+    pub declination: Option<f64>,
+    /// Expected field strength, µT (with --dip-deg): |B| outside ±10 % of it is reported as a
+    /// magnetic disturbance.
+    #[arg(long, requires = "dip_deg", conflicts_with = "learn")]
+    pub field_ut: Option<f64>,
+    /// Expected dip (inclination), degrees, positive down (with --field-ut): outside ±5° of it
+    /// is reported as a magnetic disturbance.
+    #[arg(long, requires = "field_ut", allow_hyphen_values = true)]
+    pub dip_deg: Option<f64>,
+    /// Let the device learn the expected field (its first converged second after the start or
+    /// a new calibration).
+    #[arg(long)]
+    pub learn: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -98,6 +122,7 @@ pub fn run(a: Args) -> Result<()> {
             println!("Allan state reset");
             Ok(())
         }
+        Cmd::Orientation(o) => orientation(&mut link, &o),
         Cmd::Mode { mode } => {
             let m = match mode.as_str() {
                 "off" => StreamMode::Off,
@@ -109,6 +134,66 @@ pub fn run(a: Args) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn orientation(link: &mut Link, a: &OrientationArgs) -> Result<()> {
+    let get = |link: &mut Link| match link.request(Request::GetOrientation)? {
+        Reply::Orientation(c) => Ok(c),
+        other => bail!("unexpected reply to GetOrientation: {other:?}"),
+    };
+    let mut cfg = get(link)?;
+    if a.declination.is_some() || a.field_ut.is_some() || a.learn {
+        let decl = a
+            .declination
+            .unwrap_or(f64::from(cfg.declination_cdeg) * 0.01);
+        if !(-180.0..=180.0).contains(&decl) {
+            bail!("--declination {decl}: degrees within ±180");
+        }
+        let reference = match (a.field_ut, a.dip_deg) {
+            (Some(b), Some(d)) => {
+                if !(1.0..=1000.0).contains(&b) {
+                    bail!("--field-ut {b}: µT within 1 to 1000");
+                }
+                if !(-90.0..=90.0).contains(&d) {
+                    bail!("--dip-deg {d}: degrees within ±90");
+                }
+                Some(imu_proto::MagReference {
+                    field_nt: (b * 1000.0).round() as u32,
+                    dip_cdeg: (d * 100.0).round() as i16,
+                })
+            }
+            _ if a.learn => None,
+            _ if cfg.learnt => None,
+            _ => cfg.reference,
+        };
+        match link.request(Request::SetOrientation {
+            declination_cdeg: (decl * 100.0).round() as i16,
+            reference,
+        })? {
+            Reply::Ok => {}
+            other => bail!("the device refused the orientation settings: {other:?}"),
+        }
+        cfg = get(link)?;
+    }
+    println!(
+        "declination {:.2}° (added to the magnetic heading); expected field: {}",
+        f64::from(cfg.declination_cdeg) * 0.01,
+        match cfg.reference {
+            Some(r) => format!(
+                "{:.2} µT, dip {:.2}° ({}); a disturbance outside ±10 % of it or ±5° of dip",
+                f64::from(r.field_nt) * 1e-3,
+                f64::from(r.dip_cdeg) * 0.01,
+                if cfg.learnt {
+                    "learnt by the device"
+                } else {
+                    "set by the host"
+                }
+            ),
+            None => "being learnt (the device's first converged second)".into(),
+        }
+    );
+    println!("held in the device's RAM: a reset forgets these settings");
+    Ok(())
 }
 
 fn status(link: &mut Link) -> Result<()> {

@@ -2,12 +2,18 @@
 //! device into a CSV in the contract every other subcommand reads.
 //!
 //! The CSV (docs/firmware.md, "The recording"): header `t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,
-//! gap_before`, one row per IMU sample received (1 kHz):
+//! gap_before,q0,q1,q2,q3,roll,pitch,heading,ahrs`, one row per IMU sample received (1 kHz):
 //! * `t`: when the sensor took the sample, s since the device booted, on the sensor's own sample
 //!   clock (the device's stamps: `t₀ + k·T̂`, docs/firmware.md "Timestamps");
 //! * `ax … temp` in m/s², deg/s, µT, °C; the magnetometer columns hold the latest magnetometer
 //!   sample taken at or before `t` (200 Hz, zero-order hold); rows start at the first IMU sample
 //!   after the first magnetometer sample;
+//! * `q0 … ahrs`: the device's attitude estimate (200 Hz, `imu_proto::Orientation`): the
+//!   latest made at or before `t` (its instant is the last IMU sample it integrated), held;
+//!   empty before the first. `ahrs` is the filter's state: 0 converging, 1 tracking, 2 |B| and
+//!   3 dip out of their bands (a magnetic disturbance). A row is written once an estimate at or
+//!   after its time has arrived (estimates and samples travel in separate frames), or 0.5 s of
+//!   rows later (a device that sends none);
 //! * `gap_before`: how many IMU samples of the device's sample grid are missing right before this
 //!   row (0 normally): lost on the device (each comes with a `Gap` event and its cause) or on the
 //!   link;
@@ -17,7 +23,7 @@
 //! `--raw` records the uncorrected counts (converted with the nominal sensitivities), as
 //! calibration fitting needs; the default records the corrected values. The summary states the
 //! samples the device took over the recording, those received, and those lost with their causes.
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
@@ -28,8 +34,8 @@ use std::time::Duration;
 use anyhow::{bail, Context, Result};
 use imu_proto::csv::{WriteOptions, Writer, GAP_BEFORE};
 use imu_proto::{
-    DeviceMsg, Event, GapCause, ImuSample, MagSample, Reply, Request, SampleBatch, Scales, Sensor,
-    StreamMode,
+    DeviceMsg, Event, GapCause, ImuSample, MagReference, MagSample, Orientation, Reply, Request,
+    SampleBatch, Scales, Sensor, StreamMode,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -37,9 +43,11 @@ use crate::link::PortArgs;
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "CSV: t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before — t in s on the sensor's \
-sample clock (the device's stamps), values in m/s², deg/s, µT, °C; gap_before = IMU samples lost \
-right before the row (0 normally); a value the device did not have is an empty field."
+    after_help = "CSV: t,ax,ay,az,gx,gy,gz,mx,my,mz,temp,gap_before,q0,q1,q2,q3,roll,pitch,heading,ahrs \
+— t in s on the sensor's sample clock (the device's stamps), values in m/s², deg/s, µT, °C; \
+gap_before = IMU samples lost right before the row (0 normally); q0…q3 the device's attitude \
+(body → NED), roll, pitch, heading in degrees, ahrs its state (0 converging, 1 tracking, 2 |B| \
+and 3 dip out of band); a value the device did not have is an empty field."
 )]
 pub struct Args {
     #[command(flatten)]
@@ -53,11 +61,16 @@ pub struct Args {
     /// Seconds of device time to record.
     #[arg(long, default_value_t = 60.0)]
     pub seconds: f64,
+    /// Set the device's declination first (degrees, east positive; added to the heading; held
+    /// in the device's RAM until a reset or the next setting).
+    #[arg(long, allow_hyphen_values = true)]
+    pub declination: Option<f64>,
 }
 
 /// The recording's columns, in order (names of the CSV contract, `imu_proto::csv`).
-pub const COLUMNS: [&str; 12] = [
-    "t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp", GAP_BEFORE,
+pub const COLUMNS: [&str; 20] = [
+    "t", "ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp", GAP_BEFORE, "q0", "q1",
+    "q2", "q3", "roll", "pitch", "heading", "ahrs",
 ];
 
 /// How the recording prints numbers: `t` with µs resolution, the values at f32 precision
@@ -74,6 +87,8 @@ pub struct Row {
     pub t: f64,
     pub values: [Option<f64>; 10],
     pub gap_before: u64,
+    /// The device's attitude estimate held at `t` (see [`Held`]).
+    pub orient: Option<Orientation>,
 }
 
 /// Turns sample batches into contract rows and keeps the accounts (pure: no I/O).
@@ -167,28 +182,93 @@ fn imu_row(i: &ImuSample, mag: [f64; 3], s: &Scales, gap_before: u64) -> Row {
             temp,
         ],
         gap_before,
+        orient: None,
     }
 }
 
 impl Row {
     /// The row's fields in [`COLUMNS`] order (`None`: an empty field).
-    pub fn fields(&self) -> [Option<f64>; 12] {
-        let mut f = [None; 12];
+    pub fn fields(&self) -> [Option<f64>; 20] {
+        let mut f = [None; 20];
         f[0] = Some(self.t);
         f[1..11].copy_from_slice(&self.values);
         f[11] = Some(self.gap_before as f64);
+        if let Some(o) = &self.orient {
+            for (k, q) in o.q.iter().enumerate() {
+                f[12 + k] = Some(f64::from(*q));
+            }
+            f[16] = Some(f64::from(o.roll_deg));
+            f[17] = Some(f64::from(o.pitch_deg));
+            f[18] = Some(f64::from(o.heading_deg));
+            f[19] = Some(o.state as u8 as f64);
+        }
         f
     }
 }
 
-/// Append the rows of one batch to the CSV.
+/// Rows waiting for the attitude estimates that cover them (pure: no I/O). Estimates arrive in
+/// time order, in frames of their own: once one at or after a row's time has arrived, every
+/// estimate at or before it is known, and the row gets the latest of those.
+#[derive(Debug, Default)]
+pub struct Held {
+    rows: VecDeque<Row>,
+    estimates: VecDeque<Orientation>,
+    held: Option<Orientation>,
+    /// The newest estimate's time, s.
+    newest: Option<f64>,
+}
+
+/// Rows held at most (0.5 s at 1 kHz) before they are written with what is known.
+const HOLD_ROWS: usize = 500;
+
+impl Held {
+    pub fn row(&mut self, r: Row) {
+        self.rows.push_back(r);
+    }
+
+    pub fn estimates(&mut self, o: &[Orientation]) {
+        for e in o {
+            self.newest = Some(e.t_us as f64 * 1e-6);
+            self.estimates.push_back(*e);
+        }
+    }
+
+    /// Hand over the rows that are complete (all of them with `all`).
+    pub fn release(&mut self, all: bool, mut out: impl FnMut(&Row)) {
+        while let Some(t) = self.rows.front().map(|r| r.t) {
+            let covered = self.newest.is_some_and(|n| n >= t);
+            if !(all || covered || self.rows.len() > HOLD_ROWS) {
+                break;
+            }
+            let Some(mut r) = self.rows.pop_front() else {
+                break;
+            };
+            while let Some(e) = self.estimates.front() {
+                if e.t_us as f64 * 1e-6 > r.t {
+                    break;
+                }
+                self.held = self.estimates.pop_front();
+            }
+            r.orient = self.held;
+            out(&r);
+        }
+    }
+}
+
+/// Append the rows of one batch to the CSV (those whose estimates have arrived).
 fn write_batch(
     b: &SampleBatch,
     rows: &mut Rows,
+    held: &mut Held,
     w: &mut Writer<impl Write>,
 ) -> std::io::Result<()> {
+    rows.batch(b, |r| held.row(*r));
+    write_held(held, false, w)
+}
+
+fn write_held(held: &mut Held, all: bool, w: &mut Writer<impl Write>) -> std::io::Result<()> {
     let mut res = Ok(());
-    rows.batch(b, |r| {
+    held.release(all, |r| {
         if res.is_ok() {
             res = w.row(&r.fields());
         }
@@ -279,7 +359,15 @@ pub fn run(a: Args) -> Result<()> {
             a.seconds
         );
     }
+    if let Some(d) = a.declination {
+        if !(-180.0..=180.0).contains(&d) {
+            bail!("--declination {d}: degrees within ±180");
+        }
+    }
     let mut link = a.port.open()?;
+    if let Some(d) = a.declination {
+        set_declination(&mut link, d)?;
+    }
     if let Reply::Identity(id) = link.request(Request::Identify)? {
         eprintln!(
             "device: {} on {} (IMU {} Hz, magnetometer {} Hz)",
@@ -317,13 +405,14 @@ pub fn run(a: Args) -> Result<()> {
     }
     let mut events = Vec::new();
     let mut losses = DeviceLosses::default();
+    let mut held = Held::default();
     let mut idle = 0;
     while rows.span() < a.seconds && !stop.load(Ordering::Relaxed) {
         match link.recv(Duration::from_millis(500))? {
             Some(DeviceMsg::Samples(b)) => {
                 idle = 0;
                 if b.calibrated != a.raw {
-                    write_batch(&b, &mut rows, &mut w)
+                    write_batch(&b, &mut rows, &mut held, &mut w)
                         .with_context(|| format!("writing {}", a.out.display()))?;
                 }
                 pb.set_position((rows.span() * 1000.0) as u64);
@@ -334,6 +423,11 @@ pub fn run(a: Args) -> Result<()> {
                 pb.suspend(|| eprintln!("device event: {e:?}"));
                 losses.event(&e);
                 events.push(e);
+            }
+            Some(DeviceMsg::Orientation(o)) => {
+                held.estimates(&o);
+                write_held(&mut held, false, &mut w)
+                    .with_context(|| format!("writing {}", a.out.display()))?;
             }
             Some(_) => {}
             None => {
@@ -350,6 +444,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     pb.finish_and_clear();
+    write_held(&mut held, true, &mut w).with_context(|| format!("writing {}", a.out.display()))?;
     if stop.load(Ordering::Relaxed) {
         eprintln!(
             "stopped by Ctrl-C after {:.3} s of device time",
@@ -387,6 +482,22 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Set the device's declination, keeping its expected field (a host's, or learnt).
+pub fn set_declination(link: &mut crate::link::Link, deg: f64) -> Result<()> {
+    let reference: Option<MagReference> = match link.request(Request::GetOrientation)? {
+        Reply::Orientation(c) if !c.learnt => c.reference,
+        Reply::Orientation(_) => None,
+        other => bail!("unexpected reply to GetOrientation: {other:?}"),
+    };
+    match link.request(Request::SetOrientation {
+        declination_cdeg: (deg * 100.0).round() as i16,
+        reference,
+    })? {
+        Reply::Ok => Ok(()),
+        other => bail!("the device refused declination {deg}°: {other:?}"),
+    }
 }
 
 #[cfg(test)]
@@ -507,7 +618,7 @@ mod tests {
         assert_eq!((r.missing, r.rows), (3, 4));
         let gaps: Vec<u64> = out.iter().map(|r| r.gap_before).collect();
         assert_eq!(gaps, [0, 0, 3, 0]);
-        assert!(csv_line(&out[2]).ends_with(",3"));
+        assert!(csv_line(&out[2]).ends_with(",3,,,,,,,,"));
     }
 
     #[test]
@@ -546,5 +657,44 @@ mod tests {
             "{s}"
         );
         assert!(s.contains("15 FIFO overflow, 3 not received (link)"), "{s}");
+    }
+
+    /// Rows wait for the estimates that cover them, then carry the latest at or before their
+    /// time; the columns are the estimate's, empty before the first.
+    #[test]
+    fn rows_hold_the_latest_attitude_estimate_at_or_before_them() {
+        let est = |t_us: u64, heading: f32| Orientation {
+            seq: 0,
+            t_us,
+            q: [1.0, 0.0, 0.0, 0.0],
+            roll_deg: 1.5,
+            pitch_deg: -2.5,
+            heading_deg: heading,
+            state: imu_proto::AhrsState::MagDip,
+        };
+        let mut h = Held::default();
+        let mut b = batch_with_mag([0, 0, 0]);
+        for k in 0..10 {
+            b.imu.push(imu(k, 1 + u64::from(k))).unwrap();
+        }
+        let mut r = Rows::default();
+        r.batch(&b, |row| h.row(*row));
+        let mut out = Vec::new();
+        h.release(false, |r| out.push(*r));
+        assert!(out.is_empty(), "no estimate yet: rows wait");
+        h.estimates(&[est(2_000, 10.0), est(5_000, 20.0)]);
+        h.release(false, |r| out.push(*r));
+        // Rows at 1 … 5 ms are covered (an estimate at 5 ms arrived); 6 … 10 ms wait.
+        assert_eq!(out.len(), 5);
+        assert_eq!(out[0].orient, None);
+        assert_eq!(out[1].orient.map(|o| o.heading_deg), Some(10.0));
+        assert_eq!(out[4].orient.map(|o| o.heading_deg), Some(20.0));
+        h.release(true, |r| out.push(*r));
+        assert_eq!(out.len(), 10);
+        assert_eq!(out[9].orient.map(|o| o.heading_deg), Some(20.0));
+        let line = csv_line(&out[9]);
+        assert!(line.ends_with(",1,0,0,0,1.5,-2.5,20,3"), "{line}");
+        let first = csv_line(&out[0]);
+        assert!(first.ends_with(",0,,,,,,,,"), "{first}");
     }
 }

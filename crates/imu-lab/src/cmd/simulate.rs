@@ -81,6 +81,17 @@ pub struct Args {
     /// Round every sample to this LSB (the part's resolution) [u].
     #[arg(long)]
     pub lsb: Option<f64>,
+    /// Instead of noise: the board turned through a known trajectory (`standard`: 32 s: still,
+    /// level turn, tilts to 60°, a tumble through the sphere; `imu_sim::trajectory`), every
+    /// column of the contract at --rate for --samples rows (the trajectory repeated), plus the
+    /// truth columns roll_true, pitch_true, heading_true (degrees, heading magnetic), for the
+    /// emulator (`sim/src/cli.js run --stream`) and `imu-lab heading --truth`.
+    #[arg(long, value_parser = ["standard"])]
+    pub trajectory: Option<String>,
+    /// With --trajectory: the part reading it — `ideal`, or `hard-iron` (25 µT of hard iron,
+    /// soft iron, gyro bias 0.5 deg/s, the sensors' noise).
+    #[arg(long, requires = "trajectory", value_parser = ["ideal", "hard-iron"], default_value = "hard-iron")]
+    pub part: String,
     /// Output CSV (default: stdout).
     #[arg(long, short)]
     pub output: Option<PathBuf>,
@@ -112,6 +123,41 @@ fn positive(v: Option<f64>, flag: &str) -> Result<Option<f64>> {
     }
 }
 
+/// `--trajectory`: the stream of a board turned through a known trajectory, with its truth.
+fn trajectory(args: &Args) -> Result<()> {
+    use imu_sim::trajectory::{write_stream, Part, Trajectory};
+    let traj = Trajectory::standard();
+    let part = if args.part == "ideal" {
+        Part::ideal()
+    } else {
+        Part::hard_iron()
+    };
+    let seconds = args.samples as f64 / args.rate;
+    let result = match &args.output {
+        Some(p) => {
+            let f = std::fs::File::create(p)
+                .map_err(|e| anyhow::anyhow!("cannot create {}: {e}", p.display()))?;
+            write_stream(
+                std::io::BufWriter::new(f),
+                &traj,
+                &part,
+                args.rate,
+                seconds,
+                args.seed,
+            )
+        }
+        None => write_stream(
+            std::io::stdout().lock(),
+            &traj,
+            &part,
+            args.rate,
+            seconds,
+            args.seed,
+        ),
+    };
+    result.map_err(|e| anyhow::anyhow!("writing the stream: {e}"))
+}
+
 /// The samples as a recording in the contract: `t = i/rate`, then the columns.
 fn write_rows<W: Write>(w: W, rate: f64, names: &[String], data: &[Vec<f64>]) -> Result<()> {
     let mut cols: Vec<&str> = vec![contract::TIME];
@@ -136,6 +182,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     if args.samples < 3 {
         bail!("--samples {}: at least 3 needed", args.samples);
+    }
+    if args.trajectory.is_some() {
+        return trajectory(&args);
     }
     let mut effects = Vec::new();
     if let Some(q) = positive(args.quantization, "quantization")? {

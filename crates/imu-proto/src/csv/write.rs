@@ -1,7 +1,7 @@
 //! Writing a recording in the contract.
 use std::io::Write;
 
-use super::{may_be_empty, CsvError, GAP_BEFORE, HEADER, TIME};
+use super::{may_be_empty, CsvError, GAP_BEFORE, HEADER, ORIENTATION, TIME};
 
 /// How [`Writer`] prints numbers.
 #[derive(Debug, Clone, Copy, Default)]
@@ -33,6 +33,7 @@ impl<W: Write> Writer<W> {
         for c in columns {
             let known = HEADER
                 .iter()
+                .chain(&ORIENTATION)
                 .find(|h| *h == c)
                 .ok_or_else(|| err(format!("{c:?} is not a contract column")))?;
             if cols.contains(known) {
@@ -88,7 +89,7 @@ impl<W: Write> Writer<W> {
                     Some(d) => write!(self.line, "{v:.d$}"),
                     None => write!(self.line, "{v}"),
                 },
-                GAP_BEFORE => write!(self.line, "{}", v.max(0.0).round() as u64),
+                GAP_BEFORE | "ahrs" => write!(self.line, "{}", v.max(0.0).round() as u64),
                 _ if self.opts.f32_values => write!(self.line, "{}", *v as f32),
                 _ => write!(self.line, "{v}"),
             };

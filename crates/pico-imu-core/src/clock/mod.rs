@@ -18,6 +18,11 @@
 //! * a reader that chooses *when* to observe places the latch in the middle of the interval
 //!   ([`SampleClock::probe_after`]): each such probe halves it (bisection), so the phase is
 //!   known to a few µs after a handful of probes;
+//! * reads placed after the late end find the sample whether the line is right or late, so a
+//!   reader that places them there looks before the early end now and then
+//!   ([`SampleClock::poll_offset`], a guard): only that shows a line running late (a period
+//!   wrong beyond its bound), and the period is then measured again
+//!   ([`SampleClock::distrust_period`]);
 //! * `T̂` starts at the nominal period; the number of samples counted between two observations
 //!   far apart corrects it to `T/Δn` (coarse), and once the interval is narrow, two located
 //!   sample instants far apart give `T̂ = Δt/Δk` to a fraction of a nanosecond.
@@ -50,7 +55,7 @@ pub(crate) use arithmetic::mul;
 pub use bus_timing::{read_bits, BusTiming, READ_FIRST_BIT, READ_SECOND_BIT, WRITE_DATA_BIT};
 pub use fine::{fine, whole_us, Fine, FINE_BITS, US};
 pub use observation::{Fit, Seen};
-pub use sample_clock::{SampleClock, JITTER, LOCKED_WIDTH, PROBE_WIDTH};
+pub use sample_clock::{SampleClock, GUARD_EVERY, GUARD_MARGIN, JITTER, LOCKED_WIDTH, PROBE_WIDTH};
 pub use stamps::Stamps;
 
 #[cfg(test)]

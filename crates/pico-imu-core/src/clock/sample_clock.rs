@@ -25,6 +25,16 @@ const FINE_SPAN_MIN: u32 = 64;
 /// (spans 8, 16, 32 from each new edge): the allowance falls with the first of them.
 const FINE_SPAN_FIRST: u32 = 8;
 
+/// After this many samples without an observation latched before the early end of the
+/// interval, a reader's first look is a guard ([`SampleClock::poll_offset`]).
+pub const GUARD_EVERY: u32 = 16;
+
+/// How far before the early end of the interval a guard look is aimed: more than a reader's
+/// wake-up latency, so that it latches before the early end even when it starts late (one
+/// that latches inside the interval and finds the sample only trims the late end, and a line
+/// running late keeps drifting).
+pub const GUARD_MARGIN: Fine = fine(100);
+
 /// Below this width a reader need not place its observations (no probes). A probe that lands
 /// where it is aimed (`service::Lead`) halves the interval, which then takes many reads to widen
 /// past this again, so probes are rare once the clock is found.
@@ -62,6 +72,9 @@ pub struct SampleClock {
     last_k: u32,
     /// Latest stamp issued (stamps never go backwards).
     issued: Option<Fine>,
+    /// Samples since the last observation latched before the interval's early end (one that
+    /// could show the line running late); see [`Self::poll_offset`].
+    unguarded: u32,
     /// Observations that contradicted the interval (replaced it).
     pub contradictions: u32,
 }
@@ -88,6 +101,7 @@ impl SampleClock {
             fine: false,
             last_k: 0,
             issued: None,
+            unguarded: 0,
             contradictions: 0,
         }
     }
@@ -165,20 +179,9 @@ impl SampleClock {
     /// replaces the interval only with [`Seen::NextNotYetTrusted`] (the caller has seen the
     /// part go on producing since) and when it is late by at most a period beyond the interval,
     /// and otherwise only bounds it. Returns how the observation fitted.
-    #[inline(always)]
     pub fn observe(&mut self, tau: Fine, newest: u32, seen: Seen) -> Fit {
-        self.observe_facts(tau, newest, seen.next_not_yet(), seen.trust_late())
-    }
-
-    /// [`Self::observe`] on the two facts of its [`Seen`], out of line: each call site folds its
-    /// `Seen` into constants, and the one body is what the firmware has always run.
-    fn observe_facts(
-        &mut self,
-        tau: Fine,
-        newest: u32,
-        next_not_yet: bool,
-        trust_late: bool,
-    ) -> Fit {
+        let next_not_yet = seen.next_not_yet();
+        let trust_late = seen.trust_late();
         if !self.known {
             return Fit::Fits;
         }
@@ -199,13 +202,30 @@ impl SampleClock {
         let j = JITTER.raw() as i64;
         let upper = tau.since(self.t_at) + j;
         let lower = next_not_yet.then(|| upper - p - 2 * j);
+        // Latched before the early end of the sample it is about (`newest`, or with "not yet"
+        // the next one, a period on): a guard, whether it found the sample there or not.
+        if upper <= lo || lower.is_some_and(|l| l + 2 * j <= lo) {
+            self.unguarded = 0;
+        } else {
+            self.unguarded = self.unguarded.saturating_add(gap as u32);
+        }
         let fit;
         if upper <= lo {
             // Produced earlier than the interval allows: the phase was wrong.
             self.contradictions = self.contradictions.saturating_add(1);
             fit = Fit::Early;
             hi = upper;
-            lo = lower.unwrap_or(upper - p - 2 * j);
+            lo = match lower {
+                Some(l) => l,
+                // A located line found late by a guard look (see `poll_offset`): it drifted
+                // there since the previous guard, at most by a thousandth of a period per sample
+                // (the allowance of `distrust_period`); a look past that is late again and
+                // widens it as far once more. Elsewhere nothing bounds it but the period.
+                None if hi - lo <= LOCKED_WIDTH.raw() as i64 => {
+                    (lo - i64::from(GUARD_EVERY) * p / 1024).max(upper - p - 2 * j)
+                }
+                None => upper - p - 2 * j,
+            };
         } else if lower.is_some_and(|l| l >= hi) {
             self.contradictions = self.contradictions.saturating_add(1);
             fit = Fit::Late;
@@ -298,6 +318,40 @@ impl SampleClock {
                 self.period_err = Fine::from_raw((p.raw() / u64::from(span)).max(1));
                 self.coarse_span = span;
             }
+        }
+    }
+
+    /// The period is wrong by more than its bound (an observation showed the line running
+    /// late): allow the drift of a period known to a thousandth, so the interval widens and is
+    /// located again by probes, and measure the period again from the instants located from
+    /// now on (`FINE_SPAN_FIRST` samples apart first, as after a start).
+    pub fn distrust_period(&mut self) {
+        self.period_err = self
+            .period_err
+            .max(Fine::from_raw(self.period.raw() / 1024));
+        self.edge = None;
+        self.fine_span = 0;
+    }
+
+    /// Where to latch a reader's first look for the next sample (a data-ready poll), relative
+    /// to its predicted instant ([`Self::time`]): once [`GUARD_EVERY`] samples have passed
+    /// since an observation last latched before the early end of the interval, [`GUARD_MARGIN`]
+    /// before it (a guard, again at the next sample if this one latched later than that);
+    /// otherwise in the middle of the interval while it is wide (a probe,
+    /// [`Self::wants_probe`]), or `margin` after its late end, where the sample has landed.
+    /// Looks after the late end find the sample whether the line is right or runs late (a
+    /// period too long), so without guards a late line is never contradicted and its drift
+    /// never stops; a guard that finds the sample already there ([`Fit::Early`]) shows it, and
+    /// the reader then calls [`Self::distrust_period`]. A guard normally finds it not yet there
+    /// and costs one more look at the late end.
+    pub fn poll_offset(&self, margin: Fine) -> i64 {
+        let half = self.width() / 2;
+        if self.known && self.unguarded >= GUARD_EVERY {
+            -((half + GUARD_MARGIN).raw() as i64)
+        } else if self.wants_probe() {
+            0
+        } else {
+            (half + margin).raw() as i64
         }
     }
 
@@ -606,6 +660,128 @@ mod tests {
         c.observe(fine(10_700), 9, Seen::NextNotYetTrusted);
         let b = c.stamps(10, 5);
         assert!(b.us(0) > a.us(9), "{} after {}", b.us(0), a.us(9));
+    }
+}
+
+#[cfg(test)]
+mod late_line_tests {
+    use super::*;
+    use crate::clock::test_util::xorshift;
+    use crate::clock::US;
+
+    /// ns → [`Fine`].
+    fn f(ns: f64) -> Fine {
+        Fine::from_raw((ns * US.raw() as f64 / 1000.0).round() as u64)
+    }
+
+    /// [`Fine`] → ns.
+    fn ns(t: Fine) -> f64 {
+        t.raw() as f64 * 1000.0 / US.raw() as f64
+    }
+
+    /// A part sampling at `t0 + k·p` (ns).
+    struct Part {
+        t0: f64,
+        p: f64,
+    }
+
+    impl Part {
+        fn landed(&self, k: u32, tau: f64) -> bool {
+            tau >= self.t0 + f64::from(k) * self.p
+        }
+        /// The slot of an instant on the part's first grid: the nearest (the emulator's
+        /// QMC5883L model numbers a restarted part's samples so).
+        fn slot(&self, t: f64) -> u32 {
+            ((t - self.t0) / self.p).round() as u32
+        }
+    }
+
+    /// Sample `k` looked for as the magnetometer service does: a first data-ready poll at
+    /// [`SampleClock::poll_offset`] (20 µs margin), then polls at the late end (at least 100 µs
+    /// apart) until it has landed; each latch `wake` ns late (the task's wake-up). A "not yet"
+    /// followed by the sample is trusted; a sample found earlier than the interval allows
+    /// makes the period distrusted.
+    fn look(c: &mut SampleClock, part: &Part, k: u32, wake: f64) {
+        let margin = fine(20);
+        let mut tau = ns(c.time(k).wrapping_add_signed(c.poll_offset(margin))) + wake;
+        let mut not_yet = None;
+        while !part.landed(k, tau) {
+            c.observe(f(tau), k - 1, Seen::NextNotYet);
+            not_yet = Some(tau);
+            let late = ns(c.time(k) + c.width() / 2 + margin);
+            tau = late.max(tau + 100_000.0) + wake;
+        }
+        if let Some(before) = not_yet {
+            c.observe(f(before), k - 1, Seen::NextNotYetTrusted);
+        }
+        if c.observe(f(tau), k, Seen::Produced) == Fit::Early {
+            c.distrust_period();
+        }
+    }
+
+    /// A magnetometer clock whose period goes wrong by 0.3–1.2 µs per sample, too long (the
+    /// line runs late), with a bound twenty times smaller (the emulator, from code timing
+    /// alone: 0.83 µs per sample, its stamps 1.3 ms late after 18 s), is caught by the guard
+    /// polls: two seconds on, its stamps are within 20 µs rms and 100 µs at most. Then the part
+    /// is restarted as the service does (`Core::started`): the waking write aimed one period
+    /// before a predicted instant, held up to 0.4 period (the task's wake-up, the bus), its
+    /// first sample numbered by the nearest predicted instant. That is the part's own slot in
+    /// every trial. Without the guards the line drifts by a period's fraction and the restart
+    /// lands on the neighbouring slot.
+    #[test]
+    fn a_line_running_late_is_caught_and_a_restart_keeps_the_parts_slot() {
+        let mut rnd = xorshift(0x6d61_6766_6978_2d31);
+        let mut u = move || (rnd() >> 11) as f64 / (1u64 << 53) as f64;
+        for trial in 0..24 {
+            let p = 5e6 * (1.0 + 0.03 * (u() - 0.5));
+            let part = Part {
+                t0: 3e6 + 5e6 * u(),
+                p,
+            };
+            let mut c = SampleClock::new(5000);
+            // The waking write one period before sample 0, the nominal period assumed.
+            c.start(0, f(part.t0 - p + 5e6), false, Fine::ZERO);
+            for k in 1..300 {
+                look(&mut c, &part, k, 40_000.0 * u());
+            }
+            // The failing case first (the emulator's), then random ones.
+            let (delta, restart_hold) = if trial == 0 {
+                (830.0, 0.33)
+            } else {
+                (300.0 + 900.0 * u(), 0.4 * u())
+            };
+            c.period = f(p + delta);
+            c.period_err = f(delta / 20.0);
+            c.fine = true;
+            let n = 300 + 3300 + (400.0 * u()) as u32;
+            let (mut worst, mut sq) = (0.0f64, 0.0f64);
+            for k in 300..n {
+                look(&mut c, &part, k, 40_000.0 * u());
+                if k >= 700 {
+                    let e = ns(c.time(k)) - (part.t0 + f64::from(k) * p);
+                    worst = worst.max(e.abs());
+                    sq += e * e;
+                }
+            }
+            let rms = (sq / f64::from(n - 700)).sqrt();
+            assert!(
+                worst < 100_000.0 && rms < 20_000.0,
+                "trial {trial}: stamps {:.1} µs rms, up to {:.1} µs off, with the period {delta:.0} ns per sample long",
+                rms / 1000.0,
+                worst / 1000.0
+            );
+            // A restart on the grid: aimed at the first predicted instant at least two periods
+            // on, held `restart_hold` of a period.
+            let planned = n + 2 + (20.0 * u()) as u32;
+            let first = ns(c.time(planned)) + restart_hold * p;
+            let k = c.nearest(f(first));
+            assert_eq!(
+                k,
+                part.slot(first),
+                "trial {trial}: restart numbered {k}, the part's slot is {} (period {delta:.0} ns long, held {restart_hold:.2} period)",
+                part.slot(first)
+            );
+        }
     }
 }
 

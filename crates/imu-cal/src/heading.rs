@@ -1,0 +1,260 @@
+//! Tilt-compensated heading from one accelerometer and one magnetometer reading, and what a
+//! calibration buys in degrees of heading: the error against a truth, or — without one — the
+//! heading's consistency with the gyro.
+//!
+//! Axes: the sensors' own (x forward, y left, z up; the accelerometer reads +g on z lying level),
+//! taken as the body's forward-right-down `(x, −y, −z)`; angles are aerospace Z-Y-X (roll φ,
+//! pitch θ, heading ψ clockwise from magnetic north), as the device's AHRS reports them
+//! (docs/firmware.md, "Orientation"). From the specific force `f` (body):
+//! `φ = atan2(−f_y, −f_z)`, `θ = atan2(f_x, √(f_y² + f_z²))`; the field levelled,
+//! `h_x = m_x cos θ + (m_y sin φ + m_z cos φ) sin θ`, `h_y = m_y cos φ − m_z sin φ`, and
+//! `ψ = atan2(−h_y, h_x)`.
+
+/// Roll, pitch and heading, degrees (heading in [0, 360)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Attitude {
+    pub roll: f64,
+    pub pitch: f64,
+    pub heading: f64,
+}
+
+/// The attitude from an accelerometer and a magnetometer reading (sensor axes, any units);
+/// `None` when either is zero or not finite.
+pub fn tilt_compensated(accel: [f64; 3], mag: [f64; 3]) -> Option<Attitude> {
+    let f = [accel[0], -accel[1], -accel[2]];
+    let m = [mag[0], -mag[1], -mag[2]];
+    let ok = |v: &[f64; 3]| v.iter().all(|x| x.is_finite()) && v.iter().any(|&x| x != 0.0);
+    if !ok(&f) || !ok(&m) {
+        return None;
+    }
+    let roll = (-f[1]).atan2(-f[2]);
+    let pitch = f[0].atan2(f[1].hypot(f[2]));
+    let (sr, cr) = roll.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    let hx = m[0] * cp + (m[1] * sr + m[2] * cr) * sp;
+    let hy = m[1] * cr - m[2] * sr;
+    Some(Attitude {
+        roll: roll.to_degrees(),
+        pitch: pitch.to_degrees(),
+        heading: (-hy).atan2(hx).to_degrees().rem_euclid(360.0),
+    })
+}
+
+/// The smallest signed difference `a − b` of two angles, degrees, in (−180, 180].
+pub fn angle_diff(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(360.0);
+    if d > 180.0 {
+        d - 360.0
+    } else {
+        d
+    }
+}
+
+/// An rms error with its standard uncertainty.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rms {
+    /// Root mean square, degrees.
+    pub rms: f64,
+    /// Standard uncertainty of `rms`, degrees: from the spread of the mean squares of the
+    /// blocks the errors were grouped in (consecutive errors are correlated, blocks much less).
+    pub sigma: f64,
+    /// Largest |error|, degrees.
+    pub max: f64,
+    /// Errors counted.
+    pub n: usize,
+}
+
+/// rms of `errors` grouped into blocks of `block` consecutive values (the uncertainty's unit).
+pub fn rms(errors: &[f64], block: usize) -> Option<Rms> {
+    if errors.is_empty() {
+        return None;
+    }
+    let block = block.max(1);
+    let msq: Vec<f64> = errors
+        .chunks(block)
+        .map(|c| c.iter().map(|e| e * e).sum::<f64>() / c.len() as f64)
+        .collect();
+    let n = errors.len();
+    let total = errors.iter().map(|e| e * e).sum::<f64>() / n as f64;
+    let r = total.sqrt();
+    let k = msq.len() as f64;
+    let sigma = if msq.len() > 1 && r > 0.0 {
+        let mean = msq.iter().sum::<f64>() / k;
+        let var = msq.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (k - 1.0);
+        // σ(√x) = σ(x) / (2√x), σ(x) the standard error of the blocks' mean.
+        (var / k).sqrt() / (2.0 * r)
+    } else {
+        f64::NAN
+    };
+    Some(Rms {
+        rms: r,
+        sigma,
+        max: errors.iter().fold(0.0, |a: f64, e| a.max(e.abs())),
+        n,
+    })
+}
+
+/// One row of a recording for the consistency check: time (s), accelerometer, gyro (deg/s),
+/// magnetometer, sensor axes.
+#[derive(Debug, Clone, Copy)]
+pub struct Row {
+    pub t: f64,
+    pub accel: [f64; 3],
+    pub gyro: [f64; 3],
+    pub mag: [f64; 3],
+}
+
+/// Heading consistency with the gyro: over consecutive windows of `window` s, the change of
+/// the tilt-compensated heading minus the heading change the gyro integrates
+/// (`ψ̇ = (q sin φ + r cos φ)/cos θ`, body rates, φ and θ from the accelerometer), degrees, one
+/// value per window. Windows with a gap (a step over 1.5× the median spacing) or reaching
+/// |pitch| > `max_pitch` are skipped. What it sees: heading errors that change as the board
+/// turns (hard and soft iron do); what it cannot: an error that is the same at every attitude
+/// (a declination, a turned mounting) — that needs a truth.
+pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
+    let mut dts: Vec<f64> = rows.windows(2).map(|w| w[1].t - w[0].t).collect();
+    if dts.is_empty() || !(window > 0.0) {
+        return Vec::new();
+    }
+    dts.sort_by(f64::total_cmp);
+    let step = dts[dts.len() / 2];
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < rows.len() {
+        let t0 = rows[i].t;
+        let Some(a0) = tilt_compensated(rows[i].accel, rows[i].mag) else {
+            i += 1;
+            continue;
+        };
+        let mut gyro = 0.0;
+        let mut ok = a0.pitch.abs() <= max_pitch;
+        let mut j = i;
+        while j + 1 < rows.len() && rows[j + 1].t - t0 <= window {
+            let (r, n) = (&rows[j], &rows[j + 1]);
+            let dt = n.t - r.t;
+            if dt > 1.5 * step || dt <= 0.0 {
+                ok = false;
+                break;
+            }
+            match tilt_compensated(r.accel, r.mag) {
+                Some(a) if a.pitch.abs() <= max_pitch => {
+                    let (sr, cr) = a.roll.to_radians().sin_cos();
+                    let cp = a.pitch.to_radians().cos();
+                    // Body rates forward-right-down: q = −g_y, r = −g_z.
+                    gyro += (-r.gyro[1] * sr - r.gyro[2] * cr) / cp * dt;
+                }
+                _ => {
+                    ok = false;
+                    break;
+                }
+            }
+            j += 1;
+        }
+        let complete = rows[j].t - t0 >= window - 1.5 * step;
+        match (ok && complete, tilt_compensated(rows[j].accel, rows[j].mag)) {
+            (true, Some(a1)) if a1.pitch.abs() <= max_pitch => {
+                out.push(angle_diff(a1.heading, a0.heading) - gyro);
+            }
+            _ => {}
+        }
+        i = j + 1;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reading made from a known attitude: level field B (50 µT, dip 60°) and gravity turned
+    /// into the sensor's axes.
+    fn reading(roll: f64, pitch: f64, heading: f64) -> ([f64; 3], [f64; 3]) {
+        let (sf, cf) = roll.to_radians().sin_cos();
+        let (st, ct) = pitch.to_radians().sin_cos();
+        let (sp, cp) = heading.to_radians().sin_cos();
+        let r = [
+            [ct * cp, sf * st * cp - cf * sp, cf * st * cp + sf * sp],
+            [ct * sp, sf * st * sp + cf * cp, cf * st * sp - sf * cp],
+            [-st, sf * ct, cf * ct],
+        ];
+        let body =
+            |v: [f64; 3]| [0, 1, 2].map(|j| r[0][j] * v[0] + r[1][j] * v[1] + r[2][j] * v[2]);
+        let flu = |v: [f64; 3]| [v[0], -v[1], -v[2]];
+        let d = 60f64.to_radians();
+        (
+            flu(body([0.0, 0.0, -9.81])),
+            flu(body([50.0 * d.cos(), 0.0, 50.0 * d.sin()])),
+        )
+    }
+
+    #[test]
+    fn the_attitude_of_a_reading_is_the_one_it_was_made_at() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut u = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..1000 {
+            let (r, p, h) = (-180.0 + 360.0 * u(), -85.0 + 170.0 * u(), 360.0 * u());
+            let (a, m) = reading(r, p, h);
+            let att = tilt_compensated(a, m).unwrap();
+            assert!(angle_diff(att.roll, r).abs() < 1e-9, "{r} {p} {h}: {att:?}");
+            assert!((att.pitch - p).abs() < 1e-9, "{r} {p} {h}: {att:?}");
+            assert!(
+                angle_diff(att.heading, h).abs() < 1e-7,
+                "{r} {p} {h}: {att:?}"
+            );
+        }
+        assert_eq!(tilt_compensated([0.0; 3], [1.0, 0.0, 0.0]), None);
+        assert_eq!(
+            tilt_compensated([0.0, 0.0, 1.0], [f64::NAN, 0.0, 0.0]),
+            None
+        );
+    }
+
+    /// A level turn at 30°/s: an exact field gives zero inconsistency; a hard iron along x
+    /// (a heading error that changes with the heading) gives a large one.
+    #[test]
+    fn consistency_sees_a_hard_iron_and_not_an_exact_field() {
+        let rows = |hard: [f64; 3]| -> Vec<Row> {
+            (0..12_000)
+                .map(|i| {
+                    let t = i as f64 * 1e-3;
+                    let (a, m) = reading(10.0, -5.0, 30.0 * t);
+                    // Level-ish turn about the world's vertical: body rates of ψ̇ = 30°/s.
+                    let (sf, cf) = 10f64.to_radians().sin_cos();
+                    let (st, ct) = (-5f64).to_radians().sin_cos();
+                    let w = [-30.0 * st, 30.0 * sf * ct, 30.0 * cf * ct];
+                    Row {
+                        t,
+                        accel: a,
+                        gyro: [w[0], -w[1], -w[2]],
+                        mag: [0, 1, 2].map(|k| m[k] + hard[k]),
+                    }
+                })
+                .collect()
+        };
+        let good = gyro_consistency(&rows([0.0; 3]), 2.0, 70.0);
+        assert_eq!(good.len(), 5); // windows of 2 s and a step: five in 12 s
+        let r = rms(&good, 1).unwrap();
+        assert!(r.rms < 0.05, "{good:?}");
+        let bad = gyro_consistency(&rows([15.0, 0.0, 0.0]), 2.0, 70.0);
+        let r = rms(&bad, 1).unwrap();
+        assert!(r.rms > 10.0, "{bad:?}");
+    }
+
+    #[test]
+    fn rms_and_its_uncertainty() {
+        let e: Vec<f64> = (0..1000)
+            .map(|i| if i % 2 == 0 { 2.0 } else { -2.0 })
+            .collect();
+        let r = rms(&e, 10).unwrap();
+        assert!((r.rms - 2.0).abs() < 1e-12 && r.sigma < 1e-12 && r.max == 2.0);
+        let e: Vec<f64> = (0..1000).map(|i| (i / 100) as f64).collect();
+        let r = rms(&e, 100).unwrap();
+        assert!(r.sigma > 0.5, "{r:?}");
+        assert_eq!(rms(&[], 1), None);
+    }
+}
