@@ -9,6 +9,10 @@
 * :func:`read_csv` — a recording that follows the CSV contract (time from ``t``, gaps, units);
   :func:`read_csv_chunks` the same in chunks of rows, and :func:`stream_csv` a column of any
   length through the streaming engine in bounded memory.
+* :func:`fit` — the noise lab (``imu-lab fit``): the model of Jaime et al. and the effects the
+  diagnosis names, each estimate with its uncertainty, the verdict, the walk; a :class:`Fit`.
+* :func:`calibrate` — the calibration lab (``imu-lab calibrate``): a :class:`Calibration` whose
+  ``save`` writes the TOML file the CLI and the device read.
 
 Every function releases the GIL while it computes. Bad arguments raise ``ValueError`` naming
 the argument (and the index of a bad sample); a file that cannot be opened raises ``OSError``.
@@ -24,7 +28,7 @@ from . import _native
 from . import allantools
 
 __all__ = ["allantools", "deviation", "Table", "Stream", "read_csv", "Recording", "read_csv_chunks",
-           "stream_csv", "STATS"]
+           "stream_csv", "STATS", "fit", "Fit", "Term", "Step", "calibrate", "Calibration"]
 
 #: The statistics :func:`deviation` computes.
 STATS = ("adev", "oadev", "mdev", "hdev", "ohdev", "tdev", "totdev")
@@ -246,3 +250,6 @@ def stream_csv(path, column: str, scale: float = 1.0, unit: Optional[str] = None
             except ValueError as e:
                 raise ValueError(f"{path}: rows from {chunk['start'] + cuts[k]}: {e}") from None
     return s
+
+
+from .lab import Calibration, Fit, Step, Term, calibrate, fit  # noqa: E402  (lab imports Recording from here)

@@ -114,3 +114,138 @@ def stream_csv(
 ) -> Stream:
     """A column of whole counts through the streaming engine chunk by chunk (gaps close the
     engine's segment); ``scale``: one count in ``unit``; ``rate``: Hz (default: the file's)."""
+
+@dataclass
+class Term:
+    """One fitted term. ``params``/``sigma``/``interval`` (68.3 %)/``upper_bound`` (95 %, when
+    not detected) by parameter name, in the parameter's unit (amplitudes in the column's unit ×
+    s^k, e.g. N in deg/s·√s; corner frequencies in Hz; time constants in s); ``tau_range_s``
+    where it dominates (s)."""
+
+    effect: str
+    params: Dict[str, Optional[float]]
+    sigma: Dict[str, Optional[float]]
+    interval: Dict[str, List[Optional[float]]]
+    detected: bool
+    upper_bound: Dict[str, Optional[float]]
+    known: bool
+    tau_range_s: Optional[List[float]]
+    reading: str
+    units: Dict[str, str]
+    """Parameter name → unit."""
+
+@dataclass
+class Step:
+    """One step of the walk: effects added/removed, χ²/dof and RMS log-residual before → after,
+    adequacy before → after, the step's p-value (None for a step asked by hand), the reading."""
+
+    added: List[str]
+    removed: List[str]
+    reading: str
+    p_value: Optional[float]
+    chi2_dof_before: float
+    chi2_dof_after: float
+    rms_log_residual_before: float
+    rms_log_residual_after: float
+    adequate_before: bool
+    adequate_after: bool
+
+class Fit:
+    """The last model of a noise-lab session (``imu-lab fit``)."""
+
+    column: str
+    unit: str
+    rate_hz: float
+    """Hz."""
+    samples: int
+    terms: List[Term]
+    chi2_dof: float
+    """χ² per degree of freedom of the fit on the Allan variance (≈ 1 when adequate)."""
+    dof: float
+    p_value: Optional[float]
+    rms_log_residual: float
+    adequate: bool
+    verdict: str
+    missing: Optional[str]
+    """The effect the diagnosis names, or None."""
+    explanation: str
+    evidence: List[str]
+    physics: Dict[str, str]
+    """Effect name → its physical mechanism (the model's effects and the missing one)."""
+    table: Dict[str, npt.NDArray[np.float64]]
+    """Per τ: ``tau_s`` (s), ``dev``/``lo``/``hi``/``model`` (unit), ``residual`` (CI
+    half-widths), ``z``, ``edf``, ``edf_model``."""
+    steps: List[Step]
+    stop: Optional[str]
+    def term(self, effect: str) -> Term: ...
+    def to_dict(self) -> Dict[str, object]:
+        """The object ``imu-lab fit --json`` prints."""
+    def stages(self) -> List[Dict[str, object]]:
+        """Every model of the session: ``effects``, ``tau`` (s), ``dev``/``lo``/``hi``/``model``
+        and ``terms`` (name → deviation) in ``unit``, ``residual``, ``adequate``."""
+    def plot(self, fig: object = None, stage: int = -1) -> object:
+        """Allan deviation (unit) against τ (s) with bounds, model and terms; residual panel."""
+    def _repr_html_(self) -> str: ...
+
+def fit(
+    y: Union[npt.ArrayLike, Recording],
+    rate: Optional[float] = None,
+    unit: Optional[str] = None,
+    terms: Sequence[str] = (),
+    add: Sequence[str] = (),
+    effects: Sequence[Union[str, PathLike]] = (),
+    auto: bool = False,
+    max_steps: int = 6,
+    tolerance: Optional[float] = None,
+    column: Optional[str] = None,
+    t: Optional[npt.ArrayLike] = None,
+    temp: Optional[npt.ArrayLike] = None,
+) -> Fit:
+    """The noise lab on rate samples (``rate`` Hz; ``t`` s, ``temp`` °C; ``tolerance`` in
+    ``unit``) or on a recording's ``column``: ``imu-lab fit``'s session."""
+
+class Calibration:
+    """The last model of a calibration session (``imu-lab calibrate``)."""
+
+    sensor: str
+    unit: str
+    """Unit of the columns, of offsets and biases, of ``residual_rms`` and ``noise_floor``."""
+    model: List[str]
+    params: Dict[str, object]
+    """By parameter: offsets in ``unit``; scale factors, misalignments, soft iron dimensionless."""
+    sigma: Dict[str, object]
+    """1σ of ``params``, same layout."""
+    residual_rms: float
+    noise_floor: float
+    adequate: bool
+    verdict: str
+    missing: Optional[str]
+    explanation: str
+    steps: List[Dict[str, object]]
+    stop: Optional[str]
+    def to_dict(self) -> Dict[str, object]:
+        """The object ``imu-lab calibrate --json`` prints."""
+    def save(self, path: Union[str, PathLike]) -> None:
+        """Writes (or updates this sensor's section of) the TOML calibration file; ValueError
+        naming key, axis, value and bound when the device could not hold it."""
+    def _repr_html_(self) -> str: ...
+
+def calibrate(
+    sensor: str,
+    samples: Union[Recording, Dict[str, npt.ArrayLike]],
+    model: Sequence[str] = (),
+    auto: bool = False,
+    rate: Optional[float] = None,
+    units: Optional[Dict[str, str]] = None,
+    g: Optional[float] = None,
+    field: Optional[float] = None,
+    window: float = 1.0,
+    threshold_k: float = 6.0,
+    min_static: float = 1.5,
+    saturation: Optional[float] = None,
+    blocks: int = 50,
+    max_steps: int = 4,
+) -> Calibration:
+    """The calibration lab on ``accel``/``gyro``/``mag`` columns (m/s², deg/s, µT unless
+    ``units`` says otherwise; ``rate`` Hz; ``g``, ``field`` in the columns' unit; ``window``,
+    ``min_static`` s; ``saturation`` deg/s): ``imu-lab calibrate``'s session."""

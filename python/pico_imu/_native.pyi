@@ -55,3 +55,58 @@ class CsvChunks:
     def rate_hz(self) -> Optional[float]: ...
     def __iter__(self) -> "CsvChunks": ...
     def __next__(self) -> Dict[str, object]: ...
+
+class NativeFit:
+    """A finished noise-lab session (``noise_model::session``)."""
+
+    def json(self) -> str:
+        """The object ``imu-lab fit --json`` prints."""
+    def verdict(self) -> str: ...
+    def physics(self) -> List[Tuple[str, str]]: ...
+    def param_units(self) -> List[List[Tuple[str, str]]]: ...
+    def stages(self) -> List[Dict[str, object]]: ...
+
+def fit(
+    y: npt.NDArray[np.float64],
+    rate: Optional[float] = None,
+    unit: str = "",
+    column: str = "y",
+    t: Optional[npt.NDArray[np.float64]] = None,
+    gap_before: Optional[npt.NDArray[np.float64]] = None,
+    temp: Optional[npt.NDArray[np.float64]] = None,
+    terms: List[str] = ...,
+    add: List[str] = ...,
+    effects: List[Tuple[str, str]] = ...,
+    auto: bool = False,
+    max_steps: int = 6,
+    tolerance: Optional[float] = None,
+) -> NativeFit:
+    """The session on ``y`` (``rate`` Hz, or from ``t`` in s); ``effects``: (TOML text, name)."""
+
+class NativeCalibration:
+    """A finished calibration session (``imu_cal::session``)."""
+
+    def json(self) -> str:
+        """The object ``imu-lab calibrate --json`` prints."""
+    def toml(self, existing: Optional[str] = None) -> str:
+        """The calibration file with this run's section set (ValueError when implausible)."""
+    def section(self) -> str: ...
+
+def calibrate(
+    sensor: str,
+    columns: Dict[str, npt.NDArray[np.float64]],
+    units: Dict[str, str],
+    rate: float,
+    segments: List[Tuple[int, int]],
+    model: List[str] = ...,
+    g: Optional[float] = None,
+    field: Optional[float] = None,
+    window: float = 1.0,
+    threshold_k: float = 6.0,
+    min_static: float = 1.5,
+    saturation: Optional[float] = None,
+    blocks: int = 50,
+    auto: bool = False,
+    max_steps: int = 4,
+) -> NativeCalibration:
+    """The session on ``columns`` (name → samples in ``units``) at ``rate`` Hz."""

@@ -1,7 +1,8 @@
 //! `pico_imu._native`: the Rust side of the `pico_imu` Python package. Thin bindings over the
-//! workspace crates — the Allan engine (`allan`) and the recording contract (`imu-proto`) — on
-//! numpy arrays. The Python package (`python/pico_imu/`) adds the AllanTools-compatible
-//! signatures, the documentation and the type stubs.
+//! workspace crates — the Allan engine (`allan`), the recording contract (`imu-proto`), the
+//! noise lab (`noise-model`) and the calibration lab (`imu-cal`) — on numpy arrays. The Python
+//! package (`python/pico_imu/`) adds the AllanTools-compatible signatures, the documentation and
+//! the type stubs.
 //!
 //! Every entry point releases the GIL while it computes, turns bad arguments into `ValueError`
 //! naming the argument (and the index of a bad sample), and turns a Rust panic into a
@@ -11,8 +12,10 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 
+mod cal;
 mod chunks;
 mod dev;
+mod fit;
 mod record;
 mod stream;
 
@@ -43,6 +46,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dev::deviation, m)?)?;
     m.add_function(wrap_pyfunction!(dev::plain_deviations, m)?)?;
     m.add_function(wrap_pyfunction!(record::read_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(fit::fit, m)?)?;
+    m.add_class::<fit::NativeFit>()?;
+    m.add_function(wrap_pyfunction!(cal::calibrate, m)?)?;
+    m.add_class::<cal::NativeCalibration>()?;
     m.add_function(wrap_pyfunction!(panic_for_test, m)?)?;
     m.add_class::<stream::Stream>()?;
     m.add_class::<chunks::CsvChunks>()?;

@@ -8,7 +8,9 @@
 //! * `lab` (`std`) — the robust fit, residuals, the noise floor, the adequacy verdict and the
 //!   diagnosis of the missing effect; `solve` (`std`) — Levenberg–Marquardt, uncertainties and
 //!   the statistics behind them; `error` (`std`) — the one error type; `sentinel` (`std`) — the
-//!   sensors' overflow values, excluded before fitting.
+//!   sensors' overflow values, excluded before fitting; `session` (`std`) — one run of the
+//!   calibration lab on a recording's columns (what `imu-lab calibrate` and
+//!   `pico_imu.calibrate` run) with its JSON object and the calibration file's update.
 //!
 //! ```
 //! use imu_cal::device::{
@@ -62,5 +64,7 @@ pub mod lab;
 pub mod mag;
 #[cfg(feature = "std")]
 pub mod sentinel;
+#[cfg(feature = "std")]
+pub mod session;
 #[cfg(feature = "std")]
 pub mod solve;

@@ -108,26 +108,6 @@ impl Recording {
     }
 }
 
-/// The segments as the noise lab counts them: (index of the first sample as if the gaps had been
-/// recorded, length), the indices advanced by each gap's missing samples.
-pub fn nominal_segments(rec: &Recording) -> Vec<(u64, u64)> {
-    let gaps = rec
-        .timing
-        .as_ref()
-        .map(|t| t.gaps.as_slice())
-        .unwrap_or(&[]);
-    rec.segments
-        .iter()
-        .map(|r| {
-            let missing: u64 = gaps
-                .iter()
-                .filter(|g| g.row <= r.start)
-                .fold(0u64, |a, g| a.saturating_add(g.missing_samples));
-            (r.start as u64 + missing, (r.end - r.start) as u64)
-        })
-        .collect()
-}
-
 /// The `--scale` factor (1 when absent), refusing zero, non-finite and absurd values.
 pub fn scale_of(args: &InputArgs) -> Result<f64> {
     let Some(scale) = args.scale else {

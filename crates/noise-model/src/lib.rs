@@ -36,6 +36,7 @@ pub mod nonstat;
 pub mod optim;
 pub mod practical;
 pub mod psd;
+pub mod session;
 pub mod structure;
 /// User-defined effects (their own module under [`effect`]).
 pub use effect::user;

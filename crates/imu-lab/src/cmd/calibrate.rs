@@ -5,26 +5,14 @@
 //! the rendering to `render::calibration`.
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
-use imu_cal::accel::{detect_static_masked, AccelProblem, StaticDetect, G_STANDARD};
-use imu_cal::file::CalFile;
-use imu_cal::gyro::GyroProblem;
-use imu_cal::gyro_rot::GyroRotProblem;
-use imu_cal::lab::{CalLab, Effect, Params, Problem};
-use imu_cal::mag::MagProblem;
-use imu_cal::sentinel::{self, Part, Sentinels};
-use model_lab::walk;
-use nalgebra::Vector3;
-use serde::Serialize;
+use anyhow::{anyhow, Context, Result};
+use imu_cal::lab::Effect;
+use imu_cal::session::{self, json_out, Sensor};
 
-use crate::input::{self, InputArgs, COUNTS};
+use crate::input::{self, InputArgs};
 use crate::render::{self, calibration};
-mod json;
-mod load;
 #[cfg(test)]
 mod tests;
-use json::json_out;
-use load::{default_model, load_data};
 
 /// Which sensor to calibrate.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,64 +83,70 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-pub use crate::calibration::{Data, Loaded, Outcome};
+use crate::calibration::Loaded;
 
-/// Fit `model`, and with `auto` walk from it; the report is on the last model.
-fn outcome(p: &dyn Problem, model: &[Effect], auto: bool, max_steps: usize) -> Result<Outcome> {
-    let lab = CalLab::new(p);
-    let start = lab.fit(model)?;
-    if !auto {
-        return Ok(Outcome {
-            start: start.clone(),
-            steps: Vec::new(),
-            stop: None,
-            report: lab.report(start)?,
-        });
-    }
-    let w = walk(&lab, start.clone(), max_steps)?;
-    let last = w.last().clone();
-    Ok(Outcome {
-        start,
-        steps: w.steps,
-        stop: Some(w.stop),
-        report: lab.report(last)?,
+/// The session's options from the flags.
+fn options(a: &Args) -> Result<session::Options> {
+    let model: Vec<Effect> = a
+        .model
+        .iter()
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| Effect::parse(s))
+        .collect::<Result<_, _>>()?;
+    Ok(session::Options {
+        sensor: match a.sensor {
+            SensorArg::Accel => Sensor::Accel,
+            SensorArg::Gyro => Sensor::Gyro,
+            SensorArg::Mag => Sensor::Mag,
+        },
+        model,
+        g: a.g,
+        field: a.field,
+        window: a.window,
+        threshold_k: a.threshold_k,
+        min_static: a.min_static,
+        saturation: a.saturation,
+        blocks: a.blocks,
+        auto: a.auto,
+        max_steps: a.max_steps,
+        cli: true,
     })
+}
+
+/// The recording's columns for the session and the data prepared from them.
+fn load_data(a: &Args, o: &session::Options) -> Result<Loaded> {
+    let (wanted, optional) = o.columns();
+    let rec = input::load_with(&a.input, &wanted, &optional)?;
+    let shown = a.input.file.display().to_string();
+    let input = session::Input {
+        columns: rec
+            .columns
+            .iter()
+            .map(|c| session::Column {
+                name: &c.name,
+                unit: &c.unit,
+                values: &c.values,
+            })
+            .collect(),
+        rate_hz: rec.rate_hz,
+        segments: &rec.segments,
+        shown: &shown,
+    };
+    session::prepare(&input, o).map_err(|e| anyhow!(e))
 }
 
 /// Run `imu-lab calibrate`.
 pub fn run(a: Args) -> Result<()> {
-    let model: Vec<Effect> = if a.model.is_empty() {
-        default_model(a.sensor)
-    } else {
-        a.model
-            .iter()
-            .filter(|s| !s.trim().is_empty())
-            .map(|s| Effect::parse(s))
-            .collect::<Result<_, _>>()?
-    };
-    let loaded = load_data(&a, &model)?;
-    let mut model = model;
-    if let Data::GyroRot(_) = loaded.data {
-        // The rotation fit always removes the bias at rest first; temperature is a block fit.
-        if model.contains(&Effect::Temperature) {
-            bail!(
-                "fit temperature with --model bias,temperature and scale/misalignment separately"
-            );
-        }
-        model.retain(|e| *e != Effect::Bias);
-    }
-    if !(1..=20).contains(&a.max_steps) {
-        bail!("--max-steps {}: give 1 to 20", a.max_steps);
-    }
+    let o = options(&a)?;
+    let loaded = load_data(&a, &o)?;
     let p = loaded.data.problem();
-    let run = outcome(p, &model, a.auto, a.max_steps)?;
+    let run = session::run(&loaded, &o).map_err(|e| anyhow!(e))?;
 
     if a.json {
-        println!("{}", json_out(&loaded, &run)?);
+        println!("{}", json_out(&loaded, &run));
     } else {
         print!("{}", calibration::text_report(&loaded, &run));
     }
-
     let svg = if a.plot.is_some() || a.report.is_some() {
         // Before → after: the walk's start and end, or the model and its next step.
         let (before, after) = if run.stop.is_some() {
@@ -175,40 +169,17 @@ pub fn run(a: Args) -> Result<()> {
         std::fs::write(path, html).with_context(|| format!("cannot write {}", path.display()))?;
     }
     if let Some(path) = &a.out {
-        let contract = match a.sensor {
-            SensorArg::Accel => "m/s²",
-            SensorArg::Gyro => "deg/s",
-            SensorArg::Mag => "µT",
-        };
-        let unit = match &loaded.data {
-            // The rotation fit's parameters are dimensionless; its bias is in deg/s.
-            Data::GyroRot(_) => "deg/s",
-            _ => p.unit(),
-        };
-        if unit != contract {
-            bail!(
-                "--out {}: the calibration file holds {contract}, but this fit is in {unit}; \
-                 convert the columns with --scale",
-                path.display()
-            );
-        }
-        let mut file = if path.exists() {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read {}", path.display()))?;
-            CalFile::from_toml(&text).with_context(|| format!("{}", path.display()))?
+        let existing = if path.exists() {
+            Some(
+                std::fs::read_to_string(path)
+                    .with_context(|| format!("cannot read {}", path.display()))?,
+            )
         } else {
-            CalFile::default()
+            None
         };
-        let section = match loaded.data {
-            Data::GyroRot(_) => "gyro-rot",
-            _ => p.sensor(),
-        };
-        file.set(section, &run.report.model.fitted.params)?;
-        // The device must be able to hold it, within the parts' datasheet bounds.
-        file.to_device()
-            .map_err(|e| anyhow::anyhow!("{}: refused, not written: {e}", path.display()))?;
-        std::fs::write(path, file.to_toml())
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let text = session::update_file(existing.as_deref(), &loaded, &run)
+            .map_err(|e| anyhow!("--out {}: {e}", path.display()))?;
+        std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))?;
         if !a.json {
             println!("wrote the {} section of {}", p.sensor(), path.display());
         }

@@ -4,23 +4,16 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use allan::{deviation_segments, Stat, TauSet};
 use anyhow::{anyhow, bail, Context, Result};
-use noise_model::diagnose::tradeoffs;
-use noise_model::lab::{reading, tau_range};
+use noise_model::session::{self, names, Session, Stage};
 use noise_model::user::UserEffect;
-use noise_model::{
-    diagnose, practical, walk, Diagnosis, Effect, Fit, Model, NoiseLab, Point, Record, Step, Stop,
-    TermSpec,
-};
-use serde::Serialize;
-use serde_json::{Map, Value};
+use noise_model::{practical, Effect, Step, Stop};
 
 use crate::input::{self, InputArgs};
 use crate::render::{allan as plot, noise as report};
 
-mod json;
-use json::*;
+mod words;
+use words::*;
 
 /// Arguments of `imu-lab fit`.
 #[derive(clap::Args, Debug)]
@@ -79,264 +72,69 @@ fn load_user_effects(paths: &[PathBuf]) -> Result<Vec<Effect>> {
         .collect()
 }
 
-fn parse_effects(list: &[String], flag: &str, user: &[Effect]) -> Result<Vec<Effect>> {
-    list.iter()
-        .filter(|s| !s.trim().is_empty())
-        .map(|s| {
-            Effect::parse(s)
-                .or_else(|| user.iter().find(|u| u.name() == s.trim()).cloned())
-                .ok_or_else(|| {
-                    anyhow!(
-                        "{flag} {s:?}: unknown effect; expected one of {}{}",
-                        noise_model::ALL_EFFECTS
-                            .map(|e| e.name().to_string())
-                            .join(", "),
-                        if user.is_empty() {
-                            String::new()
-                        } else {
-                            format!(
-                                ", {}",
-                                user.iter()
-                                    .map(|u| u.name().to_string())
-                                    .collect::<Vec<_>>()
-                                    .join(", ")
-                            )
-                        }
-                    )
-                })
-        })
-        .collect()
-}
-
-/// One analysed model.
-pub struct Stage {
-    pub model: Model,
-    pub diagnosis: Diagnosis,
-    /// (τ, σ) of the record with the model's time-domain signals removed (empty without any).
-    pub compensated: Vec<(f64, f64)>,
-}
-
-fn names(effects: &[Effect]) -> String {
-    effects
-        .iter()
-        .map(|e| e.name().to_string())
-        .collect::<Vec<_>>()
-        .join(" + ")
-}
-
 /// `imu-lab fit`: read the column and build the lab, fit the start model and walk from it
 /// (`--add` or `--auto`), analyse each model, then write the files and print the JSON or the
 /// report.
 pub fn run(args: Args) -> Result<()> {
-    check_args(&args)?;
-    let user = load_user_effects(&args.effects)?;
+    let opts = session::Options {
+        terms: args.terms.clone(),
+        add: args.add.clone(),
+        auto: args.auto,
+        max_steps: args.max_steps,
+        user: Vec::new(),
+        tolerance: args.tolerance,
+        flags: session::Flags::CLI,
+    };
+    session::check_options(&opts).map_err(|e| anyhow!(e))?;
+    let opts = session::Options {
+        user: load_user_effects(&args.effects)?,
+        ..opts
+    };
     let rec = input::load_with(&args.input, &[&args.column], &["temp"])?;
     let shown = args.input.file.display().to_string();
     let series = rec
         .column(&args.column)
         .ok_or_else(|| anyhow!("{shown}: column {:?} missing", args.column))?;
-    let (lab, points, skipped) = build_lab(&args, &rec, &series.values, &shown, &user)?;
-    let (models, mut steps, stop) = fit_and_walk(&args, &lab, &user)?;
-    let stages = analyse(&lab, &rec, models)?;
-    // the step records say what the diagnosis says of each model
-    for (i, s) in steps.iter_mut().enumerate() {
-        s.before.adequate = stages[i].diagnosis.adequate;
-        s.after.adequate = stages[i + 1].diagnosis.adequate;
-    }
-    let last = stages.last().expect("one stage");
-    let recal = args.tolerance.map(|tol| {
-        let (b, k, r, kc, rc) = drift_terms(&last.model.fit);
-        practical::recalibration(b, k, r, kc, rc, tol)
-    });
+    let label = format!("{shown}: column {:?}", args.column);
+    let s = session::run(
+        &session::Input {
+            column: &args.column,
+            unit: &series.unit,
+            y: &series.values,
+            rate_hz: rec.rate_hz,
+            segments: &rec.segments,
+            temp: rec.column("temp").map(|c| c.values.as_slice()),
+            timing: rec.timing.as_ref(),
+            label: &label,
+        },
+        &opts,
+    )
+    .map_err(|e| anyhow!(e))?;
     let out = Outcome {
         args: &args,
-        rate_hz: rec.rate_hz,
-        timing: rec.timing.as_ref(),
-        unit: series.unit.clone(),
-        samples: series.values.len(),
         shown,
-        points,
-        skipped,
-        lsb: lab.lsb,
-        stages,
-        steps,
-        stop,
-        recal,
+        s,
     };
     out.write_files()?;
     if args.json {
-        out.print_json()
+        println!("{}", out.s.json_string());
     } else {
         out.print_text();
-        Ok(())
-    }
-}
-
-/// The options that no file is needed to refuse.
-fn check_args(args: &Args) -> Result<()> {
-    if let Some(tol) = args.tolerance {
-        if !(tol > 0.0 && tol.is_finite()) {
-            bail!("--tolerance {tol}: must be a positive number in the column's unit");
-        }
-    }
-    if args.max_steps == 0 || args.max_steps > 20 {
-        bail!("--max-steps {}: give 1 to 20", args.max_steps);
     }
     Ok(())
 }
 
-/// The noise lab of the column `y` of `rec`: its overlapping Allan deviation at octave τ as the
-/// fit's points (with the count of rows left out for want of an EDF) and the record.
-fn build_lab<'r>(
-    args: &Args,
-    rec: &'r input::Recording,
-    y: &'r [f64],
-    shown: &str,
-    user: &[Effect],
-) -> Result<(NoiseLab<'r>, Vec<Point>, usize)> {
-    let temp = rec.column("temp").map(|c| c.values.as_slice());
-    let tau0 = 1.0 / rec.rate_hz;
-    let segments = rec.segments_of(&args.column).unwrap_or_default();
-    let rows = deviation_segments(&segments, tau0, Stat::Oadev, &TauSet::Octave)
-        .with_context(|| format!("{shown}: column {:?}", args.column))?;
-    let (points, skipped) = Point::from_rows(&rows);
-    let lab = NoiseLab::new(Record {
-        y,
-        tau0,
-        segments: input::nominal_segments(rec),
-        temp,
-        timing: rec.timing.clone(),
-        points: points.clone(),
-        user_effects: user.to_vec(),
-    })
-    .map_err(|e| anyhow!("{shown}: column {:?}: {e}", args.column))?;
-    Ok((lab, points, skipped))
-}
-
-/// The start model (--terms, or the lab's default) fitted, then the walk from it: automatic
-/// with --auto, else one step per --add. Returns the models, the steps between them and, for
-/// --auto, why the walk stopped.
-#[allow(clippy::type_complexity)]
-fn fit_and_walk(
-    args: &Args,
-    lab: &NoiseLab,
-    user: &[Effect],
-) -> Result<(Vec<Model>, Vec<Step<Effect>>, Option<Stop>)> {
-    let base: Vec<TermSpec> = if args.terms.is_empty() {
-        lab.default_specs()
-    } else {
-        parse_effects(&args.terms, "--terms", user)?
-            .into_iter()
-            .map(TermSpec::new)
-            .collect()
-    };
-    let adds = parse_effects(&args.add, "--add", user)?;
-    for e in &adds {
-        if !e.repeatable() && base.iter().any(|s| s.effect == *e) {
-            bail!("--add {e}: the model already has it");
-        }
-        if matches!(e, Effect::BiasStep) {
-            bail!("--add bias_step: a step's instant comes from the change-point test; use --auto, which adds the steps it finds");
-        }
-        if matches!(e, Effect::Drift { .. }) {
-            bail!("--add drift: a drift's shape comes from the time-domain test; use --auto, which adds the drift it finds");
-        }
-    }
-    let start = lab.fit(&base).map_err(|e| {
-        anyhow!(
-            "fit of {}: {e}",
-            names(&base.iter().map(|s| s.effect.clone()).collect::<Vec<_>>())
-        )
-    })?;
-    if args.auto {
-        let w = walk(lab, start, args.max_steps).map_err(|e| anyhow!("{e}"))?;
-        return Ok((w.models, w.steps, Some(w.stop)));
-    }
-    let mut models: Vec<Model> = vec![start];
-    let mut steps: Vec<Step<Effect>> = Vec::new();
-    for e in &adds {
-        let prev = models.last().expect("one model");
-        let mut specs = prev.specs.clone();
-        if e.replaces_white() {
-            specs.retain(|s| s.effect != Effect::White);
-        }
-        specs.push(TermSpec::new(e.clone()));
-        let next = lab
-            .fit(&specs)
-            .map_err(|err| anyhow!("fit with {e}: {err}"))?;
-        let before = summary(lab, prev);
-        steps.push(Step {
-            edit: noise_model::Edit {
-                add: vec![e.clone()],
-                remove: if e.replaces_white()
-                    && prev.specs.iter().any(|s| s.effect == Effect::White)
-                {
-                    vec![Effect::White]
-                } else {
-                    vec![]
-                },
-            },
-            before,
-            after: summary(lab, &next),
-            p_value: f64::NAN,
-            reading: reading(&next.fit, e),
-            reason: String::new(),
-        });
-        models.push(next);
-    }
-    Ok((models, steps, None))
-}
-
-/// Each model diagnosed, with the Allan deviation of the record with its time-domain signals
-/// removed.
-fn analyse(lab: &NoiseLab, rec: &input::Recording, models: Vec<Model>) -> Result<Vec<Stage>> {
-    let tau0 = 1.0 / rec.rate_hz;
-    models
-        .into_iter()
-        .map(|m| {
-            let d = diagnose(lab, &m).map_err(|e| anyhow!("{e}"))?;
-            let compensated = match lab.compensated(&m) {
-                Some(yc) => {
-                    let segs: Vec<&[f64]> = rec.segments.iter().map(|r| &yc[r.clone()]).collect();
-                    deviation_segments(&segs, tau0, Stat::Oadev, &TauSet::Octave)?
-                        .iter()
-                        .map(|r| (r.tau, r.dev))
-                        .collect()
-                }
-                None => Vec::new(),
-            };
-            Ok(Stage {
-                model: m,
-                diagnosis: d,
-                compensated,
-            })
-        })
-        .collect()
-}
-
-/// What `imu-lab fit` reports: the record, the models analysed, the steps between them and the
-/// recalibration period.
+/// What `imu-lab fit` reports: the session and where its data came from.
 struct Outcome<'a> {
     args: &'a Args,
-    rate_hz: f64,
-    timing: Option<&'a imu_proto::csv::Timing>,
-    unit: String,
-    samples: usize,
     /// The input file as shown in messages.
     shown: String,
-    points: Vec<Point>,
-    /// Allan rows left out for want of an EDF.
-    skipped: usize,
-    lsb: Option<f64>,
-    stages: Vec<Stage>,
-    steps: Vec<Step<Effect>>,
-    stop: Option<Stop>,
-    recal: Option<practical::Recalibration>,
+    s: Session,
 }
 
 impl Outcome<'_> {
     fn last(&self) -> &Stage {
-        self.stages.last().expect("one stage")
+        self.s.last()
     }
 
     /// The plot (--plot) and the HTML report (--report).
@@ -347,118 +145,44 @@ impl Outcome<'_> {
             .file
             .file_name()
             .map_or(self.shown.clone(), |n| n.to_string_lossy().into_owned());
-        let title = format!("{} [{}] — {}", args.column, self.unit, base_name);
+        let title = format!("{} [{}] — {}", args.column, self.s.unit, base_name);
         if let Some(path) = &args.plot {
-            write_plot(path, &self.stages, &self.steps, &title, &self.unit)?;
+            write_plot(path, &self.s.stages, &self.s.steps, &title, &self.s.unit)?;
         }
         if let Some(path) = &args.report {
             write_report(
                 path,
-                &self.stages,
-                &self.steps,
+                &self.s.stages,
+                &self.s.steps,
                 &title,
-                &self.unit,
+                &self.s.unit,
                 &self.shown,
                 args,
-                self.samples,
-                self.rate_hz,
-                self.recal.as_ref(),
-                self.stop,
+                self.s.samples,
+                self.s.rate_hz,
+                self.s.recal.as_ref(),
+                self.s.stop,
             )?;
         }
         Ok(())
     }
 
-    /// The last model, its diagnosis and the steps as one JSON object on stdout.
-    fn print_json(&self) -> Result<()> {
-        let last = self.last();
-        let f = &last.model.fit;
-        let out = JsonOut {
-            column: &self.args.column,
-            unit: &self.unit,
-            rate_hz: self.rate_hz,
-            samples: self.samples,
-            terms: json_terms(f),
-            chi2_dof: f.chi2_dof(),
-            dof: f.dof,
-            p_value: last.model.assessment.p_value,
-            rms_log_residual: last.model.assessment.rms_log_residual,
-            correlations: correlations(f),
-            tradeoffs: tradeoffs(f),
-            diagnosis: JsonDiag {
-                adequate: last.diagnosis.adequate,
-                missing: last
-                    .diagnosis
-                    .missing
-                    .as_ref()
-                    .map(|e| e.name().to_string()),
-                replaces: last
-                    .diagnosis
-                    .replaces
-                    .iter()
-                    .map(|e| e.name().to_string())
-                    .collect(),
-                tau_range_s: last.diagnosis.tau_range.map(|(a, b)| [a, b]),
-                explanation: last.diagnosis.explanation.clone(),
-                evidence: last.diagnosis.evidence.clone(),
-            },
-            adev: f
-                .points
-                .iter()
-                .enumerate()
-                .map(|(i, p)| JsonPoint {
-                    tau_s: p.tau,
-                    dev: p.dev,
-                    lo: p.lo,
-                    hi: p.hi,
-                    model: f.model_avar[i].max(0.0).sqrt(),
-                    residual: last.model.assessment.residuals[i],
-                    z: last.model.assessment.z[i],
-                    edf: p.edf,
-                    edf_model: f.model_edf[i],
-                })
-                .collect(),
-            steps: self.steps.iter().map(json_step).collect(),
-            adev_compensated: last
-                .compensated
-                .iter()
-                .map(|&(tau_s, dev)| JsonTau { tau_s, dev })
-                .collect(),
-            stop: self.stop.map(|s| s.to_string()),
-            timing: self.timing.map(|t| JsonTiming {
-                median_dt_s: t.median_dt_s,
-                mean_dt_s: t.mean_dt_s,
-                p95_dt_s: t.p95_dt_s,
-                gaps: t.gaps.len(),
-                missing_samples: t.missing_samples(),
-                duplicates: t.duplicates,
-                irregular: t.irregular(),
-            }),
-            resolution_lsb: self.lsb,
-            recalibration: self.recal.as_ref().map(|r| JsonRecal {
-                tolerance: r.tolerance,
-                period_s: r.period_s,
-                period_conservative_s: r.period_conservative_s,
-                flicker_floor: r.floor,
-                possible: r.possible,
-            }),
-        };
-        println!("{}", serde_json::to_string(&out)?);
-        Ok(())
-    }
-
     /// The human report on stdout.
     fn print_text(&self) {
-        let (args, unit, shown) = (self.args, &self.unit, &self.shown);
-        let (points, skipped, stages, steps) =
-            (&self.points, self.skipped, &self.stages, &self.steps);
+        let (args, unit, shown) = (self.args, &self.s.unit, &self.shown);
+        let (points, skipped, stages, steps) = (
+            &self.s.points,
+            self.s.skipped,
+            &self.s.stages,
+            &self.s.steps,
+        );
         let last = self.last();
         println!(
             "Noise-model fit of {} [{unit}] — {shown}: {} samples at {} Hz ({})",
             args.column,
-            self.samples,
-            report::sig(self.rate_hz, 6),
-            duration(self.samples as f64 / self.rate_hz)
+            self.s.samples,
+            report::sig(self.s.rate_hz, 6),
+            duration(self.s.samples as f64 / self.s.rate_hz)
         );
         println!(
             "Overlapping Allan deviation at {} octave τ ({}–{} s); generalised least squares with the \
@@ -472,10 +196,15 @@ impl Outcome<'_> {
                 String::new()
             },
         );
-        if let Some(t) = self.timing.filter(|t| t.irregular() || !t.gaps.is_empty()) {
+        if let Some(t) = self
+            .s
+            .timing
+            .as_ref()
+            .filter(|t| t.irregular() || !t.gaps.is_empty())
+        {
             println!("Timing: {}.", t.describe());
         }
-        if let Some(l) = self.lsb {
+        if let Some(l) = self.s.lsb {
             println!(
                 "Resolution: the values sit on a lattice of {} {unit} (the data's LSB).",
                 report::sig(l, 4)
@@ -487,7 +216,7 @@ impl Outcome<'_> {
             print!("{}", step_table(steps));
             println!(
                 "Stop: {}.",
-                self.stop.map_or(String::new(), |s| s.to_string())
+                self.s.stop.map_or(String::new(), |s| s.to_string())
             );
         }
         for (i, st) in stages.iter().enumerate() {
@@ -521,16 +250,11 @@ impl Outcome<'_> {
                 );
             }
         }
-        if let Some(r) = &self.recal {
+        if let Some(r) = &self.s.recal {
             println!();
             println!("{}", recal_text(r, unit));
         }
     }
-}
-
-fn summary(lab: &NoiseLab, m: &Model) -> noise_model::Summary {
-    use noise_model::lab::NoiseLab as L;
-    <L as model_lab::Lab>::summary(lab, m)
 }
 
 /// The step table of a walk.
@@ -751,6 +475,8 @@ fn recal_text(r: &practical::Recalibration, unit: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use allan::{Stat, TauSet};
+    use noise_model::{diagnose, NoiseLab, Point, Record};
 
     /// The real MPU-6050 recording (tomisuarez2/ImuCalibration, MIT; provenance in
     /// crates/allan/tests/data), gz in raw LSB → deg/s with 1/131.

@@ -20,22 +20,7 @@ pub fn esc(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
-/// `x` with `sig` significant digits, fixed notation for 1e-3 ≤ |x| < 1e5, else scientific.
-pub fn sig(x: f64, sig: usize) -> String {
-    if !x.is_finite() {
-        return "—".into();
-    }
-    if x == 0.0 {
-        return "0".into();
-    }
-    let e = x.abs().log10().floor() as i32;
-    if (-3..5).contains(&e) {
-        let dec = (sig as i32 - 1 - e).max(0) as usize;
-        format!("{:.*}", dec, x)
-    } else {
-        format!("{:.*e}", sig.saturating_sub(1), x)
-    }
-}
+pub use noise_model::session::sig;
 
 /// Rasterise an SVG document to PNG at its own size on a white background (resvg; the labels
 /// use the system's fonts, and are left out where the system has none).

@@ -212,49 +212,7 @@ pub fn step_line(st: &Step<Effect>) -> String {
     )
 }
 
-/// The verdict sentence. `adequate` is the lab's whole verdict (the Allan test, the time-domain
-/// checks and the candidates' nested tests).
-pub fn verdict(fit: &Fit, a: &Assessment, adequate: bool) -> String {
-    if a.adequate && !adequate {
-        return format!(
-            "NOT ADEQUATE — the Allan curve alone passes (χ²/dof = {}, global p = {}), but the \
-             record shows an effect the model lacks (see the diagnosis).",
-            sig(fit.chi2_dof(), 3),
-            sig(a.p_value, 2)
-        );
-    }
-    if a.adequate {
-        format!(
-            "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (all |z| ≤ {:.1}).",
-            sig(fit.chi2_dof(), 3),
-            sig(a.p_value, 2),
-            a.threshold
-        )
-    } else {
-        let ranges: Vec<String> = if a.failing.is_empty() {
-            vec!["(no single range: the misfit is spread over all τ)".into()]
-        } else {
-            a.failing
-                .iter()
-                .map(|r| {
-                    format!(
-                        "τ = {}–{} s (measured {} model, up to |z| = {:.1})",
-                        sig(r.lo, 3),
-                        sig(r.hi, 3),
-                        if r.sign > 0 { "above" } else { "below" },
-                        r.worst_z
-                    )
-                })
-                .collect()
-        };
-        format!(
-            "NOT ADEQUATE — χ²/dof = {}, global p = {}; failing: {}.",
-            sig(fit.chi2_dof(), 3),
-            sig(a.p_value, 2),
-            ranges.join("; ")
-        )
-    }
-}
+pub use noise_model::session::verdict;
 
 /// One section of the HTML report.
 pub struct Section {

@@ -1,5 +1,6 @@
 use super::*;
-use nalgebra::Matrix3;
+use imu_cal::file::CalFile;
+use nalgebra::{Matrix3, Vector3};
 use std::io::Write;
 
 fn args(file: &std::path::Path, sensor: SensorArg, model: &[&str]) -> Args {

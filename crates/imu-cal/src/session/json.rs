@@ -1,6 +1,10 @@
-//! The JSON object of `imu-lab calibrate --json`: the report on the last model, the walk's steps
-//! and what was excluded.
-use super::*;
+//! The JSON object of a calibration session (`imu-lab calibrate --json`,
+//! `pico_imu.Calibration.to_dict()`): the report on the last model, the walk's steps and what was
+//! excluded.
+use serde::Serialize;
+
+use super::{Loaded, Outcome};
+use crate::lab::{Effect, Params};
 
 #[derive(Serialize)]
 struct JsonCandidate<'a> {
@@ -15,7 +19,7 @@ struct JsonCandidate<'a> {
 
 #[derive(Serialize)]
 struct JsonDiagnosis<'a> {
-    verdict: imu_cal::lab::Verdict,
+    verdict: crate::lab::Verdict,
     adequate: bool,
     underdetermined: bool,
     /// The parameters the data cannot identify (σ not small against their plausible range).
@@ -98,7 +102,7 @@ fn names(m: &[Effect]) -> Vec<&'static str> {
 }
 
 /// The one JSON object of `--json`.
-pub(super) fn json_out(l: &Loaded, run: &Outcome) -> Result<String> {
+pub fn json_out(l: &Loaded, run: &Outcome) -> String {
     let p = l.data.problem();
     let finite = |v: f64| v.is_finite().then_some(v);
     let report = &run.report;
@@ -175,12 +179,16 @@ pub(super) fn json_out(l: &Loaded, run: &Outcome) -> Result<String> {
         }),
         stop: run.stop.map(|s| s.to_string()),
     };
-    Ok(serde_json::to_string(&out)?)
+    serde_json::to_string(&out).expect("the calibration's JSON serialises")
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::{outcome, Data};
     use super::*;
+    use crate::mag::MagProblem;
+    use crate::sentinel::Sentinels;
+    use nalgebra::Vector3;
 
     #[test]
     fn json_has_the_documented_keys_and_only_the_models_params() {
@@ -199,7 +207,7 @@ mod tests {
             sentinels: Sentinels::default(),
             notes: vec![],
         };
-        let v: serde_json::Value = serde_json::from_str(&json_out(&l, &r).unwrap()).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&json_out(&l, &r)).unwrap();
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();
         for k in [
             "sensor",

@@ -1,0 +1,616 @@
+//! One noise-lab session on a column of samples, without I/O: the lab built from the samples and
+//! the options, the start model fitted, the walk from it (effects added one by one, or the
+//! automatic walk diagnose → add → refit), every model diagnosed, and the object `imu-lab fit
+//! --json` prints ([`Session::json`]). The CLI (`imu-lab fit`) and the Python package
+//! (`pico_imu.fit`) are thin callers of [`run`]; they only read files and print.
+use std::ops::Range;
+
+use allan::{deviation_segments, Stat, TauSet};
+
+use crate::diagnose::{diagnose, Diagnosis};
+use crate::lab::{reading, Model, NoiseLab, Record, Timing};
+use crate::practical::{recalibration, Recalibration};
+use crate::{Assessment, Edit, Effect, Fit, Point, Step, Stop, TermSpec};
+
+mod json;
+pub use json::*;
+
+/// The names the caller gives its options in messages (the CLI's flags, Python's keywords).
+#[derive(Debug, Clone, Copy)]
+pub struct Flags {
+    pub terms: &'static str,
+    pub add: &'static str,
+    pub max_steps: &'static str,
+    pub tolerance: &'static str,
+}
+
+impl Flags {
+    /// The CLI's flags (`--terms`, …).
+    pub const CLI: Flags = Flags {
+        terms: "--terms",
+        add: "--add",
+        max_steps: "--max-steps",
+        tolerance: "--tolerance",
+    };
+    /// Python's keyword arguments (`terms`, …).
+    pub const PYTHON: Flags = Flags {
+        terms: "terms",
+        add: "add",
+        max_steps: "max_steps",
+        tolerance: "tolerance",
+    };
+}
+
+/// What to fit and how to walk.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Start model's effects by name (empty: the lab's default, the five terms of Jaime et al.
+    /// plus the data's resolution when its values sit on a lattice).
+    pub terms: Vec<String>,
+    /// Effects added one step each (ignored with `auto`).
+    pub add: Vec<String>,
+    /// Walk automatically until the model is adequate or nothing helps.
+    pub auto: bool,
+    /// Most steps of the automatic walk (1 to 20).
+    pub max_steps: usize,
+    /// User-described effects (candidates, and nameable in `terms` and `add`).
+    pub user: Vec<Effect>,
+    /// Bias tolerance in the column's unit: the recalibration period from B, K and R.
+    pub tolerance: Option<f64>,
+    /// The options' names in messages.
+    pub flags: Flags,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            terms: Vec::new(),
+            add: Vec::new(),
+            auto: false,
+            max_steps: 6,
+            user: Vec::new(),
+            tolerance: None,
+            flags: Flags::CLI,
+        }
+    }
+}
+
+/// The column to analyse.
+#[derive(Debug, Clone)]
+pub struct Input<'a> {
+    /// Column name (`gx`, …), as reported.
+    pub column: &'a str,
+    /// Unit of the samples (e.g. deg/s).
+    pub unit: &'a str,
+    /// The samples, gaps removed (finite).
+    pub y: &'a [f64],
+    /// Sample rate [Hz].
+    pub rate_hz: f64,
+    /// Row ranges of `y` between gaps (at least one; no Allan difference spans a gap).
+    pub segments: &'a [Range<usize>],
+    /// Temperature [°C] beside each sample (NaN where missing), for the temperature effect.
+    pub temp: Option<&'a [f64]>,
+    /// What the time column says (gaps, irregular spacing), when there is one.
+    pub timing: Option<&'a Timing>,
+    /// Prefix of messages about the data (e.g. `rec.csv: column "gx"`).
+    pub label: &'a str,
+}
+
+/// One analysed model.
+#[derive(Debug, Clone)]
+pub struct Stage {
+    pub model: Model,
+    pub diagnosis: Diagnosis,
+    /// (τ [s], σ) of the record with the model's time-domain signals removed (empty without
+    /// any).
+    pub compensated: Vec<(f64, f64)>,
+}
+
+/// A finished session: the record's description, the models analysed (the start model first),
+/// the steps between them, why an automatic walk stopped and the recalibration period.
+#[derive(Debug, Clone)]
+pub struct Session {
+    pub column: String,
+    pub unit: String,
+    pub rate_hz: f64,
+    pub samples: usize,
+    pub timing: Option<Timing>,
+    /// The overlapping Allan deviation at octave τ the models were fitted to.
+    pub points: Vec<Point>,
+    /// Allan rows left out for want of an EDF.
+    pub skipped: usize,
+    /// The data's lattice step (LSB) in the column's unit, when its values sit on one.
+    pub lsb: Option<f64>,
+    pub stages: Vec<Stage>,
+    pub steps: Vec<Step<Effect>>,
+    pub stop: Option<Stop>,
+    pub recal: Option<Recalibration>,
+}
+
+impl Session {
+    /// The last model analysed.
+    pub fn last(&self) -> &Stage {
+        self.stages
+            .last()
+            .expect("a session has one stage at least")
+    }
+
+    /// The verdict sentence on the last model.
+    pub fn verdict(&self) -> String {
+        let l = self.last();
+        verdict(&l.model.fit, &l.model.assessment, l.diagnosis.adequate)
+    }
+
+    /// The unit of every parameter of the last model's terms, term by term: (parameter name,
+    /// unit), the amplitude first (in the column's unit × s^k, e.g. N in deg/s·√s), then the
+    /// shape parameters (Hz, s, …).
+    pub fn param_units(&self) -> Vec<Vec<(String, String)>> {
+        let f = &self.last().model.fit;
+        let warm_up = f.ctx.temp_avar.is_none();
+        f.terms
+            .iter()
+            .map(|t| {
+                std::iter::once((
+                    t.effect.amp_name().to_string(),
+                    t.effect.amp_unit(&self.unit, warm_up),
+                ))
+                .chain(t.specs.iter().map(|s| (s.name.clone(), s.unit.clone())))
+                .collect()
+            })
+            .collect()
+    }
+
+    /// (name, physical mechanism) of the last model's effects and of the effect the diagnosis
+    /// names, each once.
+    pub fn physics(&self) -> Vec<(String, String)> {
+        let l = self.last();
+        let mut out: Vec<(String, String)> = Vec::new();
+        for e in l
+            .model
+            .fit
+            .effects()
+            .iter()
+            .chain(l.diagnosis.missing.iter())
+        {
+            if !out.iter().any(|(n, _)| n == e.name()) {
+                out.push((e.name().to_string(), e.physics().to_string()));
+            }
+        }
+        out
+    }
+}
+
+/// The segments as the noise lab counts them: (index of the first sample as if the gaps had been
+/// recorded, length), the indices advanced by each gap's missing samples.
+pub fn nominal_segments(segments: &[Range<usize>], timing: Option<&Timing>) -> Vec<(u64, u64)> {
+    let gaps = timing.map(|t| t.gaps.as_slice()).unwrap_or(&[]);
+    segments
+        .iter()
+        .map(|r| {
+            let missing: u64 = gaps
+                .iter()
+                .filter(|g| g.row <= r.start)
+                .fold(0u64, |a, g| a.saturating_add(g.missing_samples));
+            (r.start as u64 + missing, (r.end - r.start) as u64)
+        })
+        .collect()
+}
+
+/// The options that no data is needed to refuse.
+pub fn check_options(o: &Options) -> Result<(), String> {
+    if let Some(tol) = o.tolerance {
+        if !(tol > 0.0 && tol.is_finite()) {
+            return Err(format!(
+                "{} {tol}: must be a positive number in the column's unit",
+                o.flags.tolerance
+            ));
+        }
+    }
+    if o.max_steps == 0 || o.max_steps > 20 {
+        return Err(format!(
+            "{} {}: give 1 to 20",
+            o.flags.max_steps, o.max_steps
+        ));
+    }
+    if o.auto && o.add.iter().any(|s| !s.trim().is_empty()) {
+        return Err(format!(
+            "{} with the automatic walk: give one or the other (the walk adds the effects it names)",
+            o.flags.add
+        ));
+    }
+    Ok(())
+}
+
+/// Effects by name (built-in or the user's), refusing an unknown one with the list of known.
+pub fn parse_effects(list: &[String], flag: &str, user: &[Effect]) -> Result<Vec<Effect>, String> {
+    list.iter()
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| {
+            Effect::parse(s)
+                .or_else(|| user.iter().find(|u| u.name() == s.trim()).cloned())
+                .ok_or_else(|| {
+                    format!(
+                        "{flag} {s:?}: unknown effect; expected one of {}{}",
+                        crate::ALL_EFFECTS.map(|e| e.name().to_string()).join(", "),
+                        if user.is_empty() {
+                            String::new()
+                        } else {
+                            format!(
+                                ", {}",
+                                user.iter()
+                                    .map(|u| u.name().to_string())
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            )
+                        }
+                    )
+                })
+        })
+        .collect()
+}
+
+/// The effects' names joined by " + ".
+pub fn names(effects: &[Effect]) -> String {
+    effects
+        .iter()
+        .map(|e| e.name().to_string())
+        .collect::<Vec<_>>()
+        .join(" + ")
+}
+
+/// The session: the lab of `input` (its overlapping Allan deviation at octave τ as the fit's
+/// points), the start model fitted and the walk from it, each model diagnosed, and the
+/// recalibration period when a tolerance is given. Errors name the option or the data.
+pub fn run(input: &Input, o: &Options) -> Result<Session, String> {
+    check_options(o)?;
+    if !(input.rate_hz > 0.0 && input.rate_hz.is_finite()) {
+        return Err(format!(
+            "{}: rate {} Hz: must be a positive number",
+            input.label, input.rate_hz
+        ));
+    }
+    let tau0 = 1.0 / input.rate_hz;
+    let segs: Vec<&[f64]> = slices(input.y, input.segments, input.label)?;
+    let rows = deviation_segments(&segs, tau0, Stat::Oadev, &TauSet::Octave)
+        .map_err(|e| format!("{}: {e}", input.label))?;
+    let (points, skipped) = Point::from_rows(&rows);
+    let lab = NoiseLab::new(Record {
+        y: input.y,
+        tau0,
+        segments: nominal_segments(input.segments, input.timing),
+        temp: input.temp,
+        timing: input.timing.cloned(),
+        points: points.clone(),
+        user_effects: o.user.clone(),
+    })
+    .map_err(|e| format!("{}: {e}", input.label))?;
+    let (models, mut steps, stop) = fit_and_walk(o, &lab)?;
+    let stages = analyse(&lab, input, models)?;
+    // the step records say what the diagnosis says of each model
+    for (i, s) in steps.iter_mut().enumerate() {
+        s.before.adequate = stages[i].diagnosis.adequate;
+        s.after.adequate = stages[i + 1].diagnosis.adequate;
+    }
+    let last = stages.last().expect("one stage");
+    let recal = o.tolerance.map(|tol| {
+        let (b, k, r, kc, rc) = drift_terms(&last.model.fit);
+        recalibration(b, k, r, kc, rc, tol)
+    });
+    Ok(Session {
+        column: input.column.to_string(),
+        unit: input.unit.to_string(),
+        rate_hz: input.rate_hz,
+        samples: input.y.len(),
+        timing: input.timing.cloned(),
+        points,
+        skipped,
+        lsb: lab.lsb,
+        stages,
+        steps,
+        stop,
+        recal,
+    })
+}
+
+/// The segments of `y`, refusing ranges outside it or out of order.
+fn slices<'a>(
+    y: &'a [f64],
+    segments: &[Range<usize>],
+    label: &str,
+) -> Result<Vec<&'a [f64]>, String> {
+    let mut end = 0;
+    segments
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            if r.start < end || r.start > r.end || r.end > y.len() {
+                return Err(format!(
+                    "{label}: segment {i} ({}..{}): must lie in the {} samples, in order, without overlap",
+                    r.start,
+                    r.end,
+                    y.len()
+                ));
+            }
+            end = r.end;
+            Ok(&y[r.clone()])
+        })
+        .collect()
+}
+
+/// The start model (`terms`, or the lab's default) fitted, then the walk from it: automatic
+/// with `auto`, else one step per `add`. Returns the models, the steps between them and, for
+/// `auto`, why the walk stopped.
+#[allow(clippy::type_complexity)]
+fn fit_and_walk(
+    o: &Options,
+    lab: &NoiseLab,
+) -> Result<(Vec<Model>, Vec<Step<Effect>>, Option<Stop>), String> {
+    let f = o.flags;
+    let base: Vec<TermSpec> = if o.terms.is_empty() {
+        lab.default_specs()
+    } else {
+        parse_effects(&o.terms, f.terms, &o.user)?
+            .into_iter()
+            .map(TermSpec::new)
+            .collect()
+    };
+    let adds = parse_effects(&o.add, f.add, &o.user)?;
+    for e in &adds {
+        if !e.repeatable() && base.iter().any(|s| s.effect == *e) {
+            return Err(format!("{} {e}: the model already has it", f.add));
+        }
+        if matches!(e, Effect::BiasStep) {
+            return Err(format!("{} bias_step: a step's instant comes from the change-point test; use --auto, which adds the steps it finds", f.add));
+        }
+        if matches!(e, Effect::Drift { .. }) {
+            return Err(format!("{} drift: a drift's shape comes from the time-domain test; use --auto, which adds the drift it finds", f.add));
+        }
+    }
+    let start = lab.fit(&base).map_err(|e| {
+        format!(
+            "fit of {}: {e}",
+            names(&base.iter().map(|s| s.effect.clone()).collect::<Vec<_>>())
+        )
+    })?;
+    if o.auto {
+        let w = crate::walk(lab, start, o.max_steps).map_err(|e| format!("{e}"))?;
+        return Ok((w.models, w.steps, Some(w.stop)));
+    }
+    let mut models: Vec<Model> = vec![start];
+    let mut steps: Vec<Step<Effect>> = Vec::new();
+    for e in &adds {
+        let prev = models.last().expect("one model");
+        let mut specs = prev.specs.clone();
+        if e.replaces_white() {
+            specs.retain(|s| s.effect != Effect::White);
+        }
+        specs.push(TermSpec::new(e.clone()));
+        let next = lab
+            .fit(&specs)
+            .map_err(|err| format!("fit with {e}: {err}"))?;
+        let before = summary(lab, prev);
+        steps.push(Step {
+            edit: Edit {
+                add: vec![e.clone()],
+                remove: if e.replaces_white()
+                    && prev.specs.iter().any(|s| s.effect == Effect::White)
+                {
+                    vec![Effect::White]
+                } else {
+                    vec![]
+                },
+            },
+            before,
+            after: summary(lab, &next),
+            p_value: f64::NAN,
+            reading: reading(&next.fit, e),
+            reason: String::new(),
+        });
+        models.push(next);
+    }
+    Ok((models, steps, None))
+}
+
+/// Each model diagnosed, with the Allan deviation of the record with its time-domain signals
+/// removed.
+fn analyse(lab: &NoiseLab, input: &Input, models: Vec<Model>) -> Result<Vec<Stage>, String> {
+    let tau0 = 1.0 / input.rate_hz;
+    models
+        .into_iter()
+        .map(|m| {
+            let d = diagnose(lab, &m).map_err(|e| format!("{e}"))?;
+            let compensated = match lab.compensated(&m) {
+                Some(yc) => {
+                    let segs: Vec<&[f64]> = input.segments.iter().map(|r| &yc[r.clone()]).collect();
+                    deviation_segments(&segs, tau0, Stat::Oadev, &TauSet::Octave)
+                        .map_err(|e| format!("{e}"))?
+                        .iter()
+                        .map(|r| (r.tau, r.dev))
+                        .collect()
+                }
+                None => Vec::new(),
+            };
+            Ok(Stage {
+                model: m,
+                diagnosis: d,
+                compensated,
+            })
+        })
+        .collect()
+}
+
+fn summary(lab: &NoiseLab, m: &Model) -> crate::Summary {
+    <NoiseLab as model_lab::Lab>::summary(lab, m)
+}
+
+/// B, K, R with their conservative values (+1σ, or the 95 % upper end when not detected).
+pub fn drift_terms(f: &Fit) -> (f64, f64, f64, f64, f64) {
+    let get = |e: Effect| -> (f64, f64) {
+        match f.term(&e) {
+            Some(t) if t.detected => (t.amplitude(), t.amplitude() + t.amplitude_sigma()),
+            Some(t) => (0.0, t.amplitude_interval().1),
+            None => (0.0, 0.0),
+        }
+    };
+    let (b, _) = get(Effect::Flicker);
+    let (k, kc) = get(Effect::RateRandomWalk);
+    let (r, rc) = get(Effect::RateRamp);
+    (b, k, r, kc, rc)
+}
+
+/// `x` with `sig` significant digits, fixed notation for 1e-3 ≤ |x| < 1e5, else scientific.
+pub fn sig(x: f64, sig: usize) -> String {
+    if !x.is_finite() {
+        return "—".into();
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let e = x.abs().log10().floor() as i32;
+    if (-3..5).contains(&e) {
+        let dec = (sig as i32 - 1 - e).max(0) as usize;
+        format!("{:.*}", dec, x)
+    } else {
+        format!("{:.*e}", sig.saturating_sub(1), x)
+    }
+}
+
+/// The verdict sentence. `adequate` is the lab's whole verdict (the Allan test, the time-domain
+/// checks and the candidates' nested tests).
+pub fn verdict(fit: &Fit, a: &Assessment, adequate: bool) -> String {
+    if a.adequate && !adequate {
+        return format!(
+            "NOT ADEQUATE — the Allan curve alone passes (χ²/dof = {}, global p = {}), but the \
+             record shows an effect the model lacks (see the diagnosis).",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2)
+        );
+    }
+    if a.adequate {
+        format!(
+            "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (all |z| ≤ {:.1}).",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2),
+            a.threshold
+        )
+    } else {
+        let ranges: Vec<String> = if a.failing.is_empty() {
+            vec!["(no single range: the misfit is spread over all τ)".into()]
+        } else {
+            a.failing
+                .iter()
+                .map(|r| {
+                    format!(
+                        "τ = {}–{} s (measured {} model, up to |z| = {:.1})",
+                        sig(r.lo, 3),
+                        sig(r.hi, 3),
+                        if r.sign > 0 { "above" } else { "below" },
+                        r.worst_z
+                    )
+                })
+                .collect()
+        };
+        format!(
+            "NOT ADEQUATE — χ²/dof = {}, global p = {}; failing: {}.",
+            sig(fit.chi2_dof(), 3),
+            sig(a.p_value, 2),
+            ranges.join("; ")
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn white(n: usize, key: u64, sigma: f64) -> Vec<f64> {
+        let mut g = crate::test_noise(key);
+        (0..n).map(|_| sigma * g()).collect()
+    }
+
+    fn input<'a>(y: &'a [f64], segments: &'a [Range<usize>]) -> Input<'a> {
+        Input {
+            column: "gx",
+            unit: "deg/s",
+            y,
+            rate_hz: 100.0,
+            segments,
+            temp: None,
+            timing: None,
+            label: "test",
+        }
+    }
+
+    /// White noise of a known size: the session's white term finds it within its σ-based
+    /// interval, the JSON says what the session holds, and the walk's first model is the start.
+    #[test]
+    fn white_noise_session_and_its_json() {
+        for key in [3u64, 17, 91] {
+            let sigma = 0.01 + 0.01 * (key % 5) as f64;
+            let y = white(20_000, key, sigma);
+            let segs = [Range {
+                start: 0,
+                end: y.len(),
+            }];
+            let s = run(&input(&y, &segs), &Options::default()).unwrap();
+            assert_eq!(s.stages.len(), 1);
+            assert!(s.steps.is_empty() && s.stop.is_none());
+            // N = σ·√τ0 for white rate noise sampled at 100 Hz
+            let n_true = sigma * (0.01f64).sqrt();
+            let t = s.last().model.fit.term(&Effect::White).unwrap();
+            assert!(
+                (t.amplitude() - n_true).abs() < 4.0 * t.amplitude_sigma() + 0.03 * n_true,
+                "N = {} ± {} against {n_true}",
+                t.amplitude(),
+                t.amplitude_sigma()
+            );
+            let j: serde_json::Value = serde_json::from_str(&s.json_string()).unwrap();
+            assert_eq!(j["samples"], 20_000);
+            assert_eq!(j["column"], "gx");
+            assert_eq!(j["adev"].as_array().unwrap().len(), s.points.len());
+            assert!(j["timing"].is_null());
+            let units = s.param_units();
+            assert_eq!(units.len(), s.last().model.fit.terms.len());
+            assert!(units.iter().all(|u| !u[0].1.is_empty()));
+        }
+    }
+
+    #[test]
+    fn options_and_segments_are_refused_by_name() {
+        let y = white(3000, 5, 0.01);
+        let segs = [Range {
+            start: 0,
+            end: y.len(),
+        }];
+        let tol = Options {
+            tolerance: Some(-1.0),
+            ..Options::default()
+        };
+        assert!(run(&input(&y, &segs), &tol)
+            .unwrap_err()
+            .starts_with("--tolerance -1"));
+        let py = Options {
+            max_steps: 0,
+            flags: Flags::PYTHON,
+            ..Options::default()
+        };
+        assert!(run(&input(&y, &segs), &py)
+            .unwrap_err()
+            .starts_with("max_steps 0"));
+        let unknown = Options {
+            terms: vec!["whit".into()],
+            ..Options::default()
+        };
+        assert!(run(&input(&y, &segs), &unknown)
+            .unwrap_err()
+            .starts_with("--terms \"whit\": unknown effect"));
+        let bad = [0..10, 5..20];
+        let e = run(&input(&y, &bad), &Options::default()).unwrap_err();
+        assert!(e.contains("segment 1 (5..20)"), "{e}");
+        let beyond = [Range {
+            start: 0,
+            end: y.len() + 1,
+        }];
+        assert!(run(&input(&y, &beyond), &Options::default()).is_err());
+    }
+}
