@@ -384,8 +384,11 @@ fn slots_and_stamps_follow_the_parts_own_clocks() {
         "{}",
         st.imu_period_ns
     );
+    // The magnetometer's guard looks (clock/sample_clock.rs) make the period be measured again
+    // when a sample is found before the predicted interval, so after 12 s it has settled to
+    // within 10 ppm (50 ns) rather than 1 ns.
     assert!(
-        st.mag_period_ns.abs_diff(5_065_856) <= 5,
+        st.mag_period_ns.abs_diff(5_065_856) <= 50,
         "{}",
         st.mag_period_ns
     );
