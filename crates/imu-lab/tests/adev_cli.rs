@@ -138,3 +138,30 @@ fn bounded_mode_refuses_non_integer_counts() {
         "{err}"
     );
 }
+
+/// `imu-lab adev … | head`: the reader closes the pipe after two lines of a table of every τ;
+/// the tool stops quietly with success instead of panicking on the closed stdout.
+#[test]
+fn a_reader_that_closes_the_pipe_early_is_no_panic() {
+    use std::io::{BufRead, BufReader};
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("long.csv");
+    let p = p.to_str().unwrap().to_string();
+    common::simulate_gyro(&p, 7, &[] as &[&str]);
+    let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("imu-lab"))
+        .args(["adev", &p, "--column", "gz", "--taus", "all"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    for _ in 0..2 {
+        lines.next().unwrap().unwrap();
+    }
+    drop(lines);
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(out.status.success(), "{:?}: {err}", out.status);
+}
