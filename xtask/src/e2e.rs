@@ -271,21 +271,7 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
         check_faults(&session, &imu, &mag, &faults, &mut r);
         check_calibration(&session, &imu, &mut r);
     }
-    writeln!(r.text, "\nwall time: {:.1} s", wall.elapsed().as_secs_f64())?;
-    std::fs::write(out.join("report.md"), &r.text)?;
-    println!("{}", r.text);
-    if !r.failures.is_empty() {
-        bail!(
-            "end-to-end test `{scenario}` FAILED:\n  {}",
-            r.failures.join("\n  ")
-        );
-    }
-    println!(
-        "end-to-end test `{scenario}` passed ({:.1} s wall); report in {}",
-        wall.elapsed().as_secs_f64(),
-        out.join("report.md").display()
-    );
-    Ok(())
+    r.finish(scenario, &out, wall)
 }
 
 fn print_log_tail(log: &Path) {
@@ -301,6 +287,32 @@ fn print_log_tail(log: &Path) {
 struct Report {
     text: String,
     failures: Vec<String>,
+}
+
+impl Report {
+    /// The wall time, the report written to `out/report.md` and printed, and the verdict: an
+    /// error listing the failures, or a line saying where the report is.
+    fn finish(mut self, scenario: &str, out: &std::path::Path, wall: Instant) -> Result<()> {
+        writeln!(
+            self.text,
+            "\nwall time: {:.1} s",
+            wall.elapsed().as_secs_f64()
+        )?;
+        std::fs::write(out.join("report.md"), &self.text)?;
+        println!("{}", self.text);
+        if !self.failures.is_empty() {
+            bail!(
+                "end-to-end test `{scenario}` FAILED:\n  {}",
+                self.failures.join("\n  ")
+            );
+        }
+        println!(
+            "end-to-end test `{scenario}` passed ({:.1} s wall); report in {}",
+            wall.elapsed().as_secs_f64(),
+            out.join("report.md").display()
+        );
+        Ok(())
+    }
 }
 
 impl Report {

@@ -259,23 +259,9 @@ pub fn orientation(args: &super::E2eArgs) -> Result<()> {
     }
     writeln!(
         r.text,
-        "\nheading error before → after calibration: {h0:.2}° → {h:.2}° rms\n\nwall time: {:.1} s",
-        wall.elapsed().as_secs_f64()
+        "\nheading error before → after calibration: {h0:.2}° → {h:.2}° rms"
     )?;
-    std::fs::write(out.join("report.md"), &r.text)?;
-    println!("{}", r.text);
-    if !r.failures.is_empty() {
-        bail!(
-            "end-to-end test `orientation` FAILED:\n  {}",
-            r.failures.join("\n  ")
-        );
-    }
-    println!(
-        "end-to-end test `orientation` passed ({:.1} s wall); report in {}",
-        wall.elapsed().as_secs_f64(),
-        out.join("report.md").display()
-    );
-    Ok(())
+    r.finish("orientation", &out, wall)
 }
 
 /// One pass with the identity calibration, the part's calibration uploaded, a second pass.

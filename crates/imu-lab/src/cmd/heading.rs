@@ -62,26 +62,8 @@ struct Truth {
 impl Truth {
     fn read(path: &PathBuf) -> Result<Truth> {
         let shown = path.display();
-        let mut r = csv::ReaderBuilder::new()
-            .comment(Some(b'#'))
-            .from_path(path)
-            .with_context(|| format!("cannot open {shown}"))?;
-        let header = r
-            .headers()
-            .with_context(|| format!("{shown}: header"))?
-            .clone();
-        let col = |name: &str| {
-            header
-                .iter()
-                .position(|h| h.trim() == name)
-                .with_context(|| {
-                    format!(
-                        "{shown}: no `{name}` column (has: {})",
-                        header.iter().collect::<Vec<_>>().join(", ")
-                    )
-                })
-        };
-        let (it, ih, ip) = (col("t")?, col("heading_true")?, col("pitch_true")?);
+        let (mut r, cols) = open_columns(path, &["t", "heading_true", "pitch_true"], "")?;
+        let [it, ih, ip] = [cols[0], cols[1], cols[2]];
         let (mut t, mut heading, mut pitch) = (Vec::new(), Vec::new(), Vec::new());
         for (i, rec) in r.records().enumerate() {
             let rec = rec.with_context(|| format!("{shown}: row {}", i + 2))?;
@@ -135,18 +117,12 @@ impl Truth {
 /// filter not converging (`ahrs` ≠ 0), the truth's pitch within `max_pitch`.
 fn device_errors(path: &PathBuf, truth: &Truth, max_pitch: f64) -> Result<Vec<f64>> {
     let shown = path.display();
-    let mut r = csv::Reader::from_path(path).with_context(|| format!("cannot open {shown}"))?;
-    let header = r
-        .headers()
-        .with_context(|| format!("{shown}: header"))?
-        .clone();
-    let col = |name: &str| {
-        header
-            .iter()
-            .position(|h| h.trim() == name)
-            .with_context(|| format!("{shown}: no `{name}` column: not a recording of `imu-lab record` with the device's estimates"))
-    };
-    let (it, ih, is) = (col("t")?, col("heading")?, col("ahrs")?);
+    let (mut r, cols) = open_columns(
+        path,
+        &["t", "heading", "ahrs"],
+        ": not a recording of `imu-lab record` with the device's estimates",
+    )?;
+    let [it, ih, is] = [cols[0], cols[1], cols[2]];
     let mut out = Vec::new();
     for (i, rec) in r.records().enumerate() {
         let rec = rec.with_context(|| format!("{shown}: row {}", i + 2))?;
@@ -327,4 +303,37 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// A CSV file (lines starting with `#` skipped) and the positions of the columns `names`; a
+/// missing one is named with the file's columns and `why` appended.
+fn open_columns(
+    path: &PathBuf,
+    names: &[&str],
+    why: &str,
+) -> Result<(csv::Reader<std::fs::File>, Vec<usize>)> {
+    let shown = path.display();
+    let mut r = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .with_context(|| format!("cannot open {shown}"))?;
+    let header = r
+        .headers()
+        .with_context(|| format!("{shown}: header"))?
+        .clone();
+    let cols = names
+        .iter()
+        .map(|name| {
+            header
+                .iter()
+                .position(|h| h.trim() == *name)
+                .with_context(|| {
+                    format!(
+                        "{shown}: no `{name}` column (has: {}){why}",
+                        header.iter().collect::<Vec<_>>().join(", ")
+                    )
+                })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok((r, cols))
 }
