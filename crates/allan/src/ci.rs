@@ -462,7 +462,14 @@ pub fn norm_ppf(p: f64) -> f64 {
     let x = norm_ppf_approx(p);
     let e = norm_cdf(x) - p;
     let u = e * libm::sqrt(2.0 * core::f64::consts::PI) * libm::exp(x * x / 2.0);
-    x - u / (1.0 + x * u / 2.0)
+    let refined = x - u / (1.0 + x * u / 2.0);
+    // In the far tails (p below ~1e-290) e^{x²/2} overflows and the Halley step is 0·∞: the
+    // rational approximation is then the answer (its relative error stays below 1.2e-9).
+    if refined.is_finite() {
+        refined
+    } else {
+        x
+    }
 }
 
 /// Acklam's rational approximation of the standard normal quantile (|error| < 1.2e-9).
@@ -615,6 +622,22 @@ mod tests {
         assert!((norm_cdf(1.0) - 0.841_344_746_068_543).abs() < 1e-14);
         assert!((norm_ppf(0.975) - 1.959_963_984_540_054).abs() < 1e-13);
         assert!((norm_ppf(1e-10) + 6.361_340_902_404_056).abs() < 1e-9);
+        // The far tails are finite and ordered down to the smallest subnormal: there the Halley
+        // step's e^{x²/2} overflows (it made a z-score NaN, and a whole fit fail).
+        let mut last = f64::NEG_INFINITY;
+        for p in [5e-324, 1e-320, 1e-310, 1e-300, 1e-290, 1e-200] {
+            let z = norm_ppf(p);
+            assert!(z.is_finite() && z > last, "Φ⁻¹({p:e}) = {z}");
+            // the quantile's density: ln p ≈ −z²/2 − ln(−z√(2π)) within 1e-3 relative
+            let lp = -z * z / 2.0 - libm::log(-z * libm::sqrt(2.0 * core::f64::consts::PI));
+            assert!(
+                libm::fabs(lp / libm::log(p) - 1.0) < 1e-3,
+                "Φ⁻¹({p:e}) = {z}"
+            );
+            let q = libm::fmax(p, 1e-10);
+            assert!(libm::fabs(norm_ppf(1.0 - q) + norm_ppf(q)) < 1e-6);
+            last = z;
+        }
         // Upper tail keeps relative accuracy where 1 − CDF would cancel: Q(χ²=200, ν=10).
         let sf = chi2_sf(200.0, 10.0);
         assert!(sf > 0.0 && sf < 1e-35, "{sf}");

@@ -86,6 +86,22 @@ mod tests {
         assert_eq!(z_score(0.2, 0.0, 0.5), -38.0);
         assert_eq!(z_score(1.0, f64::NAN, 0.5), 38.0);
         assert_eq!(z_score(1.0, 10.0, 0.0), 38.0);
+        // far out in the upper tail (a step the model lacks, 70× its variance at 22 EDF: the
+        // survival function is subnormal, ~1e-309, where Φ⁻¹ once returned NaN): every
+        // z-score is finite and rises with the ratio, on a dense grid through that band
+        for nu in [2.5, 5.0, 9.8, 21.778, 50.0, 100.0] {
+            let mut last = f64::NEG_INFINITY;
+            for i in 0..400 {
+                let ratio = 10f64.powf(1.0 + 3.0 * i as f64 / 399.0);
+                let z = z_score(ratio.sqrt(), nu, 1.0);
+                assert!(
+                    z.is_finite() && z >= last,
+                    "z({ratio}, {nu}) = {z} after {last}"
+                );
+                last = z;
+            }
+        }
+        assert!(z_score((70.4f64).sqrt(), 21.778, 1.0) > 30.0);
         let z = z_score(1.0, 10.0, 1.0);
         assert!(z.is_finite() && z.abs() < 1.0, "{z}");
     }
