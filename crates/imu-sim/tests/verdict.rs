@@ -261,9 +261,10 @@ fn no_statistic_is_ever_nan() {
 
 /// The verdict is calibrated under every kind of effect: records made of a true model (white
 /// noise plus one effect of each kind — a power law, correlated noise, a line, the sensor's filter,
-/// a resonance, a step, a warm-up), fitted with that model, give χ²/dof with a median near 1 and
-/// z-scores near N(0, 1). A covariance that mistreats an effect (the deterministic ones, above
-/// all) shows as a median far from 1 or z-scores far too wide.
+/// a resonance, a step, a warm-up), each with parameters drawn at random per record, fitted with
+/// that model, give χ²/dof with a median in 0.8–1.25 and z-scores near N(0, 1). A covariance
+/// that mistreats an effect (the deterministic ones, above all) shows as a median far from 1 or
+/// z-scores far too wide or too narrow.
 #[test]
 fn the_verdict_is_calibrated_under_every_effect() {
     let fixed = |e: Effect, theta: Vec<f64>| TermSpec {
@@ -273,71 +274,103 @@ fn the_verdict_is_calibrated_under_every_effect() {
     };
     let n_white = 5e-3;
     let secs = 655.36;
-    // (name, extra simulated effect, its term as the lab states the true model)
-    let cases: Vec<(&str, SimEffect, TermSpec)> = vec![
+    let runs = 40;
+    type Draw = Box<dyn Fn(&mut Rng) -> (SimEffect, TermSpec)>;
+    // (name, a draw of the extra simulated effect and its term as the lab states the true model)
+    let cases: Vec<(&str, Draw)> = vec![
         (
             "flicker",
-            SimEffect::Flicker { b: 3e-3 },
-            TermSpec::new(Effect::Flicker),
+            Box::new(|r: &mut Rng| {
+                let b = 2e-3 + 4e-3 * r.uniform();
+                (SimEffect::Flicker { b }, TermSpec::new(Effect::Flicker))
+            }),
         ),
         (
             "markov",
-            SimEffect::Markov {
-                sigma: 4e-3,
-                tau_c: 2.0,
-            },
-            fixed(Effect::Markov, vec![2.0]),
+            Box::new(move |r: &mut Rng| {
+                let sigma = 3e-3 + 5e-3 * r.uniform();
+                let tau_c = 0.5 * 20f64.powf(r.uniform());
+                (
+                    SimEffect::Markov { sigma, tau_c },
+                    fixed(Effect::Markov, vec![tau_c]),
+                )
+            }),
         ),
         (
             "sinusoid",
-            SimEffect::Sinusoid {
-                amplitude: 4e-3,
-                freq_hz: 3.7,
-            },
-            fixed(Effect::Sinusoid, vec![3.7]),
+            Box::new(move |r: &mut Rng| {
+                let amplitude = 2e-3 + 6e-3 * r.uniform();
+                let freq_hz = 20f64.powf(r.uniform());
+                (
+                    SimEffect::Sinusoid { amplitude, freq_hz },
+                    fixed(Effect::Sinusoid, vec![freq_hz]),
+                )
+            }),
         ),
         (
             "resonance",
-            SimEffect::Resonance {
-                sigma: 4e-3,
-                f0_hz: 12.0,
-                zeta: 0.15,
-            },
-            fixed(Effect::Resonance, vec![12.0, 0.15]),
+            Box::new(move |r: &mut Rng| {
+                let sigma = 3e-3 + 5e-3 * r.uniform();
+                let f0_hz = 5.0 * 6f64.powf(r.uniform());
+                let zeta = 0.05 * 10f64.powf(r.uniform());
+                (
+                    SimEffect::Resonance { sigma, f0_hz, zeta },
+                    fixed(Effect::Resonance, vec![f0_hz, zeta]),
+                )
+            }),
         ),
         (
             "bias_step",
-            SimEffect::BiasStep {
-                at_s: 0.4 * secs,
-                size: 0.05,
-            },
-            fixed(Effect::BiasStep, vec![0.4 * secs]),
+            Box::new(move |r: &mut Rng| {
+                let at_s = (0.15 + 0.7 * r.uniform()) * secs;
+                let sign = if r.uniform() < 0.5 { -1.0 } else { 1.0 };
+                let size = sign * (0.02 + 0.08 * r.uniform());
+                (
+                    SimEffect::BiasStep { at_s, size },
+                    fixed(Effect::BiasStep, vec![at_s]),
+                )
+            }),
         ),
         (
             "warm-up",
-            SimEffect::WarmUp {
-                amplitude: 0.1,
-                tau_s: 40.0,
-            },
-            fixed(Effect::Temperature, vec![40.0]),
+            Box::new(move |r: &mut Rng| {
+                let amplitude = 0.05 + 0.15 * r.uniform();
+                let tau_s = 20.0 * 6f64.powf(r.uniform());
+                (
+                    SimEffect::WarmUp { amplitude, tau_s },
+                    fixed(Effect::Temperature, vec![tau_s]),
+                )
+            }),
         ),
     ];
-    let mut rng = Rng::new(0xca11_b4a7);
+    // a fixed stream of draws by default (the bounds hold for it); PICO_IMU_VERDICT_SEED draws
+    // another set
+    let seed = std::env::var("PICO_IMU_VERDICT_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0xca11_b4a7u64);
+    eprintln!("draws from seed {seed}");
+    let mut rng = Rng::new(seed);
     let mut failures = Vec::new();
-    for (name, extra, spec) in cases {
+    for (name, draw) in cases {
         let mut chi = Vec::new();
         let (mut zs, mut zz, mut nz) = (0.0, 0.0, 0.0);
-        for _ in 0..16 {
+        for _ in 0..runs {
+            let (extra, spec) = draw(&mut rng);
+            let sim_seed = rng.next_u64() % 100_000;
+            let what = format!("{extra:?}, simulator seed {sim_seed}");
             let c = cfg(
                 100.0,
                 secs,
-                rng.next_u64() % 100_000,
+                sim_seed,
                 vec![SimEffect::White { n: n_white }, extra],
             );
             let a = c.analyse();
             let lab = NoiseLab::new(a.record(None)).expect("lab");
             let specs = vec![TermSpec::new(Effect::White), spec.clone()];
-            let m = lab.fit(&specs).expect("fit of the true model");
+            let m = lab
+                .fit(&specs)
+                .unwrap_or_else(|e| panic!("{name}: fit of the true model on {what}: {e}"));
             all_finite(&m).unwrap_or_else(|e| panic!("{name}: {e}"));
             chi.push(m.fit.chi2_dof());
             for z in &m.assessment.z {
@@ -347,17 +380,85 @@ fn the_verdict_is_calibrated_under_every_effect() {
             }
         }
         chi.sort_by(f64::total_cmp);
-        let median = 0.5 * (chi[7] + chi[8]);
+        let median = 0.5 * (chi[chi.len() / 2 - 1] + chi[chi.len() / 2]);
         let mean_z = zs / nz;
         let sd_z = (zz / nz - mean_z * mean_z).sqrt();
         let line = format!("{name}: median χ²/dof {median:.2}, z mean {mean_z:+.2} sd {sd_z:.2}");
         eprintln!("{line}");
-        // The localised signals' covariance is a bound (fit/solve.rs, SIGNAL_GAIN): with a
-        // step or a warm-up the median sits at 0.6–0.7; the coherent-mean form it replaced put
-        // it far above 1.
-        if !((0.5..=1.35).contains(&median) && mean_z.abs() < 0.35 && (0.7..1.4).contains(&sd_z)) {
+        // Before the localised signals had their exact noise sums and the estimates' share taken
+        // out (fit/solve.rs), a step or a warm-up put the median at 0.6–0.7; the coherent-mean
+        // form before that put it far above 1.
+        if !((0.8..=1.25).contains(&median) && mean_z.abs() < 0.3 && (0.7..1.3).contains(&sd_z)) {
             failures.push(line);
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// A time-domain finding that the one criterion refuses (its refit does not lower the criterion)
+/// is said, not a veto: on control data that pass the Allan test, a step put among the findings
+/// at a random instant is tried, refused, and the model is adequate, with a diagnosis that names
+/// the finding and why it was not taken; the walk stops adequate without adding it.
+#[test]
+fn a_finding_the_criterion_refuses_is_said_and_is_no_veto() {
+    let mut rng = Rng::new(0x0f1d_1e55);
+    let mut tried = 0;
+    for run in 0..3 {
+        let secs = 300.0 + 300.0 * rng.uniform();
+        let seed = rng.next_u64() % 100_000;
+        let at = (0.2 + 0.6 * rng.uniform()) * secs;
+        let c = cfg(
+            100.0,
+            secs,
+            seed,
+            vec![
+                SimEffect::White { n: 5e-3 },
+                SimEffect::Flicker {
+                    b: 1e-3 + 3e-3 * rng.uniform(),
+                },
+            ],
+        );
+        let a = c.analyse();
+        let lab = NoiseLab::new(a.record(None)).expect("lab");
+        let specs = vec![TermSpec::new(Effect::White), TermSpec::new(Effect::Flicker)];
+        let mut m = lab.fit(&specs).expect("fit");
+        if !(m.adequate && m.assessment.adequate) {
+            // a control that fails its own test at the default level (rare): not this test's case
+            continue;
+        }
+        let text = format!("a bias step near t = {at:.1} s (put here by the test)");
+        m.findings.push(noise_model::lab::Finding {
+            effect: Effect::BiasStep,
+            spec: TermSpec {
+                theta: Some(vec![at]),
+                theta_fixed: true,
+                ..TermSpec::new(Effect::BiasStep)
+            },
+            p_value: 1e-4,
+            text: text.clone(),
+        });
+        m.adequate = false;
+        let what = format!("run {run}: {secs:.0} s, seed {seed}, step at {at:.1} s");
+        let d = noise_model::diagnose(&lab, &m).expect("diagnosis");
+        assert!(d.missing.is_none(), "{what}: {}", d.explanation);
+        assert!(d.adequate, "{what}: {}", d.explanation);
+        assert!(
+            d.explanation.contains("adequate on the one criterion")
+                && d.explanation.contains(&text),
+            "{what}: {}",
+            d.explanation
+        );
+        let w = walk(&lab, m, 4).expect("walk");
+        assert!(
+            w.steps.is_empty() && w.stop == Stop::Adequate,
+            "{what}: {} steps, {:?}",
+            w.steps.len(),
+            w.stop
+        );
+        tried += 1;
+    }
+    assert!(
+        tried >= 2,
+        "only {tried} of 3 controls passed their own test"
+    );
 }

@@ -172,6 +172,18 @@ pub trait Lab {
     /// The candidate edits of a model that is not adequate, refitted and tested, in the lab's
     /// order of preference (the walk takes the first admissible one).
     fn candidates(&self, model: &Self::Model) -> Result<Candidates<Self>, Self::Error>;
+
+    /// Whether a model that no candidate improves is adequate: by default its summary's
+    /// verdict. A lab whose verdict also counts findings that are tried as candidates (the noise
+    /// lab's time-domain findings) settles on the one criterion instead: a finding the criterion
+    /// refuses does not keep the model from being adequate.
+    fn settled(
+        &self,
+        model: &Self::Model,
+        _refused: &[Candidate<Self::Effect, Self::Model>],
+    ) -> bool {
+        self.summary(model).adequate
+    }
 }
 
 /// The result of a walk.
@@ -209,7 +221,7 @@ pub fn walk<L: Lab>(
         let mut before = lab.summary(cur);
         let cands = lab.candidates(cur)?;
         let Some(best) = cands.iter().position(|c| c.admissible) else {
-            let stop = if before.adequate {
+            let stop = if lab.settled(cur, &cands) {
                 Stop::Adequate
             } else {
                 Stop::NothingHelps

@@ -473,6 +473,65 @@ impl CovCache {
     }
 }
 
+/// The shape of a deterministic signal localised in time, as its Allan differences see it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SignalShape {
+    /// A bias step: at averaging factor m its differences are a triangle 2m samples wide, whose
+    /// autocorrelation is the cubic B-spline m³·B₃(d/m).
+    Step,
+    /// An exponential e^{−k/κ} from the record's start (a warm-up), κ in samples: its
+    /// differences at any m are the same exponential, autocorrelation ∝ e^{−|d|/κ}.
+    Exponential { kappa: f64 },
+}
+
+/// Σ_d c_m(d)·ρ(d): the noise's covariance of the Allan differences at averaging factor m
+/// (partial-sum units, [`second_diff_cov`] of every component) weighted by the normalised
+/// autocorrelation ρ of a localised signal's differences (ρ(0) = 1), summed over every lag up to
+/// `span` samples. With D_i the signal's differences and N_i the noise's,
+/// Var(Σ D_i N_i) = Σ_d c(d)·R_D(d) = Σ D_i² · (this sum), exact for a step or an exponential in
+/// the record's interior; white noise of q per sample gives q·m² for a step (the Allan filter's
+/// gain seen by a triangle) and less for a slow exponential, red noise more.
+pub fn signal_noise_sum(comps: &[Component], m: f64, shape: SignalShape, span: f64) -> f64 {
+    let c = |d: f64| -> f64 {
+        comps
+            .iter()
+            .map(|k| k.coef * second_diff_cov(&k.structure, m, m, d))
+            .sum()
+    };
+    if shape == SignalShape::Step && m <= 64.0 {
+        // short triangles exactly: tri(u) = min(u, 2m − u), u = 0…2m
+        let mi = m.round().max(1.0) as usize;
+        let tri: Vec<f64> = (0..=2 * mi).map(|u| u.min(2 * mi - u) as f64).collect();
+        let r = |d: usize| -> f64 { tri.iter().zip(&tri[d..]).map(|(a, b)| a * b).sum() };
+        let r0 = r(0);
+        return c(0.0) + 2.0 * (1..=2 * mi).map(|d| c(d as f64) * r(d) / r0).sum::<f64>();
+    }
+    let (rho, hi): (Box<dyn Fn(f64) -> f64>, f64) = match shape {
+        SignalShape::Step => (
+            Box::new(move |d: f64| crate::structure::bspline3(d / m) * 1.5),
+            2.0 * m,
+        ),
+        SignalShape::Exponential { kappa } => {
+            if !(kappa > 0.0 && kappa.is_finite()) {
+                return f64::NAN;
+            }
+            (
+                Box::new(move |d: f64| (-d / kappa).exp()),
+                (50.0 * kappa).min(span),
+            )
+        }
+    };
+    let hi = hi.floor().max(0.0) as i64;
+    let mut acc = [c(0.0)];
+    let mut half = [0.0];
+    let mi = m.round() as i64;
+    let mut kinks = vec![mi, 2 * mi];
+    let mut f = |d: f64, out: &mut [f64]| out[0] = c(d) * rho(d);
+    lag_sum(1, hi, &mut kinks, 32, &mut f, &mut half);
+    acc[0] += 2.0 * half[0];
+    acc[0]
+}
+
 fn pair_key(a: &Structure, b: &Structure) -> (Key, Key) {
     if a.key() <= b.key() {
         (a.key(), b.key())

@@ -263,10 +263,10 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
                 .map(|c| format!("{} ({}: {})", c.edit, fmt_p(c.p_value), c.reason))
                 .collect();
             format!(
-                "The Allan curve passes (χ²/dof = {:.2}, {}); what is left is in the time series \
-                 alone: {}. Added to the model, {} — the record cannot tell {} from the model's \
-                 own noise at this length. Nothing else is missing; a longer record or a repeated \
-                 run decides.",
+                "The model is adequate on the one criterion: the Allan curve passes (χ²/dof = \
+                 {:.2}, {}), and what is left is in the time series alone: {}. Added to the \
+                 model, {} — the record cannot tell {} from the model's own noise at this \
+                 length. Nothing else is missing; a longer record or a repeated run decides.",
                 m.fit.chi2_dof(),
                 fmt_p(m.assessment.p_value),
                 m.findings
@@ -310,7 +310,8 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
         }
     };
     Ok(Diagnosis {
-        adequate: false,
+        // the one criterion decides: a time-domain finding it refuses is said, not a veto
+        adequate: best.is_none() && m.assessment.adequate,
         missing: best.map(|c| c.edit.add[0].clone()),
         replaces: best.map(|c| c.edit.remove.clone()).unwrap_or_default(),
         tau_range: misfit_range(&m.assessment),

@@ -23,7 +23,7 @@
 //! **Uncertainties.** Cov = (JᵀC⁻¹J)⁻¹ at the optimum over every coefficient and free non-linear
 //! parameter, scaled by χ²/dof when that exceeds 1 (Bevington & Robinson, *Data Reduction and
 //! Error Analysis*, §8.5). Every term reports its estimate, σ and interval whether or not it is
-//! detected (c > 2σ_c); the model curve is exactly Σ c_k b_k with the reported values.
+//! detected (its 95 % interval excludes 0); the model curve is exactly Σ c_k b_k with the reported values.
 use crate::cov::{Component, CovCache, Design, Deterministic};
 use crate::effect::{Basis, Context, Effect, Kind, ParamSpec};
 use crate::nnls::nnls;
@@ -227,7 +227,7 @@ pub struct TermFit {
     pub specs: Vec<ParamSpec>,
     /// The coefficient was estimated outside the Allan fit (time domain or data lattice).
     pub known: bool,
-    /// Whether the data support the term: c > 2σ_c.
+    /// Whether the data support the term: its 95 % interval excludes 0 ([`TermFit::supported`]).
     pub detected: bool,
 }
 
@@ -246,33 +246,50 @@ pub struct ParamValue {
 }
 
 impl TermFit {
+    /// The data support the term when its 95 % interval excludes 0: c > 2σ_c for a coefficient
+    /// of the Allan fit, |A| > 2σ_A for an amplitude estimated in the time domain.
+    pub fn supported(&self) -> bool {
+        let (lo, hi) = self.amplitude_interval();
+        self.coef > 0.0 && self.coef_sigma.is_finite() && lo * hi > 0.0
+    }
+
     /// The amplitude parameter √c (Q, N, B, K, R, sigma, amplitude), signed where it has a sign.
     pub fn amplitude(&self) -> f64 {
         self.sign * self.coef.max(0.0).sqrt()
     }
 
     /// 1σ of the amplitude: half the width of [√(c − σ_c), √(c + σ_c)] (σ_c/(2A) when A ≫ σ_A;
-    /// finite at c = 0).
+    /// finite at c = 0). A known term's amplitude was estimated in the time domain, where it is
+    /// Gaussian with σ_A and σ_c = 2|A|σ_A was derived from it: σ_A is given back exactly.
     pub fn amplitude_sigma(&self) -> f64 {
         let s = if self.coef_sigma.is_finite() {
             self.coef_sigma
         } else {
             return f64::NAN;
         };
+        if self.known && self.coef > 0.0 {
+            return s / (2.0 * self.coef.sqrt());
+        }
         ((self.coef.max(0.0) + s).sqrt() - (self.coef - s).max(0.0).sqrt()) / 2.0
     }
 
-    /// 95 % interval of |amplitude|: √ of c ± 2σ_c, bounded at 0.
+    /// 95 % interval of |amplitude|: √ of c ± 2σ_c, bounded at 0; for a known term (Gaussian in
+    /// its amplitude) |A| ± 2σ_A, bounded at 0.
     pub fn amplitude_interval(&self) -> (f64, f64) {
         let s = if self.coef_sigma.is_finite() {
             self.coef_sigma
         } else {
             0.0
         };
-        let (lo, hi) = (
-            (self.coef - 2.0 * s).max(0.0).sqrt(),
-            (self.coef.max(0.0) + 2.0 * s).sqrt(),
-        );
+        let (lo, hi) = if self.known && self.coef > 0.0 {
+            let (a, sa) = (self.coef.sqrt(), self.amplitude_sigma());
+            ((a - 2.0 * sa).max(0.0), a + 2.0 * sa)
+        } else {
+            (
+                (self.coef - 2.0 * s).max(0.0).sqrt(),
+                (self.coef.max(0.0) + 2.0 * s).sqrt(),
+            )
+        };
         if self.sign < 0.0 {
             (-hi, -lo)
         } else {
@@ -506,5 +523,52 @@ impl Point {
             });
         }
         (pts, skipped)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn term(coef: f64, coef_sigma: f64, known: bool, sign: f64) -> TermFit {
+        TermFit {
+            effect: Effect::BiasStep,
+            coef,
+            coef_sigma,
+            sign,
+            theta: vec![],
+            theta_sigma: vec![],
+            specs: vec![],
+            known,
+            detected: false,
+        }
+    }
+
+    /// A time-domain amplitude is Gaussian: at |A| = 3σ_A (random A, either sign) it is detected,
+    /// its σ is σ_A and its interval |A| ± 2σ_A; an Allan coefficient keeps c > 2σ_c; a σ that
+    /// is not a number never detects.
+    #[test]
+    fn a_term_is_detected_when_its_interval_excludes_zero() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..50 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let a = 1e-4 * (1.0 + (x % 1000) as f64);
+            let sign = if x & 1 == 0 { 1.0 } else { -1.0 };
+            for (k, expect) in [(3.0, true), (1.5, false)] {
+                let sa = a / k;
+                let t = term(a * a, 2.0 * a * sa, true, sign);
+                assert!((t.amplitude_sigma() / sa - 1.0).abs() < 1e-12);
+                let (lo, hi) = t.amplitude_interval();
+                assert!((hi.abs().max(lo.abs()) - (a + 2.0 * sa)).abs() < 1e-12 * a);
+                assert_eq!(t.supported(), expect, "A = {a}, σ_A = {sa}, sign {sign}");
+                // the same numbers as an Allan coefficient: c > 2σ_c, i.e. A > 4σ_A
+                assert!(!term(a * a, 2.0 * a * sa, false, sign).supported());
+            }
+            assert!(term(a * a, 0.1 * a * a, false, 1.0).supported());
+            assert!(!term(a * a, f64::NAN, true, sign).supported());
+            assert!(!term(0.0, 0.0, true, sign).supported());
+        }
     }
 }

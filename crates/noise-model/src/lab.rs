@@ -488,7 +488,7 @@ impl<'a> NoiseLab<'a> {
         for (t, s) in fit.terms.iter_mut().zip(&specs) {
             if let Some(k) = s.known {
                 t.coef_sigma = k.coef_sigma;
-                t.detected = t.coef > 0.0 && t.coef > 2.0 * t.coef_sigma;
+                t.detected = t.supported();
             }
         }
         let assessment = assess(&fit);
@@ -750,5 +750,11 @@ impl model_lab::Lab for NoiseLab<'_> {
 
     fn candidates(&self, m: &Model) -> Result<Vec<Candidate<Effect, Model>>, FitError> {
         self.candidate_edits(m)
+    }
+
+    /// Adequate when the Allan test passes and no candidate is admissible: a time-domain finding
+    /// the criterion refuses (its refit does not lower it) is reported, not a veto.
+    fn settled(&self, m: &Model, refused: &[Candidate<Effect, Model>]) -> bool {
+        m.adequate || (m.assessment.adequate && !refused.iter().any(|c| c.admissible))
     }
 }
