@@ -17,7 +17,7 @@ use imu_proto::{
     StreamMode, Vec, MAG_PERIOD_US, MAX_ORIENTATIONS,
 };
 
-use crate::ahrs::{Accum, Ahrs, MAX_SUM};
+use crate::ahrs::{self, Accum, Ahrs, GyroStep, MAX_SUM};
 use crate::clock::{Fine, Stamps, US};
 use crate::engines::{Engines, ImuInputs};
 use crate::msg::BURST_MAX;
@@ -81,9 +81,13 @@ pub struct Pipeline {
     /// The IMU's period ([`Fine`], 0: not known yet) and the stamp of its latest sample, µs.
     imu_period: Fine,
     imu_t_us: u64,
-    /// rad per gyro count per second (the scale, in radians).
-    gyro_rad: f32,
+    /// The gyro's step per unit of the IMU's period ([`Fine`]): [`GyroStep`]'s Q46 is
+    /// `period · this >> 32`.
+    gyro_step_per_fine: i32,
 }
+
+/// The IMU's period taken before its clock knows it: 1 ms.
+const NOMINAL_IMU_PERIOD: Fine = crate::clock::fine(1000);
 
 impl Pipeline {
     pub fn new(scales: Scales) -> Self {
@@ -108,7 +112,12 @@ impl Pipeline {
             queued: heapless::Deque::new(),
             imu_period: Fine::ZERO,
             imu_t_us: 0,
-            gyro_rad: scales.gyro * (core::f32::consts::PI / 180.0),
+            // ½ · rad per count per second · 2^46 (Q46) per Fine (2^-16 µs), times 2^32.
+            gyro_step_per_fine: libm::round(
+                0.5 * f64::from(scales.gyro).to_radians() * 1e-6 / US.raw() as f64
+                    * (1u64 << 46) as f64
+                    * (1u64 << 32) as f64,
+            ) as i32,
         }
     }
 
@@ -155,18 +164,21 @@ impl Pipeline {
             return false;
         };
         stage::enter(Stage::Ahrs);
-        let period_s = if q.imu_period == Fine::ZERO {
-            1e-3
+        let period = if q.imu_period == Fine::ZERO || q.imu_period.raw() > i32::MAX as u64 {
+            NOMINAL_IMU_PERIOD
         } else {
-            q.imu_period.raw() as f32 * (1.0 / (US.raw() as f32 * 1e6))
+            q.imu_period
         };
-        let dt = match q.mag {
-            Some(_) => MAG_PERIOD_US as f32 * 1e-6,
-            None => q.acc.n as f32 * period_s,
+        let step = GyroStep(ahrs::fixed::mul_shr(
+            period.raw() as i32,
+            self.gyro_step_per_fine,
+            32,
+        ));
+        let dt_us = match q.mag {
+            Some(_) => MAG_PERIOD_US as u32,
+            None => ((u64::from(q.acc.n) * period.raw()) >> crate::clock::FINE_BITS) as u32,
         };
-        let att = self
-            .ahrs
-            .update(&mut q.acc, self.gyro_rad * period_s, q.mag.as_ref(), dt);
+        let att = self.ahrs.update(&mut q.acc, step, q.mag.as_ref(), dt_us);
         stage::enter(Stage::Usb);
         if let (Some(a), Some(_), false) = (att, q.mag, self.mode == StreamMode::Off) {
             let _ = self.orient.push(Orientation {
@@ -179,8 +191,8 @@ impl Pipeline {
                 state: a.state,
             });
             if self.orient.len() >= ORIENTATIONS_PER_FRAME {
-                let o = core::mem::take(&mut self.orient);
-                outbox.send(&DeviceMsg::Orientation(o), sink);
+                outbox.send_orientations(&self.orient, sink);
+                self.orient.clear();
             }
         }
         stage::leave();

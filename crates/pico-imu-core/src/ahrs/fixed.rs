@@ -1,0 +1,302 @@
+//! Integer arithmetic for the device's attitude filter, shaped for the Cortex-M0+: it multiplies
+//! 32 × 32 → 32 bits in one cycle, has no 64-bit product, no divide, no count-leading-zeros and
+//! no FPU. Everything here is exact integer code (bit-identical on the host and the device);
+//! the errors against the exact functions are held by the tests below and by
+//! `tests/ahrs.rs`.
+//!
+//! * [`rsqrt`]: `1/√x` by a 96-entry table and one Newton step, relative error ≤ 2·10⁻⁴;
+//! * [`atan2`]: CORDIC in vectoring mode, 16 steps, degrees in Q20 (error ≤ 0.003°), with the
+//!   vector's length times the CORDIC gain [`CORDIC_GAIN_Q30`] for free;
+//! * [`mul_shr`]: a signed 32 × 32-bit product shifted right, by 16-bit halves (no library
+//!   call);
+//! * [`to_f32`]: a fixed-point value to `f32` for the wire (one conversion, the scale put into
+//!   the exponent).
+
+/// `1/√(X)` for `X = (i + ½)/128`, `i = 32..128`, in Q15: the first guess of [`rsqrt`] for a
+/// value normalised into [¼, 1) (its top seven bits pick the entry). Checked against `libm` by a
+/// test.
+const RSQRT: [u16; 96] = [
+    65030, 64052, 63117, 62222, 61363, 60540, 59748, 58987, 58254, 57548, 56867, 56210, 55574,
+    54960, 54366, 53791, 53233, 52693, 52169, 51660, 51165, 50685, 50218, 49763, 49321, 48890,
+    48470, 48061, 47663, 47273, 46894, 46523, 46161, 45807, 45462, 45124, 44793, 44470, 44153,
+    43843, 43540, 43243, 42951, 42666, 42386, 42112, 41843, 41579, 41320, 41065, 40816, 40571,
+    40330, 40093, 39861, 39632, 39408, 39187, 38970, 38756, 38546, 38340, 38136, 37936, 37739,
+    37545, 37354, 37166, 36980, 36798, 36618, 36441, 36266, 36093, 35924, 35756, 35591, 35428,
+    35267, 35109, 34953, 34798, 34646, 34496, 34347, 34201, 34056, 33913, 33772, 33633, 33496,
+    33360, 33225, 33093, 32962, 32832,
+];
+
+/// `1/√x` for `x > 0` as `(m, s)`: `1/√x ≈ m·2^-s`, `m` in [2^15, 2^16), `s` in [16, 31].
+/// Relative error ≤ 2·10⁻⁴ (the table's ≤ 0.8 % squared by the Newton step, and the step's
+/// rounding; tested over the whole range). `x = 0` gives the value for `x = 1`: callers test
+/// for zero first.
+#[inline]
+pub fn rsqrt(x: u32) -> (u32, u32) {
+    if x == 0 {
+        return (1 << 15, 15);
+    }
+    // x·4^z in [2^30, 2^32): X = that/2^32 in [¼, 1), 1/√X in (1, 2].
+    let z = leading_zeros(x) & !1;
+    let xn = x << z;
+    let y = u32::from(RSQRT[(xn >> 25) as usize - 32]);
+    // One Newton step y·(3 − X·y²)/2: X in Q16 times y² in Q14 is X·y² in Q30 (≈ 2^30; y² < 2^32
+    // since y ≤ 65030).
+    let t = (xn >> 16) * ((y * y) >> 16);
+    let y = (y * ((3u32 << 30).wrapping_sub(t) >> 16)) >> 15;
+    // 1/√x = 2^(z/2) · 2^-16 / √X = y · 2^-(31 − z/2).
+    (y, 31 - z / 2)
+}
+
+/// atan(2^-i) in degrees, Q20 (checked against `libm` by a test).
+const ATAN_Q20: [i32; 16] = [
+    47185920, 27855475, 14718068, 7471121, 3750058, 1876857, 938658, 469357, 234682, 117342, 58671,
+    29335, 14668, 7334, 3667, 1833,
+];
+
+/// The CORDIC's gain after [`ATAN_Q20`]'s 16 steps, `∏ √(1 + 4^-i)`, Q30.
+pub const CORDIC_GAIN_Q30: i32 = 1_768_195_363;
+
+/// Degrees in Q20: 1° = 2^20.
+pub const DEG_Q20: i32 = 1 << 20;
+
+/// `atan2(y, x)` in degrees, Q20, in [−180°, 180°] (to within the error), and the vector's
+/// length times [`CORDIC_GAIN_Q30`] (≈ 1.647) in the inputs' units. The length times the gain
+/// must stay below 2^31: the filter passes unit vectors in Q29 (2^29.72) and, for the pitch,
+/// vectors of length up to the gain in Q29 (2^30.44). Error ≤ 0.003° for inputs of length
+/// ≥ 2^20 (tested). `atan2(0, 0)` is some angle (roll and heading at ±90° of pitch are
+/// undefined anyway).
+#[inline]
+#[allow(unused_assignments)] // the last step's `y`
+pub fn atan2(y: i32, x: i32) -> (i32, i32) {
+    // Into the right half-plane by a quarter turn.
+    let (mut x, mut y, mut z) = if x >= 0 {
+        (x, y, 0)
+    } else if y >= 0 {
+        (y, -x, 90 * DEG_Q20)
+    } else {
+        (-y, x, -90 * DEG_Q20)
+    };
+    // Rotate towards the x axis by ±atan(2^-i), accumulating the angle turned; written out
+    // (constant shifts and angles: ≈ 10 cycles a step on the M0+, where the loop took ≈ 18).
+    macro_rules! step {
+        ($($i:literal)*) => {$(
+            let (dx, dy) = (y >> $i, x >> $i);
+            if y >= 0 {
+                x += dx;
+                y -= dy;
+                z += ATAN_Q20[$i];
+            } else {
+                x -= dx;
+                y += dy;
+                z -= ATAN_Q20[$i];
+            }
+        )*};
+    }
+    step!(0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15);
+    (z, x)
+}
+
+/// The number of leading zero bits of `x` (32 for 0), by a binary search: the Cortex-M0+ has no
+/// count-leading-zeros instruction, and `u32::leading_zeros` is a library call of ≈ 75 cycles
+/// in the emulator, this ≈ 20.
+#[inline(always)]
+pub fn leading_zeros(mut x: u32) -> u32 {
+    if x == 0 {
+        return 32;
+    }
+    let mut n = 0;
+    if x < 1 << 16 {
+        n += 16;
+        x <<= 16;
+    }
+    if x < 1 << 24 {
+        n += 8;
+        x <<= 8;
+    }
+    if x < 1 << 28 {
+        n += 4;
+        x <<= 4;
+    }
+    if x < 1 << 30 {
+        n += 2;
+        x <<= 2;
+    }
+    if x < 1 << 31 {
+        n += 1;
+    }
+    n
+}
+
+/// `(a · b) >> s` for `s` in [16, 47], rounded down, by 16-bit halves: the Cortex-M0+ has no
+/// 32 × 32 → 64-bit product (a 64-bit multiply is a library call). The caller keeps the result
+/// within `i32`.
+#[inline(always)]
+pub fn mul_shr(a: i32, b: i32, s: u32) -> i32 {
+    // a·b = ah·bh·2^32 + (ah·bl + al·bh)·2^16 + al·bl with al, bl the unsigned low halves.
+    let (ah, al) = (a >> 16, a & 0xffff);
+    let (bh, bl) = (b >> 16, b & 0xffff);
+    let lo = ((al as u32) * (bl as u32)) as u64;
+    let mid = (ah * bl) as i64 + (al * bh) as i64;
+    let hi = (ah * bh) as i64;
+    (((hi << 32) + (mid << 16) + lo as i64) >> s) as i32
+}
+
+/// `v · 2^-frac` as `f32` (the wire's type): one integer conversion, the scale put into the
+/// exponent (exact for the results, which stay far from `f32`'s subnormals).
+#[inline(always)]
+pub fn to_f32(v: i32, frac: u32) -> f32 {
+    if v == 0 {
+        return 0.0;
+    }
+    f32::from_bits((v as f32).to_bits() - (frac << 23))
+}
+
+/// The shift `s` that brings the largest `|v_i|` into [2^14, 2^15) (`v_i · 2^s`, `s` may be
+/// negative), and the shifted vector; `None` for a zero vector.
+#[inline]
+pub fn norm15(v: [i32; 3]) -> Option<([i32; 3], i32)> {
+    let m = v[0].unsigned_abs() | v[1].unsigned_abs() | v[2].unsigned_abs();
+    if m == 0 {
+        return None;
+    }
+    // The highest bit set of the OR is the largest magnitude's.
+    let s = leading_zeros(m) as i32 - 17;
+    Some((
+        if s >= 0 {
+            v.map(|x| x << s)
+        } else {
+            v.map(|x| x >> -s)
+        },
+        s,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tables_are_the_functions_they_claim() {
+        for (k, &t) in RSQRT.iter().enumerate() {
+            let x = (k as f64 + 32.5) / 128.0;
+            assert_eq!(
+                t,
+                libm::round(32768.0 / libm::sqrt(x)) as u16,
+                "rsqrt entry {k}"
+            );
+        }
+        for (i, &a) in ATAN_Q20.iter().enumerate() {
+            let want = libm::atan(libm::ldexp(1.0, -(i as i32))).to_degrees() * 1048576.0;
+            assert_eq!(a, libm::round(want) as i32, "atan entry {i}");
+        }
+        let gain: f64 = (0..16)
+            .map(|i| libm::sqrt(1.0 + libm::ldexp(1.0, -2 * i)))
+            .product();
+        assert_eq!(CORDIC_GAIN_Q30, libm::round(gain * 1073741824.0) as i32);
+    }
+
+    #[test]
+    fn rsqrt_within_two_parts_in_ten_thousand() {
+        let mut worst = 0f64;
+        let mut x = 1u32;
+        // Every small value, then a geometric sweep with an odd step (all table entries, both
+        // parities of the shift).
+        while x < u32::MAX - (x >> 7) {
+            let (m, s) = rsqrt(x);
+            assert!((1 << 15..1 << 16).contains(&m), "{x}: {m}");
+            let got = m as f64 * libm::ldexp(1.0, -(s as i32));
+            let rel = (got * libm::sqrt(x as f64) - 1.0).abs();
+            worst = worst.max(rel);
+            x = if x < 5000 { x + 1 } else { x + (x >> 9) + 7 };
+        }
+        assert!(worst < 2e-4, "worst relative error {worst}");
+    }
+
+    #[test]
+    fn atan2_within_three_thousandths_of_a_degree() {
+        let mut worst = 0f64;
+        for k in 0..20_000 {
+            let a = -180.0 + 360.0 * (k as f64 + 0.37) / 20_000.0;
+            for r in [1 << 20, 1 << 25, 1 << 29] {
+                let (x, y) = (
+                    libm::round(r as f64 * libm::cos(a.to_radians())) as i32,
+                    libm::round(r as f64 * libm::sin(a.to_radians())) as i32,
+                );
+                let (z, len) = atan2(y, x);
+                let want = libm::atan2(y as f64, x as f64).to_degrees();
+                let mut d = z as f64 / DEG_Q20 as f64 - want;
+                if d > 180.0 {
+                    d -= 360.0;
+                } else if d < -180.0 {
+                    d += 360.0;
+                }
+                worst = worst.max(d.abs());
+                let g = CORDIC_GAIN_Q30 as f64 / 1073741824.0;
+                let l = libm::hypot(x as f64, y as f64) * g;
+                assert!(
+                    (len as f64 / l - 1.0).abs() < 1e-5,
+                    "{a}°, {r}: {len} vs {l}"
+                );
+            }
+        }
+        assert!(worst < 0.003, "worst {worst}°");
+    }
+
+    #[test]
+    fn mul_shr_is_the_wide_product() {
+        let mut s = 0x1234_5678_9abc_def1u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for _ in 0..100_000 {
+            let (a, b) = (next() as i32, next() as i32 >> (next() % 16));
+            let sh = 16 + (next() % 32) as u32;
+            let want = (a as i64 * b as i64) >> sh;
+            if want as i32 as i64 == want {
+                assert_eq!(mul_shr(a, b, sh), want as i32, "{a} {b} {sh}");
+            }
+        }
+    }
+
+    #[test]
+    fn leading_zeros_is_the_instruction() {
+        for k in 0..32 {
+            for x in [
+                1u32 << k,
+                (1u32 << k) | 1,
+                (2u32 << k).wrapping_sub(1),
+                0x9e37_79b9 >> k,
+            ] {
+                assert_eq!(leading_zeros(x), x.leading_zeros(), "{x:#x}");
+            }
+        }
+        assert_eq!(leading_zeros(0), 32);
+    }
+
+    #[test]
+    fn to_f32_is_the_scaled_value() {
+        for (v, f) in [(1, 30), (-1 << 30, 30), (123_456_789, 20), (-7, 0), (0, 30)] {
+            assert_eq!(to_f32(v, f), v as f32 / (1u64 << f) as f32);
+        }
+    }
+
+    #[test]
+    fn norm15_brings_the_largest_into_range() {
+        for v in [
+            [1, 0, 0],
+            [-3, 70_000, 5],
+            [i32::MAX / 8, -1, 2],
+            [0, 0, -16384],
+        ] {
+            let (n, s) = norm15(v).unwrap();
+            let m = n.iter().map(|x| x.unsigned_abs()).max().unwrap();
+            assert!((1 << 14..1 << 15).contains(&m), "{v:?}: {n:?}");
+            let back = if s >= 0 { v[1] << s } else { v[1] >> -s };
+            assert_eq!(back, n[1]);
+        }
+        assert!(norm15([0; 3]).is_none());
+    }
+}
