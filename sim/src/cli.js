@@ -117,7 +117,7 @@ async function cmdGen(v) {
 // The options of every subcommand: values given once, flags, and --fault (repeatable).
 const STRING_OPTIONS = [
   'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock',
-  'served', 'summary', 'log', 'out', 'report', 'json', 'top', 'callers', 'from',
+  'served', 'summary', 'log', 'out', 'report', 'json', 'top', 'callers', 'pcs', 'from',
 ];
 const BOOLEAN_OPTIONS = ['instant-i2c', 'exit-on-disconnect', 'quiet', 'copies', 'exact'];
 

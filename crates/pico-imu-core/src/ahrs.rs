@@ -239,6 +239,16 @@ impl Gains {
     }
 }
 
+impl Gains {
+    /// [`Gains::new`] at run time (`f64` in software: out of line, for the rare updates without
+    /// the magnetometer).
+    #[cold]
+    #[inline(never)]
+    fn at(dt_us: u32) -> Gains {
+        Gains::new(dt_us)
+    }
+}
+
 /// The gains of an update at a magnetometer sample (its period).
 const MAG_GAINS: Gains = Gains::new(imu_proto::MAG_PERIOD_US as u32);
 
@@ -405,6 +415,7 @@ impl Ahrs {
     /// an update without it; `dt_us`: the time since the last update, µs (the correction's
     /// step). Returns the attitude once the filter has started (it starts at the first update
     /// with both an accelerometer and a magnetometer reading).
+    #[inline(never)]
     pub fn update(
         &mut self,
         acc: &mut Accum,
@@ -437,7 +448,7 @@ impl Ahrs {
         let gains = if u64::from(dt_us) == imu_proto::MAG_PERIOD_US {
             MAG_GAINS
         } else {
-            Gains::new(dt_us)
+            Gains::at(dt_us)
         };
         let [r1, r2, d] = self.rows;
         let d15 = d.map(|c| c >> 14);
@@ -558,30 +569,9 @@ impl Ahrs {
     fn check_field(&mut self, m2: u32, sh: i32, im: u32, is: u32, sin_dip: i32) -> AhrsState {
         let bands = match &mut self.reference {
             Reference::Known { bands, .. } => *bands,
-            Reference::Learning {
-                field,
-                sin_dip: s,
-                n,
-            } => {
+            Reference::Learning { .. } => {
                 if !self.converging {
-                    // |m| in input units, Q8: √m2 · 2^(8 − sh) = m2 · im · 2^(8 − sh − is).
-                    let r = is as i32 + sh - 8;
-                    let f = u64::from(m2) * u64::from(im);
-                    *field += if r >= 0 { f >> r } else { f << -r };
-                    *s += i64::from(sin_dip);
-                    *n += 1;
-                    if *n >= LEARN_UPDATES {
-                        let k = 1.0 / *n as f64;
-                        let field = (*field as f64 * k / 256.0) as f32;
-                        let sin = (*s as f64 * k / ONE_Q30 as f64).clamp(-1.0, 1.0);
-                        let dip_deg = libm::asin(sin).to_degrees() as f32;
-                        self.reference = Reference::Known {
-                            field,
-                            dip_deg,
-                            bands: Bands::new(field, dip_deg),
-                            learnt: true,
-                        };
-                    }
+                    self.learn(m2, sh, im, is, sin_dip);
                 }
                 return AhrsState::Tracking;
             }
@@ -601,7 +591,40 @@ impl Ahrs {
         }
     }
 
+    /// One tracking update's field for the learnt reference (arguments as for
+    /// [`Ahrs::check_field`]); after [`LEARN_UPDATES`], the reference (once: `f64` and libm).
+    #[inline(never)]
+    fn learn(&mut self, m2: u32, sh: i32, im: u32, is: u32, sin_dip: i32) {
+        let Reference::Learning {
+            field,
+            sin_dip: s,
+            n,
+        } = &mut self.reference
+        else {
+            return;
+        };
+        // |m| in input units, Q8: √m2 · 2^(8 − sh) = m2 · im · 2^(8 − sh − is).
+        let r = is as i32 + sh - 8;
+        let f = u64::from(m2) * u64::from(im);
+        *field += if r >= 0 { f >> r } else { f << -r };
+        *s += i64::from(sin_dip);
+        *n += 1;
+        if *n >= LEARN_UPDATES {
+            let k = 1.0 / *n as f64;
+            let field = (*field as f64 * k / 256.0) as f32;
+            let sin = (*s as f64 * k / ONE_Q30 as f64).clamp(-1.0, 1.0);
+            let dip_deg = libm::asin(sin).to_degrees() as f32;
+            self.reference = Reference::Known {
+                field,
+                dip_deg,
+                bands: Bands::new(field, dip_deg),
+                learnt: true,
+            };
+        }
+    }
+
     /// Roll, pitch, heading from the rotation's rows.
+    #[inline(never)]
     fn attitude(&self, state: AhrsState) -> Attitude {
         let [r1, r2, d] = self.rows;
         let (mut roll, len) = atan2(d[1], d[2]);
@@ -634,6 +657,7 @@ impl Ahrs {
 
     /// The first attitude, from the accelerometer and magnetometer readings (body axes), in
     /// `f32` and libm once ([`initial_quaternion`]).
+    #[inline(never)]
     fn start(&mut self, a: &[i32; 3], m: &[i32; 3]) {
         if let Some(q) = initial_quaternion(&a.map(|c| c as f32), &m.map(|c| c as f32)) {
             self.q = q.map(|c| libm::roundf(c * ONE_Q30 as f32) as i32);

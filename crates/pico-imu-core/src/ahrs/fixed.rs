@@ -127,28 +127,49 @@ pub fn leading_zeros(mut x: u32) -> u32 {
     n
 }
 
-/// `(a · b) >> s` for `s` in [16, 47], rounded down, by 16-bit halves: the Cortex-M0+ has no
-/// 32 × 32 → 64-bit product (a 64-bit multiply is a library call). The caller keeps the result
+/// `(a · b) >> s` for `s` in [16, 47], rounded down, in 32-bit arithmetic by 16-bit halves:
+/// the Cortex-M0+ has no 32 × 32 → 64-bit product, and a 64-bit multiply is a library call (a
+/// 64-bit sum of these halves, the compiler turns back into one). The caller keeps the result
 /// within `i32`.
 #[inline(always)]
 pub fn mul_shr(a: i32, b: i32, s: u32) -> i32 {
-    // a·b = ah·bh·2^32 + (ah·bl + al·bh)·2^16 + al·bl with al, bl the unsigned low halves.
-    let (ah, al) = (a >> 16, a & 0xffff);
-    let (bh, bl) = (b >> 16, b & 0xffff);
-    let lo = ((al as u32) * (bl as u32)) as u64;
-    let mid = (ah * bl) as i64 + (al * bh) as i64;
-    let hi = (ah * bh) as i64;
-    (((hi << 32) + (mid << 16) + lo as i64) >> s) as i32
+    // a·b = ah·bh·2^32 + (ah·bl + al·bh)·2^16 + al·bl, al and bl the unsigned low halves; each
+    // middle product m is (m >> 16)·2^32 plus its low half shifted up by 16.
+    let (ah, al) = (a >> 16, (a & 0xffff) as u32);
+    let (bh, bl) = (b >> 16, (b & 0xffff) as u32);
+    let m1 = ah * bl as i32;
+    let m2 = bh * al as i32;
+    let (lo, c1) = (al * bl).overflowing_add((m1 as u32) << 16);
+    let (lo, c2) = lo.overflowing_add((m2 as u32) << 16);
+    let hi = ah * bh + (m1 >> 16) + (m2 >> 16) + c1 as i32 + c2 as i32;
+    if s >= 32 {
+        hi >> (s - 32)
+    } else {
+        (hi << (32 - s)) | (lo >> s) as i32
+    }
 }
 
-/// `v · 2^-frac` as `f32` (the wire's type): one integer conversion, the scale put into the
-/// exponent (exact for the results, which stay far from `f32`'s subnormals).
+/// `v · 2^-frac` as `f32` (the wire's type), rounded to nearest (ties to even): the same value
+/// as `v as f32` scaled, without the library's conversion (≈ 80 cycles on the M0+ with its
+/// count-leading-zeros call, this ≈ 30). `frac` ≤ 100.
 #[inline(always)]
 pub fn to_f32(v: i32, frac: u32) -> f32 {
     if v == 0 {
         return 0.0;
     }
-    f32::from_bits((v as f32).to_bits() - (frac << 23))
+    let sign = (v as u32) & 0x8000_0000;
+    let lz = leading_zeros(v.unsigned_abs());
+    // The leading one at bit 31, then 24 bits kept (the leading one is the exponent's first).
+    let m = v.unsigned_abs() << lz;
+    let mut r = m >> 8;
+    let rest = m & 0xff;
+    if rest > 0x80 || (rest == 0x80 && r & 1 == 1) {
+        r += 1;
+    }
+    // |v| = m·2^-lz, the value 1.f·2^(31 − lz − frac); r's leading one (bit 23, or 24 after a
+    // rounding carry) adds one to the exponent field, hence the − 1.
+    let exp = (127 + 31 - 1) - lz - frac;
+    f32::from_bits(sign | ((exp << 23) + r))
 }
 
 /// The shift `s` that brings the largest `|v_i|` into [2^14, 2^15) (`v_i · 2^s`, `s` may be
@@ -278,8 +299,30 @@ mod tests {
 
     #[test]
     fn to_f32_is_the_scaled_value() {
-        for (v, f) in [(1, 30), (-1 << 30, 30), (123_456_789, 20), (-7, 0), (0, 30)] {
-            assert_eq!(to_f32(v, f), v as f32 / (1u64 << f) as f32);
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut values = vec![
+            0,
+            1,
+            -1,
+            i32::MAX,
+            i32::MIN,
+            1 << 30,
+            -(1 << 30),
+            0x0100_0001,
+        ];
+        for _ in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            values.push((s as i32) >> (s >> 59));
+        }
+        // Ties: 25 significant bits ending in 1, the bit above it 0 and 1.
+        values.extend([0x0100_0001, 0x0100_0003, -0x0100_0003, 0x7fff_ffc0]);
+        for v in values {
+            for f in [0, 20, 30] {
+                let want = v as f32 / (1u64 << f) as f32;
+                assert_eq!(to_f32(v, f).to_bits(), want.to_bits(), "{v} >> {f}");
+            }
         }
     }
 
