@@ -3,9 +3,9 @@
 //! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
 //! and accelerometer for the attitude filter ([`crate::ahrs`]). Each magnetometer sample queues
 //! one filter update with those sums; the processing task runs the queued updates
-//! ([`Pipeline::attitude_step`], ≈ 0.24 ms of soft float each) where their delay does not
-//! disturb the sensor tasks (src/main.rs: in line with an IMU burst's processing), and the
-//! estimates go out four to a frame.
+//! ([`Pipeline::attitude_step`], integer arithmetic, ≈ 2,700 cycles each with their share of
+//! the frame) where their delay does not disturb the sensor tasks (src/main.rs: in line with an
+//! IMU burst's processing), and the estimates go out five to a frame.
 //!
 //! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
 //! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
@@ -31,9 +31,10 @@ use crate::stage::{self, Stage};
 pub const BATCH_IMU: usize = 25;
 const _: () = assert!(BATCH_IMU <= imu_proto::MAX_BATCH_IMU && 100 % BATCH_IMU == 0);
 
-/// Attitude estimates per frame: four, one magnetometer hand-over (20 ms), so every 100 ms
-/// carries five such frames.
-pub const ORIENTATIONS_PER_FRAME: usize = 4;
+/// Attitude estimates per frame: five (25 ms), so every 100 ms carries four such frames; with
+/// four a frame (one magnetometer hand-over) the fifth frame's fixed costs (framing, queueing,
+/// the USB task) came to ≈ 30 cycles per ms more (docs/benchmarks.md).
+pub const ORIENTATIONS_PER_FRAME: usize = 5;
 const _: () = assert!(ORIENTATIONS_PER_FRAME <= MAX_ORIENTATIONS);
 
 /// What the sample path counts.
@@ -157,8 +158,8 @@ impl Pipeline {
         !self.queued.is_empty()
     }
 
-    /// Run the oldest queued attitude update (soft float, ≈ 30,000 cycles on the M0+); its
-    /// estimate is streamed (not in mode `Off`), four to a frame. Returns whether more wait.
+    /// Run the oldest queued attitude update (integer arithmetic, ≈ 2,200 cycles on the M0+);
+    /// its estimate is streamed (not in mode `Off`), five to a frame. Returns whether more wait.
     pub fn attitude_step(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) -> bool {
         let Some(mut q) = self.queued.pop_front() else {
             return false;
