@@ -450,8 +450,8 @@ mod tests {
                 estimates.extend(o);
             }
         }
-        // The first update starts the filter (no estimate); seven more, four sent.
-        assert_eq!(estimates.len(), 4, "{estimates:?}");
+        // The first update starts the filter (no estimate); seven more, one frame of them sent.
+        assert_eq!(estimates.len(), ORIENTATIONS_PER_FRAME, "{estimates:?}");
         assert!(estimates.windows(2).all(|w| w[1].seq == w[0].seq + 1));
     }
 }
