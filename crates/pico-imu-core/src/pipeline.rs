@@ -267,6 +267,8 @@ impl Pipeline {
         // A `Vec`, not a zeroed array: nothing to clear before it is filled.
         let mut fixed: Vec<ImuInputs, BURST_MAX> = Vec::new();
         stage::enter(Stage::Corrections);
+        // The attitude sums in registers for the burst, written back once.
+        let mut acc = self.acc;
         for s in samples {
             // The gyro's temperature term needs a temperature: the latest one known; before the
             // first, none (the reference temperature: no correction).
@@ -275,10 +277,11 @@ impl Pipeline {
             }
             let accel = self.fast.apply_accel(s.accel);
             let gyro = self.fast.apply_gyro_opt(s.gyro, self.last_temp);
-            self.acc.add(&accel, &gyro);
+            acc.add(&accel, &gyro);
             // At most BURST_MAX samples (cut above): never full.
             let _ = fixed.push((accel, gyro, s.temp.map(i32::from)));
         }
+        self.acc = acc;
         self.imu_period = stamps.period;
         self.imu_t_us = stamps.us(samples.len() as u32 - 1);
         // No magnetometer update for 100 ms (sensor missing or stalled): one without it, so
