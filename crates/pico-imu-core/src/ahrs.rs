@@ -53,9 +53,9 @@
 //!   field and the dip band's edges see it);
 //! * the errors and the correction in Q30; the bias estimate in Q40 (its increments are
 //!   `k_I Δt` times smaller than the correction's);
-//! * roll, pitch, heading by [`fixed::atan2`] (CORDIC, ≤ 0.003°): roll from the down row's
-//!   `(d₂, d₃)`, whose CORDIC length is `K·√(d₂² + d₃²)`, so the pitch `atan2(−K d₁, that)`
-//!   takes no square root; degrees in Q20.
+//! * roll, pitch, heading by [`fixed::atan2`] (a polynomial in the components' ratio, the ratio
+//!   by a table-and-Newton reciprocal, ≤ 0.004°); pitch as `atan2(−d₁, √(d₂² + d₃²))`, the root
+//!   by [`fixed::rsqrt`]; degrees in Q20.
 //!
 //! The output is `f32` for the wire ([`Attitude`]): seven integer-to-float conversions an
 //! update, the scale put into the exponent ([`fixed::to_f32`]). `f32` and `libm` stay where they
@@ -67,7 +67,7 @@ pub use imu_proto::AhrsState;
 pub mod fixed;
 pub mod float;
 
-use fixed::{atan2, mul_shr, norm15, rsqrt, to_f32, CORDIC_GAIN_Q30, DEG_Q20};
+use fixed::{atan2, mul_shr, norm15, rsqrt, to_f32, DEG_Q20};
 
 /// Proportional gain while tracking, rad/s per unit error (time constant 1 s).
 pub const KP: f32 = 1.0;
@@ -627,25 +627,25 @@ impl Ahrs {
     #[inline(never)]
     fn attitude(&self, state: AhrsState) -> Attitude {
         let [r1, r2, d] = self.rows;
-        let (mut roll, len) = atan2(d[1], d[2]);
-        if roll <= -180 * DEG_Q20 {
-            roll += 360 * DEG_Q20;
-        } else if roll > 180 * DEG_Q20 {
-            roll -= 360 * DEG_Q20;
-        }
-        // len = K·√(d₂² + d₃²): the pitch's other side, times the CORDIC's gain.
-        let (pitch, _) = atan2(mul_shr(-d[0], CORDIC_GAIN_Q30, 30), len);
-        let (h, _) = atan2(r2[0], r1[0]);
+        let roll = atan2(d[1], d[2]);
+        // cos θ = √(d₂² + d₃²) from the Q15 components (< 2^30 summed), back in Q29.
+        let (d2, d3) = (d[1] >> 14, d[2] >> 14);
+        let c2 = (d2 * d2 + d3 * d3) as u32;
+        let cos = if c2 == 0 {
+            0
+        } else {
+            let (m, s) = rsqrt(c2);
+            mul_shr(c2 as i32, m as i32, s) << 14
+        };
+        let pitch = atan2(-d[0], cos);
         // h and the declination are within ±180°: one turn added or taken puts the sum in
         // [0°, 360°) (not a loop: the compiler makes a loop of these a division).
-        let mut heading = h + self.declination_q20;
+        let mut heading = atan2(r2[0], r1[0]) + self.declination_q20;
         if heading < 0 {
             heading += 360 * DEG_Q20;
         } else if heading >= 360 * DEG_Q20 {
             heading -= 360 * DEG_Q20;
         }
-        // (The CORDIC's 0.003° past ±180° kept inside too.)
-        let heading = heading.clamp(0, 360 * DEG_Q20 - 1);
         Attitude {
             q: self.q.map(|c| to_f32(c, 30)),
             roll_deg: to_f32(roll, 20),
