@@ -110,6 +110,16 @@ impl Accum {
         self.gyro[2] += gyro[2];
         self.n += 1;
     }
+
+    /// `n` IMU samples at once, their sums given.
+    #[inline(always)]
+    pub fn add_sums(&mut self, accel: &[i32; 3], gyro: &[i32; 3], n: u32) {
+        for i in 0..3 {
+            self.accel[i] += accel[i];
+            self.gyro[i] += gyro[i];
+        }
+        self.n += n;
+    }
 }
 
 /// One attitude estimate.

@@ -298,6 +298,25 @@ mod tests {
     }
 
     #[test]
+    fn mul_shr_is_the_wide_product() {
+        let mut s = 0x1234_5678_9abc_def1u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        for _ in 0..100_000 {
+            let (a, b) = (next() as i32, next() as i32 >> (next() % 16));
+            let sh = 16 + (next() % 32) as u32;
+            let want = (a as i64 * b as i64) >> sh;
+            if want as i32 as i64 == want {
+                assert_eq!(mul_shr(a, b, sh), want as i32, "{a} {b} {sh}");
+            }
+        }
+    }
+
+    #[test]
     fn leading_zeros_is_the_instruction() {
         for k in 0..32 {
             for x in [
