@@ -618,7 +618,7 @@ fn the_integer_filter_agrees_with_the_f32_reference() {
             "seed {s}, case {case}: {traj:?} {part:?}: {a:?}"
         );
         assert!(a.states_differ <= 3, "seed {s}, case {case}: {a:?}");
-        // Its rows in Q15 and the CORDIC: ≈ 0.01° near 80° of pitch, less elsewhere.
+        // Its rows in Q15 and its atan2: ≈ 0.01° near 80° of pitch, less elsewhere.
         assert!(a.outputs <= 0.02, "seed {s}, case {case}: {a:?}");
         worst.roll = worst.roll.max(a.roll);
         worst.pitch = worst.pitch.max(a.pitch);
