@@ -217,10 +217,6 @@ impl GyroStep {
 const ONE_Q30: i32 = 1 << 30;
 /// [`CONVERGED_ERR2`] in Q30.
 const CONVERGED_ERR2_Q30: u32 = (CONVERGED_ERR2 as f64 * (1u64 << 30) as f64) as u32;
-/// Gyro sums beyond this (2^23 counts: 64 s of full scale) are clamped, so the half rotation
-/// stays within 2^29 (0.5 rad) in Q30 and nothing overflows; the firmware's sums stop at
-/// [`MAX_SUM`] samples (2^21.6 counts at full scale).
-const GYRO_SUM_MAX: i32 = 1 << 23;
 /// The bias estimate's bound, Q40 rad per half magnetometer period (2^30: 0.39 rad/s, 22°/s).
 const BIAS_MAX_Q40: i32 = 1 << 30;
 
@@ -435,9 +431,11 @@ impl Ahrs {
     ) -> Option<Attitude> {
         // Half the rotation since the last update, body axes (sensor forward-left-up →
         // forward-right-down: the sign flips are free), Q30.
-        let g = acc
-            .gyro
-            .map(|s| mul_shr(s.clamp(-GYRO_SUM_MAX, GYRO_SUM_MAX), step.0, 16));
+        // The sums clamped so that |sum · step| < 2^45: the half rotation stays below 2^29
+        // (0.5 rad) in Q30, whatever the sums and the gyro's range.
+        let bits = 32 - fixed::leading_zeros(step.0.unsigned_abs());
+        let max = 1i32 << (45u32.saturating_sub(bits)).min(30);
+        let g = acc.gyro.map(|s| mul_shr(s.clamp(-max, max), step.0, 16));
         let mut v = [g[0], -g[1], -g[2]];
         if acc.n > 0 {
             // The sum's scale does not matter: the direction is normalised below.
@@ -537,14 +535,20 @@ impl Ahrs {
             };
             v[i] += c[i] + b;
         }
-        self.rotate(&v);
+        let long = self.rotate(&v);
         // Back to unit norm by a Newton step from 1: every fourth update (each step grows |q|²
         // by |v|² ≲ 1e-5 at the rates the part measures), and after every update without the
-        // magnetometer (a longer step).
+        // magnetometer or with a long step.
         self.steps = self.steps.wrapping_add(1);
-        if mag.is_none() || self.steps.is_multiple_of(RENORM_EVERY) {
+        if mag.is_none() || long || self.steps.is_multiple_of(RENORM_EVERY) {
             let n2: i64 = self.q.iter().map(|&c| mul_shr(c, c, 30) as i64).sum();
-            let s = ((3 * ONE_Q30 as i64 - n2) / 2).clamp(0, i32::MAX as i64) as i32;
+            let s = if long {
+                // |q|² up to ≈ 1.4: 1/|q| by rsqrt (≤ 1.2·10⁻⁴), refined by the next steps.
+                let (m, e) = rsqrt(n2.clamp(1, u32::MAX as i64) as u32);
+                (m << (45 - e)) as i32
+            } else {
+                ((3 * ONE_Q30 as i64 - n2) / 2).clamp(0, i32::MAX as i64) as i32
+            };
             self.q = self.q.map(|c| mul_shr(c, s, 30));
         }
         self.rows = rows(&self.q);
@@ -558,7 +562,10 @@ impl Ahrs {
     /// right by `b` until its largest component fits 15 bits, the quaternion taken in Q15; each
     /// sum of three products is below 2^31 (Cauchy–Schwarz: |q| ≤ 2^15, |v| < √3·2^15) and is
     /// Q(45 − b), shifted to Q30.
-    fn rotate(&mut self, v: &[i32; 3]) {
+    /// Returns whether the step was long (a component of `v` at or above 2^25, 0.03 rad: beyond
+    /// the gyro's full scale over a magnetometer period), so that the caller renormalises at
+    /// once and |q| stays near one whatever the sums.
+    fn rotate(&mut self, v: &[i32; 3]) -> bool {
         let big = v[0].unsigned_abs() | v[1].unsigned_abs() | v[2].unsigned_abs();
         let b = 17u32.saturating_sub(fixed::leading_zeros(big));
         let s = 15 - b;
@@ -571,6 +578,7 @@ impl Ahrs {
             y + ((qw * v1 - qx * v2 + qz * v0) >> s),
             z + ((qw * v2 + qx * v1 - qy * v0) >> s),
         ];
+        b > 10
     }
 
     /// The field checks: `m2` is |m|² of the magnetometer reading shifted by `sh` bits
