@@ -3,7 +3,7 @@
 //! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
 //! and accelerometer for the attitude filter ([`crate::ahrs`]). Each magnetometer sample queues
 //! one filter update with those sums; the processing task runs the queued updates
-//! ([`Pipeline::attitude_step`], integer arithmetic, ≈ 2,700 cycles each with their share of
+//! ([`Pipeline::attitude_step`], integer arithmetic, ≈ 2,900 cycles each with their share of
 //! the frame) where their delay does not disturb the sensor tasks (src/main.rs: in line with an
 //! IMU burst's processing), and the estimates go out five to a frame.
 //!
@@ -158,7 +158,7 @@ impl Pipeline {
         !self.queued.is_empty()
     }
 
-    /// Run the oldest queued attitude update (integer arithmetic, ≈ 2,200 cycles on the M0+);
+    /// Run the oldest queued attitude update (integer arithmetic, ≈ 2,350 cycles on the M0+);
     /// its estimate is streamed (not in mode `Off`), five to a frame. Returns whether more wait.
     pub fn attitude_step(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) -> bool {
         // Worked on in place and dropped after: popped by value, the 64-byte entry was copied
