@@ -159,7 +159,7 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1 }
     byFn.set(f, (byFn.get(f) ?? 0) + c);
     total += c;
   }
-  return { seconds, sets, total, byFn, calls };
+  return { seconds, sets, total, byFn, calls, perPc, find };
 }
 
 async function exactProfile(v) {
@@ -169,6 +169,16 @@ async function exactProfile(v) {
   const out = [`# executed cycles per sample set, by function (exclusive): ${(total / sets).toFixed(0)} in all, ${sets} sample sets in ${seconds} s`];
   for (const [n, c] of [...byFn.entries()].sort((a, b) => b[1] - a[1]).slice(0, top)) {
     out.push(`${(c / sets).toFixed(1).padStart(8)}  ${demangle(n)}`);
+  }
+  if (v.pcs) {
+    // --pcs RE: the cycles of every instruction address in the functions matching RE, per sample
+    // set (to read against a disassembly: which instructions of a hot function cost).
+    const re = new RegExp(v.pcs);
+    const rows = [...r.perPc.entries()].filter(([pc]) => re.test(demangle(r.find(pc & ~1))));
+    out.push(`# cycles per sample set by instruction address in /${v.pcs}/`);
+    for (const [pc, c] of rows.sort((a, b) => a[0] - b[0])) {
+      out.push(`${(pc >>> 0).toString(16)} ${(c / sets).toFixed(2)}`);
+    }
   }
   if (v.callers) {
     out.push(`# calls of /${v.callers}/ by call site (inclusive): cycles and calls per sample set`);

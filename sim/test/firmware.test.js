@@ -37,4 +37,8 @@ test('profile --exact charges every executed cycle to a function, per sample set
   // The IMU engines' pushes: the hand-scheduled Thumb routine (allan/src/stream/thumb.rs).
   const push = [...r.byFn.entries()].find(([n]) => /^pico_imu_allan_push_pair_small$/.test(n));
   assert.ok(push && push[1] / r.sets > 100, 'the Allan push shows up with its cycles');
+  // What `--pcs RE` lists: the charges by instruction address, which add up to the function's.
+  const byPc = [...r.perPc.entries()].filter(([pc]) => r.find(pc & ~1) === push[0]);
+  assert.ok(byPc.length > 20, `addresses in the push ${byPc.length}`);
+  assert.equal(byPc.reduce((a, [, c]) => a + c, 0), push[1], 'per-address cycles add up');
 });

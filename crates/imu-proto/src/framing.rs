@@ -2,7 +2,10 @@
 //! device uses and the reader both sides use.
 use serde::{de::DeserializeOwned, Serialize};
 
-use crate::{batch, status, table, AllanTable, SampleBatch, Status};
+use crate::{
+    batch, orientation, status, table, AllanTable, Orientation, SampleBatch, Status, Vec,
+    MAX_ORIENTATIONS,
+};
 
 /// Wire-format version carried in the first byte of every frame.
 pub const PROTOCOL_VERSION: u8 = 5;
@@ -378,6 +381,17 @@ impl FrameEncoder {
     /// frame (`status.rs` writes the postcard bytes).
     pub fn encode_status(&mut self, status: &Status, out: &mut [u8]) -> Result<usize, EncodeError> {
         self.encode_by(out, |buf| status::write(status, buf))
+    }
+
+    /// Encode `DeviceMsg::Orientation(list)` as one frame into `out`, byte for byte what
+    /// [`FrameEncoder::encode`] writes for it (tested), without serde: the firmware's attitude
+    /// frames (`orientation.rs` writes the postcard bytes).
+    pub fn encode_orientations(
+        &mut self,
+        list: &Vec<Orientation, MAX_ORIENTATIONS>,
+        out: &mut [u8],
+    ) -> Result<usize, EncodeError> {
+        self.encode_by(out, |buf| orientation::write(list, buf))
     }
 
     /// One frame whose postcard bytes `write` puts into the buffer it is given (returning

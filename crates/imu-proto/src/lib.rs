@@ -54,6 +54,7 @@ mod contract;
 pub mod csv;
 mod framing;
 mod messages;
+mod orientation;
 mod status;
 /// The hand-written postcard bytes of an Allan table, whole or a level at a time.
 pub mod table;

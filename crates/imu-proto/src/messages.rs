@@ -333,8 +333,8 @@ pub struct Orientation {
     pub state: AhrsState,
 }
 
-/// Most [`Orientation`]s in one [`DeviceMsg::Orientation`] (the device sends one frame per
-/// magnetometer hand-over: four, every 20 ms).
+/// Most [`Orientation`]s in one [`DeviceMsg::Orientation`] (the device sends five a frame,
+/// every 25 ms).
 pub const MAX_ORIENTATIONS: usize = 8;
 
 /// The expected geomagnetic field, against which the device flags a magnetic disturbance.

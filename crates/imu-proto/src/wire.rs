@@ -92,10 +92,16 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
         self.varint(((n << 1) ^ (n >> 31)) as u32);
     }
 
+    /// An `f32`'s four bytes, least significant first, cut from its bits by shifts: from
+    /// `to_le_bytes`, the compiler copied a row of them with a byte-wise `memcpy` (≈ 270 cycles
+    /// per attitude estimate on the M0+).
+    #[inline(always)]
     pub(crate) fn f32(&mut self, x: f32) {
-        for b in x.to_le_bytes() {
-            self.byte(b);
-        }
+        let b = x.to_bits();
+        self.byte(b as u8);
+        self.byte((b >> 8) as u8);
+        self.byte((b >> 16) as u8);
+        self.byte((b >> 24) as u8);
     }
 
     /// A `u128` varint; a value below 2^64 as a `u64` (32-bit steps where it allows).

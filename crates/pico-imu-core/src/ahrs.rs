@@ -37,23 +37,39 @@
 //! converged. A calibration (the magnetometer's correction) changes what |B| reads: a new one
 //! resets the filter and a learnt reference.
 //!
-//! # micromath and libm
-//! The update uses micromath's f32 approximations where their error is far below what the
-//! result needs, and the exact (libm) functions only off the hot path (configuration, the
-//! initial attitude). The measured errors are in docs/firmware.md ("Orientation") and held by
-//! the test `micromath_error_on_the_values_that_matter`:
-//! * `invsqrt` (a bit trick, ≤ 3.5 % error) scales the accelerometer to unit length: its error
-//!   only scales the correction gain;
-//! * `invsqrt` + one Newton step for `cos θ` in the pitch and for |h_xy| and |m| (≤ 0.2 %);
-//! * `atan2` (≤ 0.16°) for roll, pitch and heading;
-//! * the quaternion (micromath's `Quaternion`: its norm and scaling) is renormalised by a
-//!   Newton step from 1 (`q (3 − |q|²)/2`, error O((|q|² − 1)²)) every fourth update; the
-//!   rotation step `q + q ⊗ (0, v)` is written out (12 products, where the general product
-//!   with `(1, v)` takes 16).
-//!   micromath's `asin` (atan of x/√(1−x²) with the raw `invsqrt`) errs by up to 0.8° at 60°
-//!   of pitch, so pitch is `atan2(−r₃₁, √(r₃₂² + r₃₃²))` instead.
+//! # Integer arithmetic (the device's filter)
+//! The Cortex-M0+ has no FPU: in `f32` (soft float, [`float::Ahrs`], the reference) an update
+//! costs ≈ 30,000 cycles; [`Ahrs`] is the same filter in integers (docs/benchmarks.md has the
+//! cycles). Formats (`Qn`: value · 2^n):
+//! * the quaternion in Q30; the rotation's rows in Q29, from the quaternion rounded to Q15
+//!   (16 × 16-bit products, entries within ≈ 6·10⁻⁵; with [`fixed::atan2`], the angles within
+//!   0.013° of their exact values from the quaternion, tested);
+//! * the half rotation `v` in Q30 rad: the gyro sums times the step per count (Q46, from the
+//!   IMU's measured period), by [`fixed::mul_shr`], the sums clamped so that it stays below
+//!   0.5 rad whatever they hold (a longer step is renormalised at once);
+//! * the quaternion step `q + q ⊗ (0, v)` in block floating point: `v` shifted so its largest
+//!   component fits 15 bits, times the quaternion in Q15 (every product one 32-bit multiply; the
+//!   increments' relative error ≤ 6·10⁻⁵ of the largest component);
+//! * the directions of the accelerometer, the magnetometer and `h`'s horizontal part: shifted to
+//!   15 bits, scaled by [`fixed::rsqrt`] (≤ 2·10⁻⁴: only the correction's gain, the learnt
+//!   field and the dip band's edges see it);
+//! * the errors and the correction in Q30; the bias estimate in Q40 (its increments are
+//!   `k_I Δt` times smaller than the correction's);
+//! * roll, pitch, heading by [`fixed::atan2`] (a polynomial in the components' ratio, the ratio
+//!   by a table-and-Newton reciprocal, ≤ 0.004°); pitch as `atan2(−d₁, √(d₂² + d₃²))`, the root
+//!   by [`fixed::rsqrt`]; degrees in Q20.
+//!
+//! The output is `f32` for the wire ([`Attitude`]): seven integer-to-float conversions an
+//! update, the scale put into the exponent ([`fixed::to_f32`]). `f32` and `libm` stay where they
+//! run once: the initial attitude, the field reference (set or learnt), the declination. The
+//! integer filter agrees with the `f32` one within 0.05° in roll, pitch and heading on random
+//! trajectories, with the same states (`tests/ahrs.rs`).
 pub use imu_proto::AhrsState;
-use micromath::{Quaternion, F32};
+
+pub mod fixed;
+pub mod float;
+
+use fixed::{atan2, mul_shr, norm15, rsqrt, to_f32, DEG_Q20};
 
 /// Proportional gain while tracking, rad/s per unit error (time constant 1 s).
 pub const KP: f32 = 1.0;
@@ -73,6 +89,8 @@ const MIN_CONVERGE_UPDATES: u32 = 50;
 /// IMU samples summed at most before an update without the magnetometer (100 ms at 1 kHz;
 /// full-scale counts × this stay far inside i32).
 pub const MAX_SUM: u32 = 100;
+/// The quaternion is renormalised every this many updates.
+const RENORM_EVERY: u32 = 4;
 
 /// The 1 kHz path's sums since the last update: corrected counts.
 #[derive(Debug, Clone, Copy, Default)]
@@ -94,6 +112,16 @@ impl Accum {
         self.gyro[2] += gyro[2];
         self.n += 1;
     }
+
+    /// `n` IMU samples at once, their sums given.
+    #[inline(always)]
+    pub fn add_sums(&mut self, accel: &[i32; 3], gyro: &[i32; 3], n: u32) {
+        for i in 0..3 {
+            self.accel[i] += accel[i];
+            self.gyro[i] += gyro[i];
+        }
+        self.n += n;
+    }
 }
 
 /// One attitude estimate.
@@ -108,23 +136,145 @@ pub struct Attitude {
     pub state: AhrsState,
 }
 
-/// Expected field: bands on |B|² (input units squared) and on sin(dip).
+/// The first attitude, from one accelerometer and one magnetometer reading (body axes):
+/// down = −â, east = down × m, north = east × down, as the rows of R; then the quaternion
+/// of R, `[w, x, y, z]`, unit norm (exact functions: once per start). `None` when the readings
+/// give no frame (a zero vector, or m parallel to a).
+fn initial_quaternion(a: &[f32; 3], m: &[f32; 3]) -> Option<[f32; 4]> {
+    let unit = |v: [f32; 3]| {
+        let n = libm::sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        if n > 0.0 {
+            Some(v.map(|c| c / n))
+        } else {
+            None
+        }
+    };
+    let cross = |a: [f32; 3], b: [f32; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let down = unit(a.map(|c| -c))?;
+    let east = unit(cross(down, *m))?;
+    let north = cross(east, down);
+    let r = [north, east, down];
+    let tr = r[0][0] + r[1][1] + r[2][2];
+    let q = if tr > 0.0 {
+        let s = 2.0 * libm::sqrtf(1.0 + tr);
+        [
+            s / 4.0,
+            (r[2][1] - r[1][2]) / s,
+            (r[0][2] - r[2][0]) / s,
+            (r[1][0] - r[0][1]) / s,
+        ]
+    } else if r[0][0] > r[1][1] && r[0][0] > r[2][2] {
+        let s = 2.0 * libm::sqrtf(1.0 + r[0][0] - r[1][1] - r[2][2]);
+        [
+            (r[2][1] - r[1][2]) / s,
+            s / 4.0,
+            (r[0][1] + r[1][0]) / s,
+            (r[0][2] + r[2][0]) / s,
+        ]
+    } else if r[1][1] > r[2][2] {
+        let s = 2.0 * libm::sqrtf(1.0 + r[1][1] - r[0][0] - r[2][2]);
+        [
+            (r[0][2] - r[2][0]) / s,
+            (r[0][1] + r[1][0]) / s,
+            s / 4.0,
+            (r[1][2] + r[2][1]) / s,
+        ]
+    } else {
+        let s = 2.0 * libm::sqrtf(1.0 + r[2][2] - r[0][0] - r[1][1]);
+        [
+            (r[1][0] - r[0][1]) / s,
+            (r[0][2] + r[2][0]) / s,
+            (r[1][2] + r[2][1]) / s,
+            s / 4.0,
+        ]
+    };
+    let n = libm::sqrtf(q.iter().map(|c| c * c).sum());
+    if n.is_finite() && n > 0.0 {
+        Some(q.map(|c| c / n))
+    } else {
+        None
+    }
+}
+
+/// The gyro's step: half the rotation, rad, per count of a gyro sum, in Q46 (the half rotation
+/// in Q30 is `sum · step >> 16`): the gyro's scale times the IMU's period, halved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GyroStep(pub i32);
+
+impl GyroStep {
+    /// From rad per count-sample (the gyro's scale in rad/s per count times the IMU's period in
+    /// s); `f64` arithmetic (configuration and tests, not the sample path).
+    pub fn from_rad(rad_per_count: f64) -> GyroStep {
+        GyroStep(libm::round(rad_per_count * 0.5 * (1u64 << 46) as f64) as i32)
+    }
+}
+
+/// One in Q30.
+const ONE_Q30: i32 = 1 << 30;
+/// [`CONVERGED_ERR2`] in Q30.
+const CONVERGED_ERR2_Q30: u32 = (CONVERGED_ERR2 as f64 * (1u64 << 30) as f64) as u32;
+/// The bias estimate's bound, Q40 rad per half magnetometer period (2^30: 0.39 rad/s, 22°/s).
+const BIAS_MAX_Q40: i32 = 1 << 30;
+
+/// The gains of one update of `dt` (the correction's step).
+#[derive(Debug, Clone, Copy)]
+struct Gains {
+    /// `k_P Δt / 2`, Q32.
+    kph_q32: i32,
+    /// `(k_I/k_P) Δt`, Q34: the bias's increment per unit of correction.
+    kb_q34: i32,
+    /// `Δt` over the magnetometer's period, Q16 (the bias is kept per magnetometer period).
+    ratio_q16: i32,
+}
+
+impl Gains {
+    /// `dt_us` is taken as at most 200 ms (the firmware's updates without the magnetometer
+    /// come every [`MAX_SUM`] IMU samples, 100 ms): the half rotation, the correction and the
+    /// bias term then stay below 2^30 in Q30 ([`Ahrs::rotate`]).
+    const fn new(dt_us: u32) -> Gains {
+        let dt = (if dt_us > 200_000 { 200_000 } else { dt_us }) as f64 * 1e-6;
+        Gains {
+            kph_q32: (0.5 * KP as f64 * dt * (1u64 << 32) as f64) as i32,
+            kb_q34: ((KI / KP) as f64 * dt * (1u64 << 34) as f64) as i32,
+            ratio_q16: (dt / (imu_proto::MAG_PERIOD_US as f64 * 1e-6) * 65536.0) as i32,
+        }
+    }
+}
+
+impl Gains {
+    /// [`Gains::new`] at run time (`f64` in software: out of line, for the rare updates without
+    /// the magnetometer).
+    #[cold]
+    #[inline(never)]
+    fn at(dt_us: u32) -> Gains {
+        Gains::new(dt_us)
+    }
+}
+
+/// The gains of an update at a magnetometer sample (its period).
+const MAG_GAINS: Gains = Gains::new(imu_proto::MAG_PERIOD_US as u32);
+
+/// Expected field: bands on |B|² (input units squared) and on sin(dip) (Q30).
 #[derive(Debug, Clone, Copy)]
 struct Bands {
-    field2: [f32; 2],
-    /// The dip band's edges as `s·|s|`, `s = sin δ`: compared with `(m·d)·|m·d|/|m|²`, which
-    /// needs no square root (`x·|x|` is monotonic).
-    sin_dip_sq: [f32; 2],
+    field2: [u64; 2],
+    sin_dip: [i32; 2],
 }
 
 impl Bands {
     fn new(field: f32, dip_deg: f32) -> Bands {
         let lo = field * (1.0 - FIELD_BAND);
         let hi = field * (1.0 + FIELD_BAND);
-        let d = |x: f32| libm::sinf(x.clamp(-90.0, 90.0).to_radians());
+        let s = |x: f32| (libm::sinf(x.clamp(-90.0, 90.0).to_radians()) * ONE_Q30 as f32) as i32;
         Bands {
-            field2: [lo * lo, hi * hi],
-            sin_dip_sq: [d(dip_deg - DIP_BAND_DEG), d(dip_deg + DIP_BAND_DEG)].map(|s| s * s.abs()),
+            field2: [(lo * lo) as u64, (hi * hi) as u64],
+            sin_dip: [s(dip_deg - DIP_BAND_DEG), s(dip_deg + DIP_BAND_DEG)],
         }
     }
 }
@@ -132,39 +282,43 @@ impl Bands {
 /// Where the expected field comes from.
 #[derive(Debug, Clone, Copy)]
 enum Reference {
-    /// Learning: sums of |B| and sin(dip) over `n` tracking updates.
-    Learning {
-        field: f32,
-        sin_dip: f32,
-        n: u32,
-    },
-    Learnt(Bands),
-    /// Set by the host (field in the input units, dip in degrees).
-    Set {
+    /// Learning: sums of |B| (input units, Q8) and sin(dip) (Q30) over `n` tracking updates.
+    Learning { field: u64, sin_dip: i64, n: u32 },
+    /// Known: the field in the input units and the dip in degrees, learnt or the host's.
+    Known {
         field: f32,
         dip_deg: f32,
         bands: Bands,
+        learnt: bool,
     },
 }
 
-/// The filter.
+const LEARNING: Reference = Reference::Learning {
+    field: 0,
+    sin_dip: 0,
+    n: 0,
+};
+
+/// The filter, in integers (the device's).
 #[derive(Debug, Clone)]
 pub struct Ahrs {
-    q: Quaternion,
+    /// Body → NED, `[w, x, y, z]`, Q30.
+    q: [i32; 4],
     /// Updates since the start, for the renormalisation's turn.
     steps: u32,
-    /// The rotation's rows for `q` ([`rows`]).
-    rows: [[f32; 3]; 3],
-    /// Gyro bias estimate times half the magnetometer's period, rad (body).
-    bias_h: [f32; 3],
+    /// The rotation's rows for `q` ([`rows`]), Q29.
+    rows: [[i32; 3]; 3],
+    /// Gyro bias estimate times half the magnetometer's period, rad (body), Q40.
+    bias: [i32; 3],
     started: bool,
     converging: bool,
     updates: u32,
-    err2: f32,
-    /// Mean accelerometer of the latest update (body), for updates with no new IMU sample.
-    accel: [f32; 3],
-    have_accel: bool,
+    /// The smoothed squared error, Q30.
+    err2: u32,
+    /// The latest accelerometer sum (body), for updates with no new IMU sample.
+    accel: [i32; 3],
     declination_deg: f32,
+    declination_q20: i32,
     reference: Reference,
 }
 
@@ -174,58 +328,37 @@ impl Default for Ahrs {
     }
 }
 
-/// The quaternion is renormalised every this many updates.
-const RENORM_EVERY: u32 = 4;
-
-/// The magnetometer's period, s: the step the bias estimate is kept in.
-const MAG_DT: f32 = imu_proto::MAG_PERIOD_US as f32 * 1e-6;
-
-/// The first three rows of the body → NED rotation of a unit quaternion (the body's north,
-/// east and down axes): 9 products, 15 sums.
-fn rows(q: &Quaternion) -> [[f32; 3]; 3] {
-    let (w, x, y, z) = (q.w(), q.x(), q.y(), q.z());
-    let (x2, y2, z2) = (x + x, y + y, z + z);
-    let (xx, yy, zz) = (x * x2, y * y2, z * z2);
-    let (xy, xz, yz) = (x * y2, x * z2, y * z2);
-    let (wx, wy, wz) = (w * x2, w * y2, w * z2);
+/// The first three rows of the body → NED rotation of a unit quaternion (Q30), in Q29, from
+/// the quaternion rounded to Q15: every product one 32-bit multiply. A Q15 product is Q30, and
+/// a rotation entry is twice such products, which is the same number in Q29.
+fn rows(q: &[i32; 4]) -> [[i32; 3]; 3] {
+    let [w, x, y, z] = q.map(|c| (c + (1 << 14)) >> 15);
+    let (xx, yy, zz) = (x * x, y * y, z * z);
+    let (xy, xz, yz) = (x * y, x * z, y * z);
+    let (wx, wy, wz) = (w * x, w * y, w * z);
+    const ONE_Q29: i32 = 1 << 29;
     [
-        [1.0 - yy - zz, xy - wz, xz + wy],
-        [xy + wz, 1.0 - xx - zz, yz - wx],
-        [xz - wy, yz + wx, 1.0 - xx - yy],
+        [ONE_Q29 - yy - zz, xy - wz, xz + wy],
+        [xy + wz, ONE_Q29 - xx - zz, yz - wx],
+        [xz - wy, yz + wx, ONE_Q29 - xx - yy],
     ]
-}
-
-/// `1/√x` to ≈ 0.2 %: micromath's bit-trick guess and one Newton step.
-#[inline(always)]
-fn inv_sqrt(x: f32) -> f32 {
-    let y = F32(x).invsqrt().0;
-    y * (1.5 - 0.5 * x * y * y)
-}
-
-#[inline(always)]
-fn atan2_deg(y: f32, x: f32) -> f32 {
-    F32(y).atan2(F32(x)).0 * (180.0 / core::f32::consts::PI)
 }
 
 impl Ahrs {
     pub fn new() -> Self {
         Ahrs {
-            q: Quaternion::IDENTITY,
+            q: [ONE_Q30, 0, 0, 0],
             steps: 0,
-            rows: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-            bias_h: [0.0; 3],
+            rows: [[1 << 29, 0, 0], [0, 1 << 29, 0], [0, 0, 1 << 29]],
+            bias: [0; 3],
             started: false,
             converging: true,
             updates: 0,
-            err2: 1.0,
-            accel: [0.0; 3],
-            have_accel: false,
+            err2: 0,
+            accel: [0; 3],
             declination_deg: 0.0,
-            reference: Reference::Learning {
-                field: 0.0,
-                sin_dip: 0.0,
-                n: 0,
-            },
+            declination_q20: 0,
+            reference: LEARNING,
         }
     }
 
@@ -234,15 +367,19 @@ impl Ahrs {
     pub fn reset(&mut self) {
         let keep = (self.declination_deg, self.reference);
         *self = Ahrs::new();
-        self.declination_deg = keep.0;
-        if let Reference::Set { .. } = keep.1 {
+        self.set_declination(keep.0);
+        if let Reference::Known { learnt: false, .. } = keep.1 {
             self.reference = keep.1;
         }
     }
 
     /// Declination (true north = magnetic north + this), degrees, added to the heading.
     pub fn set_declination(&mut self, deg: f32) {
+        let deg = if deg.is_finite() { deg } else { 0.0 };
         self.declination_deg = deg;
+        // The same angle within [−180°, 180°] for the sum with the heading.
+        let d = libm::remainderf(deg, 360.0);
+        self.declination_q20 = libm::roundf(d * DEG_Q20 as f32) as i32;
     }
 
     pub fn declination(&self) -> f32 {
@@ -253,153 +390,169 @@ impl Ahrs {
     /// (positive down); `None` learns it again from the next converged second.
     pub fn set_reference(&mut self, field_dip: Option<(f32, f32)>) {
         self.reference = match field_dip {
-            Some((field, dip_deg)) => Reference::Set {
+            Some((field, dip_deg)) => Reference::Known {
                 field,
                 dip_deg,
                 bands: Bands::new(field, dip_deg),
+                learnt: false,
             },
-            None => Reference::Learning {
-                field: 0.0,
-                sin_dip: 0.0,
-                n: 0,
-            },
+            None => LEARNING,
         };
     }
 
     /// The expected field (strength, dip in degrees) in use, if known yet.
     pub fn reference(&self) -> Option<(f32, f32)> {
         match self.reference {
-            Reference::Set { field, dip_deg, .. } => Some((field, dip_deg)),
-            Reference::Learnt(b) => {
-                let field = libm::sqrtf(b.field2[0]) / (1.0 - FIELD_BAND);
-                let s = b.sin_dip_sq[0];
-                let lo = libm::copysignf(libm::sqrtf(s.abs()), s);
-                Some((field, libm::asinf(lo).to_degrees() + DIP_BAND_DEG))
-            }
+            Reference::Known { field, dip_deg, .. } => Some((field, dip_deg)),
             Reference::Learning { .. } => None,
         }
     }
 
     /// Whether the expected field is (or is being) learnt rather than the host's.
     pub fn reference_learnt(&self) -> bool {
-        !matches!(self.reference, Reference::Set { .. })
+        !matches!(self.reference, Reference::Known { learnt: false, .. })
     }
 
     /// The attitude now.
     pub fn quaternion(&self) -> [f32; 4] {
-        self.q.to_array()
+        self.q.map(|c| to_f32(c, 30))
     }
 
-    /// One update. `acc`: the IMU sums since the last update (emptied); `rad_per_count`: gyro
-    /// count × sample period → rad; `mag`: corrected magnetometer counts (sensor axes), `None`
-    /// for an update without it; `dt`: the time since the last update, s (the correction's
+    /// One update. `acc`: the IMU sums since the last update (emptied); `step`: the gyro's
+    /// half rotation per count; `mag`: corrected magnetometer counts (sensor axes), `None` for
+    /// an update without it; `dt_us`: the time since the last update, µs (the correction's
     /// step). Returns the attitude once the filter has started (it starts at the first update
     /// with both an accelerometer and a magnetometer reading).
-    ///
-    /// Soft float on the M0+ (≈ 150 cycles an operation in the emulator): the rotation's rows
-    /// are kept from the previous update, the gains are folded into the constants, and the
-    /// convergence and learning sums only run while they are needed.
+    #[inline(never)]
     pub fn update(
         &mut self,
         acc: &mut Accum,
-        rad_per_count: f32,
+        step: GyroStep,
         mag: Option<&[i32; 3]>,
-        dt: f32,
+        dt_us: u32,
     ) -> Option<Attitude> {
         // Half the rotation since the last update, body axes (sensor forward-left-up →
-        // forward-right-down: the sign flips are free).
-        let k = 0.5 * rad_per_count;
-        let mut v = [
-            acc.gyro[0] as f32 * k,
-            -(acc.gyro[1] as f32 * k),
-            -(acc.gyro[2] as f32 * k),
-        ];
+        // forward-right-down: the sign flips are free), Q30.
+        // The sums clamped so that |sum · step| < 2^45: the half rotation stays below 2^29
+        // (0.5 rad) in Q30, whatever the sums and the gyro's range.
+        let bits = 32 - fixed::leading_zeros(step.0.unsigned_abs());
+        let max = 1i32 << (45u32.saturating_sub(bits)).min(30);
+        let g = acc.gyro.map(|s| mul_shr(s.clamp(-max, max), step.0, 16));
+        let mut v = [g[0], -g[1], -g[2]];
         if acc.n > 0 {
             // The sum's scale does not matter: the direction is normalised below.
             self.accel = [
-                acc.accel[0] as f32,
-                -(acc.accel[1] as f32),
-                -(acc.accel[2] as f32),
+                acc.accel[0],
+                acc.accel[1].wrapping_neg(),
+                acc.accel[2].wrapping_neg(),
             ];
-            self.have_accel = true;
         }
         *acc = Accum::default();
-        let m = mag.map(|m| [m[0] as f32, -(m[1] as f32), -(m[2] as f32)]);
+        let m = mag.map(|m| [m[0], m[1].wrapping_neg(), m[2].wrapping_neg()]);
         if !self.started {
-            if let (Some(m), true) = (m, self.have_accel) {
+            if let (Some(m), true) = (m, self.accel != [0; 3]) {
                 self.start(&self.accel.clone(), &m);
             }
             return None;
         }
-        let a = self.accel;
+        let gains = if u64::from(dt_us) == imu_proto::MAG_PERIOD_US {
+            MAG_GAINS
+        } else {
+            Gains::at(dt_us)
+        };
         let [r1, r2, d] = self.rows;
-        // Gravity: â × (−d) = (d × a)/|a|; the gain and the half step folded into one factor.
-        let kph = 0.5 * KP * dt;
-        let da = [
-            d[1] * a[2] - d[2] * a[1],
-            d[2] * a[0] - d[0] * a[2],
-            d[0] * a[1] - d[1] * a[0],
-        ];
-        let ca = kph * F32(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).invsqrt().0;
-        let mut cm = 0.0;
+        let d15 = d.map(|c| c >> 14);
+        // Gravity: â × (−d) = d × â, Q30 (Q15 times Q15).
+        let mut e = [0; 3];
+        if let Some((a, _)) = norm15(self.accel) {
+            // |a|² < 3·2^30 (each component below 2^15) and ≥ 2^28: 1/|a| = m·2^-s, s 30 or 31.
+            let (im, is) = rsqrt(sum_sq(&a));
+            let im = im as i32;
+            // â in Q15: a · m · 2^-s · 2^15 (|a · m| < 2^31: |a_i| < 2^15, m < 2^16).
+            let ah = a.map(|c| (c * im) >> (is - 15));
+            e = [
+                d15[1] * ah[2] - d15[2] * ah[1],
+                d15[2] * ah[0] - d15[0] * ah[2],
+                d15[0] * ah[1] - d15[1] * ah[0],
+            ];
+        }
         let mut state = AhrsState::Tracking;
-        if let Some(m) = m {
-            let m2 = m[0] * m[0] + m[1] * m[1] + m[2] * m[2];
-            let md = m[0] * d[0] + m[1] * d[1] + m[2] * d[2];
-            state = self.check_field(m2, md);
+        if let Some((m, sh)) = m.and_then(norm15) {
+            // |m|² in [2^28, 3·2^30): 1/|m| = im·2^-is, is 30 or 31.
+            let m2 = sum_sq(&m);
+            let (im, is) = rsqrt(m2);
+            // m·d in Q15 · m's units (< √3·2^30); sin δ = m·d/(|m| 2^15), Q30:
+            // (m·d >> 16) · im · 2^(31 − is) (< 2^31 by the bound on m·d for each `is`).
+            let md = m[0] * d15[0] + m[1] * d15[1] + m[2] * d15[2];
+            let sin_dip = ((md >> 16) * im as i32) << (31 - is);
+            state = self.check_field(m2, sh, im, is, sin_dip);
             if state == AhrsState::Tracking {
                 // h = R̂ m, north and east: the heading error about the vertical, sin of the
-                // angle of h's horizontal part from north (its scale only scales the gain).
-                let hx = r1[0] * m[0] + r1[1] * m[1] + r1[2] * m[2];
-                let hy = r2[0] * m[0] + r2[1] * m[1] + r2[2] * m[2];
-                cm = -hy * kph * F32(hx * hx + hy * hy).invsqrt().0;
+                // angle of h's horizontal part from north.
+                let hx = dot15(&r1, &m) >> 16;
+                let hy = dot15(&r2, &m) >> 16;
+                let h2 = (hx * hx + hy * hy) as u32;
+                if h2 != 0 {
+                    let (ih, js) = rsqrt(h2);
+                    // −h_y/|h_xy| in Q30: h_y · ih · 2^(30 − js) (|h_y · ih| ≤ 2^js·(1 + 2·10⁻⁴)).
+                    let p = -(hy * ih as i32);
+                    let eh = if js >= 30 {
+                        p >> (js - 30)
+                    } else {
+                        p << (30 - js)
+                    };
+                    let eh15 = eh >> 15;
+                    for i in 0..3 {
+                        e[i] += eh15 * d15[i];
+                    }
+                }
             }
         }
-        // The correction, kP e Δt/2, per axis.
-        let c = [0, 1, 2].map(|i| ca * da[i] + cm * d[i]);
+        // The correction, k_P e Δt/2, per axis, Q30.
+        let c = e.map(|x| mul_shr(x, gains.kph_q32, 32));
         if self.converging {
-            // The squared error, smoothed; from the first update's on.
-            let e2 = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) * (1.0 / (kph * kph));
+            // The squared error, smoothed; from the first update's on (|e|² ≤ 2: < 2^31 in Q30).
+            let e15 = e.map(|x| (x >> 15).unsigned_abs());
+            let e2 = e15[0] * e15[0] + e15[1] * e15[1] + e15[2] * e15[2];
             if self.updates == 0 {
                 self.err2 = e2;
             }
-            self.err2 += (e2 - self.err2) * (1.0 / 16.0);
+            self.err2 = self.err2 - (self.err2 >> 4) + (e2 >> 4);
             self.updates = self.updates.saturating_add(1);
-            if self.updates >= MIN_CONVERGE_UPDATES && self.err2 < CONVERGED_ERR2 {
+            if self.updates >= MIN_CONVERGE_UPDATES && self.err2 < CONVERGED_ERR2_Q30 {
                 self.converging = false;
             }
         } else {
-            // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2).
-            let kb = (KI / KP) * dt;
-            for (b, c) in self.bias_h.iter_mut().zip(c) {
-                *b += kb * c;
+            // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2); Q30 · Q34 >> 24 is Q40.
+            for (b, c) in self.bias.iter_mut().zip(c) {
+                *b = (*b + mul_shr(c, gains.kb_q34, 24)).clamp(-BIAS_MAX_Q40, BIAS_MAX_Q40);
             }
         }
         // The bias is kept per magnetometer period: scaled only for an update without it.
-        let bias = if mag.is_some() {
-            self.bias_h
-        } else {
-            self.bias_h.map(|b| b * (dt * (1.0 / MAG_DT)))
-        };
         for i in 0..3 {
-            v[i] += c[i] + bias[i];
+            let b = if mag.is_some() {
+                self.bias[i] >> 10
+            } else {
+                mul_shr(self.bias[i], gains.ratio_q16, 26)
+            };
+            v[i] += c[i] + b;
         }
-        // q ← q + q ⊗ (0, v), then back to unit norm by a Newton step from 1: every fourth
-        // update (each step grows |q|² by |v|² ≲ 1e-5 at the rates the part measures), and
-        // after every update without the magnetometer (a longer step).
-        let (w, x, y, z) = (self.q.w(), self.q.x(), self.q.y(), self.q.z());
-        let q = Quaternion::new(
-            w - x * v[0] - y * v[1] - z * v[2],
-            x + w * v[0] + y * v[2] - z * v[1],
-            y + w * v[1] - x * v[2] + z * v[0],
-            z + w * v[2] + x * v[1] - y * v[0],
-        );
+        let long = self.rotate(&v);
+        // Back to unit norm by a Newton step from 1: every fourth update (each step grows |q|²
+        // by |v|² ≲ 1e-5 at the rates the part measures), and after every update without the
+        // magnetometer or with a long step.
         self.steps = self.steps.wrapping_add(1);
-        self.q = if mag.is_none() || self.steps.is_multiple_of(RENORM_EVERY) {
-            q * (1.5 - 0.5 * q.norm())
-        } else {
-            q
-        };
+        if mag.is_none() || long || self.steps.is_multiple_of(RENORM_EVERY) {
+            let n2: i64 = self.q.iter().map(|&c| mul_shr(c, c, 30) as i64).sum();
+            let s = if long {
+                // |q|² up to ≈ 1.4: 1/|q| by rsqrt (≤ 1.2·10⁻⁴), refined by the next steps.
+                let (m, e) = rsqrt(n2.clamp(1, u32::MAX as i64) as u32);
+                (m << (45 - e)) as i32
+            } else {
+                ((3 * ONE_Q30 as i64 - n2) / 2).clamp(0, i32::MAX as i64) as i32
+            };
+            self.q = self.q.map(|c| mul_shr(c, s, 30));
+        }
         self.rows = rows(&self.q);
         if self.converging {
             state = AhrsState::Converging;
@@ -407,123 +560,142 @@ impl Ahrs {
         Some(self.attitude(state))
     }
 
-    /// The field checks on |m|² and m·d (d the body's down axis); while learning, learn from
-    /// tracking updates.
-    fn check_field(&mut self, m2: f32, md: f32) -> AhrsState {
+    /// `q ← q + q ⊗ (0, v)`, `v` in Q30 (|v_i| < 2^30), in block floating point: `v` shifted
+    /// right by `b` until its largest component fits 15 bits, the quaternion taken in Q15; each
+    /// sum of three products is below 2^31 (Cauchy–Schwarz: |q| ≤ 2^15, |v| < √3·2^15) and is
+    /// Q(45 − b), shifted to Q30.
+    /// Returns whether the step was long (a component of `v` at or above 2^25, 0.03 rad: beyond
+    /// the gyro's full scale over a magnetometer period), so that the caller renormalises at
+    /// once and |q| stays near one whatever the sums.
+    fn rotate(&mut self, v: &[i32; 3]) -> bool {
+        let big = v[0].unsigned_abs() | v[1].unsigned_abs() | v[2].unsigned_abs();
+        let b = 17u32.saturating_sub(fixed::leading_zeros(big));
+        let s = 15 - b;
+        let [v0, v1, v2] = v.map(|c| c >> b);
+        let [w, x, y, z] = self.q;
+        let [qw, qx, qy, qz] = self.q.map(|c| c >> 15);
+        self.q = [
+            w - ((qx * v0 + qy * v1 + qz * v2) >> s),
+            x + ((qw * v0 + qy * v2 - qz * v1) >> s),
+            y + ((qw * v1 - qx * v2 + qz * v0) >> s),
+            z + ((qw * v2 + qx * v1 - qy * v0) >> s),
+        ];
+        b > 10
+    }
+
+    /// The field checks: `m2` is |m|² of the magnetometer reading shifted by `sh` bits
+    /// ([`norm15`]), `1/|m| = im·2^-is` in those units, `sin_dip` in Q30; while learning, learn
+    /// from tracking updates.
+    fn check_field(&mut self, m2: u32, sh: i32, im: u32, is: u32, sin_dip: i32) -> AhrsState {
         let bands = match &mut self.reference {
-            Reference::Set { bands, .. } | Reference::Learnt(bands) => *bands,
-            Reference::Learning { field, sin_dip, n } => {
+            Reference::Known { bands, .. } => *bands,
+            Reference::Learning { .. } => {
                 if !self.converging {
-                    let inv = inv_sqrt(m2);
-                    *field += m2 * inv;
-                    *sin_dip += md * inv;
-                    *n += 1;
-                    if *n >= LEARN_UPDATES {
-                        let k = 1.0 / *n as f32;
-                        let dip = libm::asinf((*sin_dip * k).clamp(-1.0, 1.0)).to_degrees();
-                        self.reference = Reference::Learnt(Bands::new(*field * k, dip));
-                    }
+                    self.learn(m2, sh, im, is, sin_dip);
                 }
                 return AhrsState::Tracking;
             }
         };
+        // |m|² in input units squared.
+        let m2 = if sh >= 0 {
+            u64::from(m2 >> (2 * sh))
+        } else {
+            u64::from(m2) << (-2 * sh)
+        };
         if m2 < bands.field2[0] || m2 > bands.field2[1] {
-            return AhrsState::MagField;
-        }
-        // sin δ = m·d/|m| within [lo, hi] ⟺ (m·d)|m·d| within [lo|lo|, hi|hi|]·|m|².
-        let md2 = md * md.abs();
-        if md2 < bands.sin_dip_sq[0] * m2 || md2 > bands.sin_dip_sq[1] * m2 {
+            AhrsState::MagField
+        } else if sin_dip < bands.sin_dip[0] || sin_dip > bands.sin_dip[1] {
             AhrsState::MagDip
         } else {
             AhrsState::Tracking
         }
     }
 
+    /// One tracking update's field for the learnt reference (arguments as for
+    /// [`Ahrs::check_field`]); after [`LEARN_UPDATES`], the reference (once: `f64` and libm).
+    #[inline(never)]
+    fn learn(&mut self, m2: u32, sh: i32, im: u32, is: u32, sin_dip: i32) {
+        let Reference::Learning {
+            field,
+            sin_dip: s,
+            n,
+        } = &mut self.reference
+        else {
+            return;
+        };
+        // |m| in input units, Q8: √m2 · 2^(8 − sh) = m2 · im · 2^(8 − sh − is).
+        let r = is as i32 + sh - 8;
+        let f = u64::from(m2) * u64::from(im);
+        *field += if r >= 0 { f >> r } else { f << -r };
+        *s += i64::from(sin_dip);
+        *n += 1;
+        if *n >= LEARN_UPDATES {
+            let k = 1.0 / *n as f64;
+            let field = (*field as f64 * k / 256.0) as f32;
+            let sin = (*s as f64 * k / ONE_Q30 as f64).clamp(-1.0, 1.0);
+            let dip_deg = libm::asin(sin).to_degrees() as f32;
+            self.reference = Reference::Known {
+                field,
+                dip_deg,
+                bands: Bands::new(field, dip_deg),
+                learnt: true,
+            };
+        }
+    }
+
     /// Roll, pitch, heading from the rotation's rows.
+    #[inline(never)]
     fn attitude(&self, state: AhrsState) -> Attitude {
         let [r1, r2, d] = self.rows;
-        let c2 = d[1] * d[1] + d[2] * d[2];
-        let mut heading = atan2_deg(r2[0], r1[0]) + self.declination_deg;
-        if heading < 0.0 {
-            heading += 360.0;
-        } else if heading >= 360.0 {
-            heading -= 360.0;
+        let roll = atan2(d[1], d[2]);
+        // cos θ = √(d₂² + d₃²) from the Q15 components (< 2^30 summed), back in Q29.
+        let (d2, d3) = (d[1] >> 14, d[2] >> 14);
+        let c2 = (d2 * d2 + d3 * d3) as u32;
+        let cos = if c2 == 0 {
+            0
+        } else {
+            let (m, s) = rsqrt(c2);
+            mul_shr(c2 as i32, m as i32, s) << 14
+        };
+        let pitch = atan2(-d[0], cos);
+        // h and the declination are within ±180°: one turn added or taken puts the sum in
+        // [0°, 360°) (not a loop: the compiler makes a loop of these a division).
+        let mut heading = atan2(r2[0], r1[0]) + self.declination_q20;
+        if heading < 0 {
+            heading += 360 * DEG_Q20;
+        } else if heading >= 360 * DEG_Q20 {
+            heading -= 360 * DEG_Q20;
         }
         Attitude {
-            q: self.q.to_array(),
-            roll_deg: atan2_deg(d[1], d[2]),
-            pitch_deg: atan2_deg(-d[0], c2 * inv_sqrt(c2)),
-            heading_deg: heading,
+            q: self.q.map(|c| to_f32(c, 30)),
+            roll_deg: to_f32(roll, 20),
+            pitch_deg: to_f32(pitch, 20),
+            heading_deg: to_f32(heading, 20),
             state,
         }
     }
 
-    /// The first attitude, from one accelerometer and one magnetometer reading (body axes):
-    /// down = −â, east = down × m, north = east × down, as the rows of R; then the quaternion
-    /// of R (exact functions: once per start).
-    fn start(&mut self, a: &[f32; 3], m: &[f32; 3]) {
-        let unit = |v: [f32; 3]| {
-            let n = libm::sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-            if n > 0.0 {
-                Some(v.map(|c| c / n))
-            } else {
-                None
-            }
-        };
-        let cross = |a: [f32; 3], b: [f32; 3]| {
-            [
-                a[1] * b[2] - a[2] * b[1],
-                a[2] * b[0] - a[0] * b[2],
-                a[0] * b[1] - a[1] * b[0],
-            ]
-        };
-        let Some(down) = unit(a.map(|c| -c)) else {
-            return;
-        };
-        let Some(east) = unit(cross(down, *m)) else {
-            return;
-        };
-        let north = cross(east, down);
-        let r = [north, east, down];
-        let tr = r[0][0] + r[1][1] + r[2][2];
-        let q = if tr > 0.0 {
-            let s = 2.0 * libm::sqrtf(1.0 + tr);
-            Quaternion::new(
-                s / 4.0,
-                (r[2][1] - r[1][2]) / s,
-                (r[0][2] - r[2][0]) / s,
-                (r[1][0] - r[0][1]) / s,
-            )
-        } else if r[0][0] > r[1][1] && r[0][0] > r[2][2] {
-            let s = 2.0 * libm::sqrtf(1.0 + r[0][0] - r[1][1] - r[2][2]);
-            Quaternion::new(
-                (r[2][1] - r[1][2]) / s,
-                s / 4.0,
-                (r[0][1] + r[1][0]) / s,
-                (r[0][2] + r[2][0]) / s,
-            )
-        } else if r[1][1] > r[2][2] {
-            let s = 2.0 * libm::sqrtf(1.0 + r[1][1] - r[0][0] - r[2][2]);
-            Quaternion::new(
-                (r[0][2] - r[2][0]) / s,
-                (r[0][1] + r[1][0]) / s,
-                s / 4.0,
-                (r[1][2] + r[2][1]) / s,
-            )
-        } else {
-            let s = 2.0 * libm::sqrtf(1.0 + r[2][2] - r[0][0] - r[1][1]);
-            Quaternion::new(
-                (r[1][0] - r[0][1]) / s,
-                (r[0][2] + r[2][0]) / s,
-                (r[1][2] + r[2][1]) / s,
-                s / 4.0,
-            )
-        };
-        let n = libm::sqrtf(q.norm());
-        if n.is_finite() && n > 0.0 {
-            self.q = q * (1.0 / n);
+    /// The first attitude, from the accelerometer and magnetometer readings (body axes), in
+    /// `f32` and libm once ([`initial_quaternion`]).
+    #[inline(never)]
+    fn start(&mut self, a: &[i32; 3], m: &[i32; 3]) {
+        if let Some(q) = initial_quaternion(&a.map(|c| c as f32), &m.map(|c| c as f32)) {
+            self.q = q.map(|c| libm::roundf(c * ONE_Q30 as f32) as i32);
             self.rows = rows(&self.q);
             self.started = true;
         }
     }
+}
+
+/// `|v|²` of a vector whose components are below 2^15 (< 3·2^30).
+#[inline(always)]
+fn sum_sq(v: &[i32; 3]) -> u32 {
+    (v[0] * v[0]) as u32 + (v[1] * v[1]) as u32 + (v[2] * v[2]) as u32
+}
+
+/// A Q29 row (taken to Q15) dotted with a vector of components below 2^15: Q15 in the vector's
+/// units, below √3·2^30 for a unit row.
+#[inline(always)]
+fn dot15(r: &[i32; 3], v: &[i32; 3]) -> i32 {
+    (r[0] >> 14) * v[0] + (r[1] >> 14) * v[1] + (r[2] >> 14) * v[2]
 }

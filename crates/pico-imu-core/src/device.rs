@@ -158,9 +158,9 @@ impl Device {
         self.pipeline.attitude_backlog()
     }
 
-    /// Run one queued attitude update (≈ 0.24 ms of soft float on the M0+: the processing
-    /// task runs them where that delay does not disturb the sensor tasks, in line with an IMU
-    /// burst's processing). Returns whether more wait.
+    /// Run one queued attitude update (≈ 20 µs on the M0+: the processing task runs them
+    /// where that delay does not disturb the sensor tasks, in line with an IMU burst's
+    /// processing). Returns whether more wait.
     pub fn attitude_step(&mut self, sink: &mut impl FrameSink) -> bool {
         self.pipeline.attitude_step(&mut self.outbox, sink)
     }

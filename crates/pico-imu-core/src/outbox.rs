@@ -1,6 +1,9 @@
 //! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
 //! split and never waited for, so a host that stops reading cannot stall the sampling path.
-use imu_proto::{AllanTable, DeviceMsg, EncodeError, FrameEncoder, SampleBatch, Status, MAX_FRAME};
+use imu_proto::{
+    AllanTable, DeviceMsg, EncodeError, FrameEncoder, Orientation, SampleBatch, Status, Vec,
+    MAX_FRAME, MAX_ORIENTATIONS,
+};
 
 /// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
 pub trait FrameSink {
@@ -82,6 +85,19 @@ impl Outbox {
     /// as [`Outbox::send`]) and queue it if it fits whole.
     pub fn send_status(&mut self, status: &Status, sink: &mut impl FrameSink) -> Sent {
         let encoded = self.enc.encode_status(status, &mut self.buf.0[..MAX_FRAME]);
+        self.queue(encoded, sink)
+    }
+
+    /// Encode `DeviceMsg::Orientation(list)` with the hand-written encoder (the same bytes as
+    /// [`Outbox::send`]) and queue it if it fits whole.
+    pub fn send_orientations(
+        &mut self,
+        list: &Vec<Orientation, MAX_ORIENTATIONS>,
+        sink: &mut impl FrameSink,
+    ) -> Sent {
+        let encoded = self
+            .enc
+            .encode_orientations(list, &mut self.buf.0[..MAX_FRAME]);
         self.queue(encoded, sink)
     }
 

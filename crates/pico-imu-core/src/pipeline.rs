@@ -3,9 +3,9 @@
 //! on the 1 kHz path allocates, divides or touches floating point: it sums the corrected gyro
 //! and accelerometer for the attitude filter ([`crate::ahrs`]). Each magnetometer sample queues
 //! one filter update with those sums; the processing task runs the queued updates
-//! ([`Pipeline::attitude_step`], ≈ 0.24 ms of soft float each) where their delay does not
-//! disturb the sensor tasks (src/main.rs: in line with an IMU burst's processing), and the
-//! estimates go out four to a frame.
+//! ([`Pipeline::attitude_step`], integer arithmetic, ≈ 2,900 cycles each with their share of
+//! the frame) where their delay does not disturb the sensor tasks (src/main.rs: in line with an
+//! IMU burst's processing), and the estimates go out five to a frame.
 //!
 //! Every sample carries its slot on its sensor's grid; a slot skipped since the previous
 //! sample is a loss: counted, split in the engines (no Allan difference straddles it) and
@@ -17,7 +17,7 @@ use imu_proto::{
     StreamMode, Vec, MAG_PERIOD_US, MAX_ORIENTATIONS,
 };
 
-use crate::ahrs::{Accum, Ahrs, MAX_SUM};
+use crate::ahrs::{self, Accum, Ahrs, GyroStep, MAX_SUM};
 use crate::clock::{Fine, Stamps, US};
 use crate::engines::{Engines, ImuInputs};
 use crate::msg::BURST_MAX;
@@ -31,9 +31,10 @@ use crate::stage::{self, Stage};
 pub const BATCH_IMU: usize = 25;
 const _: () = assert!(BATCH_IMU <= imu_proto::MAX_BATCH_IMU && 100 % BATCH_IMU == 0);
 
-/// Attitude estimates per frame: four, one magnetometer hand-over (20 ms), so every 100 ms
-/// carries five such frames.
-pub const ORIENTATIONS_PER_FRAME: usize = 4;
+/// Attitude estimates per frame: five (25 ms), so every 100 ms carries four such frames; with
+/// four a frame (one magnetometer hand-over) the fifth frame's fixed costs (framing, queueing,
+/// the USB task) came to ≈ 30 cycles per ms more (docs/benchmarks.md).
+pub const ORIENTATIONS_PER_FRAME: usize = 5;
 const _: () = assert!(ORIENTATIONS_PER_FRAME <= MAX_ORIENTATIONS);
 
 /// What the sample path counts.
@@ -81,9 +82,13 @@ pub struct Pipeline {
     /// The IMU's period ([`Fine`], 0: not known yet) and the stamp of its latest sample, µs.
     imu_period: Fine,
     imu_t_us: u64,
-    /// rad per gyro count per second (the scale, in radians).
-    gyro_rad: f32,
+    /// The gyro's step per unit of the IMU's period ([`Fine`]): [`GyroStep`]'s Q46 is
+    /// `period · this >> 32`.
+    gyro_step_per_fine: i32,
 }
+
+/// The IMU's period taken before its clock knows it: 1 ms.
+const NOMINAL_IMU_PERIOD: Fine = crate::clock::fine(1000);
 
 impl Pipeline {
     pub fn new(scales: Scales) -> Self {
@@ -108,7 +113,12 @@ impl Pipeline {
             queued: heapless::Deque::new(),
             imu_period: Fine::ZERO,
             imu_t_us: 0,
-            gyro_rad: scales.gyro * (core::f32::consts::PI / 180.0),
+            // ½ · rad per count per second · 2^46 (Q46) per Fine (2^-16 µs), times 2^32.
+            gyro_step_per_fine: libm::round(
+                0.5 * f64::from(scales.gyro).to_radians() * 1e-6 / US.raw() as f64
+                    * (1u64 << 46) as f64
+                    * (1u64 << 32) as f64,
+            ) as i32,
         }
     }
 
@@ -148,30 +158,37 @@ impl Pipeline {
         !self.queued.is_empty()
     }
 
-    /// Run the oldest queued attitude update (soft float, ≈ 30,000 cycles on the M0+); its
-    /// estimate is streamed (not in mode `Off`), four to a frame. Returns whether more wait.
+    /// Run the oldest queued attitude update (integer arithmetic, ≈ 2,350 cycles on the M0+);
+    /// its estimate is streamed (not in mode `Off`), five to a frame. Returns whether more wait.
     pub fn attitude_step(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) -> bool {
-        let Some(mut q) = self.queued.pop_front() else {
+        // Worked on in place and dropped after: popped by value, the 64-byte entry was copied
+        // byte by byte (≈ 270 cycles an update).
+        let Some(q) = self.queued.front_mut() else {
             return false;
         };
         stage::enter(Stage::Ahrs);
-        let period_s = if q.imu_period == Fine::ZERO {
-            1e-3
+        let period = if q.imu_period == Fine::ZERO || q.imu_period.raw() > i32::MAX as u64 {
+            NOMINAL_IMU_PERIOD
         } else {
-            q.imu_period.raw() as f32 * (1.0 / (US.raw() as f32 * 1e6))
+            q.imu_period
         };
-        let dt = match q.mag {
-            Some(_) => MAG_PERIOD_US as f32 * 1e-6,
-            None => q.acc.n as f32 * period_s,
+        let step = GyroStep(ahrs::fixed::mul_shr(
+            period.raw() as i32,
+            self.gyro_step_per_fine,
+            32,
+        ));
+        let dt_us = match q.mag {
+            Some(_) => MAG_PERIOD_US as u32,
+            None => ((u64::from(q.acc.n) * period.raw()) >> crate::clock::FINE_BITS) as u32,
         };
-        let att = self
-            .ahrs
-            .update(&mut q.acc, self.gyro_rad * period_s, q.mag.as_ref(), dt);
+        let att = self.ahrs.update(&mut q.acc, step, q.mag.as_ref(), dt_us);
+        let (k, t_us, with_mag) = (q.k, q.t_us, q.mag.is_some());
+        self.queued.pop_front();
         stage::enter(Stage::Usb);
-        if let (Some(a), Some(_), false) = (att, q.mag, self.mode == StreamMode::Off) {
+        if let (Some(a), true, false) = (att, with_mag, self.mode == StreamMode::Off) {
             let _ = self.orient.push(Orientation {
-                seq: q.k,
-                t_us: q.t_us,
+                seq: k,
+                t_us,
                 q: a.q,
                 roll_deg: a.roll_deg,
                 pitch_deg: a.pitch_deg,
@@ -179,8 +196,8 @@ impl Pipeline {
                 state: a.state,
             });
             if self.orient.len() >= ORIENTATIONS_PER_FRAME {
-                let o = core::mem::take(&mut self.orient);
-                outbox.send(&DeviceMsg::Orientation(o), sink);
+                outbox.send_orientations(&self.orient, sink);
+                self.orient.clear();
             }
         }
         stage::leave();
@@ -262,10 +279,20 @@ impl Pipeline {
             }
             let accel = self.fast.apply_accel(s.accel);
             let gyro = self.fast.apply_gyro_opt(s.gyro, self.last_temp);
-            self.acc.add(&accel, &gyro);
             // At most BURST_MAX samples (cut above): never full.
             let _ = fixed.push((accel, gyro, s.temp.map(i32::from)));
         }
+        // The attitude sums, three at a time so they stay in the M0+'s eight low registers (in
+        // the loop above, with the corrections' state, they went through the stack: ≈ 60
+        // cycles a sample against ≈ 25).
+        let (mut a, mut g) = ([0i32; 3], [0i32; 3]);
+        for (x, _, _) in &fixed {
+            a = [a[0] + x[0], a[1] + x[1], a[2] + x[2]];
+        }
+        for (_, x, _) in &fixed {
+            g = [g[0] + x[0], g[1] + x[1], g[2] + x[2]];
+        }
+        self.acc.add_sums(&a, &g, fixed.len() as u32);
         self.imu_period = stamps.period;
         self.imu_t_us = stamps.us(samples.len() as u32 - 1);
         // No magnetometer update for 100 ms (sensor missing or stalled): one without it, so
@@ -437,8 +464,8 @@ mod tests {
                 estimates.extend(o);
             }
         }
-        // The first update starts the filter (no estimate); seven more, four sent.
-        assert_eq!(estimates.len(), 4, "{estimates:?}");
+        // The first update starts the filter (no estimate); seven more, one frame of them sent.
+        assert_eq!(estimates.len(), ORIENTATIONS_PER_FRAME, "{estimates:?}");
         assert!(estimates.windows(2).all(|w| w[1].seq == w[0].seq + 1));
     }
 }
