@@ -342,6 +342,59 @@ fn the_verdict_is_calibrated_under_every_effect() {
                 )
             }),
         ),
+        (
+            "lowpass",
+            Box::new(move |r: &mut Rng| {
+                let n = 3e-3 + 5e-3 * r.uniform();
+                let cutoff_hz = 2.0 * 10f64.powf(r.uniform());
+                (
+                    SimEffect::LowPassWhite {
+                        n,
+                        cutoff_hz,
+                        order: 1,
+                    },
+                    fixed(Effect::Lowpass, vec![cutoff_hz]),
+                )
+            }),
+        ),
+        (
+            "rate_ramp",
+            Box::new(move |r: &mut Rng| {
+                let sign = if r.uniform() < 0.5 { -1.0 } else { 1.0 };
+                let rate = sign * 1e-5 * (1.0 + 4.0 * r.uniform());
+                (
+                    SimEffect::RateRamp { r: rate },
+                    TermSpec::new(Effect::RateRamp),
+                )
+            }),
+        ),
+        (
+            "temperature",
+            Box::new(move |r: &mut Rng| {
+                let sign = if r.uniform() < 0.5 { -1.0 } else { 1.0 };
+                (
+                    SimEffect::Temperature {
+                        coef: sign * (0.005 + 0.02 * r.uniform()),
+                        start_c: 20.0 + 10.0 * r.uniform(),
+                        rise_c: 5.0 + 15.0 * r.uniform(),
+                        tau_s: 60.0 + 300.0 * r.uniform(),
+                    },
+                    TermSpec::new(Effect::Temperature),
+                )
+            }),
+        ),
+        (
+            "drift",
+            Box::new(move |r: &mut Rng| {
+                (
+                    SimEffect::Drift {
+                        rms: 0.01 + 0.04 * r.uniform(),
+                        shape_seed: r.next_u64() % 1000,
+                    },
+                    TermSpec::new(Effect::Drift { components: 6 }),
+                )
+            }),
+        ),
     ];
     // a fixed stream of draws by default (the bounds hold for it); PICO_IMU_VERDICT_SEED draws
     // another set
@@ -387,8 +440,13 @@ fn the_verdict_is_calibrated_under_every_effect() {
         eprintln!("{line}");
         // Before the localised signals had their exact noise sums and the estimates' share taken
         // out (fit/solve.rs), a step or a warm-up put the median at 0.6–0.7; the coherent-mean
-        // form before that put it far above 1.
-        if !((0.8..=1.25).contains(&median) && mean_z.abs() < 0.3 && (0.7..1.3).contains(&sd_z)) {
+        // form before that put it far above 1. A bias following a temperature column and a
+        // drift still take the bound on the noise projected on them (their shapes are not
+        // summed exactly): conservative, median ≈ 0.7, held apart so that it cannot go unseen.
+        let bounded = matches!(name, "temperature" | "drift");
+        let lo = if bounded { 0.55 } else { 0.8 };
+        let sd_lo = if bounded { 0.6 } else { 0.7 };
+        if !((lo..=1.25).contains(&median) && mean_z.abs() < 0.3 && (sd_lo..1.3).contains(&sd_z)) {
             failures.push(line);
         }
     }
