@@ -21,7 +21,7 @@ use embassy_rp::pac;
 use embassy_time::{Duration, Instant};
 use embedded_hal_async::delay::DelayNs;
 
-use crate::shared::{ALARM_FIRED, ALARM_WAKERS};
+use crate::statics::{ALARM_FIRED, ALARM_WAKERS};
 
 // Alarms are programmed in embassy-time ticks: they must be the TIMER's µs.
 const _: () = assert!(embassy_time::TICK_HZ == 1_000_000);

@@ -12,7 +12,7 @@ use core::sync::atomic::Ordering;
 use embassy_executor::raw;
 use embassy_rp::pac;
 
-use crate::shared::CPU_IDLE;
+use crate::statics::CPU_IDLE;
 
 /// The timer's low word (1 MHz ticks, embassy's time base), read raw: one register read
 /// instead of embassy's 64-bit `Instant::now()` (three reads, a retry loop and a call through

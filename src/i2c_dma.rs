@@ -27,7 +27,7 @@ use embassy_rp::peripherals::{DMA_CH0, DMA_CH1};
 use embassy_rp::Peri;
 use embassy_time::{Duration, Instant};
 
-use crate::shared::{DMA_WAITING, DMA_WAKER};
+use crate::statics::{DMA_WAITING, DMA_WAKER};
 
 /// Longest read done by DMA; longer ones go through embassy's path. The MPU-6050 driver reads
 /// the FIFO in chunks of at most 16 frames × 14 bytes.

@@ -23,7 +23,7 @@ mod alarm;
 mod bus;
 mod cpu;
 mod i2c_dma;
-mod shared;
+mod statics;
 mod storage;
 
 use core::cell::Cell;
@@ -55,7 +55,7 @@ use pico_imu_core::mag::MagService;
 use pico_imu_core::msg::{self, SensorMsg};
 use pico_imu_core::outbox::FrameSink;
 use pico_imu_core::schedule::{self, Housekeeping, MagTicks, StatusLog};
-use pico_imu_core::service::Tick;
+use pico_imu_core::sensor::Tick;
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 

@@ -19,7 +19,7 @@ use pico_imu_core::mag::{MagService, Slots};
 use pico_imu_core::msg::{self, SensorMsg, BURST_MAX};
 use pico_imu_core::outbox::FrameSink;
 use pico_imu_core::replay;
-use pico_imu_core::service::Tick;
+use pico_imu_core::sensor::Tick;
 use pico_imu_core::tables::{TABLE_FRAME_ROOM, TABLE_SPACING_US};
 use pico_imu_tests::mpu6050_model::Motion;
 use pico_imu_tests::{Mpu6050Model, QmcModel, QmcVariant, SimBus};

@@ -28,9 +28,9 @@ use imu_proto::{GapCause, Sensor, SensorState, Vec, IMU_PERIOD_US};
 use crate::bus::{Failure, TransferTime};
 use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::imu_config;
+use crate::cycle_marker::{self, Stage};
 use crate::msg::{Out, SensorMsg, BURST_MAX};
-use crate::service::{delay_until, Core, Lead, Phase, Tick, SETUP, WRITE_MARGIN};
-use crate::stage::{self, Stage};
+use crate::sensor::{delay_until, Core, Lead, Phase, Tick, SETUP, WRITE_MARGIN};
 
 /// Bytes of one FIFO frame (accel, temperature, gyro).
 const FRAME: u16 = 14;
@@ -196,10 +196,10 @@ impl ImuService {
         }
         let mut held = 0;
         while cx.out.len() + REPORT_ROOM <= cx.out.capacity() {
-            stage::enter(Stage::I2c);
+            cycle_marker::enter(Stage::I2c);
             let count = cx.dev.fifo_count().await;
             let read_at = (cx.now)();
-            stage::leave();
+            cycle_marker::leave();
             let count = match count {
                 Ok(c) => c,
                 Err(e) => {
@@ -271,7 +271,7 @@ impl ImuService {
             let Some(SensorMsg::Imu { samples, .. }) = cx.out.last_mut() else {
                 return;
             };
-            stage::enter(Stage::I2c);
+            cycle_marker::enter(Stage::I2c);
             let r = cx
                 .dev
                 .read_fifo_counted_with(count, BURST_MAX, |s| {
@@ -279,7 +279,7 @@ impl ImuService {
                     let _ = samples.push(s);
                 })
                 .await;
-            stage::leave();
+            cycle_marker::leave();
             let n = match r {
                 Ok(n) => n,
                 Err(e) => {

@@ -5,7 +5,7 @@
 //!
 //! By job:
 //! * sensors: [`imu`] and [`mag`], the sensor tasks' ticks (initialisation, draining, faults,
-//!   losses), over what they share in [`service`], with [`health`] (the fault state machine), [`clock`] (the sample clocks: the one
+//!   losses), over what they share in [`sensor`], with [`health`] (the fault state machine), [`clock`] (the sample clocks: the one
 //!   owner of timestamps) and [`bus`] (what a bus must tell them);
 //! * samples: [`pipeline`] (corrections → Allan engines → batches, losses and splits) over
 //!   [`engines`];
@@ -14,7 +14,7 @@
 //! * tables: [`tables`] (rounds of snapshots, spaced out);
 //! * when each task's burst runs: [`schedule`] (the instants and turns the tasks wait for);
 //! * [`device`] ties them together for the processing task; [`outbox`] queues frames whole or
-//!   drops and counts them; [`stage`] marks the budget stages for the emulator; [`config`]
+//!   drops and counts them; [`cycle_marker`] marks the budget stages for the emulator; [`config`]
 //!   holds the sensors' configuration; [`msg`] the messages between the tasks.
 //!
 //! `replay` (feature `std`) replays served samples through the same corrections and engines,
@@ -48,6 +48,7 @@ pub mod ahrs;
 pub mod bus;
 pub mod clock;
 pub mod config;
+pub mod cycle_marker;
 pub mod device;
 pub mod engines;
 pub mod health;
@@ -60,6 +61,5 @@ pub mod pipeline;
 pub mod replay;
 pub mod requests;
 pub mod schedule;
-pub mod service;
-pub mod stage;
+pub mod sensor;
 pub mod tables;

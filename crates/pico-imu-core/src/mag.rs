@@ -25,7 +25,7 @@ use crate::bus::{Failure, TransferTime};
 use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::mag_config;
 use crate::msg::{Out, SensorMsg};
-use crate::service::{delay_until, Core, Phase, Tick, SETUP};
+use crate::sensor::{delay_until, Core, Phase, Tick, SETUP};
 
 /// How long after the late end of the clock's uncertainty a poll is latched.
 pub const POLL_MARGIN: Fine = fine(20);

@@ -19,10 +19,10 @@ use imu_proto::{
 
 use crate::ahrs::{self, Accum, Ahrs, GyroStep, MAX_SUM};
 use crate::clock::{Fine, Stamps, US};
+use crate::cycle_marker::{self, Stage};
 use crate::engines::{Engines, ImuInputs};
 use crate::msg::BURST_MAX;
 use crate::outbox::{FrameSink, Outbox};
-use crate::stage::{self, Stage};
 
 /// IMU samples per batch frame: 25, so that every 100 ms carries the same four batch encodings
 /// (with full 32-sample batches one window in eight carried four and the others three, and was
@@ -166,7 +166,7 @@ impl Pipeline {
         let Some(q) = self.queued.front_mut() else {
             return false;
         };
-        stage::enter(Stage::Ahrs);
+        cycle_marker::enter(Stage::Ahrs);
         let period = if q.imu_period == Fine::ZERO || q.imu_period.raw() > i32::MAX as u64 {
             NOMINAL_IMU_PERIOD
         } else {
@@ -184,7 +184,7 @@ impl Pipeline {
         let att = self.ahrs.update(&mut q.acc, step, q.mag.as_ref(), dt_us);
         let (k, t_us, with_mag) = (q.k, q.t_us, q.mag.is_some());
         self.queued.pop_front();
-        stage::enter(Stage::Usb);
+        cycle_marker::enter(Stage::Usb);
         if let (Some(a), true, false) = (att, with_mag, self.mode == StreamMode::Off) {
             let _ = self.orient.push(Orientation {
                 seq: k,
@@ -200,7 +200,7 @@ impl Pipeline {
                 self.orient.clear();
             }
         }
-        stage::leave();
+        cycle_marker::leave();
         !self.queued.is_empty()
     }
 
@@ -270,7 +270,7 @@ impl Pipeline {
         // corrections, Allan update, framing. Each sample still goes through all three in order.
         // A `Vec`, not a zeroed array: nothing to clear before it is filled.
         let mut fixed: Vec<ImuInputs, BURST_MAX> = Vec::new();
-        stage::enter(Stage::Corrections);
+        cycle_marker::enter(Stage::Corrections);
         for s in samples {
             // The gyro's temperature term needs a temperature: the latest one known; before the
             // first, none (the reference temperature: no correction).
@@ -300,9 +300,9 @@ impl Pipeline {
         if self.acc.n >= MAX_SUM {
             self.queue_attitude(None, 0);
         }
-        stage::enter(Stage::Allan);
+        cycle_marker::enter(Stage::Allan);
         self.engines.push_imu(&fixed);
-        stage::enter(Stage::Usb);
+        cycle_marker::enter(Stage::Usb);
         let n = samples.len() as u32;
         self.counts.imu_taken += u64::from(n);
         self.next_k[0] = Some(stamps.k0.wrapping_add(n));
@@ -329,7 +329,7 @@ impl Pipeline {
                 }
             }
         }
-        stage::leave();
+        cycle_marker::leave();
     }
 
     /// One magnetometer sample, slot `k`, taken at `t_us`.
@@ -345,12 +345,12 @@ impl Pipeline {
         if after.is_some() || self.next_k[1] != Some(k) {
             self.discontinuity(Sensor::Mag, k, t_us, after, outbox, sink);
         }
-        stage::enter(Stage::Corrections);
+        cycle_marker::enter(Stage::Corrections);
         let mag = self.fast.apply_mag(xyz);
-        stage::enter(Stage::Allan);
+        cycle_marker::enter(Stage::Allan);
         self.engines.push_mag(&mag);
         self.queue_attitude(Some(mag), k);
-        stage::enter(Stage::Usb);
+        cycle_marker::enter(Stage::Usb);
         self.counts.mag_taken += 1;
         self.next_k[1] = Some(k.wrapping_add(1));
         if self.mode != StreamMode::Off {
@@ -371,7 +371,7 @@ impl Pipeline {
                 self.flush(outbox, sink);
             }
         }
-        stage::leave();
+        cycle_marker::leave();
     }
 
     /// Send the batch assembled so far (if any).

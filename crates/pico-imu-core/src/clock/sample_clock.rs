@@ -36,7 +36,7 @@ pub const GUARD_EVERY: u32 = 16;
 pub const GUARD_MARGIN: Fine = fine(100);
 
 /// Below this width a reader need not place its observations (no probes). A probe that lands
-/// where it is aimed (`service::Lead`) halves the interval, which then takes many reads to widen
+/// where it is aimed (`sensor::Lead`) halves the interval, which then takes many reads to widen
 /// past this again, so probes are rare once the clock is found.
 pub const PROBE_WIDTH: Fine = fine(16);
 
