@@ -440,10 +440,10 @@ fn the_verdict_is_calibrated_under_every_effect() {
         eprintln!("{line}");
         // Before the localised signals had their exact noise sums and the estimates' share taken
         // out (fit/solve.rs), a step or a warm-up put the median at 0.6–0.7; the coherent-mean
-        // form before that put it far above 1. A bias following a temperature column and a
-        // drift still take the bound on the noise projected on them (their shapes are not
-        // summed exactly): conservative, median ≈ 0.7, held apart so that it cannot go unseen.
-        let bounded = matches!(name, "temperature" | "drift");
+        // form before that put it far above 1. A bias following a temperature column still takes
+        // the bound on the noise projected on it (its shape is not summed exactly):
+        // conservative, median ≈ 0.7, held apart so that it cannot go unseen.
+        let bounded = name == "temperature";
         let lo = if bounded { 0.55 } else { 0.8 };
         let sd_lo = if bounded { 0.6 } else { 0.7 };
         if !((lo..=1.25).contains(&median) && mean_z.abs() < 0.3 && (sd_lo..1.3).contains(&sd_z)) {

@@ -484,6 +484,33 @@ pub enum SignalShape {
     Exponential { kappa: f64 },
 }
 
+/// Σ_d c_m(d)·cos(ωd) over every lag up to `span` samples, for each ω of `omegas` [rad/sample]:
+/// the noise's covariance of the Allan differences seen by a cosine (the Allan-filtered noise
+/// spectrum at ω, over the record). A drift's differences are a constant (its ramp, ω = 0) and
+/// cosines of the record's length, orthogonal over the record, so Var(Σ D_i N_i) is the sum of
+/// these, each weighted by its share of Σ D_i².
+pub fn cosine_noise_sums(comps: &[Component], m: f64, omegas: &[f64], span: f64) -> Vec<f64> {
+    let c = |d: f64| -> f64 {
+        comps
+            .iter()
+            .map(|k| k.coef * second_diff_cov(&k.structure, m, m, d))
+            .sum()
+    };
+    let c0 = c(0.0);
+    let mut half = vec![0.0; omegas.len()];
+    let mi = m.round() as i64;
+    let mut kinks = vec![mi, 2 * mi];
+    let hi = span.floor().max(0.0) as i64;
+    let mut f = |d: f64, out: &mut [f64]| {
+        let cd = c(d);
+        for (o, w) in out.iter_mut().zip(omegas) {
+            *o = cd * (w * d).cos();
+        }
+    };
+    lag_sum(1, hi, &mut kinks, 32, &mut f, &mut half);
+    half.iter().map(|h| c0 + 2.0 * h).collect()
+}
+
 /// Σ_d c_m(d)·ρ(d): the noise's covariance of the Allan differences at averaging factor m
 /// (partial-sum units, [`second_diff_cov`] of every component) weighted by the normalised
 /// autocorrelation ρ of a localised signal's differences (ρ(0) = 1), summed over every lag up to

@@ -499,6 +499,12 @@ impl Problem<'_> {
                 }
                 _ => None,
             };
+            // a drift's differences are its ramp's constant and its cosines (a bias following a
+            // temperature column keeps the bound: its shape is not summed)
+            let drift_shape: Option<&[f64]> = match t.spec.effect {
+                Effect::Drift { .. } if !t.theta.is_empty() => Some(&t.theta),
+                _ => None,
+            };
             for j in 0..n {
                 let m = self.ms[j];
                 let terms = design.terms(m as u64).max(1) as f64;
@@ -506,10 +512,16 @@ impl Problem<'_> {
                 if a == 0.0 {
                     continue;
                 }
+                let bound = SIGNAL_GAIN * m * noise_avar[j].max(0.0);
                 let sum = match shape {
                     Some(sh) => crate::cov::signal_noise_sum(comps, m, sh, span) / (m * m),
-                    None => SIGNAL_GAIN * m * noise_avar[j].max(0.0),
+                    None => match drift_shape {
+                        Some(sh) => drift_noise_sum(comps, m, sh, &self.meas.ctx) / (m * m),
+                        None => bound,
+                    },
                 };
+                // a sum that is not a number (a structure function overflowing) takes the bound
+                let sum = if sum.is_finite() { sum } else { bound };
                 let add = 2.0 * a * sum / terms;
                 if add.is_finite() && add > 0.0 {
                     e[j] += add;
@@ -518,6 +530,38 @@ impl Problem<'_> {
         }
         e
     }
+}
+
+/// Σ_d c(d)·ρ(d) for a drift of unit shape `theta` (its ramp per sample, then its cosines'
+/// coefficients) at averaging factor m: in partial-sum units the ramp's Allan differences are the
+/// constant c₀m², a cosine's are a cosine of the same ω_j = πj/T and amplitude
+/// 2c_j·sin²(mω_j/2)/sin(ω_j/2) (docs/noise-model.md §5), so ρ is their mix weighted by each one's
+/// share of Σ D_i² (the constant in full, a cosine by half its amplitude squared), and the sum is
+/// the same mix of [`crate::cov::cosine_noise_sums`].
+fn drift_noise_sum(comps: &[Component], m: f64, theta: &[f64], ctx: &Context) -> f64 {
+    let span = crate::effect::drift_span(ctx);
+    if !(span > 0.0) {
+        return f64::NAN;
+    }
+    let mut omegas = Vec::with_capacity(theta.len());
+    let mut weights = Vec::with_capacity(theta.len());
+    for (j, cj) in theta.iter().enumerate() {
+        if j == 0 {
+            omegas.push(0.0);
+            weights.push((cj * m * m).powi(2));
+        } else {
+            let w = std::f64::consts::PI * j as f64 / span;
+            let amp = 2.0 * cj * (m * w / 2.0).sin().powi(2) / (w / 2.0).sin();
+            omegas.push(w);
+            weights.push(0.5 * amp * amp);
+        }
+    }
+    let total: f64 = weights.iter().sum();
+    if !(total > 0.0 && total.is_finite()) {
+        return f64::NAN;
+    }
+    let sums = crate::cov::cosine_noise_sums(comps, m, &omegas, span);
+    weights.iter().zip(&sums).map(|(w, s)| w * s).sum::<f64>() / total
 }
 
 /// Adds the localised signals' variances `e` to the covariance; between points they carry the
