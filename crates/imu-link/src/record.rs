@@ -223,8 +223,7 @@ impl Held {
     }
 }
 
-/// Append the rows of one batch to the CSV (those whose estimates have arrived).
-
+/// The device's own account of its losses during the recording: `Gap` events by sensor and
 /// cause.
 #[derive(Debug, Default)]
 pub struct DeviceLosses {
