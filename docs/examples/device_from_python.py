@@ -18,7 +18,10 @@ the MPU-6050's own low-pass filter is the hidden effect):
     python docs/examples/device_from_python.py tcp:127.0.0.1:$(cat port) --seconds 60 \\
         --calibrate --plot gyro.png
 
-On a real Pico W running the firmware: `python docs/examples/device_from_python.py /dev/ttyACM0`.
+The demo's stream has no gyro offset, so the bias step changes little there; `--step 0.001,1.5`
+added to `imu-lab simulate` gives the gyro 1.5 deg/s of bias for the calibration to remove
+(docs/img/python-device-gyro-bias.png was drawn so). On a real Pico W running the firmware:
+`python docs/examples/device_from_python.py /dev/ttyACM0`.
 """
 import argparse
 import time
@@ -91,15 +94,19 @@ def main() -> None:
                 import matplotlib
                 matplotlib.use("Agg")
                 import matplotlib.pyplot as plt
+                # Means over 0.25 s blocks: the white noise averaged down, the bias left standing.
                 fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 6))
                 for ax, c in zip(axes, ("gx", "gy", "gz")):
-                    ax.plot(raw.t - raw.t[0], raw[c], lw=0.5, label="before (raw)")
-                    ax.plot(after.t - after.t[0], after[c], lw=0.5, label="after (bias uploaded)")
+                    for r, label in ((raw, "before (raw)"), (after, "after (bias uploaded)")):
+                        k = len(r.t) // 250
+                        tb = (r.t[:k * 250] - r.t[0]).reshape(k, 250).mean(axis=1)
+                        yb = r[c][:k * 250].reshape(k, 250).mean(axis=1)
+                        ax.plot(tb, yb, "o-", ms=3, label=label)
                     ax.axhline(0.0, color="k", lw=0.5)
                     ax.set_ylabel(f"{c} [deg/s]")
                 axes[0].legend(loc="upper right")
                 axes[-1].set_xlabel("t since the recording's start [s]")
-                fig.suptitle("Gyro at rest before → after the fitted bias, on the device")
+                fig.suptitle("Gyro at rest, 0.25 s means, before → after the fitted bias (on the device)")
                 fig.tight_layout()
                 fig.savefig(a.plot, dpi=110)
                 print(f"wrote {a.plot}")
