@@ -141,7 +141,7 @@ fn orientation(link: &mut Link, a: &OrientationArgs) -> Result<()> {
     if a.declination.is_some() || a.field_ut.is_some() || a.learn {
         let field = a.field_ut.zip(a.dip_deg);
         let req = device::orientation_request(&cfg, a.declination, field, a.learn)
-            .map_err(|e| anyhow::anyhow!("--{e}").context("orientation settings refused"))?;
+            .map_err(|e| anyhow::anyhow!("orientation settings refused, nothing sent: {e}"))?;
         cfg = device::set_orientation(link, req)?;
     }
     println!(
