@@ -298,8 +298,8 @@ class Device:
         ``period_s`` (s); ``cpu_load_percent`` (%), ``temperature_c`` (°C), ``calibration``,
         ``mode``."""
     def info(self) -> dict:
-        """``port``, ``identity``, ``status`` and ``link`` (``requests_sent``,
-        ``frames_rejected``)."""
+        """``port``, ``identity``, ``status``, ``calibration`` (with the parts it was fitted
+        for) and ``link`` (``requests_sent``, ``frames_rejected``)."""
     def record(self, seconds: float, raw: bool = False) -> Recording:
         """``seconds`` (s) of device time as ``imu-lab record`` records it; Ctrl-C raises
         KeyboardInterrupt within 0.1 s (the stream switched off)."""

@@ -121,14 +121,20 @@ class Device:
 
     def info(self) -> dict:
         """Everything about the device and the link in one dict: ``port``, ``identity``
-        (:attr:`identity`), ``status`` (:meth:`status`), and ``link``: ``requests_sent`` and
-        ``frames_rejected`` (frames from the device skipped as corrupt or unknown, with the
-        causes given as ``RuntimeWarning`` s as they happen)."""
+        (:attr:`identity`: protocol version, firmware, rates), ``status`` (:meth:`status`: the
+        counters since boot, losses and their causes' counters — FIFO overflows, I2C errors,
+        bus faults), ``calibration`` (:meth:`calibration`: where it came from and the parts and
+        ranges it was fitted for; the protocol names the parts nowhere else), and ``link``:
+        ``requests_sent`` and ``frames_rejected`` (frames from the device skipped as corrupt or
+        unknown, with their causes given as ``RuntimeWarning`` s as they happen). A
+        recording's losses by cause are in its ``losses`` (:meth:`record`)."""
         status = self.status()
+        calibration = self.calibration()
         return {
             "port": self.port,
             "identity": self.identity,
             "status": status,
+            "calibration": calibration,
             "link": {"requests_sent": self._dev.requests_sent,
                      "frames_rejected": self._dev.frames_rejected},
         }

@@ -106,7 +106,8 @@ def test_identity_status_and_info(emu):
         assert st["uptime_s"] > 0
         assert st["imu"]["samples_lost"] == 0 and st["mag"]["samples_lost"] == 0
         assert st["calibration"].startswith("identity"), st["calibration"]
-        assert info["link"]["requests_sent"] >= 2 and info["link"]["frames_rejected"] == 0
+        assert info["calibration"]["source"] == "identity" and info["calibration"]["fitted_for"] is None
+        assert info["link"]["requests_sent"] >= 3 and info["link"]["frames_rejected"] == 0
         assert repr(dev).startswith(f"<pico_imu.Device {emu['port']} (open")
     assert dev.closed
     with pytest.raises(OSError, match="closed"):
