@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Sequence, Union
+from typing import Dict, Optional, Sequence, Union
 
 from . import _native
 from . import Recording, Table
@@ -40,9 +40,6 @@ class DeviceTable(Table):
                 f"{self.pushed} samples, {self.gaps} gaps; snapshot {self.snapshot} at "
                 f"{self.t_s:.3f} s device time")
         return head + "\n" + super().__str__()
-
-
-_Calibrationish = Union["object", str, "os.PathLike[str]", bytes, bytearray]
 
 
 class Device:
@@ -203,7 +200,8 @@ class Device:
         temperature term ``kappa``, LSB per temperature LSB, about ``t_ref_lsb``)."""
         return self._dev.calibration()
 
-    def upload(self, calibration: _Calibrationish, persist: bool = True) -> dict:
+    def upload(self, calibration: Union[object, str, "os.PathLike[str]", bytes, bytearray],
+               persist: bool = True) -> dict:
         """Uploads a calibration after the checks ``imu-lab device calibrate --upload`` makes:
         a :class:`~pico_imu.Calibration` (the file its ``save`` writes to a new path: this
         sensor's section, identity for the others), a path to a TOML calibration file or to a

@@ -1,5 +1,9 @@
-//! The host end of the device link (used by `imu-lab` and by the emulator harness, `cargo xtask`): imu-proto frames over a serial port (a real Pico's USB CDC,
-//! e.g. `/dev/ttyACM0`) or over TCP (`tcp:HOST:PORT`, the emulator harness's CDC bridge).
+//! The host end of the device link (used by `imu-lab`, by `pico_imu.Device` and by the emulator
+//! harness, `cargo xtask`): imu-proto frames over a serial port (a real Pico's USB CDC, e.g.
+//! `/dev/ttyACM0`) or over TCP (`tcp:HOST:PORT`, the emulator harness's CDC bridge). On top of
+//! [`Link`]: [`device`], the requests as the host's tools make them (replies checked, tables
+//! read from their sums, argument checks shared), and [`record`], a recording's rows and the
+//! accounts of what was lost.
 //!
 //! Corrupt or unknown frames from the device are counted ([`Link::rx_stats`]) and skipped, never
 //! fatal: the stream resynchronises at the next frame delimiter. They are reported in one
