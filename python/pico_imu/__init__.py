@@ -13,12 +13,18 @@
   diagnosis names, each estimate with its uncertainty, the verdict, the walk; a :class:`Fit`.
 * :func:`calibrate` — the calibration lab (``imu-lab calibrate``): a :class:`Calibration` whose
   ``save`` writes the TOML file the CLI and the device read.
+* :class:`Device` — the device (a Pico on its USB port, or the emulated one on ``tcp:HOST:PORT``)
+  through ``imu-lab``'s link: status, recordings into arrays, its Allan tables, calibration
+  upload with the CLI's checks.
 
-Every function releases the GIL while it computes. Bad arguments raise ``ValueError`` naming
-the argument (and the index of a bad sample); a file that cannot be opened raises ``OSError``.
+Every function releases the GIL while it computes (and :class:`Device` while it waits). Bad
+arguments raise ``ValueError`` naming the argument (and the index of a bad sample); a file that
+cannot be opened, or a device that fails, raises ``OSError`` (``TimeoutError`` when it does not
+answer).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
@@ -28,7 +34,8 @@ from . import _native
 from . import allantools
 
 __all__ = ["allantools", "deviation", "Table", "Stream", "read_csv", "Recording", "read_csv_chunks",
-           "stream_csv", "STATS", "fit", "Fit", "Term", "Step", "calibrate", "Calibration"]
+           "stream_csv", "STATS", "fit", "Fit", "Term", "Step", "calibrate", "Calibration", "Device",
+           "DeviceTable"]
 
 #: The statistics :func:`deviation` computes.
 STATS = ("adev", "oadev", "mdev", "hdev", "ohdev", "tdev", "totdev")
@@ -188,11 +195,16 @@ class Stream:
 
 @dataclass
 class Recording:
-    """A recording read by :func:`read_csv`. ``columns``: name → array in the contract's unit
-    (``units``: ax ay az m/s², gx gy gz deg/s, mx my mz µT, temp °C, NaN where empty);
-    ``t`` (s) or None; ``rate_hz`` (from the median spacing of ``t``) or None; ``segments``:
-    (start, stop) row ranges between gaps; ``timing``: median_dt_s, gaps, missing_samples,
-    irregular, summary (or None without ``t``)."""
+    """A recording read by :func:`read_csv` or made by :meth:`Device.record`. ``columns``:
+    name → array in the contract's unit (``units``: ax ay az m/s², gx gy gz deg/s, mx my mz µT,
+    temp °C, gap_before samples; a device recording's attitude q0…q3 (1), roll pitch heading
+    deg, ahrs state; NaN where empty); ``t`` (s) or None; ``rate_hz`` (Hz, from the median
+    spacing of ``t``) or None; ``segments``: (start, stop) row ranges between gaps; ``timing``:
+    median_dt_s (s), gaps, missing_samples, irregular, summary (or None without ``t``).
+
+    A device recording also has ``losses`` (per sensor: samples ``received``, ``lost``, the
+    device's ``causes`` and those lost on the ``link``), ``summary``, ``events``,
+    ``device_status`` and ``raw`` (see :meth:`Device.record`); None for a file."""
 
     path: str
     columns: Dict[str, np.ndarray]
@@ -201,6 +213,20 @@ class Recording:
     rate_hz: Optional[float]
     segments: List[Tuple[int, int]] = field(default_factory=list)
     timing: Optional[dict] = None
+    losses: Optional[dict] = None
+    summary: Optional[str] = None
+    events: Optional[List[str]] = None
+    device_status: Optional[dict] = None
+    raw: Optional[bool] = None
+
+    def to_csv(self, path) -> None:
+        """Writes the recording as ``imu-lab record`` writes its CSV (header ``t,ax,ay,az,gx,
+        gy,gz,mx,my,mz,temp,gap_before,q0,q1,q2,q3,roll,pitch,heading,ahrs``; t with µs
+        resolution, values at f32 precision, NaN as an empty field), which :func:`read_csv`
+        reads back. Needs ``t``, ``gap_before`` and the nine sensor columns; ``temp`` and the
+        attitude columns may be missing (empty fields). ``OSError`` if it cannot be written."""
+        _native.write_record_csv(os.fspath(path), {k: np.ascontiguousarray(v, dtype=np.float64)
+                                                   for k, v in self.columns.items()})
 
     def __getitem__(self, name: str) -> np.ndarray:
         try:
@@ -253,3 +279,4 @@ def stream_csv(path, column: str, scale: float = 1.0, unit: Optional[str] = None
 
 
 from .lab import Calibration, Fit, Step, Term, calibrate, fit  # noqa: E402  (lab imports Recording from here)
+from .device import Device, DeviceTable  # noqa: E402  (device imports Recording and Table from here)

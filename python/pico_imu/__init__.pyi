@@ -68,8 +68,9 @@ class Stream:
 
 @dataclass
 class Recording:
-    """``columns`` (contract units: m/s², deg/s, µT, °C), ``units``, ``t`` (s), ``rate_hz``
-    (Hz), ``segments`` (row ranges between gaps), ``timing``."""
+    """``columns`` (contract units: m/s², deg/s, µT, °C; a device recording's attitude too),
+    ``units``, ``t`` (s), ``rate_hz`` (Hz), ``segments`` (row ranges between gaps), ``timing``;
+    a device recording's ``losses``, ``summary``, ``events``, ``device_status``, ``raw``."""
 
     path: str
     columns: Dict[str, npt.NDArray[np.float64]]
@@ -78,7 +79,15 @@ class Recording:
     rate_hz: Optional[float]
     segments: List[Tuple[int, int]] = ...
     timing: Optional[dict] = ...
+    losses: Optional[dict] = ...
+    summary: Optional[str] = ...
+    events: Optional[List[str]] = ...
+    device_status: Optional[dict] = ...
+    raw: Optional[bool] = ...
     def __getitem__(self, name: str) -> npt.NDArray[np.float64]: ...
+    def to_csv(self, path: Union[str, PathLike]) -> None:
+        """Writes the CSV ``imu-lab record`` writes (t in s with µs resolution, values at f32
+        precision, NaN as an empty field); ``read_csv`` reads it back."""
 
 def read_csv(path: Union[str, PathLike], skip_lines: int = 0) -> Recording:
     """Reads a contract recording; ValueError names a malformed line and field, OSError a file
@@ -249,3 +258,66 @@ def calibrate(
     """The calibration lab on ``accel``/``gyro``/``mag`` columns (m/s², deg/s, µT unless
     ``units`` says otherwise; ``rate`` Hz; ``g``, ``field`` in the columns' unit; ``window``,
     ``min_static`` s; ``saturation`` deg/s): ``imu-lab calibrate``'s session."""
+
+@dataclass
+class DeviceTable(Table):
+    """One channel's Allan table from the device (OADEV at octave τ, EDF, 68.3 % bounds):
+    ``channel``, ``snapshot``, ``t_s`` (device time of the snapshot, s), ``tau0_s`` (measured
+    sample period, s), ``scale`` (``unit`` per count), ``pushed`` (samples since the Allan
+    reset), ``gaps``."""
+
+    channel: str = ...
+    snapshot: int = ...
+    t_s: float = ...
+    tau0_s: float = ...
+    scale: float = ...
+    pushed: int = ...
+    gaps: int = ...
+
+class Device:
+    """A device running pico-imu's firmware: a serial port or ``tcp:HOST:PORT`` (the
+    emulator). ``timeout`` in s. ValueError for bad arguments and refused calibrations
+    (nothing sent), TimeoutError when the device does not answer, OSError for the port."""
+
+    def __init__(self, port: str, timeout: float = 3.0) -> None: ...
+    def __enter__(self) -> "Device": ...
+    def __exit__(self, *exc: object) -> None: ...
+    @property
+    def port(self) -> str: ...
+    @property
+    def closed(self) -> bool: ...
+    def close(self) -> None: ...
+    @property
+    def identity(self) -> dict:
+        """``protocol``, ``firmware``, ``board``, ``imu_rate_hz``/``mag_rate_hz`` (Hz),
+        ``allan_overlap``, ``allan_levels``, ``allan_levels_mag``."""
+    @property
+    def requests_sent(self) -> int: ...
+    def status(self) -> dict:
+        """Counters and health: ``uptime_s`` (s), per sensor ``samples_taken``, ``samples_lost``,
+        ``period_s`` (s); ``cpu_load_percent`` (%), ``temperature_c`` (°C), ``calibration``,
+        ``mode``."""
+    def info(self) -> dict:
+        """``port``, ``identity``, ``status``, ``calibration`` (with the parts it was fitted
+        for) and ``link`` (``requests_sent``, ``frames_rejected``)."""
+    def record(self, seconds: float, raw: bool = False) -> Recording:
+        """``seconds`` (s) of device time as ``imu-lab record`` records it; Ctrl-C raises
+        KeyboardInterrupt within 0.1 s (the stream switched off)."""
+    def tables(self, channels: Optional[Sequence[str]] = None, timeout: float = 30.0) -> Dict[str, DeviceTable]:
+        """The device's Allan tables of one snapshot (``timeout`` in s)."""
+    def reset_allan(self) -> None: ...
+    def calibration(self) -> dict:
+        """``blob`` (bytes), ``source``, ``status``, ``fitted_for``, ``accel``/``gyro``/``mag``
+        (``matrix``, ``offset_lsb`` in nominal LSB; the gyro's ``kappa``, ``t_ref_lsb``)."""
+    def upload(self, calibration: Union[Calibration, str, PathLike, bytes, bytearray], persist: bool = True) -> dict:
+        """Checked as ``imu-lab device calibrate --upload`` checks (ValueError naming key, axis,
+        value, bound; nothing sent), uploaded, read back (:meth:`calibration`)."""
+    def orientation(self) -> dict:
+        """``declination_deg`` (deg), ``field_ut`` (µT), ``dip_deg`` (deg), ``learnt``."""
+    def set_orientation(self, declination_deg: Optional[float] = None, field_ut: Optional[float] = None,
+                        dip_deg: Optional[float] = None, learn: bool = False) -> dict: ...
+    @property
+    def declination(self) -> float:
+        """Degrees, east positive."""
+    @declination.setter
+    def declination(self, deg: float) -> None: ...

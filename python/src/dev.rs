@@ -101,31 +101,22 @@ pub fn deviation<'py>(
             .map_err(allan_error)
         })
     })?;
+    rows_dict(py, &rows)
+}
+
+/// A table's rows as a dict of arrays: `tau` (s), `m`, `dev`, `n`, `alpha`, `edf`, `lo`, `hi`
+/// (68.3 % bounds), as `deviation` and `Stream.table` return them.
+pub(crate) fn rows_dict<'py>(py: Python<'py>, rows: &[allan::Row]) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     let col = |f: fn(&allan::Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     out.set_item("tau", col(|r| r.tau).into_pyarray(py))?;
-    out.set_item(
-        "m",
-        rows.iter()
-            .map(|r| r.m)
-            .collect::<Vec<u64>>()
-            .into_pyarray(py),
-    )?;
+    let m: Vec<u64> = rows.iter().map(|r| r.m).collect();
+    out.set_item("m", m.into_pyarray(py))?;
     out.set_item("dev", col(|r| r.dev).into_pyarray(py))?;
-    out.set_item(
-        "n",
-        rows.iter()
-            .map(|r| r.n)
-            .collect::<Vec<u64>>()
-            .into_pyarray(py),
-    )?;
-    out.set_item(
-        "alpha",
-        rows.iter()
-            .map(|r| r.alpha)
-            .collect::<Vec<i32>>()
-            .into_pyarray(py),
-    )?;
+    let n: Vec<u64> = rows.iter().map(|r| r.n).collect();
+    out.set_item("n", n.into_pyarray(py))?;
+    let alpha: Vec<i32> = rows.iter().map(|r| r.alpha).collect();
+    out.set_item("alpha", alpha.into_pyarray(py))?;
     out.set_item("edf", col(|r| r.edf).into_pyarray(py))?;
     out.set_item("lo", col(|r| r.lo).into_pyarray(py))?;
     out.set_item("hi", col(|r| r.hi).into_pyarray(py))?;

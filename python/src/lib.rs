@@ -1,8 +1,8 @@
 //! `pico_imu._native`: the Rust side of the `pico_imu` Python package. Thin bindings over the
 //! workspace crates — the Allan engine (`allan`), the recording contract (`imu-proto`), the
-//! noise lab (`noise-model`) and the calibration lab (`imu-cal`) — on numpy arrays. The Python
-//! package (`python/pico_imu/`) adds the AllanTools-compatible signatures, the documentation and
-//! the type stubs.
+//! noise lab (`noise-model`), the calibration lab (`imu-cal`) and the device link
+//! (`imu-link`) — on numpy arrays. The Python package (`python/pico_imu/`) adds the
+//! AllanTools-compatible signatures, the documentation and the type stubs.
 //!
 //! Every entry point releases the GIL while it computes, turns bad arguments into `ValueError`
 //! naming the argument (and the index of a bad sample), and turns a Rust panic into a
@@ -15,6 +15,7 @@ use pyo3::prelude::*;
 mod cal;
 mod chunks;
 mod dev;
+mod device;
 mod fit;
 mod record;
 mod stream;
@@ -53,6 +54,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(panic_for_test, m)?)?;
     m.add_class::<stream::Stream>()?;
     m.add_class::<chunks::CsvChunks>()?;
+    m.add_class::<device::NativeDevice>()?;
+    m.add_function(wrap_pyfunction!(device::write_record_csv, m)?)?;
     Ok(())
 }
 

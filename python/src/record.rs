@@ -85,8 +85,20 @@ pub fn read_csv<'py>(
     }
     out.set_item("columns", columns)?;
     out.set_item("units", units)?;
+    set_timing(py, &out, tm.as_ref(), rows)?;
+    Ok(out)
+}
+
+/// Sets `rate_hz` (Hz), `segments` (row ranges between gaps) and `timing` in `out` from the
+/// time column's timing (`None` without a time column: one segment of `rows` rows).
+pub(crate) fn set_timing(
+    py: Python<'_>,
+    out: &Bound<'_, PyDict>,
+    tm: Option<&imu_proto::csv::Timing>,
+    rows: usize,
+) -> PyResult<()> {
     let segments = PyList::empty(py);
-    match &tm {
+    match tm {
         Some(t) => {
             out.set_item("rate_hz", t.rate_hz())?;
             for s in t.segments() {
@@ -106,6 +118,5 @@ pub fn read_csv<'py>(
             out.set_item("timing", py.None())?;
         }
     }
-    out.set_item("segments", segments)?;
-    Ok(out)
+    out.set_item("segments", segments)
 }

@@ -104,34 +104,7 @@ impl Stream {
                 &levels, self.tau0, self.scale, hadamard,
             ))
         })?;
-        let out = PyDict::new(py);
-        let col = |f: fn(&allan::Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
-        out.set_item("tau", col(|r| r.tau).into_pyarray(py))?;
-        out.set_item(
-            "m",
-            rows.iter()
-                .map(|r| r.m)
-                .collect::<Vec<u64>>()
-                .into_pyarray(py),
-        )?;
-        out.set_item("dev", col(|r| r.dev).into_pyarray(py))?;
-        out.set_item(
-            "n",
-            rows.iter()
-                .map(|r| r.n)
-                .collect::<Vec<u64>>()
-                .into_pyarray(py),
-        )?;
-        out.set_item(
-            "alpha",
-            rows.iter()
-                .map(|r| r.alpha)
-                .collect::<Vec<i32>>()
-                .into_pyarray(py),
-        )?;
-        out.set_item("edf", col(|r| r.edf).into_pyarray(py))?;
-        out.set_item("lo", col(|r| r.lo).into_pyarray(py))?;
-        out.set_item("hi", col(|r| r.hi).into_pyarray(py))?;
+        let out = crate::dev::rows_dict(py, &rows)?;
         let stride = rows
             .iter()
             .map(|r| match r.estimator {

@@ -1,6 +1,7 @@
 //! `cargo xtask test`'s Python step: the `pico_imu` package (python/) built from source in
 //! release, once, into the workspace's target directory, installed in a venv there, and its
-//! pytest suite run against AllanTools from PyPI and the `imu-lab` binary the host tests built.
+//! pytest suite run against AllanTools from PyPI, the `imu-lab` binary the host tests built and
+//! the firmware on the emulated board (`PICO_IMU_ELF`, `PICO_IMU_SIM`).
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -68,6 +69,14 @@ pub fn test() -> Result<()> {
     c.args(["-m", "pytest", "-q", "python/tests"])
         .env("IMU_LAB", imu_lab()?)
         .env("PATH", &path);
+    // `pico_imu.Device`'s tests (test_device.py) run the firmware's release ELF on the emulated
+    // board: both are provided where node is there (CI), and the tests skip without them.
+    if crate::emu::node_available() {
+        c.env("PICO_IMU_ELF", crate::emu::build_firmware()?)
+            .env("PICO_IMU_SIM", crate::emu::ensure_sim()?);
+    } else {
+        eprintln!("xtask: node >= 20 not found: the pico_imu device tests will be skipped");
+    }
     run(&mut c)
 }
 

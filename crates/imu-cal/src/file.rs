@@ -252,6 +252,15 @@ impl CalFile {
         self.convert(true)
     }
 
+    /// The blob the device stores (`device::encode_blob`) for this file, after every check of
+    /// [`CalFile::to_device`]: what `imu-lab device calibrate --upload` and `pico_imu`'s
+    /// `Device.upload` send.
+    pub fn to_blob(&self) -> Result<Vec<u8>, BlobError> {
+        let cal = self.to_device()?;
+        let mut buf = [0u8; crate::device::MAX_BLOB_LEN];
+        Ok(crate::device::encode_blob(&cal, &mut buf)?.to_vec())
+    }
+
     /// [`CalFile::to_device`] without the datasheet bounds (the sensitivities and the
     /// fixed-point ranges are still checked): for tests and tools that need a blob the device
     /// must refuse.
@@ -326,4 +335,22 @@ impl CalFile {
             Calibration::assemble(accel, gyro, mag, Some(fitted))
         }
     }
+}
+/// The blob to send for a calibration file's `content`: a blob file (`is_blob`, e.g. `.bin`,
+/// as `imu-lab device calibrate --download --out` writes) decoded and checked as the device
+/// will, or a TOML calibration file converted and checked ([`CalFile::to_blob`]: the datasheet
+/// bounds on the file's own numbers, named by key, index, value and bound). `Err` says why it
+/// is refused; then nothing is to be sent. `imu-lab device calibrate --upload` and `pico_imu`'s
+/// `Device.upload` both call this.
+pub fn upload_blob(content: &[u8], is_blob: bool) -> Result<Vec<u8>, String> {
+    if is_blob {
+        crate::device::decode_blob(content)
+            .map_err(|e| format!("refused, nothing uploaded: {e}"))?;
+        return Ok(content.to_vec());
+    }
+    let text = std::str::from_utf8(content)
+        .map_err(|e| format!("not a TOML calibration file (not UTF-8 text: {e})"))?;
+    let file = CalFile::from_toml(text).map_err(|e| e.to_string())?;
+    file.to_blob()
+        .map_err(|e| format!("refused, nothing uploaded: {e}"))
 }

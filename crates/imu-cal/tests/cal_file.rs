@@ -170,3 +170,61 @@ fn a_calibration_fits_only_the_ranges_it_was_fitted_for() {
     let back = decode_blob(encode_blob(&cal, &mut buf).unwrap()).unwrap();
     assert_eq!(back.lsb_per_unit(), Some(fitted));
 }
+
+/// `upload_blob` (what `imu-lab device calibrate --upload` and `pico_imu.Device.upload` send):
+/// a plausible file becomes the blob the device decodes, the blob itself passes as a `.bin`.
+mod upload {
+    use imu_cal::file::{upload_blob, CalFile};
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(32))]
+
+        #[test]
+        fn a_plausible_file_becomes_the_blob_the_device_decodes(
+            bias in prop::array::uniform3(-50.0f64..50.0)
+        ) {
+            let mut f = CalFile::default();
+            f.gyro.bias = bias;
+            let blob = upload_blob(f.to_toml().as_bytes(), false).unwrap();
+            prop_assert_eq!(&blob, &f.to_blob().unwrap());
+            let cal = imu_cal::device::decode_blob(&blob).unwrap();
+            // The offset the device subtracts: the bias in counts (131 LSB per deg/s).
+            let c = cal.gyro().affine().folded_offset();
+            for k in 0..3 {
+                prop_assert!((c[k] - bias[k] * 131.0).abs() < 0.01, "{} vs {}", c[k], bias[k]);
+            }
+            prop_assert_eq!(upload_blob(&blob, true).unwrap(), blob);
+        }
+
+        #[test]
+        fn an_implausible_scale_is_refused_naming_key_axis_and_bound(
+            axis in 0usize..3,
+            value in prop_oneof![1.1f64..2.0, 0.2f64..0.9],
+        ) {
+            let mut f = CalFile::default();
+            f.accel.scale[axis] = value;
+            let e = upload_blob(f.to_toml().as_bytes(), false).unwrap_err();
+            prop_assert!(e.starts_with("refused, nothing uploaded: "), "{}", e);
+            let key = format!("accel.scale[{axis}]");
+            prop_assert!(e.contains(&key) && e.contains("0.91–1.09"), "{}", e);
+        }
+
+        #[test]
+        fn a_blob_with_a_flipped_bit_is_refused(byte in 0usize..1000, bit in 0u8..8) {
+            let mut blob = CalFile::default().to_blob().unwrap();
+            let i = byte % blob.len();
+            blob[i] ^= 1 << bit;
+            let e = upload_blob(&blob, true).unwrap_err();
+            prop_assert!(e.starts_with("refused, nothing uploaded: "), "{}", e);
+        }
+    }
+
+    #[test]
+    fn text_that_is_no_calibration_file_is_refused_saying_why() {
+        let e = upload_blob(&[0xff, 0xfe, 0x00], false).unwrap_err();
+        assert!(e.contains("not UTF-8"), "{e}");
+        let e = upload_blob(b"version = 99\n", false).unwrap_err();
+        assert!(e.contains("calibration file"), "{e}");
+    }
+}

@@ -1,6 +1,6 @@
 //! The device link ([`imu_link`]) and the `--port` argument of the device commands.
 use anyhow::{bail, Result};
-pub use imu_link::{Link, REPLY_TIMEOUT};
+pub use imu_link::Link;
 
 /// `--port` argument shared by the device commands.
 #[derive(clap::Args, Debug, Clone)]

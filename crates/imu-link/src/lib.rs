@@ -1,5 +1,9 @@
-//! The host end of the device link (used by `imu-lab` and by the emulator harness, `cargo xtask`): imu-proto frames over a serial port (a real Pico's USB CDC,
-//! e.g. `/dev/ttyACM0`) or over TCP (`tcp:HOST:PORT`, the emulator harness's CDC bridge).
+//! The host end of the device link (used by `imu-lab`, by `pico_imu.Device` and by the emulator
+//! harness, `cargo xtask`): imu-proto frames over a serial port (a real Pico's USB CDC, e.g.
+//! `/dev/ttyACM0`) or over TCP (`tcp:HOST:PORT`, the emulator harness's CDC bridge). On top of
+//! [`Link`]: [`device`], the requests as the host's tools make them (replies checked, tables
+//! read from their sums, argument checks shared), and [`record`], a recording's rows and the
+//! accounts of what was lost.
 //!
 //! Corrupt or unknown frames from the device are counted ([`Link::rx_stats`]) and skipped, never
 //! fatal: the stream resynchronises at the next frame delimiter. They are reported in one
@@ -57,11 +61,14 @@ use std::io::{ErrorKind, Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, Context, Result};
 use imu_proto::{
     DecodeError, DeviceMsg, FrameEncoder, FrameReader, HostFrame, Reply, Request, RxStats,
     MAX_FRAME, PROTOCOL_VERSION,
 };
+
+pub mod device;
+pub mod record;
 
 /// Default wait for a reply.
 pub const REPLY_TIMEOUT: Duration = Duration::from_secs(3);
@@ -71,6 +78,31 @@ const POLL: Duration = Duration::from_millis(50);
 
 /// Rejected frames are reported at most this often.
 const REJECT_REPORT_EVERY: Duration = Duration::from_secs(1);
+
+/// No reply came in time: the device is silent, busy or not there. Carried inside the
+/// `anyhow::Error` of [`Link::request_with`], so that a front end can tell a timeout from other
+/// link failures (`downcast_ref`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoReply {
+    /// The port's name.
+    pub port: String,
+    /// The request, by name.
+    pub request: String,
+    /// How long the host waited, s.
+    pub waited_s: f64,
+}
+
+impl std::fmt::Display for NoReply {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "no reply from {} to {} within {:.1} s (is the firmware running and the port right?)",
+            self.port, self.request, self.waited_s
+        )
+    }
+}
+
+impl std::error::Error for NoReply {}
 
 /// A byte stream a link runs over.
 pub trait Port: Read + Write + Send {}
@@ -83,6 +115,10 @@ pub struct Link {
     reader: Box<FrameReader<MAX_FRAME>>,
     enc: Box<FrameEncoder>,
     next_id: u16,
+    /// Requests written to the port so far.
+    sent: u64,
+    /// How long [`Link::request`] waits for a reply.
+    reply_timeout: Duration,
     queue: VecDeque<DeviceMsg>,
     buf: Vec<u8>,
     rejects: Rejections,
@@ -164,8 +200,14 @@ fn version_mismatch(device: u8) -> anyhow::Error {
 }
 
 impl Link {
-    /// Open `port`: `tcp:HOST:PORT`, or a serial device path.
+    /// Open `port`: `tcp:HOST:PORT`, or a serial device path; rejected-frame summaries go to
+    /// stderr.
     pub fn open(port: &str) -> Result<Link> {
+        Link::open_with(port, |w| eprintln!("warning: {w}"))
+    }
+
+    /// [`Link::open`] with the rejected-frame summaries handed to `warn`.
+    pub fn open_with(port: &str, warn: impl FnMut(String) + Send + 'static) -> Result<Link> {
         let io: Box<dyn Port> = if let Some(addr) = port.strip_prefix("tcp:") {
             let s = TcpStream::connect(addr)
                 .with_context(|| format!("connecting to the emulator at {addr}"))?;
@@ -180,7 +222,7 @@ impl Link {
                 .with_context(|| format!("opening serial port {port}"))?;
             Box::new(p)
         };
-        Ok(Link::over(port, io, |w| eprintln!("warning: {w}")))
+        Ok(Link::over(port, io, warn))
     }
 
     /// A link over any byte stream; `warn` receives the rejected-frame summaries.
@@ -191,6 +233,8 @@ impl Link {
             reader: Box::new(FrameReader::new()),
             enc: Box::new(FrameEncoder::new()),
             next_id: 1,
+            sent: 0,
+            reply_timeout: REPLY_TIMEOUT,
             queue: VecDeque::new(),
             buf: vec![0u8; 4096],
             rejects: Rejections::default(),
@@ -216,6 +260,22 @@ impl Link {
         self.reader.stats()
     }
 
+    /// How long [`Link::request`] waits for a reply ([`REPLY_TIMEOUT`] unless set).
+    pub fn reply_timeout(&self) -> Duration {
+        self.reply_timeout
+    }
+
+    /// Sets how long [`Link::request`] waits for a reply.
+    pub fn set_reply_timeout(&mut self, timeout: Duration) {
+        self.reply_timeout = timeout;
+    }
+
+    /// Requests written to the device so far (a front end's proof that a refused request was
+    /// never sent).
+    pub fn requests_sent(&self) -> u64 {
+        self.sent
+    }
+
     /// Send a request; returns its id.
     pub fn send(&mut self, req: Request) -> Result<u16> {
         let id = self.next_id;
@@ -228,6 +288,7 @@ impl Link {
         self.io
             .write_all(&out[..n])
             .with_context(|| format!("writing to {}", self.name))?;
+        self.sent += 1;
         self.io.flush().ok();
         Ok(id)
     }
@@ -235,7 +296,7 @@ impl Link {
     /// Read what is available (blocking at most one poll interval) into the queue.
     fn fill(&mut self) -> Result<()> {
         let n = match self.io.read(&mut self.buf) {
-            Ok(0) => bail!("{} closed the connection", self.name),
+            Ok(0) => return Err(anyhow!("{} closed the connection", self.name)),
             Ok(n) => n,
             Err(e)
                 if matches!(
@@ -292,27 +353,29 @@ impl Link {
             match self.recv(left)? {
                 Some(DeviceMsg::Reply { id: rid, reply }) if rid == id => return Ok(reply),
                 Some(m) => other(m),
-                None => bail!(
-                    "no reply from {} to {} within {:.1} s (is the firmware running and the port right?)",
-                    self.name,
-                    short(&what),
-                    timeout.as_secs_f64()
-                ),
+                None => {
+                    return Err(NoReply {
+                        port: self.name.clone(),
+                        request: short(&what).to_string(),
+                        waited_s: timeout.as_secs_f64(),
+                    }
+                    .into())
+                }
             }
         }
     }
 
-    /// Send `req` and wait for its reply, ignoring other traffic.
+    /// Send `req` and wait for its reply ([`Link::reply_timeout`]), ignoring other traffic.
     pub fn request(&mut self, req: Request) -> Result<Reply> {
-        self.request_with(req, REPLY_TIMEOUT, |_| {})
+        self.request_with(req, self.reply_timeout, |_| {})
     }
 
     /// Send `req` and require `Reply::Ok`.
     pub fn request_ok(&mut self, req: Request) -> Result<()> {
         match self.request(req)? {
             Reply::Ok => Ok(()),
-            Reply::Error(e) => bail!("the device refused: {e:?}"),
-            other => bail!("unexpected reply {other:?}"),
+            Reply::Error(e) => Err(anyhow!("the device refused: {e:?}")),
+            other => Err(anyhow!("unexpected reply {other:?}")),
         }
     }
 }
