@@ -16,6 +16,7 @@ mod emu_check;
 mod emu_link;
 mod firmware;
 mod python;
+mod serve;
 
 /// Packages that only build for the device (thumbv6m-none-eabi).
 const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
@@ -220,6 +221,8 @@ fn test(extra: &[String]) -> Result<()> {
     }
     c.args(extra);
     run(&mut c)?;
+    // imu-lab serve's noise lab in headless Chromium (skipped without one)
+    serve::browser_tests(&["noise_lab"], &[])?;
     python::test()?;
     if emu::node_available() {
         for scenario in [

@@ -75,7 +75,7 @@ pub const COLUMNS: [&str; 20] = [
 
 /// How the recording prints numbers: `t` with µs resolution, the values at f32 precision
 /// (shortest text that reads back; beyond the sensors' 16-bit resolution).
-const PRINT: WriteOptions = WriteOptions {
+pub const PRINT: WriteOptions = WriteOptions {
     time_decimals: Some(6),
     f32_values: true,
 };
