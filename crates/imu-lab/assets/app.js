@@ -302,7 +302,8 @@ function renderTables(v) {
   for (const t of v.tables) {
     const rows = t.rows.filter((r) => r.dev > 0);
     const data = [rows.map((r) => r.tau_s), rows.map((r) => r.hi), rows.map((r) => r.lo), rows.map((r) => r.dev)];
-    const title = `${t.channel} [${t.unit}] — round ${t.round}, ${t.samples} samples`;
+    const title = `${t.channel} [${t.unit}] — round ${t.round}, ${t.samples} samples` +
+      (rows.length ? "" : " — σ = 0 at every τ (a constant signal)");
     let p = tablePlots.get(t.channel);
     if (!p) {
       const div = document.createElement("div");
