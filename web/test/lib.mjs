@@ -44,6 +44,7 @@ export function serve(args, { timeoutMs = 120_000 } = {}) {
         resolve({
           url: m[1],
           host: new URL(m[1]).host,
+          pid: child.pid,
           stop: () => new Promise((r) => { child.once("exit", r); child.kill(); }),
         });
       }
