@@ -9,11 +9,16 @@ use anyhow::{bail, Context, Result};
 use crate::emu::{node_available, out_dir};
 use crate::{cargo, root, run};
 
-/// The browser: `$CHROMIUM`, else Debian's `/usr/bin/chromium`.
-pub fn chromium() -> Option<PathBuf> {
-    let p = std::env::var_os("CHROMIUM")
+/// Where the browser is looked for: `$CHROMIUM`, else Debian's `/usr/bin/chromium`.
+fn chromium_path() -> PathBuf {
+    std::env::var_os("CHROMIUM")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"));
+        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"))
+}
+
+/// The browser, when it is there.
+pub fn chromium() -> Option<PathBuf> {
+    let p = chromium_path();
     p.exists().then_some(p)
 }
 
@@ -79,8 +84,9 @@ fn test_files(web: &Path, only: &[&str]) -> Result<Vec<PathBuf>> {
 pub fn browser_tests(only: &[&str], env: &[(&str, String)]) -> Result<()> {
     let Some(chrome) = chromium() else {
         eprintln!(
-            "xtask: no Chromium at /usr/bin/chromium (or $CHROMIUM): the browser tests of \
-             imu-lab serve ({}) skipped; install Debian's chromium package to run them",
+            "xtask: no Chromium at {} ($CHROMIUM, else /usr/bin/chromium): the browser tests \
+             of imu-lab serve ({}) skipped; install Debian's chromium package to run them",
+            chromium_path().display(),
             only.join(", ")
         );
         return Ok(());
