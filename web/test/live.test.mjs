@@ -1,7 +1,8 @@
-// The live page against the emulated Pico (xtask starts it and passes IMU_LIVE_PORT): the
-// status arrives, the device's own Allan tables arrive and are replaced by the next round with
-// more samples and narrower bounds, the decimated stream stays bounded, and a recording made
-// from the page opens in the noise lab.
+// The live page against the emulated Pico (xtask starts it, turned through the simulator's
+// standard trajectory by a part with hard iron, and passes IMU_LIVE_PORT): the status arrives,
+// the device's own Allan tables arrive and are replaced by the next round with more samples and
+// narrower bounds, the decimated stream stays bounded, a recording made from the page opens in
+// the noise lab; the magnetometer wizard collects the field with its coverage and fits it.
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
 import { join } from "node:path";
@@ -75,5 +76,32 @@ test("status, tables that update round by round, a bounded stream, a recording i
   await page.waitForSelector("#verdict.ok, #verdict.bad", { timeout: 120_000 });
   assert.match(await page.textContent("#verdict"), /ADEQUATE/);
   assert.deepEqual(foreign, []);
+  await page.close();
+});
+
+test("magnetometer wizard: the point cloud grows with its coverage, the fit finds the hard iron", { skip: !PORT && "IMU_LIVE_PORT not set" }, async () => {
+  const page = await ctx.newPage();
+  await page.goto(srv.url);
+  await page.waitForSelector("#live-status[data-uptime]", { timeout: 60_000 });
+  await page.click("#mag-start");
+  // the emulated board turns through the simulator's standard trajectory: wait for half of the
+  // directions (or 60 s of device time)
+  const t0 = Number(await page.getAttribute("#live-status", "data-uptime"));
+  await page.waitForFunction((t) => Number(document.querySelector("#mag-state").dataset.coverage || 0) >= 0.5 ||
+    Number(document.querySelector("#live-status").dataset.uptime) >= t + 60, t0, { timeout: 240_000 });
+  await page.click("#mag-stop");
+  const points = Number(await page.getAttribute("#mag-state", "data-points"));
+  const coverage = Number(await page.getAttribute("#mag-state", "data-coverage"));
+  console.log(`magnetometer: ${points} points, coverage ${(100 * coverage).toFixed(1)} %`);
+  assert.ok(points >= 20 && points <= 5000, `${points} points`);
+  assert.ok(coverage > 0.2, `coverage ${coverage}`);
+  await page.click("#mag-fit");
+  await page.waitForSelector("#mag-result[data-model]", { timeout: 120_000 });
+  const model = await page.getAttribute("#mag-result", "data-model");
+  const text = await page.textContent("#mag-result");
+  console.log(`fit: ${model}; ${text.slice(0, 300)}`);
+  assert.match(model, /hard_iron/);
+  assert.match(text, /residual RMS [\d.e-]+ µT/);
+  await page.screenshot({ path: join(OUT, "mag-wizard.png"), fullPage: true });
   await page.close();
 });

@@ -257,8 +257,9 @@ fn test(extra: &[String]) -> Result<()> {
     }
 }
 
-/// The live page's browser test against the emulated board (web/test/live.test.mjs), fed by
-/// the simulator's white gyro noise.
+/// The live page's browser tests against the emulated board (web/test/live.test.mjs), turned
+/// through the simulator's standard trajectory by a part with hard and soft iron (the
+/// magnetometer wizard needs the field in many directions; the stream loops).
 fn serve_live_test() -> Result<()> {
     if serve::chromium().is_none() {
         return serve::browser_tests(&["live"], &[]);
@@ -270,14 +271,12 @@ fn serve_live_test() -> Result<()> {
     run(Command::new(serve::imu_lab_bin()?)
         .args([
             "simulate",
-            "--rate",
-            "1000",
-            "--samples",
-            "400000",
-            "--seed",
-            "5",
+            "--trajectory",
+            "standard",
+            "--part",
+            "hard-iron",
         ])
-        .args(["--columns", "gx,gy,gz", "--white", "0.01"])
+        .args(["--rate", "1000", "--samples", "120000", "--seed", "7"])
         .arg("--output")
         .arg(&stream))?;
     let sim = emu::Sim::start(

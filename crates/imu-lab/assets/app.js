@@ -366,6 +366,67 @@ function renderRecord(r) {
   $("record-state").dataset.recording = r.recording ? "yes" : "no";
 }
 
+// ---------- magnetometer wizard ----------
+
+const magPoints = []; // at most the server's MAG_POINTS (5000)
+
+function drawCloud() {
+  const cv = $("mag-cloud");
+  const ctx = cv.getContext("2d");
+  ctx.clearRect(0, 0, cv.width, cv.height);
+  if (!magPoints.length) return;
+  let r = 1;
+  for (const p of magPoints) for (const v of p) r = Math.max(r, Math.abs(v));
+  const panels = [[0, 1, "mx", "my"], [1, 2, "my", "mz"], [0, 2, "mx", "mz"]];
+  panels.forEach(([a, b, la, lb], i) => {
+    const x0 = i * 300 + 150, y0 = 150, k = 130 / r;
+    ctx.strokeStyle = "#bbb";
+    ctx.strokeRect(i * 300 + 10, 10, 280, 280);
+    ctx.fillStyle = "#222";
+    ctx.fillText(`${la} → / ${lb} ↑ [µT], ±${fmt(r, 3)} µT`, i * 300 + 16, 24);
+    ctx.fillStyle = "rgba(31, 119, 180, 0.6)";
+    for (const p of magPoints) ctx.fillRect(x0 + p[a] * k - 1, y0 - p[b] * k - 1, 2, 2);
+  });
+}
+
+function renderMagState(m) {
+  $("mag-state").textContent = `${m.points} points, coverage ${fmt(100 * m.coverage, 3)} % of the directions` +
+    (m.collecting ? " — collecting" : "");
+  $("mag-state").dataset.points = String(m.points);
+  $("mag-state").dataset.coverage = String(m.coverage);
+  $("mag-start").disabled = m.collecting;
+  $("mag-stop").disabled = !m.collecting;
+}
+
+function renderMagFit(r) {
+  const f = r.fit;
+  const div = $("mag-result");
+  const p = (text, cls) => { const el = document.createElement("p"); el.textContent = text; if (cls) el.className = cls; return el; };
+  const t = document.createElement("table");
+  const head = t.insertRow();
+  for (const h of ["parameter", "value", "1σ", "unit"]) { const th = document.createElement("th"); th.textContent = h; head.appendChild(th); }
+  for (const [name, v] of Object.entries(f.params || {})) {
+    const values = Array.isArray(v) ? v.flat() : [v];
+    const sig = f.sigma && f.sigma[name] !== undefined ? (Array.isArray(f.sigma[name]) ? f.sigma[name].flat() : [f.sigma[name]]) : [];
+    const tr = t.insertRow();
+    cell(tr, name);
+    cell(tr, values.map((x) => fmt(x, 4)).join(", "));
+    cell(tr, sig.map((x) => fmt(x, 2)).join(", "));
+    cell(tr, name.includes("soft") ? "1 (a matrix)" : f.unit);
+  }
+  const d = f.diagnosis || {};
+  div.replaceChildren(
+    p(`Model: ${f.model.join(" + ")}; residual RMS ${fmt(f.residual_rms, 3)} ${f.unit} ` +
+      `(noise floor ${fmt(f.noise_floor, 3)} ${f.unit}, ${f.n_residuals} residuals); coverage ${fmt(100 * r.coverage, 3)} %`),
+    p(`${d.adequate ? "ADEQUATE" : "NOT ADEQUATE"} — ${d.explanation || ""}`, d.adequate ? "ok" : "bad"),
+    t,
+    ...(f.steps || []).map((s) => p(`step: + ${s.added.join(", ")}${s.removed && s.removed.length ? ", − " + s.removed.join(", ") : ""}: ` +
+      `residual RMS ${fmt(s.rms_residual_before, 3)} → ${fmt(s.rms_residual_after, 3)} ${s.rms_unit}`)),
+  );
+  div.dataset.model = f.model.join(",");
+  div.dataset.adequate = d.adequate ? "yes" : "no";
+}
+
 window.startLive = (info) => {
   $("live").hidden = false;
   const es = new EventSource("/api/live/events");
@@ -379,6 +440,19 @@ window.startLive = (info) => {
   es.addEventListener("stream", (e) => streamPush([JSON.parse(e.data)]));
   es.addEventListener("record", (e) => renderRecord(JSON.parse(e.data)));
   es.addEventListener("link", (e) => showError(JSON.parse(e.data).error));
+  es.addEventListener("mag", (e) => {
+    const m = JSON.parse(e.data);
+    magPoints.push(m.point);
+    if (magPoints.length > 5000) magPoints.splice(0, magPoints.length - 5000);
+    renderMagState(m);
+    drawCloud();
+  });
+  $("mag-start").onclick = async () => {
+    const m = await act("/api/live/mag/start");
+    if (m) { magPoints.length = 0; drawCloud(); renderMagState(m); }
+  };
+  $("mag-stop").onclick = async () => { const m = await act("/api/live/mag/stop"); if (m) renderMagState(m); };
+  $("mag-fit").onclick = async () => { const r = await act("/api/live/mag/fit"); if (r) renderMagFit(r); };
   const act = async (path) => {
     showError("");
     try { return await api(path, {}); } catch (err) { showError(err.message); return null; }

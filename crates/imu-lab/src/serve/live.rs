@@ -69,6 +69,58 @@ struct Snapshot {
     finished: Option<(PathBuf, String)>,
     losses: DeviceLosses,
     link_error: Option<String>,
+    /// The magnetometer wizard's points.
+    mag: MagPoints,
+}
+
+/// Most magnetometer points the wizard keeps (ten a second: over 8 minutes).
+pub const MAG_POINTS: usize = 5000;
+/// Direction bins of the coverage: 6 bands of equal area in elevation × 12 in azimuth.
+const BANDS: usize = 6;
+const SECTORS: usize = 12;
+
+/// The magnetometer wizard's collection: the mean field of every stream window while on.
+#[derive(Default)]
+struct MagPoints {
+    on: bool,
+    points: VecDeque<[f64; 3]>,
+}
+
+impl MagPoints {
+    /// The share of direction bins (around the points' mean, a first guess of the hard iron)
+    /// that hold a point: how much of the sphere the turns have covered.
+    fn coverage(&self) -> f64 {
+        let n = self.points.len();
+        if n < 2 {
+            return 0.0;
+        }
+        let mut c = [0.0; 3];
+        for p in &self.points {
+            for k in 0..3 {
+                c[k] += p[k] / n as f64;
+            }
+        }
+        let mut hit = [false; BANDS * SECTORS];
+        for p in &self.points {
+            let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+            let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            // a point at the centre (or not finite) has no direction
+            if r.is_nan() || r <= 0.0 {
+                continue;
+            }
+            // z/r is uniform on a sphere: equal-area bands
+            let band = (((d[2] / r + 1.0) / 2.0 * BANDS as f64) as usize).min(BANDS - 1);
+            let az = d[1].atan2(d[0]) + std::f64::consts::PI;
+            let sector =
+                ((az / (2.0 * std::f64::consts::PI) * SECTORS as f64) as usize).min(SECTORS - 1);
+            hit[band * SECTORS + sector] = true;
+        }
+        hit.iter().filter(|h| **h).count() as f64 / hit.len() as f64
+    }
+
+    fn state(&self) -> Value {
+        json!({ "collecting": self.on, "points": self.points.len(), "coverage": self.coverage() })
+    }
 }
 
 /// A recording in progress.
@@ -276,6 +328,19 @@ fn read_loop(mut link: Link, shared: &Mutex<Snapshot>, tx: &broadcast::Sender<(S
                     });
                 }
                 for p in points {
+                    if s.mag.on {
+                        let m = |k: usize| p["mean"][k].as_f64().unwrap_or(f64::NAN);
+                        let point = [m(6), m(7), m(8)];
+                        if point.iter().all(|v| v.is_finite()) {
+                            s.mag.points.push_back(point);
+                            while s.mag.points.len() > MAG_POINTS {
+                                s.mag.points.pop_front();
+                            }
+                            let mut v = s.mag.state();
+                            v["point"] = json!(point);
+                            send(tx, "mag", v);
+                        }
+                    }
                     s.stream.push_back(p.clone());
                     while s.stream.len() > HISTORY {
                         s.stream.pop_front();
@@ -496,5 +561,156 @@ pub async fn open_recording(State(s): State<Shared>, bytes: Bytes) -> Response {
     match s.lab.set_file(file).await {
         Ok(()) => Json(s.lab.describe().await).into_response(),
         Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, &format!("{e:#}")),
+    }
+}
+
+/// POST /api/live/mag/start {}: collect the magnetometer's field (the mean of every 0.1 s) for
+/// the calibration, from an empty set.
+pub async fn mag_start(State(s): State<Shared>, bytes: Bytes) -> Response {
+    mag_switch(s, bytes, true)
+}
+
+/// POST /api/live/mag/stop {}: stop collecting (the points stay for the fit).
+pub async fn mag_stop(State(s): State<Shared>, bytes: Bytes) -> Response {
+    mag_switch(s, bytes, false)
+}
+
+fn mag_switch(s: Shared, bytes: Bytes, on: bool) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let mut snap = live.shared.lock().expect("snapshot");
+    if on {
+        snap.mag.points.clear();
+    }
+    snap.mag.on = on;
+    Json(snap.mag.state()).into_response()
+}
+
+/// POST /api/live/mag/fit {}: the calibration lab's walk on the points collected (what `imu-lab
+/// calibrate mag --auto --json` does on a recording of them): the model, its parameters with σ,
+/// the residual, the diagnosis.
+pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let (points, coverage): (Vec<[f64; 3]>, f64) = {
+        let snap = live.shared.lock().expect("snapshot");
+        (
+            snap.mag.points.iter().copied().collect(),
+            snap.mag.coverage(),
+        )
+    };
+    if points.len() < 20 {
+        return error(
+            StatusCode::CONFLICT,
+            &format!(
+                "{} magnetometer points: collect 20 at least, turning the board",
+                points.len()
+            ),
+        );
+    }
+    let fitted = tokio::task::spawn_blocking(move || {
+        use imu_cal::session::{self as cal, Sensor};
+        let col = |k: usize| points.iter().map(|p| p[k]).collect::<Vec<f64>>();
+        let (x, y, z) = (col(0), col(1), col(2));
+        // one segment: the points are consecutive windows without gaps
+        let segments = vec![std::ops::Range {
+            start: 0,
+            end: points.len(),
+        }];
+        let input = cal::Input {
+            columns: vec![
+                cal::Column {
+                    name: "mx",
+                    unit: "µT",
+                    values: &x,
+                },
+                cal::Column {
+                    name: "my",
+                    unit: "µT",
+                    values: &y,
+                },
+                cal::Column {
+                    name: "mz",
+                    unit: "µT",
+                    values: &z,
+                },
+            ],
+            rate_hz: 1.0 / WINDOW_S,
+            segments: &segments,
+            shown: "the page's magnetometer points",
+        };
+        let o = cal::Options {
+            auto: true,
+            ..cal::Options::new(Sensor::Mag)
+        };
+        let loaded = cal::prepare(&input, &o)?;
+        let run = cal::run(&loaded, &o)?;
+        Ok::<String, String>(cal::json_out(&loaded, &run))
+    })
+    .await;
+    match fitted {
+        Ok(Ok(text)) => match serde_json::from_str::<Value>(&text) {
+            Ok(v) => Json(json!({ "coverage": coverage, "fit": v })).into_response(),
+            Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+        },
+        Ok(Err(e)) => error(StatusCode::UNPROCESSABLE_ENTITY, &e),
+        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Directions drawn at random around a random hard-iron offset: the whole sphere is covered;
+    /// a turn in one plane covers only the equatorial band (12 of 72 bins).
+    #[test]
+    fn coverage_counts_the_directions_reached() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as u64;
+        let mut state = key | 1;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let c = [
+            60.0 * next() - 30.0,
+            60.0 * next() - 30.0,
+            60.0 * next() - 30.0,
+        ];
+        let mut sphere = MagPoints::default();
+        let mut circle = MagPoints::default();
+        for _ in 0..4000 {
+            let z = 2.0 * next() - 1.0;
+            let a = 2.0 * std::f64::consts::PI * next();
+            let r = (1.0 - z * z).sqrt();
+            sphere.points.push_back([
+                c[0] + 50.0 * r * a.cos(),
+                c[1] + 50.0 * r * a.sin(),
+                c[2] + 50.0 * z,
+            ]);
+            circle
+                .points
+                .push_back([c[0] + 50.0 * a.cos(), c[1] + 50.0 * a.sin(), c[2]]);
+        }
+        assert_eq!(sphere.coverage(), 1.0, "key {key}");
+        assert!(
+            (circle.coverage() - 12.0 / 72.0).abs() < 1e-12,
+            "key {key}: {}",
+            circle.coverage()
+        );
+        assert_eq!(MagPoints::default().coverage(), 0.0);
     }
 }

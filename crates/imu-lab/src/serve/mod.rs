@@ -85,6 +85,9 @@ pub fn router(state: Shared) -> Router {
         .route("/api/live/record", post(live::record))
         .route("/api/live/stop", post(live::stop))
         .route("/api/live/open", post(live::open_recording))
+        .route("/api/live/mag/start", post(live::mag_start))
+        .route("/api/live/mag/stop", post(live::mag_stop))
+        .route("/api/live/mag/fit", post(live::mag_fit))
         .fallback(not_found)
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
