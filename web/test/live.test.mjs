@@ -102,6 +102,25 @@ test("magnetometer wizard: the point cloud grows with its coverage, the fit find
   console.log(`fit: ${model}; ${text.slice(0, 300)}`);
   assert.match(model, /hard_iron/);
   assert.match(text, /residual RMS [\d.e-]+ µT/);
+  // the upload: refused without the confirmation, then sent to RAM only
+  await page.click("#mag-upload-button");
+  assert.match(await page.textContent("#error"), /confirmation/);
+  assert.equal(await page.getAttribute("#mag-upload-state", "data-applied"), null);
+  // a wrong code is refused by the server, whatever the page does
+  const wrong = await page.evaluate(async () => {
+    const info = await (await fetch("/api/info")).json();
+    const r = await fetch("/api/live/mag/upload", { method: "POST", headers: { "x-imu-lab-token": info.token },
+      body: JSON.stringify({ confirm: "00000000", persist: false }) });
+    return r.status;
+  });
+  assert.equal(wrong, 403);
+  await page.check("#mag-confirm");
+  await page.click("#mag-upload-button");
+  await page.waitForSelector("#mag-upload-state[data-applied=yes]", { timeout: 60_000 });
+  assert.match(await page.textContent("#mag-upload-state"), /RAM only/);
+  // the device says so in its next status frames
+  await page.waitForFunction(() => /set by the host, not persisted/.test(document.querySelector("#live-status").textContent),
+    null, { timeout: 60_000 });
   await page.screenshot({ path: join(OUT, "mag-wizard.png"), fullPage: true });
   await page.close();
 });

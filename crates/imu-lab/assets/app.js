@@ -292,6 +292,7 @@ function renderStatus(s) {
   row("CPU load", `${fmt(s.cpu_percent, 3)} %`);
   row("temperature", s.temp_c === null ? "n/a" : `${fmt(s.temp_c, 4)} °C`);
   row("stream", s.mode);
+  row("calibration", s.calibration);
   $("live-status").replaceChildren(t);
   $("live-status").dataset.uptime = String(s.uptime_s);
 }
@@ -425,6 +426,51 @@ function renderMagFit(r) {
   );
   div.dataset.model = f.model.join(",");
   div.dataset.adequate = d.adequate ? "yes" : "no";
+  div.appendChild(renderUpload(r.upload));
+}
+
+// The upload: only a plausible calibration, only after the user ticks the confirmation; RAM
+// only unless "write to flash" is ticked too (the CLI's --no-persist is the default here).
+function renderUpload(u) {
+  const box = document.createElement("div");
+  box.id = "mag-upload";
+  if (!u.plausible) {
+    const p = document.createElement("p");
+    p.className = "bad";
+    p.textContent = `Not uploadable: ${u.problem}`;
+    box.appendChild(p);
+    return box;
+  }
+  const label = (id, text) => {
+    const l = document.createElement("label");
+    const c = document.createElement("input");
+    c.type = "checkbox";
+    c.id = id;
+    l.append(c, " ", text);
+    return l;
+  };
+  const btn = document.createElement("button");
+  btn.type = "button";
+  btn.id = "mag-upload-button";
+  btn.textContent = "Upload to the device";
+  const state = document.createElement("span");
+  state.id = "mag-upload-state";
+  btn.onclick = async () => {
+    if (!$("mag-confirm").checked) { showError("Tick the confirmation first: nothing was uploaded."); return; }
+    showError("");
+    try {
+      const r = await api("/api/live/mag/upload", { confirm: u.code, persist: $("mag-persist").checked });
+      state.textContent = r.persisted ? "applied and written to flash" : "applied in RAM only (not persisted; a reset forgets it)";
+      state.dataset.applied = "yes";
+      btn.disabled = true;
+    } catch (e) { showError(e.message); }
+  };
+  const row = document.createElement("div");
+  row.className = "row";
+  row.append(label("mag-confirm", `I confirm: replace the device's calibration with this fit (code ${u.code})`),
+    label("mag-persist", "also write it to flash"), btn, state);
+  box.appendChild(row);
+  return box;
 }
 
 window.startLive = (info) => {

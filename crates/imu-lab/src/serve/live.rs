@@ -19,7 +19,7 @@ use std::convert::Infallible;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::{mpsc, Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
@@ -34,7 +34,7 @@ use imu_proto::csv::Writer;
 use imu_proto::{Channel, DeviceMsg, Reply, Request, SensorState, Status, StreamMode};
 use serde::Deserialize;
 use serde_json::{json, Value};
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, oneshot};
 use tokio_stream::wrappers::BroadcastStream;
 
 use super::{error, Shared};
@@ -55,7 +55,22 @@ pub struct Live {
     shared: Arc<Mutex<Snapshot>>,
     tx: broadcast::Sender<(String, Value)>,
     record_dir: PathBuf,
+    /// Requests for the device, sent by the reader thread (it owns the link).
+    requests: Mutex<mpsc::Sender<Pending>>,
 }
+
+/// A request for the device and where its reply goes.
+type Pending = (Request, oneshot::Sender<Result<Reply, String>>);
+
+/// A request sent: its id, where its reply goes, and until when it may come.
+type Waiting = (
+    u16,
+    oneshot::Sender<Result<Reply, String>>,
+    std::time::Instant,
+);
+
+/// How long the device has to answer a request (a flash write pauses it a few hundred ms).
+const REPLY_WAIT: Duration = Duration::from_secs(10);
 
 /// The latest of everything, for a page that connects now.
 #[derive(Default)]
@@ -71,6 +86,15 @@ struct Snapshot {
     link_error: Option<String>,
     /// The magnetometer wizard's points.
     mag: MagPoints,
+    /// The last fit's calibration, checked and ready for the device, with the one-time code
+    /// the page must send back to upload it.
+    mag_cal: Option<ReadyCal>,
+}
+
+/// A calibration the user may upload: the blob and its confirmation code.
+struct ReadyCal {
+    blob: Vec<u8>,
+    code: String,
 }
 
 /// Most magnetometer points the wizard keeps (ten a second: over 8 minutes).
@@ -218,6 +242,11 @@ fn status_json(s: &Status, losses: &DeviceLosses) -> Value {
         "cpu_percent": f64::from(s.cpu_load_permille) / 10.0,
         "temp_c": s.temp_milli_c.map(|t| f64::from(t) / 1000.0),
         "mode": format!("{:?}", s.mode),
+        "calibration": match s.cal.source {
+            imu_proto::CalSource::Identity => "identity (none stored)",
+            imu_proto::CalSource::Flash => "from flash",
+            imu_proto::CalSource::Host => "set by the host, not persisted",
+        },
     })
 }
 
@@ -268,11 +297,12 @@ impl Live {
             ..Snapshot::default()
         }));
         let (tx, _) = broadcast::channel(QUEUE);
+        let (req_tx, req_rx) = mpsc::channel();
         {
             let (shared, tx) = (shared.clone(), tx.clone());
             std::thread::Builder::new()
                 .name("device link".into())
-                .spawn(move || read_loop(link, &shared, &tx))
+                .spawn(move || read_loop(link, &shared, &tx, &req_rx))
                 .context("starting the link's reader")?;
         }
         Ok(Live {
@@ -280,6 +310,7 @@ impl Live {
             shared,
             tx,
             record_dir,
+            requests: Mutex::new(req_tx),
         })
     }
 }
@@ -290,12 +321,34 @@ fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
 }
 
 /// The reader: every message from the device into the snapshot and out to the pages.
-fn read_loop(mut link: Link, shared: &Mutex<Snapshot>, tx: &broadcast::Sender<(String, Value)>) {
+fn read_loop(
+    mut link: Link,
+    shared: &Mutex<Snapshot>,
+    tx: &broadcast::Sender<(String, Value)>,
+    requests: &mpsc::Receiver<Pending>,
+) {
     let mut window = Window::new();
     let mut decim = Rows::default();
     let mut round: Option<u32> = None;
     let mut round_tables: Vec<Value> = Vec::new();
+    // requests sent, waiting for their reply: (id, where it goes, until when)
+    let mut waiting: Vec<Waiting> = Vec::new();
     loop {
+        while let Ok((req, reply)) = requests.try_recv() {
+            match link.send(req) {
+                Ok(id) => waiting.push((id, reply, std::time::Instant::now() + REPLY_WAIT)),
+                Err(e) => {
+                    let _ = reply.send(Err(format!("{e:#}")));
+                }
+            }
+        }
+        let now = std::time::Instant::now();
+        for (_, reply, _) in waiting.extract_if(.., |(_, _, until)| *until < now) {
+            let _ = reply.send(Err(format!(
+                "no reply from the device within {} s",
+                REPLY_WAIT.as_secs()
+            )));
+        }
         let msg = match link.recv(Duration::from_millis(200)) {
             Ok(Some(m)) => m,
             Ok(None) => continue,
@@ -381,7 +434,12 @@ fn read_loop(mut link: Link, shared: &Mutex<Snapshot>, tx: &broadcast::Sender<(S
                     round_tables = Vec::new();
                 }
             }
-            DeviceMsg::Reply { .. } => {}
+            DeviceMsg::Reply { id, reply } => {
+                if let Some(k) = waiting.iter().position(|(w, _, _)| *w == id) {
+                    let (_, to, _) = waiting.swap_remove(k);
+                    let _ = to.send(Ok(reply));
+                }
+            }
         }
     }
 }
@@ -653,16 +711,111 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         };
         let loaded = cal::prepare(&input, &o)?;
         let run = cal::run(&loaded, &o)?;
-        Ok::<String, String>(cal::json_out(&loaded, &run))
+        // the calibration file `calibrate --out` would write, converted for the device with the
+        // plausibility checks `imu-lab device calibrate --upload` applies
+        let blob = cal::update_file(None, &loaded, &run).and_then(|toml| {
+            let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
+            let c = file.to_device().map_err(|e| e.to_string())?;
+            let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+            imu_cal::device::encode_blob(&c, &mut buf)
+                .map(|b| b.to_vec())
+                .map_err(|e| format!("encoding the blob: {e}"))
+        });
+        Ok::<(String, Result<Vec<u8>, String>), String>((cal::json_out(&loaded, &run), blob))
     })
     .await;
-    match fitted {
-        Ok(Ok(text)) => match serde_json::from_str::<Value>(&text) {
-            Ok(v) => Json(json!({ "coverage": coverage, "fit": v })).into_response(),
-            Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    let (text, blob) = match fitted {
+        Ok(Ok(t)) => t,
+        Ok(Err(e)) => return error(StatusCode::UNPROCESSABLE_ENTITY, &e),
+        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    };
+    let v: Value = match serde_json::from_str(&text) {
+        Ok(v) => v,
+        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    };
+    let upload = match blob {
+        Ok(blob) if blob.len() <= imu_proto::MAX_CAL_BLOB => {
+            let code = super::guard::new_token()[..8].to_string();
+            live.shared.lock().expect("snapshot").mag_cal = Some(ReadyCal {
+                blob,
+                code: code.clone(),
+            });
+            json!({ "plausible": true, "code": code })
+        }
+        Ok(blob) => json!({ "plausible": false,
+            "problem": format!("a blob of {} B exceeds the device's {} B", blob.len(), imu_proto::MAX_CAL_BLOB) }),
+        Err(problem) => {
+            live.shared.lock().expect("snapshot").mag_cal = None;
+            json!({ "plausible": false, "problem": problem })
+        }
+    };
+    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct UploadBody {
+    /// The code the fit gave: the user's explicit confirmation of this calibration.
+    confirm: String,
+    /// Also write it to the device's flash (else RAM only, until a reset).
+    persist: bool,
+}
+
+/// POST /api/live/mag/upload {"confirm": CODE, "persist": false}: send the last fit's
+/// calibration to the device, once, with the code its fit gave (403 without it: nothing is
+/// written to a device without the user's confirmation of that very calibration).
+pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
+    let b: UploadBody = match super::noise::body(&bytes) {
+        Ok(b) => b,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e),
+    };
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let blob = {
+        let mut snap = live.shared.lock().expect("snapshot");
+        match &snap.mag_cal {
+            None => return error(StatusCode::CONFLICT, "no plausible calibration fitted yet"),
+            Some(c) if c.code != b.confirm => {
+                return error(
+                    StatusCode::FORBIDDEN,
+                    "the confirmation code is not the one of the last fit: nothing uploaded",
+                )
+            }
+            Some(_) => snap.mag_cal.take().expect("checked").blob,
+        }
+    };
+    let Ok(blob) = imu_proto::Vec::from_slice(&blob) else {
+        return error(StatusCode::UNPROCESSABLE_ENTITY, "the blob is too long");
+    };
+    let (reply_tx, reply_rx) = oneshot::channel();
+    let sent = live.requests.lock().expect("requests").send((
+        Request::SetCalibration {
+            blob,
+            persist: b.persist,
         },
-        Ok(Err(e)) => error(StatusCode::UNPROCESSABLE_ENTITY, &e),
-        Err(e) => error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+        reply_tx,
+    ));
+    if sent.is_err() {
+        return error(StatusCode::BAD_GATEWAY, "the link to the device is closed");
+    }
+    match reply_rx.await {
+        Ok(Ok(Reply::Ok)) => {
+            Json(json!({ "applied": true, "persisted": b.persist })).into_response()
+        }
+        Ok(Ok(Reply::Error(imu_proto::ErrorCode::BadCalibration(p)))) => error(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            &format!(
+                "the device refused the calibration: {}",
+                crate::cmd::device::cal_problem(&p)
+            ),
+        ),
+        Ok(Ok(other)) => error(
+            StatusCode::BAD_GATEWAY,
+            &format!("the device did not apply the calibration: {other:?}"),
+        ),
+        Ok(Err(e)) => error(StatusCode::BAD_GATEWAY, &e),
+        Err(_) => error(StatusCode::BAD_GATEWAY, "the link's reader stopped"),
     }
 }
 

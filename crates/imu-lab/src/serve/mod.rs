@@ -88,6 +88,7 @@ pub fn router(state: Shared) -> Router {
         .route("/api/live/mag/start", post(live::mag_start))
         .route("/api/live/mag/stop", post(live::mag_stop))
         .route("/api/live/mag/fit", post(live::mag_fit))
+        .route("/api/live/mag/upload", post(live::mag_upload))
         .fallback(not_found)
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),

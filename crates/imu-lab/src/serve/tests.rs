@@ -263,6 +263,14 @@ async fn malformed_requests_get_400_and_change_nothing() {
         ("/api/lab/auto", r#"{"steps":3}"#),
         ("/api/lab/auto", "nope"),
         ("/api/lab/reset", "{"),
+        ("/api/live/mag/upload", r#"{"confirm":"0123abcd"}"#),
+        (
+            "/api/live/mag/upload",
+            r#"{"confirm":"0123abcd","persist":"yes"}"#,
+        ),
+        ("/api/live/mag/upload", r#"{"persist":false}"#),
+        ("/api/live/record", r#"{"file":"/etc/passwd"}"#),
+        ("/api/live/mag/start", "x"),
     ] {
         let (st, resp) = send(&app, post(path).body(body.to_string().into()).unwrap()).await;
         assert_eq!(st, StatusCode::BAD_REQUEST, "{path} {body:?}: {resp}");
