@@ -39,7 +39,8 @@ enum Command {
     Simulate(cmd::simulate::Args),
     /// Export noise parameters for other tools (Kalibr imu.yaml).
     Export(cmd::export::Args),
-    /// The lab in the browser: a local web app on a recording (noise lab).
+    /// The lab in the browser: a local web app on a recording (noise lab) or a live device
+    /// (status, its Allan tables, the stream, recording, magnetometer calibration).
     Serve(cmd::serve::Args),
 }
 

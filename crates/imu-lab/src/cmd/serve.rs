@@ -1,4 +1,4 @@
-//! `imu-lab serve`: the lab as a local web app (the server is `crate::serve`).
+//! `imu-lab serve`: the lab as a local web app (the server is `crate::serve`; docs/serve.md).
 use std::net::SocketAddr;
 use std::path::PathBuf;
 

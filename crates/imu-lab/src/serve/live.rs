@@ -10,7 +10,9 @@
 //!   and channel the mean, minimum and maximum — so a page follows a 1 kHz stream with ten
 //!   small messages a second whatever the rate;
 //! * `record`: the recording's state (the rows go to a CSV in the contract, the same rows
-//!   `imu-lab record` writes).
+//!   `imu-lab record` writes);
+//! * `mag`: while the magnetometer wizard collects, each window's mean field with the count and
+//!   the direction coverage; its fit and upload answer their own requests.
 //!
 //! The server keeps only the last [`HISTORY`] stream windows and the latest tables, so neither
 //! it nor the page grows with the length of the session.

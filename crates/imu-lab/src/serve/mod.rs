@@ -1,12 +1,14 @@
 //! `imu-lab serve`: the lab as a local web app. An axum server on a loopback address serves one
 //! page (HTML, script, style and the vendored plotting library, all embedded in the binary) and
 //! a small JSON API over the library sessions: the noise lab ([`noise`]) on a recording, and the
-//! live device ([`live`]) over the same link `imu-lab record` uses.
+//! live device ([`live`]) over the same link `imu-lab record` uses, with the magnetometer
+//! calibration (collect, fit with `imu_cal::session`, upload after an explicit confirmation).
 //!
 //! Safe by default ([`guard`]): it binds to 127.0.0.1, answers only requests whose `Host` is the
 //! address it listens on (DNS rebinding), refuses writes from another origin (403) and writes
-//! without the token the page obtains from `/api/info` (403), serves only its embedded assets
-//! (anything else 404) and refuses malformed requests with 400 before changing anything.
+//! without the token the page obtains from `/api/info` (403), writes to the device without the
+//! one-time code of the calibration confirmed (403), serves only its embedded assets (anything
+//! else 404) and refuses malformed requests with 400 before changing anything.
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
