@@ -18,6 +18,10 @@ use crate::run;
 
 /// `cargo xtask demo`: the noise lab's walk (`emu::demo`), then, on the emulator, the heading.
 pub fn demo(args: &crate::emu::DemoArgs) -> Result<()> {
+    if args.serve {
+        // the page until Ctrl-C: the heading is not part of it
+        return crate::emu::demo(args).map(|_| ());
+    }
     match crate::emu::demo(args)? {
         // Heading before → after calibration, on a second emulated board turned through a
         // known trajectory (its truth is what the heading is judged against).

@@ -308,6 +308,11 @@ pub struct DemoArgs {
     /// Seconds recorded.
     #[arg(long, value_name = "S", default_value_t = 60.0)]
     pub seconds: f64,
+    /// Show it in the browser instead: `imu-lab serve` on the (emulated) device — its status,
+    /// its own Allan tables round by round, the decimated stream; record from the page and open
+    /// the recording in the noise lab. Serves http://127.0.0.1:8750/ until Ctrl-C.
+    #[arg(long)]
+    pub serve: bool,
 }
 
 /// Runs the noise part of the demo (see [`DemoArgs`]); returns the firmware it ran in the
@@ -317,11 +322,49 @@ pub fn demo(args: &DemoArgs) -> Result<Option<PathBuf>> {
     let seconds = args.seconds;
     if let Some(port) = &args.port {
         eprintln!("xtask: demo on the device at {port} (flash it first: cargo run --release)");
+        if args.serve {
+            serve_page(port, &out)?;
+            return Ok(None);
+        }
         demo_flow(port, seconds, &out)?;
         return Ok(None);
     }
     let elf = build_firmware()?;
     ensure_sim()?;
+    if args.serve {
+        // the page for as long as it is open: ten minutes of stream, which the emulator loops
+        let sim = start_demo_board(&elf, 570.0, &out)?;
+        serve_page(&format!("tcp:127.0.0.1:{}", sim.port), &out)?;
+        return Ok(None);
+    }
+    let sim = start_demo_board(&elf, seconds, &out)?;
+    let port = format!("tcp:127.0.0.1:{}", sim.port);
+    // Dropping the emulator at the end of the flow, or on its error, stops it.
+    demo_flow(&port, seconds, &out)?;
+    Ok(Some(elf))
+}
+
+/// `imu-lab serve --port PORT` in the foreground until Ctrl-C, recordings into `out`.
+fn serve_page(port: &str, out: &Path) -> Result<()> {
+    eprintln!(
+        "xtask: the page: http://127.0.0.1:8750/ (Ctrl-C ends the demo); recordings go to {}",
+        out.display()
+    );
+    run(imu_lab()
+        .args([
+            "serve",
+            "--port",
+            port,
+            "--listen",
+            "127.0.0.1:8750",
+            "--record-dir",
+        ])
+        .arg(out))
+}
+
+/// The demo's emulated board: gyro noise inside the five-term model simulated for `seconds`
+/// (+30 s), the firmware running on it with the MPU-6050's low-pass filter as the hidden effect.
+fn start_demo_board(elf: &Path, seconds: f64, out: &Path) -> Result<Sim> {
     let stream = out.join("stream.csv");
     let samples = ((seconds + 30.0) * 1000.0) as u64;
     run(imu_lab()
@@ -337,8 +380,8 @@ pub fn demo(args: &DemoArgs) -> Result<Option<PathBuf>> {
         .args(["--columns", "gx,gy,gz", "--white", "0.01", "--rrw", "0.002"])
         .arg("--output")
         .arg(&stream))?;
-    let sim = Sim::start(
-        &elf,
+    Sim::start(
+        elf,
         &[
             "--seconds".into(),
             format!("{}", seconds + 3600.0),
@@ -348,12 +391,8 @@ pub fn demo(args: &DemoArgs) -> Result<Option<PathBuf>> {
             out.join("firmware.log").display().to_string(),
             "--quiet".into(),
         ],
-        &out,
-    )?;
-    let port = format!("tcp:127.0.0.1:{}", sim.port);
-    // Dropping the emulator at the end of the flow, or on its error, stops it.
-    demo_flow(&port, seconds, &out)?;
-    Ok(Some(elf))
+        out,
+    )
 }
 
 fn demo_flow(port: &str, seconds: f64, out: &Path) -> Result<()> {

@@ -16,6 +16,7 @@ mod emu_check;
 mod emu_link;
 mod firmware;
 mod python;
+mod serve;
 
 /// Packages that only build for the device (thumbv6m-none-eabi).
 const DEVICE_ONLY: &[&str] = &["pico-imu", "rp2040-hal-blocking"];
@@ -220,6 +221,8 @@ fn test(extra: &[String]) -> Result<()> {
     }
     c.args(extra);
     run(&mut c)?;
+    // imu-lab serve's noise lab in headless Chromium (skipped without one)
+    serve::browser_tests(&["vendor", "noise_lab"], &[])?;
     python::test()?;
     if emu::node_available() {
         for scenario in [
@@ -244,13 +247,53 @@ fn test(extra: &[String]) -> Result<()> {
         run(cargo().args(["build", "--release", "-p", "allan-thumb-check"]))?;
         let thumb_check = target_dir()?.join("thumbv6m-none-eabi/release/allan-thumb-check");
         std::env::set_var("PICO_IMU_THUMB_CHECK_ELF", thumb_check);
-        emu::harness_tests()
+        emu::harness_tests()?;
+        serve_live_test()
     } else {
         eprintln!(
             "xtask: node >= 20 not found: emulator end-to-end test and harness tests skipped"
         );
         Ok(())
     }
+}
+
+/// The live page's browser tests against the emulated board (web/test/live.test.mjs), turned
+/// through the simulator's standard trajectory by a part with hard and soft iron (the
+/// magnetometer wizard needs the field in many directions; the stream loops).
+fn serve_live_test() -> Result<()> {
+    if serve::chromium().is_none() {
+        return serve::browser_tests(&["live"], &[]);
+    }
+    let out = emu::out_dir("serve")?;
+    let elf = emu::build_firmware()?;
+    let stream = out.join("live-stream.csv");
+    // the binary the browser tests use (the test build), not a release build of its own
+    run(Command::new(serve::imu_lab_bin()?)
+        .args([
+            "simulate",
+            "--trajectory",
+            "standard",
+            "--part",
+            "hard-iron",
+        ])
+        .args(["--rate", "1000", "--samples", "120000", "--seed", "7"])
+        .arg("--output")
+        .arg(&stream))?;
+    let sim = emu::Sim::start(
+        &elf,
+        &[
+            "--seconds".into(),
+            "3600".into(),
+            "--stream".into(),
+            stream.display().to_string(),
+            "--log".into(),
+            out.join("live-firmware.log").display().to_string(),
+            "--quiet".into(),
+        ],
+        &out,
+    )?;
+    let port = format!("tcp:127.0.0.1:{}", sim.port);
+    serve::browser_tests(&["live"], &[("IMU_LIVE_PORT", port)])
 }
 
 #[cfg(test)]
@@ -276,6 +319,8 @@ mod tests {
             "bench-emu --seconds 3 --warmup 0.2 --seed 7 --clock mpu:-1.3%,qmc:+1.3%",
             "demo",
             "demo --port /dev/ttyACM0 --seconds 60",
+            "demo --serve",
+            "demo --serve --port /dev/ttyACM0",
             "firmware",
             "firmware --no-build",
         ] {

@@ -7,6 +7,7 @@ mod cmd;
 mod input;
 mod link;
 mod render;
+mod serve;
 
 #[derive(Parser)]
 #[command(
@@ -38,6 +39,9 @@ enum Command {
     Simulate(cmd::simulate::Args),
     /// Export noise parameters for other tools (Kalibr imu.yaml).
     Export(cmd::export::Args),
+    /// The lab in the browser: a local web app on a recording (noise lab) or a live device
+    /// (status, its Allan tables, the stream, recording, magnetometer calibration).
+    Serve(cmd::serve::Args),
 }
 
 fn main() {
@@ -52,6 +56,7 @@ fn main() {
         Command::Export(a) => cmd::export::run(a),
         Command::Calibrate(a) => cmd::calibrate::run(a),
         Command::Heading(a) => cmd::heading::run(a),
+        Command::Serve(a) => cmd::serve::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

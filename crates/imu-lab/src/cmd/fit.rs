@@ -7,7 +7,7 @@ use std::sync::Arc;
 use anyhow::{anyhow, bail, Context, Result};
 use noise_model::session::{self, names, Session, Stage};
 use noise_model::user::UserEffect;
-use noise_model::{practical, Effect, Step, Stop};
+use noise_model::{practical, Effect, Step};
 
 use crate::input::{self, InputArgs};
 use crate::render::{allan as plot, noise as report};
@@ -140,29 +140,13 @@ impl Outcome<'_> {
     /// The plot (--plot) and the HTML report (--report).
     fn write_files(&self) -> Result<()> {
         let args = self.args;
-        let base_name = args
-            .input
-            .file
-            .file_name()
-            .map_or(self.shown.clone(), |n| n.to_string_lossy().into_owned());
-        let title = format!("{} [{}] — {}", args.column, self.s.unit, base_name);
+        let title = report_title(&self.s, &args.input.file);
         if let Some(path) = &args.plot {
             write_plot(path, &self.s.stages, &self.s.steps, &title, &self.s.unit)?;
         }
         if let Some(path) = &args.report {
-            write_report(
-                path,
-                &self.s.stages,
-                &self.s.steps,
-                &title,
-                &self.s.unit,
-                &self.shown,
-                args,
-                self.s.samples,
-                self.s.rate_hz,
-                self.s.recal.as_ref(),
-                self.s.stop,
-            )?;
+            std::fs::write(path, report_html(&self.s, &title, &self.shown))
+                .with_context(|| format!("writing {}", path.display()))?;
         }
         Ok(())
     }
@@ -352,20 +336,20 @@ fn write_plot(
     std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
-#[allow(clippy::too_many_arguments)]
-fn write_report(
-    path: &std::path::Path,
-    stages: &[Stage],
-    steps: &[Step<Effect>],
-    title: &str,
-    unit: &str,
-    shown: &str,
-    args: &Args,
-    samples: usize,
-    rate_hz: f64,
-    recal: Option<&practical::Recalibration>,
-    stop: Option<Stop>,
-) -> Result<()> {
+/// The report's title: column, unit and the file's name.
+pub fn report_title(s: &Session, file: &std::path::Path) -> String {
+    let base_name = file.file_name().map_or(file.display().to_string(), |n| {
+        n.to_string_lossy().into_owned()
+    });
+    format!("{} [{}] — {}", s.column, s.unit, base_name)
+}
+
+/// The self-contained HTML report of a session (`--report`, and `imu-lab serve`'s export): one
+/// section per model with its figure, table, verdict and diagnosis, then the effects' physics.
+/// `shown` names the input file in the introduction.
+pub fn report_html(s: &Session, title: &str, shown: &str) -> String {
+    let (stages, steps, unit) = (&s.stages, &s.steps, s.unit.as_str());
+    let (samples, rate_hz, recal, stop) = (s.samples, s.rate_hz, s.recal.as_ref(), s.stop);
     let mut sections = Vec::new();
     for (i, st) in stages.iter().enumerate() {
         let svg = if i == 0 {
@@ -439,12 +423,11 @@ fn write_report(
          half-width).{}{}",
         report::sig(rate_hz, 6),
         duration(samples as f64 / rate_hz),
-        args.column,
+        s.column,
         stop.map_or(String::new(), |s| format!(" Automatic walk: {s}.")),
         recal.map_or(String::new(), |r| format!(" {}", recal_text(r, unit)))
     );
-    std::fs::write(path, report::html(title, &intro, &sections, &physics))
-        .with_context(|| format!("writing {}", path.display()))
+    report::html(title, &intro, &sections, &physics)
 }
 
 fn recal_text(r: &practical::Recalibration, unit: &str) -> String {

@@ -5,4 +5,5 @@ pub mod export;
 pub mod fit;
 pub mod heading;
 pub mod record;
+pub mod serve;
 pub mod simulate;

@@ -1,0 +1,512 @@
+// imu-lab serve: the page. It asks the server (same origin only) for its mode and write token,
+// then drives the noise lab (and, on a device, the live view). Every number shown comes from
+// the server with its unit; the page only draws and lays out.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+let TOKEN = "";
+let allanPlot = null;
+let residualPlot = null;
+
+function fmt(x, digits = 3) {
+  if (x === null || x === undefined || !Number.isFinite(x)) return "—";
+  if (x === 0) return "0";
+  const e = Math.floor(Math.log10(Math.abs(x)));
+  if (e >= -3 && e < 5) return x.toFixed(Math.max(0, digits - 1 - e));
+  return x.toExponential(digits - 1);
+}
+
+function showError(msg) {
+  const el = $("error");
+  el.textContent = msg || "";
+  el.hidden = !msg;
+}
+
+function busy(on) {
+  $("busy").hidden = !on;
+  document.querySelectorAll("#lab button, #live button").forEach((b) => {
+    if (on) { b.dataset.wasDisabled = b.disabled ? "1" : ""; b.disabled = true; }
+    else { b.disabled = b.dataset.wasDisabled === "1"; }
+  });
+}
+
+async function api(path, body) {
+  const opts = body === undefined ? {} : {
+    method: "POST",
+    headers: { "Content-Type": "application/json", "X-Imu-Lab-Token": TOKEN },
+    body: JSON.stringify(body),
+  };
+  const r = await fetch(path, opts);
+  const j = await r.json().catch(() => null);
+  if (!r.ok) throw new Error((j && j.error) || `${path}: HTTP ${r.status}`);
+  return j;
+}
+
+async function labCall(path, body) {
+  showError("");
+  busy(true);
+  try {
+    const v = await api(path, body);
+    if (v) renderLab(v);
+  } catch (e) {
+    showError(e.message);
+  } finally {
+    busy(false);
+  }
+}
+
+function cell(tr, text, cls) {
+  const td = document.createElement("td");
+  td.textContent = text;
+  if (cls) td.className = cls;
+  tr.appendChild(td);
+  return td;
+}
+
+// ---------- noise lab ----------
+
+const COLORS = ["#1f77b4", "#2ca02c", "#ff7f0e", "#8c564b", "#d62728", "#e377c2", "#7f7f7f",
+  "#bcbd22", "#17becf", "#9467bd", "#1f3f9f", "#3f9f1f", "#ff1f8f", "#aa5500"];
+
+function plotWidth() {
+  return Math.min(1100, Math.max(480, document.querySelector("main").clientWidth - 20));
+}
+
+// A log axis spans whole decades: uPlot's log splits, given a range whose ends are not powers
+// of ten (τ = 0.00999999999999801 s), search for seconds before drawing.
+function decade(x, up) {
+  return 10 ** (up ? Math.ceil(Math.log10(x) - 1e-9) : Math.floor(Math.log10(x) + 1e-9));
+}
+const logRange = (u, lo, hi) => [decade(lo, false), decade(hi, true)];
+// tick labels: powers of ten as numbers, others left blank (minor grid lines)
+const logValues = (u, splits) => splits.map((s) => {
+  const e = Math.log10(s);
+  return Math.abs(e - Math.round(e)) < 1e-9 ? fmt(s, 1) : "";
+});
+const numValues = (u, splits) => splits.map((s) => fmt(s, 2));
+
+// Shade the failing τ ranges (red) on a plot's τ axis.
+function shadeFailing(failing) {
+  return (u) => {
+    const ctx = u.ctx;
+    ctx.save();
+    ctx.fillStyle = "rgba(220, 0, 0, 0.12)";
+    for (const r of failing) {
+      const x0 = u.valToPos(r.lo / 1.2, "x", true);
+      const x1 = u.valToPos(r.hi * 1.2, "x", true);
+      ctx.fillRect(x0, u.bbox.top, x1 - x0, u.bbox.height);
+    }
+    ctx.restore();
+  };
+}
+
+function drawAllan(v) {
+  const f = v.fit;
+  const unit = f.unit;
+  // one τ axis for the measured points and the model curves (uPlot draws aligned series)
+  const pts = new Map(f.adev.map((p) => [p.tau_s, p]));
+  const curveAt = new Map(v.curves.tau.map((t, i) => [t, i]));
+  const xs = [...new Set([...pts.keys(), ...curveAt.keys()])].sort((a, b) => a - b);
+  const col = (fn) => xs.map(fn);
+  // the σ axis spans the measurement (a decade beyond its bounds); curves below it are cut, as
+  // a term of amplitude ~0 would otherwise stretch a log axis over hundreds of decades
+  const yLo = decade(Math.min(...f.adev.map((p) => p.lo).filter((x) => x > 0)) / 3, false);
+  const yHi = decade(Math.max(...f.adev.map((p) => p.hi)) * 1.5, true);
+  const clip = (x) => (x !== null && x >= yLo ? x : null);
+  const data = [
+    xs,
+    col((t) => (pts.has(t) ? pts.get(t).hi : null)),
+    col((t) => (pts.has(t) ? pts.get(t).lo : null)),
+    col((t) => (pts.has(t) ? pts.get(t).dev : null)),
+    col((t) => (curveAt.has(t) ? clip(v.curves.total[curveAt.get(t)]) : null)),
+    ...v.curves.terms.map((term) => col((t) => (curveAt.has(t) ? clip(term.dev[curveAt.get(t)]) : null))),
+  ];
+  const series = [
+    { label: "τ [s]", value: (u, x) => fmt(x) },
+    { label: "68.3 % upper", stroke: "rgba(0,0,0,0.25)", width: 1, spanGaps: true, points: { show: false }, value: (u, x) => fmt(x) },
+    { label: "68.3 % lower", stroke: "rgba(0,0,0,0.25)", width: 1, spanGaps: true, points: { show: false }, value: (u, x) => fmt(x) },
+    { label: `σ(τ) measured [${unit}]`, stroke: "#000", width: 0, points: { show: true, size: 7, fill: "#000" }, paths: () => null, value: (u, x) => fmt(x) },
+    { label: "model", stroke: "#c00", width: 2, spanGaps: true, points: { show: false }, value: (u, x) => fmt(x) },
+    ...v.curves.terms.map((term, i) => ({
+      label: term.effect, stroke: COLORS[i % COLORS.length], width: 1.5, dash: [6, 4],
+      spanGaps: true, points: { show: false }, value: (u, x) => fmt(x),
+    })),
+  ];
+  const opts = {
+    width: plotWidth(), height: 380,
+    title: `Allan deviation of ${f.column} [${unit}] with 68.3 % bands, the model and its terms`,
+    scales: { x: { time: false, distr: 3, range: logRange }, y: { distr: 3, range: () => [yLo, yHi] } },
+    axes: [{ label: "τ [s]", values: logValues }, { label: `σ(τ) [${unit}]`, size: 70, values: logValues }],
+    bands: [{ series: [1, 2], fill: "rgba(0, 90, 200, 0.15)" }],
+    series,
+    hooks: { drawClear: [shadeFailing(v.failing)] },
+  };
+  if (allanPlot) allanPlot.destroy();
+  allanPlot = new uPlot(opts, data, $("allan-plot"));
+}
+
+function drawResidual(v) {
+  const f = v.fit;
+  const xs = f.adev.map((p) => p.tau_s);
+  const data = [xs, f.adev.map((p) => p.residual), xs.map(() => 1), xs.map(() => -1)];
+  const opts = {
+    width: plotWidth(), height: 190,
+    title: "Residual r = (measured − model) / CI half-width; failing τ ranges shaded red",
+    scales: { x: { time: false, distr: 3, range: logRange }, y: { range: (u, lo, hi) => [Math.min(-2, lo * 1.1), Math.max(2, hi * 1.1)] } },
+    axes: [{ label: "τ [s]", values: logValues }, { label: "r", size: 70, values: numValues }],
+    series: [
+      { label: "τ [s]", value: (u, x) => fmt(x) },
+      { label: "r", stroke: "#000", width: 1, points: { show: true, size: 6, fill: "#000" }, value: (u, x) => fmt(x) },
+      { label: "+1", stroke: "#888", dash: [4, 4], width: 1, points: { show: false } },
+      { label: "−1", stroke: "#888", dash: [4, 4], width: 1, points: { show: false } },
+    ],
+    hooks: { drawClear: [shadeFailing(v.failing)] },
+  };
+  if (residualPlot) residualPlot.destroy();
+  residualPlot = new uPlot(opts, data, $("residual-plot"));
+}
+
+function renderLab(v) {
+  $("lab-body").hidden = false;
+  const f = v.fit;
+  $("record-info").textContent =
+    `${f.samples} samples at ${fmt(f.rate_hz, 6)} Hz (${fmt(f.samples / f.rate_hz, 4)} s), unit ${f.unit}`;
+  const verdict = $("verdict");
+  verdict.textContent = v.verdict;
+  verdict.className = v.adequate ? "ok" : "bad";
+  verdict.dataset.adequate = v.adequate ? "yes" : "no";
+  $("chi2").textContent = fmt(v.chi2_dof);
+  $("chi2").dataset.value = String(v.chi2_dof);
+  $("rms").textContent = fmt(v.rms_log_residual);
+  $("effects").textContent = v.effects.join(" + ");
+
+  const named = $("add-named");
+  named.hidden = !(v.missing && v.missing_addable && v.editable);
+  named.textContent = v.missing ? `Add the named effect: ${v.missing}` : "";
+  named.dataset.effect = v.missing || "";
+  $("add-effect").disabled = !v.editable;
+  $("remove-effect").disabled = !v.editable;
+
+  const d = f.diagnosis;
+  $("diagnosis").textContent =
+    (d.missing ? `Missing effect: ${d.missing}. ` : "") + d.explanation +
+    (d.tau_range_s ? ` (τ = ${fmt(d.tau_range_s[0])}–${fmt(d.tau_range_s[1])} s)` : "");
+  const ev = $("evidence");
+  ev.replaceChildren(...d.evidence.map((e) => { const li = document.createElement("li"); li.textContent = e; return li; }));
+  $("physics").replaceChildren(...v.physics.map((p) => {
+    const el = document.createElement("p");
+    const b = document.createElement("b");
+    b.textContent = p.effect;
+    el.append(b, ` — ${p.text}`);
+    if (p.effect === v.missing) el.className = "missing";
+    return el;
+  }));
+
+  const pt = $("params").tBodies[0];
+  pt.replaceChildren(...v.params.map((r) => {
+    const tr = document.createElement("tr");
+    cell(tr, r.effect); cell(tr, r.param); cell(tr, r.value); cell(tr, r.conventional); cell(tr, r.status);
+    return tr;
+  }));
+
+  const st = $("steps").tBodies[0];
+  st.replaceChildren(...v.steps.map((s, i) => {
+    const tr = document.createElement("tr");
+    const yn = (b) => (b ? "yes" : "no");
+    cell(tr, String(i + 1));
+    cell(tr, s.edit + (s.reading ? ` — ${s.reading}` : ""));
+    const c = cell(tr, `${fmt(s.chi2_dof_before)} → ${fmt(s.chi2_dof_after)}`);
+    c.dataset.after = String(s.chi2_dof_after);
+    cell(tr, `${fmt(s.rms_log_residual_before)} → ${fmt(s.rms_log_residual_after)}`);
+    cell(tr, `${yn(s.adequate_before)} → ${yn(s.adequate_after)}`, s.adequate_after ? "ok" : "bad");
+    return tr;
+  }));
+  $("command").textContent = v.command;
+  drawAllan(v);
+  drawResidual(v);
+}
+
+async function startLab(lab, vocabulary) {
+  $("lab").hidden = false;
+  const colSel = $("column");
+  colSel.replaceChildren(new Option("— choose —", ""), ...lab.columns.map((c) => new Option(c, c)));
+  $("effect").replaceChildren(...vocabulary.map((e) => new Option(e, e)));
+  colSel.onchange = () => { if (colSel.value) labCall("/api/lab/select", { column: colSel.value }); };
+  $("add-named").onclick = () => labCall("/api/lab/edit", { add: $("add-named").dataset.effect });
+  $("add-effect").onclick = () => labCall("/api/lab/edit", { add: $("effect").value });
+  $("remove-effect").onclick = () => labCall("/api/lab/edit", { remove: $("effect").value });
+  $("auto").onclick = () => labCall("/api/lab/auto", {});
+  $("reset").onclick = () => labCall("/api/lab/reset", {});
+  const v = await api("/api/lab");
+  if (v) { colSel.value = v.fit.column; renderLab(v); }
+}
+
+async function main() {
+  try {
+    const info = await api("/api/info");
+    TOKEN = info.token;
+    document.body.dataset.mode = info.mode;
+    $("source").textContent = info.lab && info.lab.file
+      ? `recording: ${info.lab.file}` : (info.port ? `device: ${info.port}` : "");
+    if (info.mode === "live" && window.startLive) window.startLive(info);
+    if (info.lab && info.lab.columns) await startLab(info.lab, info.vocabulary);
+    else if (info.lab && info.lab.error) showError(info.lab.error);
+    window.LAB_VOCABULARY = info.vocabulary;
+    document.body.dataset.ready = "yes";
+  } catch (e) {
+    showError(e.message);
+  }
+}
+
+window.labApi = { api, startLab, showError, fmt, busy };
+document.addEventListener("DOMContentLoaded", main);
+
+// ---------- live device ----------
+
+const STREAM_KEEP = 600; // points kept by the page: the server's history, never more
+const CHANNELS = ["ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp"];
+const tablePlots = new Map();
+let streamPlot = null;
+let streamData = null;
+let streamChannel = 3; // gx
+
+function renderStatus(s) {
+  const t = document.createElement("table");
+  t.className = "status";
+  const row = (k, v, fault) => {
+    const tr = t.insertRow();
+    cell(tr, k);
+    cell(tr, v, fault ? "fault" : "");
+  };
+  const losses = (m) => {
+    const e = Object.entries(m || {});
+    return e.length ? e.map(([c, n]) => `${n} ${c}`).join(", ") : "none";
+  };
+  row("uptime", `${fmt(s.uptime_s, 6)} s`);
+  row("IMU", `${s.imu.state}; ${s.imu.taken} samples taken, ${s.imu.lost} lost (${losses(s.imu.losses)}), ` +
+    `${s.imu.fifo_overflows} FIFO overflows; period ${fmt(s.imu.period_us, 6)} µs`, s.imu.state !== "ok");
+  row("magnetometer", `${s.mag.state}; ${s.mag.taken} samples taken, ${s.mag.lost} lost (${losses(s.mag.losses)}); ` +
+    `period ${fmt(s.mag.period_us, 6)} µs`, s.mag.state !== "ok");
+  row("I2C", `${s.i2c_errors} errors, ${s.bus_faults} bus faults, ${s.bus_recoveries} bus recoveries`, s.bus_faults > 0);
+  row("frames", `${s.frames_rejected} host frames rejected, ${s.frames_unsent} device frames not sent`);
+  row("CPU load", `${fmt(s.cpu_percent, 3)} %`);
+  row("temperature", s.temp_c === null ? "n/a" : `${fmt(s.temp_c, 4)} °C`);
+  row("stream", s.mode);
+  row("calibration", s.calibration);
+  $("live-status").replaceChildren(t);
+  $("live-status").dataset.uptime = String(s.uptime_s);
+}
+
+function renderTables(v) {
+  $("tables-state").textContent = `round ${v.round}: ${v.tables.length} channels`;
+  $("tables").dataset.round = String(v.round);
+  for (const t of v.tables) {
+    const rows = t.rows.filter((r) => r.dev > 0);
+    const data = [rows.map((r) => r.tau_s), rows.map((r) => r.hi), rows.map((r) => r.lo), rows.map((r) => r.dev)];
+    const title = `${t.channel} [${t.unit}] — round ${t.round}, ${t.samples} samples` +
+      (rows.length ? "" : " — σ = 0 at every τ (a constant signal)");
+    let p = tablePlots.get(t.channel);
+    if (!p) {
+      const div = document.createElement("div");
+      div.className = "table-plot";
+      div.dataset.channel = t.channel;
+      $("tables").appendChild(div);
+      p = new uPlot({
+        width: 360, height: 220, title,
+        scales: { x: { time: false, distr: 3, range: logRange }, y: { distr: 3, range: logRange } },
+        axes: [{ label: "τ [s]", values: logValues }, { label: `σ(τ) [${t.unit}]`, size: 60, values: logValues }],
+        bands: [{ series: [1, 2], fill: "rgba(0, 90, 200, 0.18)" }],
+        legend: { show: false },
+        series: [{}, { stroke: "rgba(0,0,0,0.2)" }, { stroke: "rgba(0,0,0,0.2)" },
+          { stroke: "#000", points: { show: true, size: 5 } }],
+      }, data, div);
+      tablePlots.set(t.channel, p);
+    } else {
+      p.setData(data);
+      const h = p.root.querySelector(".u-title");
+      if (h) h.textContent = title;
+    }
+    p.root.parentElement.dataset.round = String(t.round);
+    p.root.parentElement.dataset.rows = JSON.stringify(rows.map((r) => [r.tau_s, r.dev, r.lo, r.hi]));
+  }
+}
+
+function streamPush(points) {
+  if (!streamData) streamData = [[], [], [], []];
+  for (const p of points) {
+    streamData[0].push(p.t);
+    streamData[1].push(p.min[streamChannel]);
+    streamData[2].push(p.max[streamChannel]);
+    streamData[3].push(p.mean[streamChannel]);
+  }
+  const extra = streamData[0].length - STREAM_KEEP;
+  if (extra > 0) for (const a of streamData) a.splice(0, extra);
+  if (!streamPlot) {
+    streamPlot = new uPlot({
+      width: plotWidth(), height: 220,
+      title: `${CHANNELS[streamChannel]} [deg/s]: mean, min and max per 0.1 s of device time`,
+      axes: [{ label: "device time [s]", values: numValues }, { label: "deg/s", size: 70, values: numValues }],
+      scales: { x: { time: false } },
+      bands: [{ series: [2, 1], fill: "rgba(0, 90, 200, 0.15)" }],
+      series: [{ label: "t [s]" }, { label: "min", stroke: "rgba(0,0,0,0.2)" },
+        { label: "max", stroke: "rgba(0,0,0,0.2)" }, { label: "mean", stroke: "#1f77b4" }],
+    }, streamData, $("stream-plot"));
+  } else {
+    streamPlot.setData(streamData);
+  }
+  $("stream-plot").dataset.points = String(streamData[0].length);
+}
+
+function renderRecord(r) {
+  $("record-start").disabled = r.recording;
+  $("record-stop").disabled = !r.recording;
+  $("record-open").hidden = r.recording || !r.summary;
+  $("record-state").textContent = r.recording
+    ? `recording to ${r.file}`
+    : (r.summary ? `${r.file}: ${r.summary}` : "");
+  $("record-state").dataset.recording = r.recording ? "yes" : "no";
+}
+
+// ---------- magnetometer wizard ----------
+
+const magPoints = []; // at most the server's MAG_POINTS (5000)
+
+function drawCloud() {
+  const cv = $("mag-cloud");
+  const ctx = cv.getContext("2d");
+  ctx.clearRect(0, 0, cv.width, cv.height);
+  if (!magPoints.length) return;
+  let r = 1;
+  for (const p of magPoints) for (const v of p) r = Math.max(r, Math.abs(v));
+  const panels = [[0, 1, "mx", "my"], [1, 2, "my", "mz"], [0, 2, "mx", "mz"]];
+  panels.forEach(([a, b, la, lb], i) => {
+    const x0 = i * 300 + 150, y0 = 150, k = 130 / r;
+    ctx.strokeStyle = "#bbb";
+    ctx.strokeRect(i * 300 + 10, 10, 280, 280);
+    ctx.fillStyle = "#222";
+    ctx.fillText(`${la} → / ${lb} ↑ [µT], ±${fmt(r, 3)} µT`, i * 300 + 16, 24);
+    ctx.fillStyle = "rgba(31, 119, 180, 0.6)";
+    for (const p of magPoints) ctx.fillRect(x0 + p[a] * k - 1, y0 - p[b] * k - 1, 2, 2);
+  });
+}
+
+function renderMagState(m) {
+  $("mag-state").textContent = `${m.points} points, coverage ${fmt(100 * m.coverage, 3)} % of the directions` +
+    (m.collecting ? " — collecting" : "");
+  $("mag-state").dataset.points = String(m.points);
+  $("mag-state").dataset.coverage = String(m.coverage);
+  $("mag-start").disabled = m.collecting;
+  $("mag-stop").disabled = !m.collecting;
+}
+
+function renderMagFit(r) {
+  const f = r.fit;
+  const div = $("mag-result");
+  const p = (text, cls) => { const el = document.createElement("p"); el.textContent = text; if (cls) el.className = cls; return el; };
+  const t = document.createElement("table");
+  const head = t.insertRow();
+  for (const h of ["parameter", "value", "1σ", "unit"]) { const th = document.createElement("th"); th.textContent = h; head.appendChild(th); }
+  for (const [name, v] of Object.entries(f.params || {})) {
+    const values = Array.isArray(v) ? v.flat() : [v];
+    const sig = f.sigma && f.sigma[name] !== undefined ? (Array.isArray(f.sigma[name]) ? f.sigma[name].flat() : [f.sigma[name]]) : [];
+    const tr = t.insertRow();
+    cell(tr, name);
+    cell(tr, values.map((x) => fmt(x, 4)).join(", "));
+    cell(tr, sig.map((x) => fmt(x, 2)).join(", "));
+    cell(tr, name.includes("soft") ? "1 (a matrix)" : f.unit);
+  }
+  const d = f.diagnosis || {};
+  div.replaceChildren(
+    p(`Model: ${f.model.join(" + ")}; residual RMS ${fmt(f.residual_rms, 3)} ${f.unit} ` +
+      `(noise floor ${fmt(f.noise_floor, 3)} ${f.unit}, ${f.n_residuals} residuals); coverage ${fmt(100 * r.coverage, 3)} %`),
+    p(`${d.adequate ? "ADEQUATE" : "NOT ADEQUATE"} — ${d.explanation || ""}`, d.adequate ? "ok" : "bad"),
+    t,
+    ...(f.steps || []).map((s) => p(`step: + ${s.added.join(", ")}${s.removed && s.removed.length ? ", − " + s.removed.join(", ") : ""}: ` +
+      `residual RMS ${fmt(s.rms_residual_before, 3)} → ${fmt(s.rms_residual_after, 3)} ${s.rms_unit}`)),
+  );
+  div.dataset.model = f.model.join(",");
+  div.dataset.adequate = d.adequate ? "yes" : "no";
+  div.appendChild(renderUpload(r.upload));
+}
+
+// The upload: only a plausible calibration, only after the user ticks the confirmation; RAM
+// only unless "write to flash" is ticked too (the CLI's --no-persist is the default here).
+function renderUpload(u) {
+  const box = document.createElement("div");
+  box.id = "mag-upload";
+  if (!u.plausible) {
+    const p = document.createElement("p");
+    p.className = "bad";
+    p.textContent = `Not uploadable: ${u.problem}`;
+    box.appendChild(p);
+    return box;
+  }
+  const label = (id, text) => {
+    const l = document.createElement("label");
+    const c = document.createElement("input");
+    c.type = "checkbox";
+    c.id = id;
+    l.append(c, " ", text);
+    return l;
+  };
+  const btn = document.createElement("button");
+  btn.type = "button";
+  btn.id = "mag-upload-button";
+  btn.textContent = "Upload to the device";
+  const state = document.createElement("span");
+  state.id = "mag-upload-state";
+  btn.onclick = async () => {
+    if (!$("mag-confirm").checked) { showError("Tick the confirmation first: nothing was uploaded."); return; }
+    showError("");
+    try {
+      const r = await api("/api/live/mag/upload", { confirm: u.code, persist: $("mag-persist").checked });
+      state.textContent = r.persisted ? "applied and written to flash" : "applied in RAM only (not persisted; a reset forgets it)";
+      state.dataset.applied = "yes";
+      btn.disabled = true;
+    } catch (e) { showError(e.message); }
+  };
+  const row = document.createElement("div");
+  row.className = "row";
+  row.append(label("mag-confirm", `I confirm: replace the device's calibration with this fit (code ${u.code})`),
+    label("mag-persist", "also write it to flash"), btn, state);
+  box.appendChild(row);
+  return box;
+}
+
+window.startLive = (info) => {
+  $("live").hidden = false;
+  const es = new EventSource("/api/live/events");
+  es.addEventListener("identity", (e) => {
+    const id = JSON.parse(e.data);
+    $("source").textContent = `device: ${info.port} — ${id.firmware} on ${id.board}, IMU ${id.imu_rate_hz} Hz, magnetometer ${id.mag_rate_hz} Hz`;
+  });
+  es.addEventListener("status", (e) => renderStatus(JSON.parse(e.data)));
+  es.addEventListener("tables", (e) => renderTables(JSON.parse(e.data)));
+  es.addEventListener("history", (e) => streamPush(JSON.parse(e.data)));
+  es.addEventListener("stream", (e) => streamPush([JSON.parse(e.data)]));
+  es.addEventListener("record", (e) => renderRecord(JSON.parse(e.data)));
+  es.addEventListener("link", (e) => showError(JSON.parse(e.data).error));
+  es.addEventListener("mag", (e) => {
+    const m = JSON.parse(e.data);
+    magPoints.push(m.point);
+    if (magPoints.length > 5000) magPoints.splice(0, magPoints.length - 5000);
+    renderMagState(m);
+    drawCloud();
+  });
+  $("mag-start").onclick = async () => {
+    const m = await act("/api/live/mag/start");
+    if (m) { magPoints.length = 0; drawCloud(); renderMagState(m); }
+  };
+  $("mag-stop").onclick = async () => { const m = await act("/api/live/mag/stop"); if (m) renderMagState(m); };
+  $("mag-fit").onclick = async () => { const r = await act("/api/live/mag/fit"); if (r) renderMagFit(r); };
+  const act = async (path) => {
+    showError("");
+    try { return await api(path, {}); } catch (err) { showError(err.message); return null; }
+  };
+  $("record-start").onclick = async () => { const r = await act("/api/live/record"); if (r) renderRecord(r); };
+  $("record-stop").onclick = async () => { const r = await act("/api/live/stop"); if (r) renderRecord(r); };
+  $("record-open").onclick = async () => {
+    const lab = await act("/api/live/open");
+    if (lab && lab.columns) await startLab(lab, info.vocabulary);
+  };
+};

@@ -1,0 +1,871 @@
+//! The live device in the page: one thread reads the link (`imu_link`, as `imu-lab record`
+//! does) and turns what the device sends into bounded updates, sent to every open page as
+//! server-sent events:
+//!
+//! * `status`: the device's status frames (sensor states, samples taken and lost, the losses'
+//!   causes from its `Gap` events, bus faults, CPU load), as they arrive (1 s);
+//! * `tables`: the device's own Allan tables, every channel of a round, each with its rows
+//!   (τ, deviation, 68.3 % bounds, EDF) derived on the host as `imu-lab device tables` does;
+//! * `stream`: the calibrated stream decimated on the server — per [`WINDOW_S`] of device time
+//!   and channel the mean, minimum and maximum — so a page follows a 1 kHz stream with ten
+//!   small messages a second whatever the rate;
+//! * `record`: the recording's state (the rows go to a CSV in the contract, the same rows
+//!   `imu-lab record` writes);
+//! * `mag`: while the magnetometer wizard collects, each window's mean field with the count and
+//!   the direction coverage; its fit and upload answer their own requests.
+//!
+//! The server keeps only the last [`HISTORY`] stream windows and the latest tables, so neither
+//! it nor the page grows with the length of the session.
+use std::collections::VecDeque;
+use std::convert::Infallible;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use axum::body::Bytes;
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use futures_util::stream::{self, Stream, StreamExt};
+use imu_proto::csv::Writer;
+use imu_proto::{Channel, DeviceMsg, Reply, Request, SensorState, Status, StreamMode};
+use serde::Deserialize;
+use serde_json::{json, Value};
+use tokio::sync::{broadcast, oneshot};
+use tokio_stream::wrappers::BroadcastStream;
+
+use super::{error, Shared};
+use crate::link::Link;
+use imu_link::device::table_rows;
+use imu_link::record::{self, DeviceLosses, Held, Rows, COLUMNS};
+
+/// Device time per decimated stream point, s.
+pub const WINDOW_S: f64 = 0.1;
+/// Stream windows kept for a page that opens late (60 s).
+pub const HISTORY: usize = 600;
+/// Messages a slow page may fall behind before it skips ahead.
+const QUEUE: usize = 256;
+
+/// The live side: what the reader thread keeps, and the channel to the pages.
+pub struct Live {
+    pub port: String,
+    shared: Arc<Mutex<Snapshot>>,
+    tx: broadcast::Sender<(String, Value)>,
+    record_dir: PathBuf,
+    /// Requests for the device, sent by the reader thread (it owns the link).
+    requests: Mutex<mpsc::Sender<Pending>>,
+}
+
+/// A request for the device and where its reply goes.
+type Pending = (Request, oneshot::Sender<Result<Reply, String>>);
+
+/// A request sent: its id, where its reply goes, and until when it may come.
+type Waiting = (
+    u16,
+    oneshot::Sender<Result<Reply, String>>,
+    std::time::Instant,
+);
+
+/// How long the device has to answer a request (a flash write pauses it a few hundred ms).
+const REPLY_WAIT: Duration = Duration::from_secs(10);
+
+/// The latest of everything, for a page that connects now.
+#[derive(Default)]
+struct Snapshot {
+    identity: Value,
+    status: Value,
+    tables: Value,
+    stream: VecDeque<Value>,
+    record: Option<Recording>,
+    /// The last finished recording: (path, summary).
+    finished: Option<(PathBuf, String)>,
+    losses: DeviceLosses,
+    link_error: Option<String>,
+    /// The magnetometer wizard's points.
+    mag: MagPoints,
+    /// The last fit's calibration, checked and ready for the device, with the one-time code
+    /// the page must send back to upload it.
+    mag_cal: Option<ReadyCal>,
+}
+
+/// A calibration the user may upload: the blob and its confirmation code.
+struct ReadyCal {
+    blob: Vec<u8>,
+    code: String,
+}
+
+/// Most magnetometer points the wizard keeps (ten a second: over 8 minutes).
+pub const MAG_POINTS: usize = 5000;
+/// Direction bins of the coverage: 6 bands of equal area in elevation × 12 in azimuth.
+const BANDS: usize = 6;
+const SECTORS: usize = 12;
+
+/// The magnetometer wizard's collection: the mean field of every stream window while on.
+#[derive(Default)]
+struct MagPoints {
+    on: bool,
+    points: VecDeque<[f64; 3]>,
+}
+
+impl MagPoints {
+    /// The share of direction bins (around the points' mean, a first guess of the hard iron)
+    /// that hold a point: how much of the sphere the turns have covered.
+    fn coverage(&self) -> f64 {
+        let n = self.points.len();
+        if n < 2 {
+            return 0.0;
+        }
+        let mut c = [0.0; 3];
+        for p in &self.points {
+            for k in 0..3 {
+                c[k] += p[k] / n as f64;
+            }
+        }
+        let mut hit = [false; BANDS * SECTORS];
+        for p in &self.points {
+            let d = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+            let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            // a point at the centre (or not finite) has no direction
+            if r.is_nan() || r <= 0.0 {
+                continue;
+            }
+            // z/r is uniform on a sphere: equal-area bands
+            let band = (((d[2] / r + 1.0) / 2.0 * BANDS as f64) as usize).min(BANDS - 1);
+            let az = d[1].atan2(d[0]) + std::f64::consts::PI;
+            let sector =
+                ((az / (2.0 * std::f64::consts::PI) * SECTORS as f64) as usize).min(SECTORS - 1);
+            hit[band * SECTORS + sector] = true;
+        }
+        hit.iter().filter(|h| **h).count() as f64 / hit.len() as f64
+    }
+
+    fn state(&self) -> Value {
+        json!({ "collecting": self.on, "points": self.points.len(), "coverage": self.coverage() })
+    }
+}
+
+/// A recording in progress.
+struct Recording {
+    path: PathBuf,
+    writer: Writer<BufWriter<File>>,
+    rows: Rows,
+    held: Held,
+    losses: DeviceLosses,
+    /// The first write that failed (reported when the recording stops).
+    failed: Option<String>,
+}
+
+/// The decimator: per channel the sum, minimum and maximum over the current window.
+struct Window {
+    start: Option<f64>,
+    n: u32,
+    sum: [f64; 10],
+    min: [f64; 10],
+    max: [f64; 10],
+}
+
+impl Window {
+    fn new() -> Window {
+        Window {
+            start: None,
+            n: 0,
+            sum: [0.0; 10],
+            min: [f64::INFINITY; 10],
+            max: [f64::NEG_INFINITY; 10],
+        }
+    }
+
+    /// Add a row; returns the finished window's point when `t` starts a new one.
+    fn push(&mut self, t: f64, v: &[Option<f64>; 10]) -> Option<Value> {
+        let mut out = None;
+        match self.start {
+            Some(s) if t - s >= WINDOW_S || t < s => {
+                out = self.point();
+                *self = Window::new();
+                self.start = Some(t);
+            }
+            None => self.start = Some(t),
+            _ => {}
+        }
+        self.n += 1;
+        for (k, x) in v.iter().enumerate() {
+            let x = x.unwrap_or(f64::NAN);
+            self.sum[k] += x;
+            self.min[k] = self.min[k].min(x);
+            self.max[k] = self.max[k].max(x);
+        }
+        out
+    }
+
+    fn point(&self) -> Option<Value> {
+        let t = self.start?;
+        if self.n == 0 {
+            return None;
+        }
+        let n = f64::from(self.n);
+        let f = noise_model::session::num;
+        Some(json!({
+            "t": t,
+            "n": self.n,
+            "mean": self.sum.iter().map(|s| f(s / n)).collect::<Vec<_>>(),
+            "min": self.min.iter().map(|&x| f(x)).collect::<Vec<_>>(),
+            "max": self.max.iter().map(|&x| f(x)).collect::<Vec<_>>(),
+        }))
+    }
+}
+
+fn state_name(s: SensorState) -> &'static str {
+    match s {
+        SensorState::Unknown => "not probed yet",
+        SensorState::Ok => "ok",
+        SensorState::Missing => "missing (retrying with bus recovery)",
+        SensorState::Stalled => "stalled (re-initialising)",
+    }
+}
+
+fn status_json(s: &Status, losses: &DeviceLosses) -> Value {
+    json!({
+        "uptime_s": s.uptime_us as f64 * 1e-6,
+        "imu": { "state": state_name(s.imu), "taken": s.samples_taken, "lost": s.samples_dropped,
+                 "fifo_overflows": s.fifo_overflows, "period_us": f64::from(s.imu_period_ns) * 1e-3,
+                 "losses": &losses.imu },
+        "mag": { "state": state_name(s.mag), "taken": s.mag_samples, "lost": s.mag_dropped,
+                 "period_us": f64::from(s.mag_period_ns) * 1e-3, "losses": &losses.mag },
+        "i2c_errors": s.i2c_errors,
+        "bus_faults": s.bus_faults,
+        "bus_recoveries": s.bus_recoveries,
+        "frames_rejected": s.frames_rejected,
+        "frames_unsent": s.frames_unsent,
+        "cpu_percent": f64::from(s.cpu_load_permille) / 10.0,
+        "temp_c": s.temp_milli_c.map(|t| f64::from(t) / 1000.0),
+        "mode": format!("{:?}", s.mode),
+        "calibration": match s.cal.source {
+            imu_proto::CalSource::Identity => "identity (none stored)",
+            imu_proto::CalSource::Flash => "from flash",
+            imu_proto::CalSource::Host => "set by the host, not persisted",
+        },
+    })
+}
+
+fn table_json(t: &imu_proto::AllanTable) -> Value {
+    let rows: Vec<Value> = table_rows(t)
+        .iter()
+        .map(|r| json!({ "tau_s": r.tau, "dev": r.dev, "lo": r.lo, "hi": r.hi, "edf": r.edf }))
+        .collect();
+    json!({
+        "channel": t.channel.name(),
+        "unit": t.channel.unit(),
+        "round": t.snapshot,
+        "t_s": t.t_us as f64 * 1e-6,
+        "samples": t.pushed,
+        "gaps": t.gaps,
+        "rows": rows,
+    })
+}
+
+impl Live {
+    /// Open the link, ask who is there, switch the stream to calibrated samples, and start the
+    /// reader thread.
+    pub fn start(port: String, record_dir: PathBuf) -> Result<Live> {
+        if !record_dir.is_dir() {
+            bail!(
+                "--record-dir {}: not a directory (recordings are written there)",
+                record_dir.display()
+            );
+        }
+        let mut link = Link::open(&port)?;
+        let identity = match link.request(Request::Identify)? {
+            Reply::Identity(id) => json!({
+                "firmware": id.firmware.as_str(), "board": id.board.as_str(),
+                "protocol": id.protocol, "imu_rate_hz": id.imu_rate_hz, "mag_rate_hz": id.mag_rate_hz,
+            }),
+            other => bail!("{port}: unexpected reply to Identify: {other:?}"),
+        };
+        match link.request_with(
+            Request::SetMode(StreamMode::Calibrated),
+            imu_link::REPLY_TIMEOUT,
+            |_| {},
+        )? {
+            Reply::Ok => {}
+            other => bail!("{port}: the device did not accept the calibrated stream: {other:?}"),
+        }
+        let shared = Arc::new(Mutex::new(Snapshot {
+            identity,
+            ..Snapshot::default()
+        }));
+        let (tx, _) = broadcast::channel(QUEUE);
+        let (req_tx, req_rx) = mpsc::channel();
+        {
+            let (shared, tx) = (shared.clone(), tx.clone());
+            std::thread::Builder::new()
+                .name("device link".into())
+                .spawn(move || read_loop(link, &shared, &tx, &req_rx))
+                .context("starting the link's reader")?;
+        }
+        Ok(Live {
+            port,
+            shared,
+            tx,
+            record_dir,
+            requests: Mutex::new(req_tx),
+        })
+    }
+}
+
+fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
+    // no page open: nobody to tell
+    let _ = tx.send((kind.to_string(), v));
+}
+
+/// The reader: every message from the device into the snapshot and out to the pages.
+fn read_loop(
+    mut link: Link,
+    shared: &Mutex<Snapshot>,
+    tx: &broadcast::Sender<(String, Value)>,
+    requests: &mpsc::Receiver<Pending>,
+) {
+    let mut window = Window::new();
+    let mut decim = Rows::default();
+    let mut round: Option<u32> = None;
+    let mut round_tables: Vec<Value> = Vec::new();
+    // requests sent, waiting for their reply: (id, where it goes, until when)
+    let mut waiting: Vec<Waiting> = Vec::new();
+    loop {
+        while let Ok((req, reply)) = requests.try_recv() {
+            match link.send(req) {
+                Ok(id) => waiting.push((id, reply, std::time::Instant::now() + REPLY_WAIT)),
+                Err(e) => {
+                    let _ = reply.send(Err(format!("{e:#}")));
+                }
+            }
+        }
+        let now = std::time::Instant::now();
+        for (_, reply, _) in waiting.extract_if(.., |(_, _, until)| *until < now) {
+            let _ = reply.send(Err(format!(
+                "no reply from the device within {} s",
+                REPLY_WAIT.as_secs()
+            )));
+        }
+        let msg = match link.recv(Duration::from_millis(200)) {
+            Ok(Some(m)) => m,
+            Ok(None) => continue,
+            Err(e) => {
+                let text = format!("the link to {} failed: {e:#}", link.name());
+                shared.lock().expect("snapshot").link_error = Some(text.clone());
+                send(tx, "link", json!({ "error": text }));
+                return;
+            }
+        };
+        match msg {
+            DeviceMsg::Samples(b) => {
+                let mut points = Vec::new();
+                decim.batch(&b, |r| {
+                    if let Some(p) = window.push(r.t, &r.values) {
+                        points.push(p);
+                    }
+                });
+                let mut s = shared.lock().expect("snapshot");
+                if let Some(rec) = s.record.as_mut() {
+                    let (rows, held, w) = (&mut rec.rows, &mut rec.held, &mut rec.writer);
+                    let failed = &mut rec.failed;
+                    rows.batch(&b, |r| held.row(*r));
+                    held.release(false, |r| {
+                        if failed.is_none() {
+                            if let Err(e) = w.row(&r.fields()) {
+                                *failed = Some(e.to_string());
+                            }
+                        }
+                    });
+                }
+                for p in points {
+                    if s.mag.on {
+                        let m = |k: usize| p["mean"][k].as_f64().unwrap_or(f64::NAN);
+                        let point = [m(6), m(7), m(8)];
+                        if point.iter().all(|v| v.is_finite()) {
+                            s.mag.points.push_back(point);
+                            while s.mag.points.len() > MAG_POINTS {
+                                s.mag.points.pop_front();
+                            }
+                            let mut v = s.mag.state();
+                            v["point"] = json!(point);
+                            send(tx, "mag", v);
+                        }
+                    }
+                    s.stream.push_back(p.clone());
+                    while s.stream.len() > HISTORY {
+                        s.stream.pop_front();
+                    }
+                    send(tx, "stream", p);
+                }
+            }
+            DeviceMsg::Orientation(o) => {
+                if let Some(rec) = shared.lock().expect("snapshot").record.as_mut() {
+                    rec.held.estimates(&o);
+                }
+            }
+            DeviceMsg::Event(e) => {
+                let mut s = shared.lock().expect("snapshot");
+                s.losses.event(&e);
+                if let Some(rec) = s.record.as_mut() {
+                    rec.losses.event(&e);
+                }
+            }
+            DeviceMsg::Status(st) => {
+                let mut s = shared.lock().expect("snapshot");
+                let v = status_json(&st, &s.losses);
+                s.status = v.clone();
+                drop(s);
+                send(tx, "status", v);
+            }
+            DeviceMsg::Table(t) => {
+                if round != Some(t.snapshot) {
+                    round = Some(t.snapshot);
+                    round_tables.clear();
+                }
+                round_tables.push(table_json(&t));
+                // a round is ten tables, one per channel, sent one after the other
+                if round_tables.len() == Channel::ALL.len() {
+                    let v = json!({ "round": t.snapshot, "tables": round_tables });
+                    shared.lock().expect("snapshot").tables = v.clone();
+                    send(tx, "tables", v);
+                    round_tables = Vec::new();
+                }
+            }
+            DeviceMsg::Reply { id, reply } => {
+                if let Some(k) = waiting.iter().position(|(w, _, _)| *w == id) {
+                    let (_, to, _) = waiting.swap_remove(k);
+                    let _ = to.send(Ok(reply));
+                }
+            }
+        }
+    }
+}
+
+/// GET /api/live/events: the current state, then every update, as server-sent events.
+pub async fn events(State(s): State<Shared>) -> Response {
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let rx = live.tx.subscribe();
+    let first: Vec<(String, Value)> = {
+        let snap = live.shared.lock().expect("snapshot");
+        let mut v = vec![("identity".to_string(), snap.identity.clone())];
+        if !snap.status.is_null() {
+            v.push(("status".into(), snap.status.clone()));
+        }
+        if !snap.tables.is_null() {
+            v.push(("tables".into(), snap.tables.clone()));
+        }
+        v.push((
+            "history".into(),
+            Value::Array(snap.stream.iter().cloned().collect()),
+        ));
+        v.push(("record".into(), record_state(&snap)));
+        if let Some(e) = &snap.link_error {
+            v.push(("link".into(), json!({ "error": e })));
+        }
+        v
+    };
+    let event = |(kind, v): (String, Value)| -> Result<SseEvent, Infallible> {
+        Ok(SseEvent::default().event(kind).data(v.to_string()))
+    };
+    // a page that falls behind skips what it missed (the next update replaces it)
+    let updates = BroadcastStream::new(rx).filter_map(|m| async move { m.ok() });
+    let all: std::pin::Pin<Box<dyn Stream<Item = Result<SseEvent, Infallible>> + Send>> =
+        Box::pin(stream::iter(first).chain(updates).map(event));
+    Sse::new(all)
+        .keep_alive(KeepAlive::default())
+        .into_response()
+}
+
+fn record_state(s: &Snapshot) -> Value {
+    match (&s.record, &s.finished) {
+        (Some(r), _) => json!({
+            "recording": true, "file": r.path.display().to_string(),
+            "rows": r.rows.rows, "seconds": r.rows.span(),
+        }),
+        (None, Some((p, summary))) => json!({
+            "recording": false, "file": p.display().to_string(), "summary": summary,
+        }),
+        (None, None) => json!({ "recording": false }),
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Empty {}
+
+/// The body every live write takes: `{}` (anything else is a 400).
+fn empty(bytes: &Bytes) -> Option<Response> {
+    super::noise::body::<Empty>(bytes)
+        .err()
+        .map(|e| error(StatusCode::BAD_REQUEST, &e))
+}
+
+/// POST /api/live/record {}: start writing the stream to a new CSV in the recording directory
+/// (a name the server chooses: the page cannot name a file).
+pub async fn record(State(s): State<Shared>, bytes: Bytes) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let mut snap = live.shared.lock().expect("snapshot");
+    if snap.record.is_some() {
+        return error(StatusCode::CONFLICT, "already recording");
+    }
+    let stamp = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let path = (0..1000)
+        .map(|k| live.record_dir.join(format!("live-{stamp}-{k}.csv")))
+        .find(|p| !p.exists());
+    let Some(path) = path else {
+        return error(StatusCode::CONFLICT, "no free recording name");
+    };
+    let opened = File::create(&path)
+        .map_err(anyhow::Error::from)
+        .and_then(|f| Ok(Writer::new(BufWriter::new(f), &COLUMNS, record::PRINT)?));
+    let writer = match opened {
+        Ok(w) => w,
+        Err(e) => {
+            return error(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                &format!("creating {}: {e:#}", path.display()),
+            )
+        }
+    };
+    snap.record = Some(Recording {
+        path,
+        writer,
+        rows: Rows::default(),
+        held: Held::default(),
+        losses: DeviceLosses::default(),
+        failed: None,
+    });
+    let v = record_state(&snap);
+    drop(snap);
+    send(&live.tx, "record", v.clone());
+    Json(v).into_response()
+}
+
+/// POST /api/live/stop {}: finish the recording (every row written) and say what it holds.
+pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let mut snap = live.shared.lock().expect("snapshot");
+    let Some(mut rec) = snap.record.take() else {
+        return error(StatusCode::CONFLICT, "not recording");
+    };
+    let w = &mut rec.writer;
+    let mut res = Ok(());
+    rec.held.release(true, |r| {
+        if res.is_ok() {
+            res = w.row(&r.fields());
+        }
+    });
+    let Recording {
+        path,
+        writer,
+        rows,
+        losses,
+        failed,
+        ..
+    } = rec;
+    let res = match failed {
+        Some(e) => Err(std::io::Error::other(e)),
+        None => res.and_then(|_| writer.finish().and_then(|mut f| f.flush())),
+    };
+    if let Err(e) = res {
+        return error(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            &format!("writing {}: {e}", path.display()),
+        );
+    }
+    let summary = record::summary(&rows, &losses);
+    snap.finished = Some((path, summary));
+    let v = record_state(&snap);
+    drop(snap);
+    send(&live.tx, "record", v.clone());
+    Json(v).into_response()
+}
+
+/// POST /api/live/open {}: the last finished recording in the noise lab.
+pub async fn open_recording(State(s): State<Shared>, bytes: Bytes) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let file = live
+        .shared
+        .lock()
+        .expect("snapshot")
+        .finished
+        .as_ref()
+        .map(|(p, _)| p.clone());
+    let Some(file) = file else {
+        return error(StatusCode::CONFLICT, "no finished recording yet");
+    };
+    match s.lab.set_file(file).await {
+        Ok(()) => Json(s.lab.describe().await).into_response(),
+        Err(e) => error(StatusCode::UNPROCESSABLE_ENTITY, &format!("{e:#}")),
+    }
+}
+
+/// POST /api/live/mag/start {}: collect the magnetometer's field (the mean of every 0.1 s) for
+/// the calibration, from an empty set.
+pub async fn mag_start(State(s): State<Shared>, bytes: Bytes) -> Response {
+    mag_switch(s, bytes, true)
+}
+
+/// POST /api/live/mag/stop {}: stop collecting (the points stay for the fit).
+pub async fn mag_stop(State(s): State<Shared>, bytes: Bytes) -> Response {
+    mag_switch(s, bytes, false)
+}
+
+fn mag_switch(s: Shared, bytes: Bytes, on: bool) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let mut snap = live.shared.lock().expect("snapshot");
+    if on {
+        snap.mag.points.clear();
+    }
+    snap.mag.on = on;
+    Json(snap.mag.state()).into_response()
+}
+
+/// POST /api/live/mag/fit {}: the calibration lab's walk on the points collected (what `imu-lab
+/// calibrate mag --auto --json` does on a recording of them): the model, its parameters with σ,
+/// the residual, the diagnosis.
+pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
+    if let Some(r) = empty(&bytes) {
+        return r;
+    }
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let (points, coverage): (Vec<[f64; 3]>, f64) = {
+        let snap = live.shared.lock().expect("snapshot");
+        (
+            snap.mag.points.iter().copied().collect(),
+            snap.mag.coverage(),
+        )
+    };
+    if points.len() < 20 {
+        return error(
+            StatusCode::CONFLICT,
+            &format!(
+                "{} magnetometer points: collect 20 at least, turning the board",
+                points.len()
+            ),
+        );
+    }
+    let fitted = tokio::task::spawn_blocking(move || {
+        use imu_cal::session::{self as cal, Sensor};
+        let col = |k: usize| points.iter().map(|p| p[k]).collect::<Vec<f64>>();
+        let (x, y, z) = (col(0), col(1), col(2));
+        // one segment: the points are consecutive windows without gaps
+        let segments = vec![std::ops::Range {
+            start: 0,
+            end: points.len(),
+        }];
+        let input = cal::Input {
+            columns: vec![
+                cal::Column {
+                    name: "mx",
+                    unit: "µT",
+                    values: &x,
+                },
+                cal::Column {
+                    name: "my",
+                    unit: "µT",
+                    values: &y,
+                },
+                cal::Column {
+                    name: "mz",
+                    unit: "µT",
+                    values: &z,
+                },
+            ],
+            rate_hz: 1.0 / WINDOW_S,
+            segments: &segments,
+            shown: "the page's magnetometer points",
+        };
+        let o = cal::Options {
+            auto: true,
+            ..cal::Options::new(Sensor::Mag)
+        };
+        let loaded = cal::prepare(&input, &o)?;
+        let run = cal::run(&loaded, &o)?;
+        // the calibration file `calibrate --out` would write, converted for the device with the
+        // plausibility checks `imu-lab device calibrate --upload` applies
+        let blob = cal::update_file(None, &loaded, &run).and_then(|toml| {
+            let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
+            let c = file.to_device().map_err(|e| e.to_string())?;
+            let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+            imu_cal::device::encode_blob(&c, &mut buf)
+                .map(|b| b.to_vec())
+                .map_err(|e| format!("encoding the blob: {e}"))
+        });
+        Ok::<(String, Result<Vec<u8>, String>), String>((cal::json_out(&loaded, &run), blob))
+    })
+    .await;
+    let (text, blob) = match fitted {
+        Ok(Ok(t)) => t,
+        Ok(Err(e)) => return error(StatusCode::UNPROCESSABLE_ENTITY, &e),
+        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    };
+    let v: Value = match serde_json::from_str(&text) {
+        Ok(v) => v,
+        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
+    };
+    let upload = match blob {
+        Ok(blob) if blob.len() <= imu_proto::MAX_CAL_BLOB => {
+            let code = super::guard::new_token()[..8].to_string();
+            live.shared.lock().expect("snapshot").mag_cal = Some(ReadyCal {
+                blob,
+                code: code.clone(),
+            });
+            json!({ "plausible": true, "code": code })
+        }
+        Ok(blob) => json!({ "plausible": false,
+            "problem": format!("a blob of {} B exceeds the device's {} B", blob.len(), imu_proto::MAX_CAL_BLOB) }),
+        Err(problem) => {
+            live.shared.lock().expect("snapshot").mag_cal = None;
+            json!({ "plausible": false, "problem": problem })
+        }
+    };
+    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct UploadBody {
+    /// The code the fit gave: the user's explicit confirmation of this calibration.
+    confirm: String,
+    /// Also write it to the device's flash (else RAM only, until a reset).
+    persist: bool,
+}
+
+/// POST /api/live/mag/upload {"confirm": CODE, "persist": false}: send the last fit's
+/// calibration to the device, once, with the code its fit gave (403 without it: nothing is
+/// written to a device without the user's confirmation of that very calibration).
+pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
+    let b: UploadBody = match super::noise::body(&bytes) {
+        Ok(b) => b,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e),
+    };
+    let Some(live) = s.live.as_ref() else {
+        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    };
+    let blob = {
+        let mut snap = live.shared.lock().expect("snapshot");
+        match &snap.mag_cal {
+            None => return error(StatusCode::CONFLICT, "no plausible calibration fitted yet"),
+            Some(c) if c.code != b.confirm => {
+                return error(
+                    StatusCode::FORBIDDEN,
+                    "the confirmation code is not the one of the last fit: nothing uploaded",
+                )
+            }
+            Some(_) => snap.mag_cal.take().expect("checked").blob,
+        }
+    };
+    let Ok(blob) = imu_proto::Vec::from_slice(&blob) else {
+        return error(StatusCode::UNPROCESSABLE_ENTITY, "the blob is too long");
+    };
+    let (reply_tx, reply_rx) = oneshot::channel();
+    let sent = live.requests.lock().expect("requests").send((
+        Request::SetCalibration {
+            blob,
+            persist: b.persist,
+        },
+        reply_tx,
+    ));
+    if sent.is_err() {
+        return error(StatusCode::BAD_GATEWAY, "the link to the device is closed");
+    }
+    match reply_rx.await {
+        Ok(Ok(Reply::Ok)) => {
+            Json(json!({ "applied": true, "persisted": b.persist })).into_response()
+        }
+        Ok(Ok(Reply::Error(imu_proto::ErrorCode::BadCalibration(p)))) => error(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            &format!(
+                "the device refused the calibration: {}",
+                imu_link::device::cal_problem(&p)
+            ),
+        ),
+        Ok(Ok(other)) => error(
+            StatusCode::BAD_GATEWAY,
+            &format!("the device did not apply the calibration: {other:?}"),
+        ),
+        Ok(Err(e)) => error(StatusCode::BAD_GATEWAY, &e),
+        Err(_) => error(StatusCode::BAD_GATEWAY, "the link's reader stopped"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Directions drawn at random around a random hard-iron offset: the whole sphere is covered;
+    /// a turn in one plane covers only the equatorial band (12 of 72 bins).
+    #[test]
+    fn coverage_counts_the_directions_reached() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as u64;
+        let mut state = key | 1;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let c = [
+            60.0 * next() - 30.0,
+            60.0 * next() - 30.0,
+            60.0 * next() - 30.0,
+        ];
+        let mut sphere = MagPoints::default();
+        let mut circle = MagPoints::default();
+        for _ in 0..4000 {
+            let z = 2.0 * next() - 1.0;
+            let a = 2.0 * std::f64::consts::PI * next();
+            let r = (1.0 - z * z).sqrt();
+            sphere.points.push_back([
+                c[0] + 50.0 * r * a.cos(),
+                c[1] + 50.0 * r * a.sin(),
+                c[2] + 50.0 * z,
+            ]);
+            circle
+                .points
+                .push_back([c[0] + 50.0 * a.cos(), c[1] + 50.0 * a.sin(), c[2]]);
+        }
+        assert_eq!(sphere.coverage(), 1.0, "key {key}");
+        assert!(
+            (circle.coverage() - 12.0 / 72.0).abs() < 1e-12,
+            "key {key}: {}",
+            circle.coverage()
+        );
+        assert_eq!(MagPoints::default().coverage(), 0.0);
+    }
+}

@@ -1,0 +1,126 @@
+// The live page against the emulated Pico (xtask starts it, turned through the simulator's
+// standard trajectory by a part with hard iron, and passes IMU_LIVE_PORT): the status arrives,
+// the device's own Allan tables arrive and are replaced by the next round with more samples and
+// narrower bounds, the decimated stream stays bounded, a recording made from the page opens in
+// the noise lab; the magnetometer wizard collects the field with its coverage and fits it.
+import { test, before, after } from "node:test";
+import assert from "node:assert/strict";
+import { join } from "node:path";
+import { OUT, browser, scratch, serve } from "./lib.mjs";
+
+const PORT = process.env.IMU_LIVE_PORT;
+let srv, ctx;
+
+before(async () => {
+  if (!PORT) return;
+  srv = await serve(["--port", PORT, "--record-dir", scratch()]);
+  ctx = await browser();
+});
+
+after(async () => {
+  await ctx?.close();
+  await srv?.stop();
+});
+
+/// The gx table's rows on the page: [τ, σ, lo, hi] and its round.
+async function gxTable(page) {
+  return page.evaluate(() => {
+    const el = document.querySelector('.table-plot[data-channel="gx"]');
+    return el ? { round: Number(el.dataset.round), rows: JSON.parse(el.dataset.rows) } : null;
+  });
+}
+
+test("status, tables that update round by round, a bounded stream, a recording into the lab", { skip: !PORT && "IMU_LIVE_PORT not set (xtask starts the emulator and sets it)" }, async () => {
+  const page = await ctx.newPage();
+  const foreign = [];
+  page.on("request", (r) => { if (!r.url().startsWith(srv.url)) foreign.push(r.url()); });
+  await page.goto(srv.url);
+  await page.waitForSelector("body[data-ready=yes]");
+  assert.equal(await page.getAttribute("body", "data-mode"), "live");
+  await page.waitForSelector("#live-status[data-uptime]", { timeout: 60_000 });
+  assert.match(await page.textContent("#live-status"), /IMU\s*ok/);
+  assert.match(await page.textContent("#source"), /device: tcp:/);
+
+  // two rounds of the device's tables: the second has more samples and narrower bounds
+  await page.waitForFunction(() => document.querySelector('.table-plot[data-channel="gx"]'), null, { timeout: 120_000 });
+  const first = await gxTable(page);
+  console.log(`gx table, round ${first.round}: ${first.rows.length} rows`);
+  assert.equal(await page.locator(".table-plot").count(), 10, "a table per channel");
+  await page.waitForFunction((r) => Number(document.querySelector('.table-plot[data-channel="gx"]').dataset.round) > r,
+    first.round, { timeout: 120_000 });
+  const second = await gxTable(page);
+  console.log(`gx table, round ${second.round}: ${second.rows.length} rows`);
+  assert.ok(second.rows.length >= first.rows.length);
+  const width = (r) => (r[3] - r[2]) / r[1]; // relative width of the 68.3 % interval
+  assert.ok(width(second.rows[0]) < width(first.rows[0]),
+    `the interval at τ = ${second.rows[0][0]} s narrows: ${width(first.rows[0])} → ${width(second.rows[0])}`);
+
+  // the stream: decimated on the server, at most 600 points on the page
+  const points = Number(await page.getAttribute("#stream-plot", "data-points"));
+  assert.ok(points > 0 && points <= 600, `${points} stream points`);
+  await page.screenshot({ path: join(OUT, "live.png"), fullPage: true });
+
+  // a recording made from the page, opened in the noise lab
+  await page.click("#record-start");
+  await page.waitForSelector("#record-state[data-recording=yes]");
+  const t0 = Number(await page.getAttribute("#live-status", "data-uptime"));
+  await page.waitForFunction((t) => Number(document.querySelector("#live-status").dataset.uptime) >= t + 4, t0, { timeout: 120_000 });
+  await page.click("#record-stop");
+  await page.waitForSelector("#record-open:not([hidden])");
+  const summary = await page.textContent("#record-state");
+  console.log(`recording: ${summary}`);
+  assert.match(summary, /rows over/);
+  await page.click("#record-open");
+  await page.waitForSelector("#lab:not([hidden]) #column option[value=gx]", { state: "attached" });
+  await page.selectOption("#column", "gx");
+  await page.waitForSelector("#verdict.ok, #verdict.bad", { timeout: 120_000 });
+  assert.match(await page.textContent("#verdict"), /ADEQUATE/);
+  assert.deepEqual(foreign, []);
+  await page.close();
+});
+
+test("magnetometer wizard: the point cloud grows with its coverage, the fit finds the hard iron", { skip: !PORT && "IMU_LIVE_PORT not set" }, async () => {
+  const page = await ctx.newPage();
+  await page.goto(srv.url);
+  await page.waitForSelector("#live-status[data-uptime]", { timeout: 60_000 });
+  await page.click("#mag-start");
+  // the emulated board turns through the simulator's standard trajectory: wait for half of the
+  // directions (or 60 s of device time)
+  const t0 = Number(await page.getAttribute("#live-status", "data-uptime"));
+  await page.waitForFunction((t) => Number(document.querySelector("#mag-state").dataset.coverage || 0) >= 0.5 ||
+    Number(document.querySelector("#live-status").dataset.uptime) >= t + 60, t0, { timeout: 240_000 });
+  await page.click("#mag-stop");
+  const points = Number(await page.getAttribute("#mag-state", "data-points"));
+  const coverage = Number(await page.getAttribute("#mag-state", "data-coverage"));
+  console.log(`magnetometer: ${points} points, coverage ${(100 * coverage).toFixed(1)} %`);
+  assert.ok(points >= 20 && points <= 5000, `${points} points`);
+  assert.ok(coverage > 0.2, `coverage ${coverage}`);
+  await page.click("#mag-fit");
+  await page.waitForSelector("#mag-result[data-model]", { timeout: 120_000 });
+  const model = await page.getAttribute("#mag-result", "data-model");
+  const text = await page.textContent("#mag-result");
+  console.log(`fit: ${model}; ${text.slice(0, 300)}`);
+  assert.match(model, /hard_iron/);
+  assert.match(text, /residual RMS [\d.e-]+ µT/);
+  // the upload: refused without the confirmation, then sent to RAM only
+  await page.click("#mag-upload-button");
+  assert.match(await page.textContent("#error"), /confirmation/);
+  assert.equal(await page.getAttribute("#mag-upload-state", "data-applied"), null);
+  // a wrong code is refused by the server, whatever the page does
+  const wrong = await page.evaluate(async () => {
+    const info = await (await fetch("/api/info")).json();
+    const r = await fetch("/api/live/mag/upload", { method: "POST", headers: { "x-imu-lab-token": info.token },
+      body: JSON.stringify({ confirm: "00000000", persist: false }) });
+    return r.status;
+  });
+  assert.equal(wrong, 403);
+  await page.check("#mag-confirm");
+  await page.click("#mag-upload-button");
+  await page.waitForSelector("#mag-upload-state[data-applied=yes]", { timeout: 60_000 });
+  assert.match(await page.textContent("#mag-upload-state"), /RAM only/);
+  // the device says so in its next status frames
+  await page.waitForFunction(() => /set by the host, not persisted/.test(document.querySelector("#live-status").textContent),
+    null, { timeout: 60_000 });
+  await page.screenshot({ path: join(OUT, "mag-wizard.png"), fullPage: true });
+  await page.close();
+});
