@@ -6,7 +6,7 @@
 //! "rate × samples" makes `τ0` cancel from every deviation except TDEV, which is a time.
 //! Removing the mean changes none of the difference-based estimators (a constant rate is a
 //! linear phase, annihilated by second and third differences); it only keeps `x` small.
-use crate::ci::{self, Variance};
+use crate::confidence::{self, Variance};
 use crate::noise_id;
 use crate::AllanError;
 
@@ -680,7 +680,7 @@ fn stat_sum(x: &[f64], m: usize, stat: Stat) -> f64 {
 
 pub(super) fn bounds(dev: f64, edf: f64) -> (f64, f64) {
     if edf.is_finite() && edf > 0.0 {
-        ci::chi2_bounds(dev, edf, ci::ONE_SIGMA)
+        confidence::chi2_bounds(dev, edf, confidence::ONE_SIGMA)
     } else {
         (f64::NAN, f64::NAN)
     }
@@ -734,9 +734,9 @@ fn edf_for(stat: Stat, alpha: i32, m: f64, np: f64) -> f64 {
         },
         Stat::Ohdev => Variance::Unmodified { d: 3, s_factor: m },
         Stat::Mdev | Stat::Tdev => Variance::Modified,
-        Stat::Totdev => return ci::edf_totdev(alpha, m, np),
+        Stat::Totdev => return confidence::edf_totdev(alpha, m, np),
     };
-    ci::edf_greenhall(alpha, m, np, var).unwrap_or(f64::NAN)
+    confidence::edf_greenhall(alpha, m, np, var).unwrap_or(f64::NAN)
 }
 
 #[cfg(test)]

@@ -36,7 +36,7 @@
 #![cfg_attr(not(feature = "std"), no_std)]
 #![deny(missing_docs)]
 
-pub mod ci;
+pub mod confidence;
 pub mod stream;
 
 #[cfg(feature = "std")]

@@ -268,20 +268,20 @@ pub struct TableRow {
     pub dev: f64,
     /// The noise exponent the EDF was computed for (S_y ∝ f^α), from the local slope.
     pub alpha: i32,
-    /// Equivalent degrees of freedom (`allan::ci`).
+    /// Equivalent degrees of freedom (`allan::confidence`).
     pub edf: f64,
-    /// 68.3 % bounds of `dev` (`allan::ci::chi2_bounds`).
+    /// 68.3 % bounds of `dev` (`allan::confidence::chi2_bounds`).
     pub lo: f64,
     pub hi: f64,
 }
 
 /// The rows of a table from its sums: deviation, Greenhall's EDF for the level's estimator
 /// (stride `s`, `m/s` differences per cluster; Greenhall & Riley 2003) with the noise exponent
-/// from the local slope of the Allan variance (`allan::ci::alpha_from_slope`), and exact χ²
+/// from the local slope of the Allan variance (`allan::confidence::alpha_from_slope`), and exact χ²
 /// bounds (NIST SP 1065 eq. 45). Where Greenhall's algorithm is undefined, the simple EDF of
-/// NIST SP 1065 Table 5 for white FM (`allan::ci::edf_simple`).
+/// NIST SP 1065 Table 5 for white FM (`allan::confidence::edf_simple`).
 pub fn table_rows(t: &AllanTable) -> Vec<TableRow> {
-    use allan::ci;
+    use allan::confidence;
     let tau0 = f64::from(t.tau0_ns) * 1e-9;
     let devs: Vec<f64> = t
         .levels
@@ -300,19 +300,21 @@ pub fn table_rows(t: &AllanTable) -> Vec<TableRow> {
             let alpha = if a == b {
                 0
             } else {
-                ci::alpha_from_slope(devs[a] * devs[a], devs[b] * devs[b], 2.0, 2)
+                confidence::alpha_from_slope(devs[a] * devs[a], devs[b] * devs[b], 2.0, 2)
             };
             let sums = *l;
             let s_factor = f64::from(l.m) / f64::from(l.stride.max(1));
-            let edf = ci::edf_greenhall(
+            let edf = confidence::edf_greenhall(
                 alpha,
                 f64::from(l.m),
                 sums.phase_points(),
-                ci::Variance::Unmodified { d: 2, s_factor },
+                confidence::Variance::Unmodified { d: 2, s_factor },
             )
             .filter(|e| e.is_finite() && *e > 0.0)
-            .unwrap_or_else(|| ci::edf_simple(0, f64::from(l.m), sums.phase_points()).max(1.0));
-            let (lo, hi) = ci::chi2_bounds(devs[k], edf, ci::ONE_SIGMA);
+            .unwrap_or_else(|| {
+                confidence::edf_simple(0, f64::from(l.m), sums.phase_points()).max(1.0)
+            });
+            let (lo, hi) = confidence::chi2_bounds(devs[k], edf, confidence::ONE_SIGMA);
             TableRow {
                 tau: f64::from(l.m) * tau0,
                 dev: devs[k],
@@ -419,7 +421,7 @@ mod tests {
 
     #[test]
     fn rows_come_from_the_sums_and_follow_greenhall() {
-        // The slope gives alpha = 0, so every EDF must equal allan::ci's Greenhall value for
+        // The slope gives alpha = 0, so every EDF must equal allan::confidence's Greenhall value for
         // alpha 0 exactly, and the bounds must bracket the deviation.
         let t = white_fm_table();
         let rows = table_rows(&t);
@@ -431,11 +433,11 @@ mod tests {
             assert!((r.tau - f64::from(l.m) * 1.013171e-3).abs() < 1e-12);
             assert!(r.lo < r.dev && r.dev < r.hi, "m = {}", l.m);
             let sums = *l;
-            let g = allan::ci::edf_greenhall(
+            let g = allan::confidence::edf_greenhall(
                 0,
                 f64::from(l.m),
                 sums.phase_points(),
-                allan::ci::Variance::Unmodified {
+                allan::confidence::Variance::Unmodified {
                     d: 2,
                     s_factor: f64::from(l.m) / f64::from(l.stride),
                 },

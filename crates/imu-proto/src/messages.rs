@@ -60,7 +60,7 @@ pub struct SampleBatch {
 /// ([`allan::stream::LevelSums`], the same type: cluster size `m`, stride, the counts and sums of
 /// squared second and third differences of the integer phase, on the wire in that order), from
 /// which the host derives the deviation and its bounds (overlapping ADEV `σ² = Σ D2² / (2 n m²)`,
-/// NIST SP 1065 eq. 11; bounds from `allan::ci`).
+/// NIST SP 1065 eq. 11; bounds from `allan::confidence`).
 pub use allan::stream::LevelSums as AllanLevel;
 
 /// The Allan table of one channel, as it stood at its round's snapshot.

@@ -19,7 +19,7 @@
 use crate::cov::correlation_factor;
 use crate::fit::{Fit, Weighting};
 pub use crate::zscore::{correlated_chi2, z_score, CORRELATION_INFLATION};
-use allan::ci::{chi2_sf, norm_ppf as normal_quantile};
+use allan::confidence::{chi2_sf, norm_ppf as normal_quantile};
 use nalgebra::{DMatrix, DVector};
 
 /// Level of the verdict's global test (the local test runs at a tenth of it).

@@ -27,7 +27,7 @@ use crate::fit::{
 };
 use crate::nonstat::{self, Blocks, Signal};
 use crate::psd::{default_segment, find_lines, line_near, welch, Line};
-use allan::ci::chi2_sf;
+use allan::confidence::chi2_sf;
 use model_lab::{Candidate, Edit, Summary};
 use nalgebra::DMatrix;
 

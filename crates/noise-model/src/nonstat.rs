@@ -20,7 +20,7 @@
 //! so that a noise model that is off by a factor cannot manufacture a step. The instant is then
 //! refined on finer blocks and, with the samples at hand, to the sample.
 use crate::cov::{second_diff_cov, Component};
-use allan::ci::chi2_sf;
+use allan::confidence::chi2_sf;
 use nalgebra::{DMatrix, DVector};
 
 /// Most blocks per scale in a GLS (the whitening is O(B²) in time and memory).

@@ -7,7 +7,7 @@
 //! 50 % overlap (Percival & Walden, *Spectral Analysis for Physical Applications*, §6.17). A line
 //! is declared where the bin exceeds the local running-median background by more than the
 //! χ²_ν/ν quantile at a family-wise false-alarm probability of 1e-3 over all bins.
-use allan::ci::chi2_ppf as chi2_quantile;
+use allan::confidence::chi2_ppf as chi2_quantile;
 
 /// A one-sided PSD estimate.
 #[derive(Debug, Clone, PartialEq)]

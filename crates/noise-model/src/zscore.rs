@@ -2,7 +2,7 @@
 //! add up to (the verdict's global test, [`crate::assess`]): T = zᵀ ρ⁻¹ z with the estimates'
 //! correlation ρ, or Σz²/[`CORRELATION_INFLATION`] when only the points are known.
 use crate::cov::correlation_factor;
-use allan::ci::{chi2_cdf, chi2_sf, norm_ppf as normal_quantile};
+use allan::confidence::{chi2_cdf, chi2_sf, norm_ppf as normal_quantile};
 use nalgebra::{DMatrix, DVector};
 
 /// Points-only fits: the χ² of correlated octave-spaced OADEV points is larger than that of

@@ -5,7 +5,7 @@
 //! framed between its steps do not disturb it, and is queued whole when its last level is in.
 //!
 //! The device sends only the engines' exact integer sums; the deviation, its EDF and its bounds
-//! are the host's (`allan::ci`), which recomputes them from the sums anyway: on the M0+ each
+//! are the host's (`allan::confidence`), which recomputes them from the sums anyway: on the M0+ each
 //! row's soft-float square roots cost ≈ 0.3 ms.
 use imu_proto::{table, AllanTable, Channel, FrameBuilder, Scales, Sensor, Vec};
 

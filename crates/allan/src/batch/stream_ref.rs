@@ -2,7 +2,7 @@
 //! [`crate::Engine`] accumulates, computed directly from the samples ([`stride_sums`]), and the
 //! table rows made from such sums ([`stream_rows`], also used on the engine's own sums).
 use super::{bounds, redder, Estimator, Row};
-use crate::ci::{self, Variance};
+use crate::confidence::{self, Variance};
 use crate::stream::LevelSums;
 
 /// The host "stride" estimator: exactly the integer sums the streaming engine
@@ -71,12 +71,12 @@ pub fn stream_rows(levels: &[LevelSums], tau0: f64, scale: f64, hadamard: bool) 
                     .map(|v| (v, dev))
             });
         let alpha = redder(
-            neighbour.map(|(a, b)| ci::alpha_from_slope(a * a, b * b, 2.0, d)),
+            neighbour.map(|(a, b)| confidence::alpha_from_slope(a * a, b * b, 2.0, d)),
             &mut ceiling,
         );
         let m = l.m as f64;
         let np = (n - 1) as f64 * l.stride as f64 + d as f64 * m + 1.0;
-        let edf = ci::edf_greenhall(
+        let edf = confidence::edf_greenhall(
             alpha,
             m,
             np,

@@ -9,7 +9,7 @@ use super::{
     IDENTIFIED_FRACTION, MAX_OUTLIER_FRACTION, OUTLIER_SIGMAS, PRACTICAL_MARGIN, ROBUST_ROUNDS,
 };
 use crate::solve::{mad_sigma, median};
-use allan::ci::f_sf;
+use allan::confidence::f_sf;
 
 /// Normalise a model: sorted, deduplicated, and checked against the sensor's effects.
 pub fn normalise_model(p: &dyn Problem, model: &[Effect]) -> Result<Vec<Effect>, CalError> {

@@ -261,7 +261,7 @@ fn tables(link: &mut Link, a: &TablesArgs) -> Result<()> {
             fit_table(t, &rows);
         }
     }
-    println!("\ndeviation, EDF and bounds computed on the host from the device's integer sums (allan::ci)");
+    println!("\ndeviation, EDF and bounds computed on the host from the device's integer sums (allan::confidence)");
     if let Some(p) = &a.json {
         let v: Vec<&AllanTable> = got.values().collect();
         std::fs::write(p, serde_json::to_string_pretty(&v)?)
