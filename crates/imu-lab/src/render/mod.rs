@@ -7,6 +7,7 @@ pub mod allan;
 pub mod calibration;
 pub mod noise;
 pub mod scatter;
+pub mod session_report;
 pub mod steps;
 
 use std::path::Path;

@@ -20,9 +20,9 @@ use serde_json::{json, Value};
 use tokio::sync::Mutex;
 
 use super::{error, Shared};
-use crate::cmd::fit::{report_html, report_title};
 use crate::input::{self, InputArgs};
 use crate::render::noise as report;
+use crate::render::session_report::{report_html, report_title};
 
 /// Samples the page's curves are drawn with (per decade of τ).
 const CURVE_PER_DECADE: usize = 12;
