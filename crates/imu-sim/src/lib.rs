@@ -139,6 +139,15 @@ pub enum SimEffect {
         rise_c: f64,
         tau_s: f64,
     },
+    /// A bias of `coef` [u/°C] times a temperature that wanders smoothly about 25 °C by `rms_c`
+    /// [°C] (the shape of [`drift_curve`] drawn from `shape_seed`: a transition and a bow, as a
+    /// room's heating cycle gives). The bias follows the true temperature; the column returned by
+    /// [`SimConfig::generate_with_temp`] is read at the MPU-6050's resolution, 1/340 °C.
+    TemperatureWander {
+        coef: f64,
+        rms_c: f64,
+        shape_seed: u64,
+    },
     /// A warm-up transient A·e^{−t/τ} [u] (no temperature column).
     WarmUp { amplitude: f64, tau_s: f64 },
     /// A smooth drift of the bias, `rms` [u] about its mean over the record, of a shape drawn
@@ -363,7 +372,30 @@ impl SimConfig {
                     .map(|i| start_c + rise_c * -(-(i as f64) * self.tau0() / tau_s).exp_m1())
                     .collect(),
             ),
+            SimEffect::TemperatureWander {
+                rms_c, shape_seed, ..
+            } => Some(
+                drift_curve(rms_c, shape_seed, self.n_samples)
+                    .into_iter()
+                    .map(|v| 25.0 + v)
+                    .collect(),
+            ),
             _ => None,
+        })
+    }
+
+    /// The temperature column as recorded: the true temperature, read at the MPU-6050's
+    /// 1/340 °C for a wandering temperature.
+    fn temperature_column(&self) -> Option<Vec<f64>> {
+        let t = self.temperature()?;
+        let read = self
+            .effects
+            .iter()
+            .any(|e| matches!(e, SimEffect::TemperatureWander { .. }));
+        Some(if read {
+            t.into_iter().map(|v| (v * 340.0).round() / 340.0).collect()
+        } else {
+            t
         })
     }
 
@@ -491,7 +523,7 @@ impl SimConfig {
                         *v += size;
                     }
                 }
-                SimEffect::Temperature { coef, .. } => {
+                SimEffect::Temperature { coef, .. } | SimEffect::TemperatureWander { coef, .. } => {
                     let t = self.temperature().expect("temperature effect");
                     for (v, c) in y.iter_mut().zip(&t) {
                         *v += coef * c;
@@ -528,7 +560,7 @@ impl SimConfig {
                 *v = (*v / q).round() * q;
             }
         }
-        (y, self.temperature())
+        (y, self.temperature_column())
     }
 
     /// Exact expected overlapping Allan variance at τ = m·τ0 of the generated process (the
@@ -609,7 +641,8 @@ impl SimConfig {
                                 &ctx,
                             )
                     }
-                    SimEffect::Temperature { coef, .. } => {
+                    SimEffect::Temperature { coef, .. }
+                    | SimEffect::TemperatureWander { coef, .. } => {
                         let t = self.temperature().expect("temperature");
                         coef * coef * exact_oavar(&t, m)
                     }

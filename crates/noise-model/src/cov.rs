@@ -24,6 +24,7 @@
 //! between, where c is a smooth function of d (a polynomial for the power-law terms), it is
 //! integrated by Gauss–Legendre quadrature on geometrically growing panels, the sum over integers
 //! being the integral over half-integer-extended intervals (midpoint rule, error O(f'') per lag).
+use crate::diff_profile::DiffProfile;
 use crate::structure::Structure;
 use nalgebra::DMatrix;
 
@@ -578,6 +579,27 @@ pub fn signal_noise_sum(comps: &[Component], m: f64, shape: SignalShape, span: f
         }
         SignalShape::Exponential { .. } => f64::NAN,
     }
+}
+
+/// Σ_d c_m(d)·ρ(d) as [`signal_noise_sum`] does, for a signal whose differences' autocorrelation
+/// was measured on the record ([`crate::diff_profile`]): a bias following a column such as the
+/// temperature. Lags up to the profile's span; at a stride of one lag the sum is term by term,
+/// otherwise by quadrature on panels no wider than the profile's stride.
+pub fn profile_noise_sum(comps: &[Component], m: f64, profile: &DiffProfile) -> f64 {
+    let span = profile.span();
+    if !(span.is_finite() && profile.stride > 0.0) {
+        return f64::NAN;
+    }
+    if profile.stride <= 1.0 && span <= 4096.0 {
+        let hi = span.floor() as i64;
+        return noise_diff_cov(comps, m, 0.0)
+            + 2.0
+                * (1..=hi)
+                    .map(|d| noise_diff_cov(comps, m, d as f64) * profile.at(d as f64))
+                    .sum::<f64>();
+    }
+    let w = |d: f64, out: &mut [f64]| out[0] = profile.at(d);
+    weighted_lag_sums(comps, m, span, profile.stride.max(1.0), 1, &w)[0]
 }
 
 fn pair_key(a: &Structure, b: &Structure) -> (Key, Key) {

@@ -239,34 +239,6 @@ pub fn lattice(y: &[f64]) -> Option<f64> {
         .then_some(delta)
 }
 
-/// Exact overlapping Allan variance of `x` (segments concatenated) at averaging factor m.
-fn oavar(x: &[f64], segments: &[(u64, u64)], m: u64) -> Option<f64> {
-    let (mut acc, mut n) = (0.0, 0u64);
-    let mut off = 0usize;
-    let m = m as usize;
-    for &(_, len) in segments {
-        let s = &x[off..off + len as usize];
-        off += len as usize;
-        if s.len() < 2 * m {
-            continue;
-        }
-        let mut pre = Vec::with_capacity(s.len() + 1);
-        let mut a = 0.0;
-        pre.push(0.0);
-        let mean = s.iter().sum::<f64>() / s.len() as f64;
-        for v in s {
-            a += v - mean;
-            pre.push(a);
-        }
-        for i in 0..=s.len() - 2 * m {
-            let d = pre[i + 2 * m] - 2.0 * pre[i + m] + pre[i];
-            acc += d * d;
-            n += 1;
-        }
-    }
-    (n > 0).then(|| acc / (2.0 * (m * m) as f64 * n as f64))
-}
-
 impl<'a> NoiseLab<'a> {
     /// Prepare the lab: the measurement, block means, the lattice and the spectral lines.
     pub fn new(record: Record<'a>) -> Result<NoiseLab<'a>, FitError> {
@@ -290,6 +262,7 @@ impl<'a> NoiseLab<'a> {
             tau0,
             segments: record.segments.clone(),
             temp_avar: None,
+            temp_profile: None,
             tau_min: tau0,
             tau_max: tau0,
         };
@@ -300,17 +273,20 @@ impl<'a> NoiseLab<'a> {
                 ));
             }
             let longest = record.segments.iter().map(|s| s.1).max().unwrap_or(0);
-            let mut v = Vec::new();
+            let lengths: Vec<u64> = record.segments.iter().map(|s| s.1).collect();
+            let (mut v, mut profiles) = (Vec::new(), Vec::new());
             let mut m = 1u64;
             while 2 * m < longest {
-                if let Some(a) = oavar(t, &record.segments, m) {
+                if let Some((a, p)) = crate::diff_profile::allan_profile(t, &lengths, m) {
                     v.push((m, a));
+                    profiles.push((m, p));
                 }
                 m *= 2;
             }
             // A constant temperature column carries no information.
             if v.iter().any(|p| p.1 > 0.0) {
                 ctx.temp_avar = Some(v);
+                ctx.temp_profile = Some(std::sync::Arc::new(profiles));
             }
         }
         set_range(&mut ctx, &record.points);

@@ -28,6 +28,7 @@
 pub mod assess;
 pub mod cov;
 pub mod diagnose;
+pub mod diff_profile;
 pub mod effect;
 pub mod fit;
 pub mod lab;

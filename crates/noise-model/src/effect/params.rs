@@ -28,6 +28,9 @@ pub struct Context {
     /// The exact overlapping Allan variance of the temperature column [°C²] at averaging factors
     /// m (ascending), when the record has one.
     pub temp_avar: Option<Vec<(u64, f64)>>,
+    /// The autocorrelation of the temperature column's Allan differences at the same factors
+    /// (the noise projected on a bias following it, `fit/solve.rs`).
+    pub temp_profile: Option<std::sync::Arc<Vec<(u64, crate::diff_profile::DiffProfile)>>>,
     /// Shortest and longest τ of the measured points [s] (search ranges).
     pub tau_min: f64,
     pub tau_max: f64,
@@ -40,6 +43,7 @@ impl Context {
             tau0,
             segments: vec![(0, n)],
             temp_avar: None,
+            temp_profile: None,
             tau_min: tau0,
             tau_max: tau0 * (n as f64 / 4.0).max(1.0),
         }

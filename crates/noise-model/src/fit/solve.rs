@@ -458,11 +458,12 @@ fn add_scaled(acc: &mut [f64], c: f64, b: &[f64]) {
     }
 }
 
-/// The gain g of the noise projected on a localised signal whose shape the lab does not know in
-/// closed form (a bias following a temperature column, a drift, a user's signal), as a bound:
+/// The gain g of the noise projected on a localised signal whose shape the lab neither knows in
+/// closed form nor has measured (a user's signal), as a bound:
 /// Var(Σ D_i N_i) ≤ g·m²·q·Σ D_i² for white noise of q per sample, g the peak of the Allan
 /// difference's power gain |H|²/m² = 4 sin⁴x/x² ≈ 2.1 at x ≈ 1.17. Steps and warm-ups have
-/// their exact sum instead ([`crate::cov::signal_noise_sum`]).
+/// their exact sum instead ([`crate::cov::signal_noise_sum`]), a drift its cosines' and a bias
+/// following the temperature its column's measured profile ([`crate::diff_profile`]).
 const SIGNAL_GAIN: f64 = 2.1;
 
 /// The variance the deterministic signals localised in time (a bias step, a warm-up, a bias
@@ -474,9 +475,11 @@ const SIGNAL_GAIN: f64 = 2.1;
 /// the model's covariance would then claim a precision the data do not have where the step
 /// dominates). Var(Σ D_i N_i) = Σ D_i²·Σ_d c(d)ρ(d), c the noise's covariance of the
 /// differences and ρ the signal's normalised autocorrelation (exact for a step and an
-/// exponential warm-up, [`crate::cov::signal_noise_sum`]); with Σ D_i² = 2m²M·a(m) for a signal
-/// of Allan variance a(m), the added variance is e = 2·a(m)·Σ_d c(d)ρ(d)/(m²M). Other shapes take
-/// the bound [`SIGNAL_GAIN`] on the noise taken as white of the model's variance at m.
+/// exponential warm-up, [`crate::cov::signal_noise_sum`]; a drift's from its cosines; a bias
+/// following the temperature column's as measured on the column at the nearest octave,
+/// [`crate::cov::profile_noise_sum`]); with Σ D_i² = 2m²M·a(m) for a signal of Allan variance
+/// a(m), the added variance is e = 2·a(m)·Σ_d c(d)ρ(d)/(m²M). Other shapes take the bound
+/// [`SIGNAL_GAIN`] on the noise taken as white of the model's variance at m.
 impl Problem<'_> {
     fn localised_variance(
         &self,
@@ -499,10 +502,15 @@ impl Problem<'_> {
                 }
                 _ => None,
             };
-            // a drift's differences are its ramp's constant and its cosines (a bias following a
-            // temperature column keeps the bound: its shape is not summed)
+            // a drift's differences are its ramp's constant and its cosines
             let drift_shape: Option<&[f64]> = match t.spec.effect {
                 Effect::Drift { .. } if !t.theta.is_empty() => Some(&t.theta),
+                _ => None,
+            };
+            // a bias following the temperature column: its differences' autocorrelation as
+            // measured on the column
+            let profiles = match t.spec.effect {
+                Effect::Temperature if t.theta.is_empty() => self.meas.ctx.temp_profile.as_deref(),
                 _ => None,
             };
             for j in 0..n {
@@ -513,12 +521,14 @@ impl Problem<'_> {
                     continue;
                 }
                 let bound = SIGNAL_GAIN * m * noise_avar[j].max(0.0);
-                let sum = match shape {
-                    Some(sh) => crate::cov::signal_noise_sum(comps, m, sh, span) / (m * m),
-                    None => match drift_shape {
-                        Some(sh) => drift_noise_sum(comps, m, sh, &self.meas.ctx) / (m * m),
+                let sum = match (shape, drift_shape, profiles) {
+                    (Some(sh), _, _) => crate::cov::signal_noise_sum(comps, m, sh, span) / (m * m),
+                    (_, Some(sh), _) => drift_noise_sum(comps, m, sh, &self.meas.ctx) / (m * m),
+                    (_, _, Some(p)) => match nearest_profile(p, m) {
+                        Some(prof) => crate::cov::profile_noise_sum(comps, m, &prof) / (m * m),
                         None => bound,
                     },
+                    _ => bound,
                 };
                 // a sum that is not a number (a structure function overflowing) takes the bound
                 let sum = if sum.is_finite() { sum } else { bound };
@@ -530,6 +540,19 @@ impl Problem<'_> {
         }
         e
     }
+}
+
+/// The profile measured at the octave nearest to m (in log m), its lags scaled to m.
+fn nearest_profile(
+    profiles: &[(u64, crate::diff_profile::DiffProfile)],
+    m: f64,
+) -> Option<crate::diff_profile::DiffProfile> {
+    let (at, p) = profiles.iter().min_by(|a, b| {
+        let da = (a.0 as f64 / m).ln().abs();
+        let db = (b.0 as f64 / m).ln().abs();
+        da.total_cmp(&db)
+    })?;
+    Some(p.rescaled(*at as f64, m))
 }
 
 /// Σ_d c(d)·ρ(d) for a drift of unit shape `theta` (its ramp per sample, then its cosines'
