@@ -114,7 +114,7 @@ function symbolFinder(elf) {
  * (memcpy, division, 64-bit multiply, …) are also charged inclusively to their call sites.
  * Deterministic: the same ELF gives the same table.
  */
-export async function exactCycles({ elf, seconds = 1, callers = null, from = 1 }) {
+export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, tasks = false }) {
   const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: from + seconds + 2 }), echoLog: false });
   await s.run(from * 1e9);
   const core = s.emu.core;
@@ -129,9 +129,32 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1 }
   }
   const calls = new Map();
   let open = null;
+  // --tasks: an embassy task's poll (`TaskStorage<F>::poll`, one per task, told apart by
+  // address) is charged every cycle until it returns to the executor; handlers by exception
+  // number; the rest is the run loop and the executor.
+  const taskEntries = new Map();
+  if (tasks) {
+    for (const [n, x] of s.emu.elf.symbols.entries()) {
+      if (x.size > 0 && /TaskStorage.*poll/.test(n)) taskEntries.set(x.value & ~1, `task ${(x.value & ~1).toString(16)}`);
+    }
+  }
+  const byTask = new Map();
+  const pollsByTask = new Map();
+  let task = null;
   const exec = core.executeInstruction.bind(core);
   core.executeInstruction = () => {
     const pc = core.PC >>> 0;
+    let taskKey = null;
+    if (tasks) {
+      if (core.IPSR === 0) {
+        if (task && pc === task.ret) task = null;
+        if (!task && taskEntries.has(pc)) {
+          task = { name: taskEntries.get(pc), ret: (core.LR >>> 0) & ~1 };
+          pollsByTask.set(task.name, (pollsByTask.get(task.name) ?? 0) + 1);
+        }
+      }
+      taskKey = core.IPSR !== 0 ? `exception ${core.IPSR}` : task ? task.name : 'run loop and executor';
+    }
     if (open && pc === open.ret) {
       const c = calls.get(open.key) ?? { calls: 0, cycles: 0 };
       c.calls++;
@@ -146,6 +169,12 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1 }
     const c0 = core.cycles;
     const r = exec();
     perPc.set(pc, (perPc.get(pc) ?? 0) + (core.cycles - c0));
+    if (taskKey) {
+      const t = byTask.get(taskKey) ?? { cycles: 0, pcs: new Map() };
+      t.cycles += core.cycles - c0;
+      t.pcs.set(pc, (t.pcs.get(pc) ?? 0) + (core.cycles - c0));
+      byTask.set(taskKey, t);
+    }
     return r;
   };
   const served0 = s.mpu.stats.servedFifo + s.mpu.stats.servedRegs;
@@ -159,11 +188,11 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1 }
     byFn.set(f, (byFn.get(f) ?? 0) + c);
     total += c;
   }
-  return { seconds, sets, total, byFn, calls, perPc, find };
+  return { seconds, sets, total, byFn, calls, perPc, find, byTask, pollsByTask };
 }
 
 async function exactProfile(v) {
-  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1) });
+  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1), tasks: Boolean(v.tasks) });
   const { sets, total, byFn, calls, seconds } = r;
   const top = Number(v.top ?? 25);
   const out = [`# executed cycles per sample set, by function (exclusive): ${(total / sets).toFixed(0)} in all, ${sets} sample sets in ${seconds} s`];
@@ -178,6 +207,23 @@ async function exactProfile(v) {
     out.push(`# cycles per sample set by instruction address in /${v.pcs}/`);
     for (const [pc, c] of rows.sort((a, b) => a[0] - b[0])) {
       out.push(`${(pc >>> 0).toString(16)} ${(c / sets).toFixed(2)}`);
+    }
+  }
+  if (v.tasks) {
+    // Interrupts are charged to their exception number (16 + IRQ: 21 USBCTRL, 27 DMA_IRQ_0,
+    // 16–19 TIMER_IRQ_0–3, 39 I2C0), not to the task they interrupted.
+    out.push(`# cycles per sample set by task poll (with polls per sample set), exception and run loop; each task's costliest functions (exclusive)`);
+    for (const [name, t] of [...r.byTask.entries()].sort((a, b) => b[1].cycles - a[1].cycles)) {
+      const polls = r.pollsByTask.get(name);
+      out.push(`${(t.cycles / sets).toFixed(1).padStart(8)}  ${name}${polls ? ` (${(polls / sets).toFixed(3)} polls)` : ''}`);
+      const fns = new Map();
+      for (const [pc, c] of t.pcs) {
+        const f = demangle(r.find(pc & ~1));
+        fns.set(f, (fns.get(f) ?? 0) + c);
+      }
+      for (const [f, c] of [...fns.entries()].sort((a, b) => b[1] - a[1]).slice(0, 6)) {
+        out.push(`${''.padStart(8)}  ${(c / sets).toFixed(1).padStart(8)}  ${f}`);
+      }
     }
   }
   if (v.callers) {

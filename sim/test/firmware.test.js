@@ -27,7 +27,7 @@ test('the firmware boots, enumerates USB and reads both sensors at their rates',
 
 test('profile --exact charges every executed cycle to a function, per sample set', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
   const { exactCycles } = await import('../src/profile.js');
-  const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem' });
+  const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem', tasks: true });
   // 0.2 s after the 1 s warm-up: 200 IMU sample sets (± one burst of slack).
   assert.ok(r.sets >= 180 && r.sets <= 220, `sets ${r.sets}`);
   const sum = [...r.byFn.values()].reduce((a, b) => a + b, 0);
@@ -41,4 +41,14 @@ test('profile --exact charges every executed cycle to a function, per sample set
   const byPc = [...r.perPc.entries()].filter(([pc]) => r.find(pc & ~1) === push[0]);
   assert.ok(byPc.length > 20, `addresses in the push ${byPc.length}`);
   assert.equal(byPc.reduce((a, [, c]) => a + c, 0), push[1], 'per-address cycles add up');
+  // What `--tasks` lists: every cycle charged once, to a task's polls, an exception or the run
+  // loop; the sensor, processing and USB tasks polled, the USB and DMA interrupts taken.
+  const byTask = [...r.byTask.entries()];
+  assert.equal(byTask.reduce((a, [, t]) => a + t.cycles, 0), r.total, 'the per-task charges add up');
+  const polled = byTask.filter(([n]) => n.startsWith('task ') && r.pollsByTask.get(n) > 0);
+  assert.ok(polled.length >= 4, `tasks polled: ${polled.map(([n]) => n)}`);
+  for (const irq of ['exception 21', 'exception 27']) assert.ok(r.byTask.get(irq)?.cycles > 0, `${irq} charged`);
+  // The processing task holds the Allan push.
+  const processing = byTask.find(([, t]) => [...t.pcs.keys()].some((pc) => r.find(pc & ~1) === push[0]));
+  assert.ok(processing && processing[1].cycles > push[1], 'the Allan push is inside a task poll');
 });
