@@ -122,19 +122,22 @@ pub fn allan_profile(x: &[f64], segments: &[u64], m: u64) -> Option<(f64, DiffPr
         // D_0 directly, then D_{i+1} = D_i + x_{i+2m} − 2x_{i+m} + x_i
         let mut d: f64 = (0..mu).map(|j| (s[mu + j] - mean) - (s[j] - mean)).sum();
         let positions = s.len() + 1 - 2 * mu;
+        let (mut next_kept, mut q) = (0usize, 0usize);
         for i in 0..positions {
             if i > 0 {
                 let k = i - 1;
-                d += (s[k + 2 * mu] - mean) - 2.0 * (s[k + mu] - mean) + (s[k] - mean);
+                // the mean cancels in x_{k+2m} − 2x_{k+m} + x_k
+                d += s[k + 2 * mu] - 2.0 * s[k + mu] + s[k];
             }
             sum_sq += d * d;
-            if i % stride == 0 {
-                let q = i / stride;
+            if i == next_kept {
                 for (buf, &(a, b)) in bufs.iter_mut().zip(&stored) {
                     if q >= a && q < b {
                         buf.push(d);
                     }
                 }
+                next_kept += stride;
+                q += 1;
             }
         }
         terms += positions as u64;
