@@ -58,6 +58,23 @@ test("status, tables that update round by round, a bounded stream, a recording i
   // the stream: decimated on the server, at most 600 points on the page
   const points = Number(await page.getAttribute("#stream-plot", "data-points"));
   assert.ok(points > 0 && points <= 600, `${points} stream points`);
+  // every channel (the ten calibrated columns and the device's roll, pitch and heading) with
+  // its unit, each plotted on request with data
+  const options = await page.$$eval("#stream-channel option", (o) => o.map((x) => [x.value, x.textContent]));
+  assert.deepEqual(options.map((o) => o[1]), ["ax [m/s²]", "ay [m/s²]", "az [m/s²]", "gx [deg/s]", "gy [deg/s]",
+    "gz [deg/s]", "mx [µT]", "my [µT]", "mz [µT]", "temp [°C]", "roll [deg]", "pitch [deg]", "heading [deg]"]);
+  for (const [value, label] of options) {
+    await page.selectOption("#stream-channel", value);
+    const name = label.split(" ")[0];
+    await page.waitForFunction((n) => document.querySelector("#stream-plot").dataset.channel === n &&
+      Number(document.querySelector("#stream-plot").dataset.finite) > 0, name);
+    const latest = await page.getAttribute(`#stream-latest tr[data-channel="${name}"]`, "data-mean");
+    assert.ok(Number.isFinite(Number(latest)) && latest !== "", `${name}: latest mean ${latest}`);
+  }
+  // the magnitude of the mean specific force is gravity's (the board still or turning slowly)
+  const g = await page.$$eval("#stream-latest tbody tr", (rows) => Math.hypot(...rows.slice(0, 3).map((r) => Number(r.dataset.mean))));
+  assert.ok(g > 7 && g < 13, `|a| = ${g} m/s²`);
+  await page.selectOption("#stream-channel", "3");
   await page.screenshot({ path: join(OUT, "live.png"), fullPage: true });
 
   // a recording made from the page, opened in the noise lab

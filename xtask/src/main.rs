@@ -46,6 +46,9 @@ enum Cmd {
     Demo(emu::DemoArgs),
     /// Release build of the firmware, size report, UF2 (out/pico-imu.uf2).
     Firmware(firmware::FirmwareArgs),
+    /// The live page of `imu-lab serve` following the emulated board's 1 kHz stream for an hour
+    /// (or `--minutes`): the page's JS heap and DOM, the server's memory (out/serve/soak.md).
+    BenchServe(serve::BenchServeArgs),
 }
 
 /// `cargo xtask test [CARGO_TEST_ARGS…]`.
@@ -64,6 +67,7 @@ fn main() -> Result<()> {
         Cmd::BenchEmu(a) => emu::bench(&a),
         Cmd::Demo(a) => demo_heading::demo(&a),
         Cmd::Firmware(a) => firmware::main(&a),
+        Cmd::BenchServe(a) => serve::bench(&a),
     }
 }
 
@@ -323,6 +327,7 @@ mod tests {
             "demo --serve --port /dev/ttyACM0",
             "firmware",
             "firmware --no-build",
+            "bench-serve --minutes 60 --every 2",
         ] {
             parse(line).unwrap_or_else(|e| panic!("`cargo xtask {line}`: {e}"));
         }

@@ -264,11 +264,12 @@ document.addEventListener("DOMContentLoaded", main);
 // ---------- live device ----------
 
 const STREAM_KEEP = 600; // points kept by the page: the server's history, never more
-const CHANNELS = ["ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp"];
+// the stream's channels with their units (the server's list, sent with the device's identity)
+let CHANNELS = [];
 const tablePlots = new Map();
 let streamPlot = null;
-let streamData = null;
-let streamChannel = 3; // gx
+let streamPoints = []; // the last STREAM_KEEP points as the server sent them
+let streamChannel = 3; // gx until the user picks another
 
 function renderStatus(s) {
   const t = document.createElement("table");
@@ -331,30 +332,64 @@ function renderTables(v) {
   }
 }
 
+function setChannels(list) {
+  CHANNELS = list;
+  const sel = $("stream-channel");
+  sel.replaceChildren(...list.map((c, i) => new Option(`${c.name} [${c.unit}]`, String(i))));
+  sel.value = String(streamChannel);
+  sel.onchange = () => {
+    streamChannel = Number(sel.value);
+    if (streamPlot) { streamPlot.destroy(); streamPlot = null; }
+    drawStream();
+  };
+  $("stream-latest").tBodies[0].replaceChildren(...list.map((c) => {
+    const tr = document.createElement("tr");
+    tr.dataset.channel = c.name;
+    cell(tr, c.name); cell(tr, "—"); cell(tr, "—"); cell(tr, c.unit);
+    return tr;
+  }));
+}
+
 function streamPush(points) {
-  if (!streamData) streamData = [[], [], [], []];
-  for (const p of points) {
-    streamData[0].push(p.t);
-    streamData[1].push(p.min[streamChannel]);
-    streamData[2].push(p.max[streamChannel]);
-    streamData[3].push(p.mean[streamChannel]);
+  for (const p of points) streamPoints.push(p);
+  // how many points the page has received (read by the soak benchmark, web/bench)
+  window.imuLabStreamReceived = (window.imuLabStreamReceived || 0) + points.length;
+  if (streamPoints.length > STREAM_KEEP) streamPoints.splice(0, streamPoints.length - STREAM_KEEP);
+  const last = streamPoints[streamPoints.length - 1];
+  if (last) {
+    const rows = $("stream-latest").tBodies[0].rows;
+    for (let k = 0; k < rows.length; k++) {
+      const m = last.mean[k];
+      rows[k].cells[1].textContent = m === null ? "—" : `${fmt(m, 5)} ± ${fmt(last.sd[k], 2)}`;
+      rows[k].cells[2].textContent = m === null ? "—" : `${fmt(last.min[k], 5)} … ${fmt(last.max[k], 5)}`;
+      rows[k].dataset.mean = m === null ? "" : String(m);
+    }
   }
-  const extra = streamData[0].length - STREAM_KEEP;
-  if (extra > 0) for (const a of streamData) a.splice(0, extra);
+  drawStream();
+}
+
+function drawStream() {
+  const k = streamChannel;
+  const c = CHANNELS[k] || { name: `channel ${k}`, unit: "" };
+  const data = [streamPoints.map((p) => p.t), streamPoints.map((p) => p.min[k]),
+    streamPoints.map((p) => p.max[k]), streamPoints.map((p) => p.mean[k])];
   if (!streamPlot) {
     streamPlot = new uPlot({
       width: plotWidth(), height: 220,
-      title: `${CHANNELS[streamChannel]} [deg/s]: mean, min and max per 0.1 s of device time`,
-      axes: [{ label: "device time [s]", values: numValues }, { label: "deg/s", size: 70, values: numValues }],
+      title: `${c.name} [${c.unit}]: mean, min and max per 0.1 s of device time`,
+      axes: [{ label: "device time [s]", values: numValues }, { label: c.unit, size: 70, values: numValues }],
       scales: { x: { time: false } },
       bands: [{ series: [2, 1], fill: "rgba(0, 90, 200, 0.15)" }],
       series: [{ label: "t [s]" }, { label: "min", stroke: "rgba(0,0,0,0.2)" },
         { label: "max", stroke: "rgba(0,0,0,0.2)" }, { label: "mean", stroke: "#1f77b4" }],
-    }, streamData, $("stream-plot"));
+    }, data, $("stream-plot"));
   } else {
-    streamPlot.setData(streamData);
+    streamPlot.setData(data);
   }
-  $("stream-plot").dataset.points = String(streamData[0].length);
+  const el = $("stream-plot");
+  el.dataset.points = String(streamPoints.length);
+  el.dataset.channel = c.name;
+  el.dataset.finite = String(data[3].filter((x) => x !== null && Number.isFinite(x)).length);
 }
 
 function renderRecord(r) {
@@ -479,6 +514,7 @@ window.startLive = (info) => {
   es.addEventListener("identity", (e) => {
     const id = JSON.parse(e.data);
     $("source").textContent = `device: ${info.port} — ${id.firmware} on ${id.board}, IMU ${id.imu_rate_hz} Hz, magnetometer ${id.mag_rate_hz} Hz`;
+    if (id.channels) setChannels(id.channels);
   });
   es.addEventListener("status", (e) => renderStatus(JSON.parse(e.data)));
   es.addEventListener("tables", (e) => renderTables(JSON.parse(e.data)));

@@ -160,28 +160,78 @@ struct Recording {
     failed: Option<String>,
 }
 
-/// The decimator: per channel the sum, minimum and maximum over the current window.
-struct Window {
+/// The channels of the decimated stream with their units: the ten calibrated columns of the
+/// contract, then the device's attitude estimate (roll, pitch, heading), when it sends one.
+pub const STREAM_CHANNELS: [(&str, &str); STREAM_N] = [
+    ("ax", "m/s²"),
+    ("ay", "m/s²"),
+    ("az", "m/s²"),
+    ("gx", "deg/s"),
+    ("gy", "deg/s"),
+    ("gz", "deg/s"),
+    ("mx", "µT"),
+    ("my", "µT"),
+    ("mz", "µT"),
+    ("temp", "°C"),
+    ("roll", "deg"),
+    ("pitch", "deg"),
+    ("heading", "deg"),
+];
+/// Channels of a stream point.
+pub const STREAM_N: usize = 13;
+/// Index of the heading in [`STREAM_CHANNELS`] (an angle: averaged unwrapped).
+const HEADING: usize = 12;
+
+/// The decimator: per channel the count, sum, sum of squares, minimum and maximum over the
+/// current window. Values are summed as offsets from the channel's first value in the window
+/// (the variance without cancellation; the heading unwrapped across 0/360°).
+pub(crate) struct Window {
     start: Option<f64>,
-    n: u32,
-    sum: [f64; 10],
-    min: [f64; 10],
-    max: [f64; 10],
+    /// Rows (IMU samples) in the window.
+    rows: u32,
+    n: [u32; STREAM_N],
+    first: [f64; STREAM_N],
+    sum: [f64; STREAM_N],
+    sq: [f64; STREAM_N],
+    min: [f64; STREAM_N],
+    max: [f64; STREAM_N],
 }
 
 impl Window {
-    fn new() -> Window {
+    pub(crate) fn new() -> Window {
         Window {
             start: None,
-            n: 0,
-            sum: [0.0; 10],
-            min: [f64::INFINITY; 10],
-            max: [f64::NEG_INFINITY; 10],
+            rows: 0,
+            n: [0; STREAM_N],
+            first: [0.0; STREAM_N],
+            sum: [0.0; STREAM_N],
+            sq: [0.0; STREAM_N],
+            min: [f64::INFINITY; STREAM_N],
+            max: [f64::NEG_INFINITY; STREAM_N],
         }
     }
 
+    fn add(&mut self, k: usize, x: f64) {
+        if !x.is_finite() {
+            return;
+        }
+        if self.n[k] == 0 {
+            self.first[k] = x;
+        }
+        let d = if k == HEADING {
+            imu_cal::heading::angle_diff(x, self.first[k])
+        } else {
+            x - self.first[k]
+        };
+        self.n[k] += 1;
+        self.sum[k] += d;
+        self.sq[k] += d * d;
+        self.min[k] = self.min[k].min(d);
+        self.max[k] = self.max[k].max(d);
+    }
+
     /// Add a row; returns the finished window's point when `t` starts a new one.
-    fn push(&mut self, t: f64, v: &[Option<f64>; 10]) -> Option<Value> {
+    pub(crate) fn push(&mut self, t: f64, v: &[Option<f64>; 10]) -> Option<Value> {
         let mut out = None;
         match self.start {
             Some(s) if t - s >= WINDOW_S || t < s => {
@@ -192,30 +242,56 @@ impl Window {
             None => self.start = Some(t),
             _ => {}
         }
-        self.n += 1;
+        self.rows += 1;
         for (k, x) in v.iter().enumerate() {
-            let x = x.unwrap_or(f64::NAN);
-            self.sum[k] += x;
-            self.min[k] = self.min[k].min(x);
-            self.max[k] = self.max[k].max(x);
+            if let Some(x) = x {
+                self.add(k, *x);
+            }
         }
         out
     }
 
-    fn point(&self) -> Option<Value> {
+    /// Add the device's attitude estimates (they come in frames of their own, a few ms after
+    /// the samples they cover: each counts in the window open when it arrives).
+    pub(crate) fn orientation(&mut self, o: &[imu_proto::Orientation]) {
+        for e in o {
+            self.add(10, f64::from(e.roll_deg));
+            self.add(11, f64::from(e.pitch_deg));
+            self.add(HEADING, f64::from(e.heading_deg));
+        }
+    }
+
+    /// The window's point: `t` (its first row, s of device time), `n` rows, and per channel of
+    /// [`STREAM_CHANNELS`] the mean, minimum, maximum and standard deviation (null: no value).
+    pub(crate) fn point(&self) -> Option<Value> {
         let t = self.start?;
-        if self.n == 0 {
+        if self.rows == 0 {
             return None;
         }
-        let n = f64::from(self.n);
         let f = noise_model::session::num;
-        Some(json!({
-            "t": t,
-            "n": self.n,
-            "mean": self.sum.iter().map(|s| f(s / n)).collect::<Vec<_>>(),
-            "min": self.min.iter().map(|&x| f(x)).collect::<Vec<_>>(),
-            "max": self.max.iter().map(|&x| f(x)).collect::<Vec<_>>(),
-        }))
+        let mut mean = Vec::with_capacity(STREAM_N);
+        let (mut min, mut max, mut sd) = (mean.clone(), mean.clone(), mean.clone());
+        for k in 0..STREAM_N {
+            if self.n[k] == 0 {
+                for v in [&mut mean, &mut min, &mut max, &mut sd] {
+                    v.push(Value::Null);
+                }
+                continue;
+            }
+            let n = f64::from(self.n[k]);
+            let m = self.sum[k] / n;
+            // the heading's mean back in [0, 360), its extremes shifted with it
+            let base = if k == HEADING {
+                (self.first[k] + m).rem_euclid(360.0) - m
+            } else {
+                self.first[k]
+            };
+            mean.push(f(base + m));
+            min.push(f(base + self.min[k]));
+            max.push(f(base + self.max[k]));
+            sd.push(f((self.sq[k] / n - m * m).max(0.0).sqrt()));
+        }
+        Some(json!({ "t": t, "n": self.rows, "mean": mean, "min": min, "max": max, "sd": sd }))
     }
 }
 
@@ -283,6 +359,9 @@ impl Live {
             Reply::Identity(id) => json!({
                 "firmware": id.firmware.as_str(), "board": id.board.as_str(),
                 "protocol": id.protocol, "imu_rate_hz": id.imu_rate_hz, "mag_rate_hz": id.mag_rate_hz,
+                "channels": STREAM_CHANNELS.iter()
+                    .map(|(name, unit)| json!({ "name": name, "unit": unit }))
+                    .collect::<Vec<_>>(),
             }),
             other => bail!("{port}: unexpected reply to Identify: {other:?}"),
         };
@@ -404,6 +483,7 @@ fn read_loop(
                 }
             }
             DeviceMsg::Orientation(o) => {
+                window.orientation(&o);
                 if let Some(rec) = shared.lock().expect("snapshot").record.as_mut() {
                     rec.held.estimates(&o);
                 }
@@ -824,6 +904,58 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn orientation(t_us: u64, heading_deg: f32) -> imu_proto::Orientation {
+        imu_proto::Orientation {
+            seq: 0,
+            t_us,
+            q: [1.0, 0.0, 0.0, 0.0],
+            roll_deg: 1.0,
+            pitch_deg: -2.0,
+            heading_deg,
+            state: imu_proto::AhrsState::Tracking,
+        }
+    }
+
+    /// A window's point: each channel's mean, extremes and standard deviation (a random offset
+    /// and spread); the heading averaged across north (358° and 4° give 1°, not 181°); a
+    /// channel without values (no attitude estimate) is null.
+    #[test]
+    fn a_window_decimates_every_channel_and_the_heading_across_north() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .subsec_nanos();
+        let (offset, spread) = (
+            1e3 * f64::from(key % 1000) / 1000.0,
+            0.1 + f64::from(key % 7),
+        );
+        let mut w = Window::new();
+        let xs = [-1.0, 1.0, -1.0, 1.0];
+        for (i, x) in xs.iter().enumerate() {
+            let mut v = [None; 10];
+            v[3] = Some(offset + spread * x);
+            assert!(w.push(i as f64 * 1e-3, &v).is_none());
+        }
+        let p = w.point().unwrap();
+        assert_eq!(p["n"], 4);
+        let close = |v: &Value, x: f64| (v.as_f64().unwrap() - x).abs() < 1e-9 * (1.0 + x.abs());
+        assert!(close(&p["mean"][3], offset), "key {key}: {p}");
+        assert!(close(&p["sd"][3], spread), "key {key}: {p}");
+        assert!(close(&p["min"][3], offset - spread) && close(&p["max"][3], offset + spread));
+        assert!(p["mean"][0].is_null() && p["mean"][12].is_null());
+        w.orientation(&[orientation(0, 358.0), orientation(5_000, 4.0)]);
+        let p = w.point().unwrap();
+        assert!(close(&p["mean"][12], 1.0), "{p}");
+        assert!(
+            close(&p["min"][12], -2.0) && close(&p["max"][12], 4.0),
+            "{p}"
+        );
+        assert!(close(&p["sd"][12], 3.0), "{p}");
+        assert!(close(&p["mean"][10], 1.0) && close(&p["mean"][11], -2.0));
+        // the next window starts 0.1 s later and hands this one out
+        assert!(w.push(0.1, &[Some(0.0); 10]).is_some());
+    }
 
     /// Directions drawn at random around a random hard-iron offset: the whole sphere is covered;
     /// a turn in one plane covers only the equatorial band (12 of 72 bins).
