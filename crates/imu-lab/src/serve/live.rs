@@ -54,8 +54,8 @@ const QUEUE: usize = 256;
 /// The live side: what the reader thread keeps, and the channel to the pages.
 pub struct Live {
     pub port: String,
-    shared: Arc<Mutex<Snapshot>>,
-    tx: broadcast::Sender<(String, Value)>,
+    pub(super) shared: Arc<Mutex<Snapshot>>,
+    pub(super) tx: broadcast::Sender<(String, Value)>,
     record_dir: PathBuf,
     /// Requests for the device, sent by the reader thread (it owns the link).
     requests: Mutex<mpsc::Sender<Pending>>,
@@ -76,7 +76,7 @@ const REPLY_WAIT: Duration = Duration::from_secs(10);
 
 /// The latest of everything, for a page that connects now.
 #[derive(Default)]
-struct Snapshot {
+pub(super) struct Snapshot {
     identity: Value,
     status: Value,
     tables: Value,
@@ -88,13 +88,21 @@ struct Snapshot {
     link_error: Option<String>,
     /// The magnetometer wizard's points.
     mag: MagPoints,
-    /// The last fit's calibration, checked and ready for the device, with the one-time code
-    /// the page must send back to upload it.
-    mag_cal: Option<ReadyCal>,
+    /// The last fit's calibration (either wizard's), checked and ready for the device, with
+    /// the one-time code the page must send back to upload it.
+    ready_cal: Option<ReadyCal>,
+    /// The calibration file of the last upload from this page (TOML): a later fit of another
+    /// sensor updates its own section and keeps the others.
+    pub(super) cal_file: Option<String>,
+    /// The accelerometer's pose wizard.
+    pub(super) poses: super::poses::Wizard,
+    /// The device's noise (from its tables), for the pose wizard's stillness.
+    noise: Option<super::poses::Noise>,
 }
 
-/// A calibration the user may upload: the blob and its confirmation code.
+/// A calibration the user may upload: the calibration file, its blob and the confirmation code.
 struct ReadyCal {
+    toml: String,
     blob: Vec<u8>,
     code: String,
 }
@@ -396,7 +404,7 @@ impl Live {
     }
 }
 
-fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
+pub(super) fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
     // no page open: nobody to tell
     let _ = tx.send((kind.to_string(), v));
 }
@@ -462,6 +470,12 @@ fn read_loop(
                     });
                 }
                 for p in points {
+                    if let Some(w) = super::poses::Win::from_point(&p) {
+                        let noise = s.noise;
+                        if let Some(v) = s.poses.window(w, noise) {
+                            send(tx, "accel", v);
+                        }
+                    }
                     if s.mag.on {
                         let m = |k: usize| p["mean"][k].as_f64().unwrap_or(f64::NAN);
                         let point = [m(6), m(7), m(8)];
@@ -511,7 +525,10 @@ fn read_loop(
                 // a round is ten tables, one per channel, sent one after the other
                 if round_tables.len() == Channel::ALL.len() {
                     let v = json!({ "round": t.snapshot, "tables": round_tables });
-                    shared.lock().expect("snapshot").tables = v.clone();
+                    let mut s = shared.lock().expect("snapshot");
+                    s.noise = super::poses::noise_from_tables(&v).or(s.noise);
+                    s.tables = v.clone();
+                    drop(s);
                     send(tx, "tables", v);
                     round_tables = Vec::new();
                 }
@@ -546,6 +563,7 @@ pub async fn events(State(s): State<Shared>) -> Response {
             Value::Array(snap.stream.iter().cloned().collect()),
         ));
         v.push(("record".into(), record_state(&snap)));
+        v.push(("accel".into(), snap.poses.state()));
         if let Some(e) = &snap.link_error {
             v.push(("link".into(), json!({ "error": e })));
         }
@@ -581,7 +599,7 @@ fn record_state(s: &Snapshot) -> Value {
 struct Empty {}
 
 /// The body every live write takes: `{}` (anything else is a 400).
-fn empty(bytes: &Bytes) -> Option<Response> {
+pub(super) fn empty(bytes: &Bytes) -> Option<Response> {
     super::noise::body::<Empty>(bytes)
         .err()
         .map(|e| error(StatusCode::BAD_REQUEST, &e))
@@ -756,6 +774,7 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             ),
         );
     }
+    let existing = live.shared.lock().expect("snapshot").cal_file.clone();
     let fitted = tokio::task::spawn_blocking(move || {
         use imu_cal::session::{self as cal, Sensor};
         let col = |k: usize| points.iter().map(|p| p[k]).collect::<Vec<f64>>();
@@ -793,45 +812,67 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         };
         let loaded = cal::prepare(&input, &o)?;
         let run = cal::run(&loaded, &o)?;
-        // the calibration file `calibrate --out` would write, converted for the device with the
-        // plausibility checks `imu-lab device calibrate --upload` applies
-        let blob = cal::update_file(None, &loaded, &run).and_then(|toml| {
-            let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
-            let c = file.to_device().map_err(|e| e.to_string())?;
-            let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
-            imu_cal::device::encode_blob(&c, &mut buf)
-                .map(|b| b.to_vec())
-                .map_err(|e| format!("encoding the blob: {e}"))
-        });
-        Ok::<(String, Result<Vec<u8>, String>), String>((cal::json_out(&loaded, &run), blob))
+        Ok::<_, String>(calibration(&loaded, &run, existing.as_deref()))
     })
     .await;
-    let (text, blob) = match fitted {
+    let (v, upload) = match fitted {
         Ok(Ok(t)) => t,
         Ok(Err(e)) => return error(StatusCode::UNPROCESSABLE_ENTITY, &e),
         Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     };
-    let v: Value = match serde_json::from_str(&text) {
-        Ok(v) => v,
-        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
-    };
-    let upload = match blob {
-        Ok(blob) if blob.len() <= imu_proto::MAX_CAL_BLOB => {
+    let upload = offer(live, upload);
+    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+}
+
+/// A fit's answer: the object `imu-lab calibrate --json` prints, and the calibration file
+/// `calibrate --out` would write (`existing` with this sensor's section set) with its blob,
+/// through the plausibility checks `imu-lab device calibrate --upload` applies — or why not.
+pub(super) fn calibration(
+    loaded: &imu_cal::session::Loaded,
+    run: &imu_cal::session::Outcome,
+    existing: Option<&str>,
+) -> (Value, Result<(String, Vec<u8>), String>) {
+    use imu_cal::session as cal;
+    let v = serde_json::from_str(&cal::json_out(loaded, run)).unwrap_or(Value::Null);
+    let ready = cal::update_file(existing, loaded, run).and_then(|toml| {
+        let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
+        let c = file.to_device().map_err(|e| e.to_string())?;
+        let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+        let blob = imu_cal::device::encode_blob(&c, &mut buf)
+            .map(|b| b.to_vec())
+            .map_err(|e| format!("encoding the blob: {e}"))?;
+        if blob.len() > imu_proto::MAX_CAL_BLOB {
+            return Err(format!(
+                "a blob of {} B exceeds the device's {} B",
+                blob.len(),
+                imu_proto::MAX_CAL_BLOB
+            ));
+        }
+        Ok((toml, blob))
+    });
+    (v, ready)
+}
+
+/// Keep a plausible calibration for upload under a new one-time code (the page shows it with
+/// the confirmation); what the page is told: `{plausible, code}` or `{plausible: false,
+/// problem}`. An implausible fit withdraws the last offer.
+pub(super) fn offer(live: &Live, ready: Result<(String, Vec<u8>), String>) -> Value {
+    let mut snap = live.shared.lock().expect("snapshot");
+    match ready {
+        Ok((toml, blob)) => {
             let code = super::guard::new_token()[..8].to_string();
-            live.shared.lock().expect("snapshot").mag_cal = Some(ReadyCal {
+            snap.ready_cal = Some(ReadyCal {
+                toml,
                 blob,
                 code: code.clone(),
             });
             json!({ "plausible": true, "code": code })
         }
-        Ok(blob) => json!({ "plausible": false,
-            "problem": format!("a blob of {} B exceeds the device's {} B", blob.len(), imu_proto::MAX_CAL_BLOB) }),
         Err(problem) => {
-            live.shared.lock().expect("snapshot").mag_cal = None;
+            snap.ready_cal = None;
             json!({ "plausible": false, "problem": problem })
         }
-    };
-    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+    }
 }
 
 #[derive(Deserialize)]
@@ -843,10 +884,10 @@ struct UploadBody {
     persist: bool,
 }
 
-/// POST /api/live/mag/upload {"confirm": CODE, "persist": false}: send the last fit's
-/// calibration to the device, once, with the code its fit gave (403 without it: nothing is
-/// written to a device without the user's confirmation of that very calibration).
-pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
+/// POST /api/live/upload {"confirm": CODE, "persist": false}: send the last fit's calibration
+/// (either wizard's) to the device, once, with the code its fit gave (403 without it: nothing
+/// is written to a device without the user's confirmation of that very calibration).
+pub async fn upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     let b: UploadBody = match super::noise::body(&bytes) {
         Ok(b) => b,
         Err(e) => return error(StatusCode::BAD_REQUEST, &e),
@@ -854,9 +895,9 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     let Some(live) = s.live.as_ref() else {
         return error(StatusCode::CONFLICT, "no device: started on a recording");
     };
-    let blob = {
+    let ready = {
         let mut snap = live.shared.lock().expect("snapshot");
-        match &snap.mag_cal {
+        match &snap.ready_cal {
             None => return error(StatusCode::CONFLICT, "no plausible calibration fitted yet"),
             Some(c) if c.code != b.confirm => {
                 return error(
@@ -864,10 +905,10 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
                     "the confirmation code is not the one of the last fit: nothing uploaded",
                 )
             }
-            Some(_) => snap.mag_cal.take().expect("checked").blob,
+            Some(_) => snap.ready_cal.take().expect("checked"),
         }
     };
-    let Ok(blob) = imu_proto::Vec::from_slice(&blob) else {
+    let Ok(blob) = imu_proto::Vec::from_slice(&ready.blob) else {
         return error(StatusCode::UNPROCESSABLE_ENTITY, "the blob is too long");
     };
     let (reply_tx, reply_rx) = oneshot::channel();
@@ -883,6 +924,8 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     }
     match reply_rx.await {
         Ok(Ok(Reply::Ok)) => {
+            // the next fit of another sensor keeps this one's section
+            live.shared.lock().expect("snapshot").cal_file = Some(ready.toml);
             Json(json!({ "applied": true, "persisted": b.persist })).into_response()
         }
         Ok(Ok(Reply::Error(imu_proto::ErrorCode::BadCalibration(p)))) => error(

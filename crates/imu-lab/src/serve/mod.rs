@@ -25,6 +25,7 @@ pub mod assets;
 pub mod guard;
 pub mod live;
 pub mod noise;
+pub mod poses;
 #[cfg(test)]
 mod tests;
 
@@ -90,7 +91,13 @@ pub fn router(state: Shared) -> Router {
         .route("/api/live/mag/start", post(live::mag_start))
         .route("/api/live/mag/stop", post(live::mag_stop))
         .route("/api/live/mag/fit", post(live::mag_fit))
-        .route("/api/live/mag/upload", post(live::mag_upload))
+        .route("/api/live/accel/capture", post(poses::capture))
+        .route("/api/live/accel/cancel", post(poses::cancel))
+        .route("/api/live/accel/merge", post(poses::merge))
+        .route("/api/live/accel/remove", post(poses::remove))
+        .route("/api/live/accel/clear", post(poses::clear))
+        .route("/api/live/accel/fit", post(poses::fit))
+        .route("/api/live/upload", post(live::upload))
         .fallback(not_found)
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),
