@@ -31,8 +31,8 @@ mod tests;
 
 /// What the server was given: a recording, or a device port.
 pub enum Source {
-    /// A CSV recording in the contract (the noise lab).
-    File(PathBuf),
+    /// A CSV recording and `imu-lab fit`'s options to read it (the noise lab).
+    File(crate::input::InputArgs),
     /// A device link (`/dev/ttyACM0`, `tcp:HOST:PORT`): the live page; recordings go into
     /// `record_dir`, each then open in the noise lab.
     Port { port: String, record_dir: PathBuf },

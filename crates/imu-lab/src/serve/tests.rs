@@ -52,7 +52,16 @@ fn app(file: &std::path::Path) -> Router {
     router(Arc::new(AppState {
         listen: HOST.parse().unwrap(),
         token: TOKEN.into(),
-        lab: noise::Lab::open(file.to_path_buf()).unwrap(),
+        lab: noise::Lab::open(crate::input::InputArgs {
+            file: file.to_path_buf(),
+            rate: None,
+            ignore_time: false,
+            skip_lines: 0,
+            scale: None,
+            unit: None,
+            rename: vec![],
+        })
+        .unwrap(),
         live: None,
     }))
 }
