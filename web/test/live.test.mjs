@@ -142,8 +142,33 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
     null, { timeout: 60_000 });
   await page.screenshot({ path: join(OUT, "mag-wizard.png"), fullPage: true });
   await accelFit(page);
+  await verification(page);
   await page.close();
 });
+
+/// The verification recording after the uploads: 30 s of device time in raw values, the
+/// heading's consistency with the gyro before (raw) and after (the calibration uploaded).
+async function verification(page) {
+  await page.click("#verify-start");
+  await page.waitForSelector("#verify-stop:not([disabled])");
+  await page.waitForFunction(() => Number(document.querySelector("#verify-state").dataset.seconds) >= 30,
+    null, { timeout: 120_000 });
+  await page.click("#verify-stop");
+  await page.waitForSelector("#verify-result[data-windows]", { timeout: 60_000 });
+  const text = await page.textContent("#verify-result");
+  console.log(`verification: ${text}`);
+  const before = Number(await page.getAttribute("#verify-result", "data-before"));
+  const after = Number(await page.getAttribute("#verify-result", "data-after"));
+  const windows = Number(await page.getAttribute("#verify-result", "data-windows"));
+  assert.match(text, /before \(raw\) [\d.]+ ± [\d.e-]+° rms .* → after \(the uploaded calibration\) [\d.]+ ± [\d.e-]+° rms/);
+  // the emulated part's hard iron (25 µT, half the field) turns the heading by tens of degrees
+  // as the board turns; the fitted calibration leaves the gyro's noise and the 0.1 s windows
+  assert.ok(windows >= 5, `${windows} windows`);
+  assert.ok(before > 2 && after < before / 3, `before ${before}°, after ${after}°`);
+  // back to calibrated values
+  await page.waitForFunction(() => /Calibrated/.test(document.querySelector("#live-status").textContent), null, { timeout: 30_000 });
+  await page.screenshot({ path: join(OUT, "verify.png"), fullPage: true });
+}
 
 /// The accelerometer's wizard on the emulated board turned through the calibration run (eight
 /// poses held 5 s): one pose captured twice at once (the merge warning, then the merge), then

@@ -646,6 +646,29 @@ function renderAccelFit(r) {
   div.appendChild(renderUpload(r.upload, "accel"));
 }
 
+// ---------- verification: heading before → after ----------
+
+function renderVerify(v) {
+  $("verify-start").disabled = v.recording;
+  $("verify-stop").disabled = !v.recording;
+  $("verify-state").textContent = v.recording
+    ? `recording raw values: ${fmt(v.seconds, 3)} s` : "";
+  $("verify-state").dataset.seconds = String(v.seconds);
+  if (v.recording) return;
+  const one = (r) => (r ? `${fmt(r.rms_deg, 3)} ± ${fmt(r.sigma_deg, 2)}° rms (max ${fmt(r.max_deg, 3)}°, ${r.windows} windows)`
+    : "no window counted (no turn within ±70° of pitch)");
+  const div = $("verify-result");
+  const p = document.createElement("p");
+  p.textContent = `Heading inconsistency with the gyro over ${fmt(v.seconds, 3)} s of device time ` +
+    `(${v.check_window_s} s windows): before (raw) ${one(v.before)} → after (the uploaded calibration) ${one(v.after)}` +
+    (v.calibrated_again ? ` — the stream did not return to calibrated values: ${v.calibrated_again}` : "");
+  p.className = v.before && v.after && v.after.rms_deg < v.before.rms_deg ? "ok" : "bad";
+  div.replaceChildren(p);
+  div.dataset.before = v.before ? String(v.before.rms_deg) : "";
+  div.dataset.after = v.after ? String(v.after.rms_deg) : "";
+  div.dataset.windows = v.after ? String(v.after.windows) : "0";
+}
+
 window.startLive = (info) => {
   $("live").hidden = false;
   const es = new EventSource("/api/live/events");
@@ -661,6 +684,9 @@ window.startLive = (info) => {
   es.addEventListener("record", (e) => renderRecord(JSON.parse(e.data)));
   es.addEventListener("link", (e) => showError(JSON.parse(e.data).error));
   es.addEventListener("accel", (e) => renderAccel(JSON.parse(e.data)));
+  es.addEventListener("verify", (e) => renderVerify(JSON.parse(e.data)));
+  $("verify-start").onclick = async () => { const v = await act("/api/live/verify/start"); if (v) renderVerify(v); };
+  $("verify-stop").onclick = async () => { const v = await act("/api/live/verify/stop"); if (v) renderVerify(v); };
   $("accel-capture").onclick = () => accelAct("/api/live/accel/capture", { continuous: false });
   $("accel-continuous").onclick = () => accelAct("/api/live/accel/capture", { continuous: true });
   $("accel-cancel").onclick = () => accelAct("/api/live/accel/cancel");

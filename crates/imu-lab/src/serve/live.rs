@@ -58,11 +58,11 @@ pub struct Live {
     pub(super) tx: broadcast::Sender<(String, Value)>,
     record_dir: PathBuf,
     /// Requests for the device, sent by the reader thread (it owns the link).
-    requests: Mutex<mpsc::Sender<Pending>>,
+    pub(super) requests: Mutex<mpsc::Sender<Pending>>,
 }
 
 /// A request for the device and where its reply goes.
-type Pending = (Request, oneshot::Sender<Result<Reply, String>>);
+pub(super) type Pending = (Request, oneshot::Sender<Result<Reply, String>>);
 
 /// A request sent: its id, where its reply goes, and until when it may come.
 type Waiting = (
@@ -98,6 +98,8 @@ pub(super) struct Snapshot {
     pub(super) poses: super::poses::Wizard,
     /// The device's noise (from its tables), for the pose wizard's stillness.
     noise: Option<super::poses::Noise>,
+    /// The verification recording, while it runs.
+    pub(super) verify: Option<super::verify::Recording>,
 }
 
 /// A calibration the user may upload: the calibration file, its blob and the confirmation code.
@@ -470,6 +472,9 @@ fn read_loop(
                     });
                 }
                 for p in points {
+                    if let Some(v) = s.verify.as_mut().and_then(|r| r.window(&p)) {
+                        send(tx, "verify", v);
+                    }
                     if let Some(w) = super::poses::Win::from_point(&p) {
                         let noise = s.noise;
                         if let Some(v) = s.poses.window(w, noise) {

@@ -28,6 +28,7 @@ pub mod noise;
 pub mod poses;
 #[cfg(test)]
 mod tests;
+pub mod verify;
 
 /// What the server was given: a recording, or a device port.
 pub enum Source {
@@ -98,6 +99,8 @@ pub fn router(state: Shared) -> Router {
         .route("/api/live/accel/clear", post(poses::clear))
         .route("/api/live/accel/fit", post(poses::fit))
         .route("/api/live/upload", post(live::upload))
+        .route("/api/live/verify/start", post(verify::start))
+        .route("/api/live/verify/stop", post(verify::stop))
         .fallback(not_found)
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),

@@ -284,6 +284,8 @@ async fn malformed_requests_get_400_and_change_nothing() {
         ("/api/live/accel/merge", r#"{"a":0,"b":-1}"#),
         ("/api/live/accel/remove", r#"{"index":"first"}"#),
         ("/api/live/accel/fit", r#"{"model":"offset"}"#),
+        ("/api/live/verify/start", r#"{"seconds":30}"#),
+        ("/api/live/verify/stop", "stop"),
         ("/api/live/record", r#"{"file":"/etc/passwd"}"#),
         ("/api/live/mag/start", "x"),
     ] {
