@@ -2,16 +2,16 @@
 // Pico): every INTERVAL s the page's JS heap and DOM size (Chromium's performance metrics over
 // CDP, after a forced garbage collection) and the server's resident memory (/proc). Neither
 // should grow once the stream history (60 s of device time) is full. The run lasts until
-// MINUTES have passed both in wall time and in the device's time (an emulated board runs
-// faster or slower than real time with the machine's load). The plotted channel changes at
+// MINUTES of wall time and DEVICE_MINUTES (default MINUTES) of the device's time have passed
+// (an emulated board runs faster or slower than real time with the machine's load). The plotted channel changes at
 // every row (each of the stream's channels in turn), as a user's clicks would.
 //
-//   IMU_LAB_BIN=… node web/bench/live_soak.mjs tcp:127.0.0.1:PORT MINUTES [INTERVAL_S]
+//   IMU_LAB_BIN=… node web/bench/live_soak.mjs tcp:127.0.0.1:PORT MINUTES [INTERVAL_S [DEVICE_MINUTES]]
 // (`cargo xtask bench-serve --minutes 60` starts the emulated board and runs this.)
 import { readFileSync } from "node:fs";
 import { browser, scratch, serve } from "../test/lib.mjs";
 
-const [port, minutes = "10", every = "30"] = process.argv.slice(2);
+const [port, minutes = "10", every = "30", deviceMinutes = minutes] = process.argv.slice(2);
 if (!port) {
   console.error("usage: node web/bench/live_soak.mjs PORT MINUTES [INTERVAL_S]");
   process.exit(2);
@@ -47,19 +47,19 @@ for (let k = 0; ; k++) {
   rows.push(row);
   console.log(`| ${wall.toFixed(1)} | ${row.device.toFixed(1)} | ${s.received} | ${s.round} | ${s.channel} | ${s.points} | ` +
     `${row.heap.toFixed(2)} | ${m.Nodes} | ${row.rss.toFixed(1)} |`);
-  if (wall >= Number(minutes) && row.device >= Number(minutes)) break;
+  if (wall >= Number(minutes) && row.device >= Number(deviceMinutes)) break;
   // the next channel, as a user's click would pick it
   if (channels.length) await page.selectOption("#stream-channel", channels[(k + 1) % channels.length]);
   await new Promise((r) => setTimeout(r, Number(every) * 1000));
 }
 // after the first row past 2 minutes (the history full): the range of each measure
 const full = rows.filter((r) => r.wall >= 2);
-const range = (f) => `${Math.min(...full.map(f)).toFixed(2)}–${Math.max(...full.map(f)).toFixed(2)}`;
+const range = (f, d = 2) => `${Math.min(...full.map(f)).toFixed(d)}–${Math.max(...full.map(f)).toFixed(d)}`;
 if (full.length) {
   console.log();
   console.log(`From ${full[0].wall.toFixed(1)} to ${full[full.length - 1].wall.toFixed(1)} min of wall time ` +
     `(${full[0].device.toFixed(1)} to ${full[full.length - 1].device.toFixed(1)} min of device time): ` +
-    `page JS heap ${range((r) => r.heap)} MiB, DOM ${range((r) => r.nodes)} nodes, server RSS ${range((r) => r.rss)} MiB.`);
+    `page JS heap ${range((r) => r.heap)} MiB, DOM ${range((r) => r.nodes, 0)} nodes, server RSS ${range((r) => r.rss)} MiB.`);
 }
 await ctx.close();
 await srv.stop();

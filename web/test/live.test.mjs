@@ -167,7 +167,7 @@ async function verification(page) {
   assert.ok(before > 2 && after < before / 3, `before ${before}°, after ${after}°`);
   // back to calibrated values
   await page.waitForFunction(() => /Calibrated/.test(document.querySelector("#live-status").textContent), null, { timeout: 30_000 });
-  await page.screenshot({ path: join(OUT, "verify.png"), fullPage: true });
+  await page.locator("#verify-wizard").screenshot({ path: join(OUT, "verify.png") });
 }
 
 /// The accelerometer's wizard on the emulated board turned through the calibration run (eight
@@ -197,7 +197,7 @@ async function accelPoses(page) {
   console.log(`merge warning: ${warning}`);
   assert.match(warning, /Poses 1 and 2 are the same orientation \([\d.]+° apart/);
   assert.match(await page.textContent("#accel-warnings"), /Missing: no pose yet with .* up/);
-  await page.screenshot({ path: join(OUT, "accel-merge-warning.png"), fullPage: true });
+  await page.locator("#accel-wizard").screenshot({ path: join(OUT, "accel-merge-warning.png") });
   await page.click(".accel-merge");
   await page.waitForFunction(() => document.querySelector("#accel-poses tbody").dataset.poses === "1" &&
     document.querySelector("#accel-warnings").dataset.same === "0");
@@ -251,5 +251,5 @@ async function accelFit(page) {
   await page.click("#accel-upload-button");
   await page.waitForSelector("#accel-upload-state[data-applied=yes]", { timeout: 60_000 });
   assert.match(await page.textContent("#accel-upload-state"), /RAM only/);
-  await page.screenshot({ path: join(OUT, "accel-wizard.png"), fullPage: true });
+  await page.locator("#accel-wizard").screenshot({ path: join(OUT, "accel-wizard.png") });
 }

@@ -374,6 +374,7 @@ mod tests {
             "firmware",
             "firmware --no-build",
             "bench-serve --minutes 60 --every 2",
+            "bench-serve --minutes 20 --device-minutes 60 --every 2",
         ] {
             parse(line).unwrap_or_else(|e| panic!("`cargo xtask {line}`: {e}"));
         }

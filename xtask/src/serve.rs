@@ -121,6 +121,9 @@ pub struct BenchServeArgs {
     /// the machine's load: the soak lasts until both have passed).
     #[arg(long, default_value_t = 60.0)]
     pub minutes: f64,
+    /// Minutes of the device's stream, when they should differ from --minutes of wall time.
+    #[arg(long)]
+    pub device_minutes: Option<f64>,
     /// Minutes between two rows of the table.
     #[arg(long, default_value_t = 2.0)]
     pub every: f64,
@@ -162,7 +165,8 @@ pub fn bench(args: &BenchServeArgs) -> Result<()> {
         .arg("--output")
         .arg(&stream))?;
     // the emulator may run slower than real time: room for three times the soak
-    let seconds = (args.minutes * 60.0 * 3.0 + 600.0).round();
+    let seconds =
+        (args.minutes.max(args.device_minutes.unwrap_or(0.0)) * 60.0 * 3.0 + 600.0).round();
     let sim = crate::emu::Sim::start(
         &elf,
         &[
@@ -186,6 +190,7 @@ pub fn bench(args: &BenchServeArgs) -> Result<()> {
             port,
             format!("{}", args.minutes),
             format!("{}", args.every * 60.0),
+            format!("{}", args.device_minutes.unwrap_or(args.minutes)),
         ])
         .env("IMU_LAB_BIN", bin)
         .env("CHROMIUM", chrome)
