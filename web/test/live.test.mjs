@@ -58,6 +58,23 @@ test("status, tables that update round by round, a bounded stream, a recording i
   // the stream: decimated on the server, at most 600 points on the page
   const points = Number(await page.getAttribute("#stream-plot", "data-points"));
   assert.ok(points > 0 && points <= 600, `${points} stream points`);
+  // every channel (the ten calibrated columns and the device's roll, pitch and heading) with
+  // its unit, each plotted on request with data
+  const options = await page.$$eval("#stream-channel option", (o) => o.map((x) => [x.value, x.textContent]));
+  assert.deepEqual(options.map((o) => o[1]), ["ax [m/s²]", "ay [m/s²]", "az [m/s²]", "gx [deg/s]", "gy [deg/s]",
+    "gz [deg/s]", "mx [µT]", "my [µT]", "mz [µT]", "temp [°C]", "roll [deg]", "pitch [deg]", "heading [deg]"]);
+  for (const [value, label] of options) {
+    await page.selectOption("#stream-channel", value);
+    const name = label.split(" ")[0];
+    await page.waitForFunction((n) => document.querySelector("#stream-plot").dataset.channel === n &&
+      Number(document.querySelector("#stream-plot").dataset.finite) > 0, name);
+    const latest = await page.getAttribute(`#stream-latest tr[data-channel="${name}"]`, "data-mean");
+    assert.ok(Number.isFinite(Number(latest)) && latest !== "", `${name}: latest mean ${latest}`);
+  }
+  // the magnitude of the mean specific force is gravity's (the board still or turning slowly)
+  const g = await page.$$eval("#stream-latest tbody tr", (rows) => Math.hypot(...rows.slice(0, 3).map((r) => Number(r.dataset.mean))));
+  assert.ok(g > 7 && g < 13, `|a| = ${g} m/s²`);
+  await page.selectOption("#stream-channel", "3");
   await page.screenshot({ path: join(OUT, "live.png"), fullPage: true });
 
   // a recording made from the page, opened in the noise lab
@@ -79,11 +96,13 @@ test("status, tables that update round by round, a bounded stream, a recording i
   await page.close();
 });
 
-test("magnetometer wizard: the point cloud grows with its coverage, the fit finds the hard iron", { skip: !PORT && "IMU_LIVE_PORT not set" }, async () => {
+test("calibration wizards: the magnetometer's point cloud and coverage, the accelerometer's poses with a merge warning; both fits within tolerance, both uploaded in RAM", { skip: !PORT && "IMU_LIVE_PORT not set" }, async () => {
   const page = await ctx.newPage();
   await page.goto(srv.url);
   await page.waitForSelector("#live-status[data-uptime]", { timeout: 60_000 });
   await page.click("#mag-start");
+  // the accelerometer's poses while the magnetometer's points are collected (the same turns)
+  await accelPoses(page);
   // the emulated board turns through the simulator's standard trajectory: wait for half of the
   // directions (or 60 s of device time)
   const t0 = Number(await page.getAttribute("#live-status", "data-uptime"));
@@ -109,7 +128,7 @@ test("magnetometer wizard: the point cloud grows with its coverage, the fit find
   // a wrong code is refused by the server, whatever the page does
   const wrong = await page.evaluate(async () => {
     const info = await (await fetch("/api/info")).json();
-    const r = await fetch("/api/live/mag/upload", { method: "POST", headers: { "x-imu-lab-token": info.token },
+    const r = await fetch("/api/live/upload", { method: "POST", headers: { "x-imu-lab-token": info.token },
       body: JSON.stringify({ confirm: "00000000", persist: false }) });
     return r.status;
   });
@@ -122,5 +141,115 @@ test("magnetometer wizard: the point cloud grows with its coverage, the fit find
   await page.waitForFunction(() => /set by the host, not persisted/.test(document.querySelector("#live-status").textContent),
     null, { timeout: 60_000 });
   await page.screenshot({ path: join(OUT, "mag-wizard.png"), fullPage: true });
+  await accelFit(page);
+  await verification(page);
   await page.close();
 });
+
+/// The verification recording after the uploads: 30 s of device time in raw values, the
+/// heading's consistency with the gyro before (raw) and after (the calibration uploaded).
+async function verification(page) {
+  await page.click("#verify-start");
+  await page.waitForSelector("#verify-stop:not([disabled])");
+  await page.waitForFunction(() => Number(document.querySelector("#verify-state").dataset.seconds) >= 30,
+    null, { timeout: 120_000 });
+  await page.click("#verify-stop");
+  await page.waitForSelector("#verify-result[data-windows]", { timeout: 60_000 });
+  const text = await page.textContent("#verify-result");
+  console.log(`verification: ${text}`);
+  const before = Number(await page.getAttribute("#verify-result", "data-before"));
+  const after = Number(await page.getAttribute("#verify-result", "data-after"));
+  const windows = Number(await page.getAttribute("#verify-result", "data-windows"));
+  assert.match(text, /before \(raw\) [\d.]+ ± [\d.e-]+° rms .* → after \(the uploaded calibration\) [\d.]+ ± [\d.e-]+° rms/);
+  // the emulated part's hard iron (25 µT, half the field) turns the heading by tens of degrees
+  // as the board turns; the fitted calibration leaves the gyro's noise and the 0.1 s windows
+  assert.ok(windows >= 5, `${windows} windows`);
+  assert.ok(before > 2 && after < before / 3, `before ${before}°, after ${after}°`);
+  // back to calibrated values
+  await page.waitForFunction(() => /Calibrated/.test(document.querySelector("#live-status").textContent), null, { timeout: 30_000 });
+  await page.locator("#verify-wizard").screenshot({ path: join(OUT, "verify.png") });
+}
+
+/// The accelerometer's wizard on the emulated board turned through the calibration run (eight
+/// poses held 5 s): one pose captured twice at once (the merge warning, then the merge), then
+/// every hold captured until each face is up once and eight poses are held.
+async function accelPoses(page) {
+  // stillness is judged once the device's noise is known (its first Allan tables)
+  await page.waitForSelector("#accel-still[data-still=yes], #accel-still[data-still=no]", { timeout: 120_000 });
+  const state = () => page.evaluate(() => ({
+    n: Number(document.querySelector("#accel-poses tbody").dataset.poses || 0),
+    same: Number(document.querySelector("#accel-warnings").dataset.same || 0),
+    missing: document.querySelector("#accel-warnings").dataset.missing || "",
+  }));
+  const captured = (n) => page.waitForFunction((n) => Number(document.querySelector("#accel-poses tbody").dataset.poses) > n,
+    n, { timeout: 180_000 });
+  // one pose, asked for while the board moves: the progress bar, then the pose
+  await page.waitForSelector("#accel-still[data-still=no]", { timeout: 180_000 });
+  await page.click("#accel-capture");
+  await page.waitForSelector("#accel-progress", { state: "attached" });
+  await captured(0);
+  // the same pose again at once (the board still held: its last second): the same orientation
+  // twice
+  await page.click("#accel-capture");
+  await captured(1);
+  await page.waitForSelector(".merge-warning");
+  const warning = await page.textContent(".merge-warning");
+  console.log(`merge warning: ${warning}`);
+  assert.match(warning, /Poses 1 and 2 are the same orientation \([\d.]+° apart/);
+  assert.match(await page.textContent("#accel-warnings"), /Missing: no pose yet with .* up/);
+  await page.locator("#accel-wizard").screenshot({ path: join(OUT, "accel-merge-warning.png") });
+  await page.click(".accel-merge");
+  await page.waitForFunction(() => document.querySelector("#accel-poses tbody").dataset.poses === "1" &&
+    document.querySelector("#accel-warnings").dataset.same === "0");
+  // every hold from now on, until each face is up once and eight poses are held; a hold taken
+  // again when the run loops is merged
+  await page.click("#accel-continuous");
+  for (;;) {
+    await page.waitForFunction(() => {
+      const n = Number(document.querySelector("#accel-poses tbody").dataset.poses);
+      const w = document.querySelector("#accel-warnings").dataset;
+      return w.same !== "0" || (n >= 8 && w.missing === "");
+    }, null, { timeout: 240_000 });
+    const s = await state();
+    if (!s.same) break;
+    await page.click(".accel-merge");
+    // merged (a new pose may come at the same time: the warnings count, not the poses)
+    await page.waitForFunction((k) => Number(document.querySelector("#accel-warnings").dataset.same) < k, s.same);
+  }
+  await page.click("#accel-cancel");
+  const faces = await page.$$eval("#accel-poses tbody tr", (rows) => rows.map((r) => r.dataset.face));
+  console.log(`poses: ${faces.join(" ")}`);
+  assert.ok(faces.length >= 8 && ["+x", "-x", "+y", "-y", "+z", "-z"].every((f) => faces.includes(f)), faces.join(" "));
+}
+
+/// The accelerometer's fit against the emulated part's errors (drawn by xtask), and its
+/// upload through the magnetometer's path.
+async function accelFit(page) {
+  const truth = JSON.parse(process.env.IMU_LIVE_ACCEL_TRUTH || "null");
+  await page.click("#accel-fit");
+  await page.waitForSelector("#accel-result[data-model]", { timeout: 120_000 });
+  const params = JSON.parse(await page.getAttribute("#accel-result", "data-params"));
+  const sigma = JSON.parse(await page.getAttribute("#accel-result", "data-sigma"));
+  console.log(`emulated accelerometer: ${JSON.stringify(truth)}`);
+  console.log(`fit: ${await page.getAttribute("#accel-result", "data-model")}; offset ${params.offset} ± ${sigma.offset} m/s², ` +
+    `scale ${params.scale} ± ${sigma.scale}`);
+  assert.match(await page.getAttribute("#accel-result", "data-model"), /offset.*scale|scale.*offset/);
+  assert.match(await page.textContent("#accel-result"), /residual RMS [\d.e-]+ m\/s²/);
+  if (truth) {
+    // each pose mean holds ≥ 1000 samples of 0.04 m/s² noise (σ ≈ 1.3 mm/s²) read in 16-bit
+    // counts (0.6 mm/s²): the fit recovers the part within 0.02 m/s² and 0.2 % (ten times
+    // that), far inside the errors drawn (0.05–0.3 m/s², 0.5–3 %)
+    for (let k = 0; k < 3; k++) {
+      assert.ok(Math.abs(params.offset[k] - truth.offset[k]) < 0.02, `offset ${k}: ${params.offset[k]} vs ${truth.offset[k]}`);
+      assert.ok(Math.abs(params.scale[k] - truth.scale[k]) < 0.002, `scale ${k}: ${params.scale[k]} vs ${truth.scale[k]}`);
+    }
+  }
+  // the upload shares the magnetometer's path: refused without the confirmation, then in RAM
+  await page.click("#accel-upload-button");
+  assert.match(await page.textContent("#error"), /confirmation/);
+  await page.check("#accel-confirm");
+  await page.click("#accel-upload-button");
+  await page.waitForSelector("#accel-upload-state[data-applied=yes]", { timeout: 60_000 });
+  assert.match(await page.textContent("#accel-upload-state"), /RAM only/);
+  await page.locator("#accel-wizard").screenshot({ path: join(OUT, "accel-wizard.png") });
+}

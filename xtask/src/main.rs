@@ -46,6 +46,9 @@ enum Cmd {
     Demo(emu::DemoArgs),
     /// Release build of the firmware, size report, UF2 (out/pico-imu.uf2).
     Firmware(firmware::FirmwareArgs),
+    /// The live page of `imu-lab serve` following the emulated board's 1 kHz stream for an hour
+    /// (or `--minutes`): the page's JS heap and DOM, the server's memory (out/serve/soak.md).
+    BenchServe(serve::BenchServeArgs),
 }
 
 /// `cargo xtask test [CARGO_TEST_ARGS…]`.
@@ -64,6 +67,7 @@ fn main() -> Result<()> {
         Cmd::BenchEmu(a) => emu::bench(&a),
         Cmd::Demo(a) => demo_heading::demo(&a),
         Cmd::Firmware(a) => firmware::main(&a),
+        Cmd::BenchServe(a) => serve::bench(&a),
     }
 }
 
@@ -259,8 +263,11 @@ fn test(extra: &[String]) -> Result<()> {
 }
 
 /// The live page's browser tests against the emulated board (web/test/live.test.mjs), turned
-/// through the simulator's standard trajectory by a part with hard and soft iron (the
-/// magnetometer wizard needs the field in many directions; the stream loops).
+/// through the simulator's calibration run (`imu_sim::trajectory::Trajectory::calibration`:
+/// eight poses held 5 s around the standard run's turns) by a part with hard and soft iron and
+/// an accelerometer offset and scale drawn at random (printed, and handed to the test as its
+/// truth): the magnetometer wizard needs the field in many directions, the accelerometer's
+/// the poses; the stream loops.
 fn serve_live_test() -> Result<()> {
     if serve::chromium().is_none() {
         return serve::browser_tests(&["live"], &[]);
@@ -268,16 +275,30 @@ fn serve_live_test() -> Result<()> {
     let out = emu::out_dir("serve")?;
     let elf = emu::build_firmware()?;
     let stream = out.join("live-stream.csv");
+    let (offset, scale) = accel_errors();
+    let truth = format!(
+        r#"{{"offset":[{},{},{}],"scale":[{},{},{}]}}"#,
+        offset[0], offset[1], offset[2], scale[0], scale[1], scale[2]
+    );
+    eprintln!("xtask: the emulated accelerometer's errors (the live test's truth): {truth}");
     // the binary the browser tests use (the test build), not a release build of its own
     run(Command::new(serve::imu_lab_bin()?)
         .args([
             "simulate",
             "--trajectory",
-            "standard",
+            "calibration",
             "--part",
             "hard-iron",
         ])
-        .args(["--rate", "1000", "--samples", "120000", "--seed", "7"])
+        .arg(format!(
+            "--accel-offset={},{},{}",
+            offset[0], offset[1], offset[2]
+        ))
+        .arg(format!(
+            "--accel-scale={},{},{}",
+            scale[0], scale[1], scale[2]
+        ))
+        .args(["--rate", "1000", "--samples", "80500", "--seed", "7"])
         .arg("--output")
         .arg(&stream))?;
     let sim = emu::Sim::start(
@@ -294,7 +315,36 @@ fn serve_live_test() -> Result<()> {
         &out,
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
-    serve::browser_tests(&["live"], &[("IMU_LIVE_PORT", port)])
+    serve::browser_tests(
+        &["live"],
+        &[("IMU_LIVE_PORT", port), ("IMU_LIVE_ACCEL_TRUTH", truth)],
+    )
+}
+
+/// An accelerometer offset (0.05–0.3 m/s² a axis, either sign) and scale (1 ± 0.5–3 %), drawn
+/// from the clock, rounded to what the stream's flags print.
+fn accel_errors() -> ([f64; 3], [f64; 3]) {
+    let mut s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(1, |d| d.as_nanos() as u64)
+        | 1;
+    let mut u = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut signed = |lo: f64, hi: f64| {
+        let x = lo + (hi - lo) * u();
+        if u() < 0.5 {
+            -x
+        } else {
+            x
+        }
+    };
+    let offset = [0; 3].map(|_| (signed(0.05, 0.3) * 1e4).round() / 1e4);
+    let scale = [0; 3].map(|_| ((1.0 + signed(0.005, 0.03)) * 1e5).round() / 1e5);
+    (offset, scale)
 }
 
 #[cfg(test)]
@@ -324,6 +374,8 @@ mod tests {
             "demo --serve --port /dev/ttyACM0",
             "firmware",
             "firmware --no-build",
+            "bench-serve --minutes 60 --every 2",
+            "bench-serve --minutes 20 --device-minutes 60 --every 2",
         ] {
             parse(line).unwrap_or_else(|e| panic!("`cargo xtask {line}`: {e}"));
         }

@@ -112,3 +112,94 @@ pub fn browser_tests(only: &[&str], env: &[(&str, String)]) -> Result<()> {
     }
     run(&mut c)
 }
+
+/// `cargo xtask bench-serve`: the live page's memory over a long run (web/bench/live_soak.mjs).
+#[derive(Debug, Clone, clap::Args)]
+pub struct BenchServeArgs {
+    /// How long the page follows the stream: at least this many minutes of wall time and of
+    /// the device's 1 kHz stream (the emulated board runs faster or slower than real time with
+    /// the machine's load: the soak lasts until both have passed).
+    #[arg(long, default_value_t = 60.0)]
+    pub minutes: f64,
+    /// Minutes of the device's stream, when they should differ from --minutes of wall time.
+    #[arg(long)]
+    pub device_minutes: Option<f64>,
+    /// Minutes between two rows of the table.
+    #[arg(long, default_value_t = 2.0)]
+    pub every: f64,
+}
+
+/// The soak: the emulated Pico (1 kHz IMU, 200 Hz magnetometer) turned through the standard
+/// trajectory, `imu-lab serve` on it (the test build `cargo xtask test` uses), and the page in
+/// headless Chromium, measured every `--every` minutes; the table goes to stdout and to
+/// out/serve/soak.md.
+pub fn bench(args: &BenchServeArgs) -> Result<()> {
+    if !(args.minutes > 0.0 && args.minutes.is_finite() && args.every > 0.0) {
+        bail!(
+            "--minutes {} --every {}: give positive numbers of minutes",
+            args.minutes,
+            args.every
+        );
+    }
+    let Some(chrome) = chromium() else {
+        bail!(
+            "no Chromium at {} ($CHROMIUM, else /usr/bin/chromium): install Debian's chromium \
+             package",
+            chromium_path().display()
+        );
+    };
+    let web = ensure_web()?;
+    let out = out_dir("serve")?;
+    let elf = crate::emu::build_firmware()?;
+    let bin = imu_lab_bin()?;
+    let stream = out.join("soak-stream.csv");
+    run(Command::new(&bin)
+        .args([
+            "simulate",
+            "--trajectory",
+            "standard",
+            "--part",
+            "hard-iron",
+        ])
+        .args(["--rate", "1000", "--samples", "128000", "--seed", "3"])
+        .arg("--output")
+        .arg(&stream))?;
+    // the emulator may run slower than real time: room for three times the soak
+    let seconds =
+        (args.minutes.max(args.device_minutes.unwrap_or(0.0)) * 60.0 * 3.0 + 600.0).round();
+    let sim = crate::emu::Sim::start(
+        &elf,
+        &[
+            "--seconds".into(),
+            format!("{seconds}"),
+            "--stream".into(),
+            stream.display().to_string(),
+            "--log".into(),
+            out.join("soak-firmware.log").display().to_string(),
+            "--quiet".into(),
+        ],
+        &out,
+    )?;
+    let port = format!("tcp:127.0.0.1:{}", sim.port);
+    let report = out.join("soak.md");
+    let file =
+        std::fs::File::create(&report).with_context(|| format!("creating {}", report.display()))?;
+    run(Command::new("node")
+        .arg(web.join("bench/live_soak.mjs"))
+        .args([
+            port,
+            format!("{}", args.minutes),
+            format!("{}", args.every * 60.0),
+            format!("{}", args.device_minutes.unwrap_or(args.minutes)),
+        ])
+        .env("IMU_LAB_BIN", bin)
+        .env("CHROMIUM", chrome)
+        .stdout(file))?;
+    print!(
+        "{}",
+        std::fs::read_to_string(&report)
+            .with_context(|| format!("reading {}", report.display()))?
+    );
+    drop(sim);
+    Ok(())
+}

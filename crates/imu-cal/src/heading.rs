@@ -162,6 +162,70 @@ pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
     out
 }
 
+/// A calibration file's accelerometer and magnetometer corrections in the recording's units
+/// (m/s², µT), and its gyro bias (deg/s: the consistency check's gyro), applied on the host to
+/// the raw columns of a recording (`imu-lab record --raw`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Correction {
+    /// `a_cal = M·(a − o)`: (M, o).
+    pub accel: ([[f64; 3]; 3], [f64; 3]),
+    /// `m_cal = S·(m − h)`: (soft iron, hard iron).
+    pub mag: ([[f64; 3]; 3], [f64; 3]),
+    pub gyro_bias: [f64; 3],
+}
+
+impl Correction {
+    /// The corrections of a calibration file.
+    pub fn of(f: &crate::file::CalFile) -> Correction {
+        let m = crate::accel::correction_matrix(&crate::lab::Params {
+            scale: Some(f.accel.scale),
+            misalignment_deg: Some(f.accel.misalignment_deg),
+            ..crate::lab::Params::default()
+        });
+        Correction {
+            accel: (
+                [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[(i, j)])),
+                f.accel.offset,
+            ),
+            mag: (f.mag.soft_iron, f.mag.hard_iron),
+            gyro_bias: f.gyro.bias,
+        }
+    }
+
+    fn affine((m, o): &([[f64; 3]; 3], [f64; 3]), v: [f64; 3]) -> [f64; 3] {
+        let d = [v[0] - o[0], v[1] - o[1], v[2] - o[2]];
+        [0, 1, 2].map(|i| m[i][0] * d[0] + m[i][1] * d[1] + m[i][2] * d[2])
+    }
+
+    /// A raw row corrected.
+    pub fn apply(&self, r: &Row) -> Row {
+        Row {
+            t: r.t,
+            accel: Correction::affine(&self.accel, r.accel),
+            mag: Correction::affine(&self.mag, r.mag),
+            gyro: [0, 1, 2].map(|i| r.gyro[i] - self.gyro_bias[i]),
+        }
+    }
+}
+
+/// What a calibration buys in heading on one raw recording, without a truth: the heading's
+/// consistency with the gyro ([`gyro_consistency`], windows of `window` s, rows beyond
+/// `max_pitch` left out) with the raw columns as recorded (`before`, the identity) and through
+/// `cal` (`after`); each an rms in degrees with its uncertainty (one value a window), `None`
+/// when no window counts.
+pub fn before_after(
+    rows: &[Row],
+    cal: &Correction,
+    window: f64,
+    max_pitch: f64,
+) -> (Option<Rms>, Option<Rms>) {
+    let fitted: Vec<Row> = rows.iter().map(|r| cal.apply(r)).collect();
+    (
+        rms(&gyro_consistency(rows, window, max_pitch), 1),
+        rms(&gyro_consistency(&fitted, window, max_pitch), 1),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,6 +307,61 @@ mod tests {
         let bad = gyro_consistency(&rows([15.0, 0.0, 0.0]), 2.0, 70.0);
         let r = rms(&bad, 1).unwrap();
         assert!(r.rms > 10.0, "{bad:?}");
+    }
+
+    /// A level-ish turn read through a hard and soft iron drawn at random: before, the heading
+    /// disagrees with the gyro by degrees; after the file that undoes them, not at all.
+    #[test]
+    fn before_after_a_calibration_that_undoes_the_iron() {
+        let mut s = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as u64
+            | 1;
+        let key = s;
+        let mut u = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let hard = [0; 3].map(|_| 10.0 + 20.0 * u());
+        let soft = [
+            [1.0 + 0.1 * u(), 0.02, 0.0],
+            [0.02, 1.0 - 0.1 * u(), 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let rows: Vec<Row> = (0..12_000)
+            .map(|i| {
+                let t = i as f64 * 1e-3;
+                let (a, m) = reading(0.0, 0.0, 30.0 * t);
+                let read =
+                    [0, 1, 2].map(|k| (0..3).map(|j| soft[k][j] * m[j]).sum::<f64>() + hard[k]);
+                Row {
+                    t,
+                    accel: a,
+                    gyro: [0.0, 0.0, -30.0],
+                    mag: read,
+                }
+            })
+            .collect();
+        // the file's correction: S⁻¹ (soft iron inverted) and the hard iron
+        let inv = nalgebra::Matrix3::from_fn(|i, j| soft[i][j])
+            .try_inverse()
+            .unwrap();
+        let cal = Correction {
+            accel: (
+                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+                [0.0; 3],
+            ),
+            mag: ([0, 1, 2].map(|i| [0, 1, 2].map(|j| inv[(i, j)])), hard),
+            gyro_bias: [0.0; 3],
+        };
+        let (b, a) = before_after(&rows, &cal, 2.0, 70.0);
+        let (b, a) = (b.unwrap(), a.unwrap());
+        assert!(b.rms > 5.0, "key {key}: {b:?}");
+        assert!(a.rms < 0.05, "key {key}: {a:?}");
+        assert_eq!(a.n, 5);
     }
 
     #[test]

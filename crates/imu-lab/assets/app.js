@@ -264,11 +264,12 @@ document.addEventListener("DOMContentLoaded", main);
 // ---------- live device ----------
 
 const STREAM_KEEP = 600; // points kept by the page: the server's history, never more
-const CHANNELS = ["ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz", "temp"];
+// the stream's channels with their units (the server's list, sent with the device's identity)
+let CHANNELS = [];
 const tablePlots = new Map();
 let streamPlot = null;
-let streamData = null;
-let streamChannel = 3; // gx
+let streamPoints = []; // the last STREAM_KEEP points as the server sent them
+let streamChannel = 3; // gx until the user picks another
 
 function renderStatus(s) {
   const t = document.createElement("table");
@@ -331,30 +332,64 @@ function renderTables(v) {
   }
 }
 
+function setChannels(list) {
+  CHANNELS = list;
+  const sel = $("stream-channel");
+  sel.replaceChildren(...list.map((c, i) => new Option(`${c.name} [${c.unit}]`, String(i))));
+  sel.value = String(streamChannel);
+  sel.onchange = () => {
+    streamChannel = Number(sel.value);
+    if (streamPlot) { streamPlot.destroy(); streamPlot = null; }
+    drawStream();
+  };
+  $("stream-latest").tBodies[0].replaceChildren(...list.map((c) => {
+    const tr = document.createElement("tr");
+    tr.dataset.channel = c.name;
+    cell(tr, c.name); cell(tr, "—"); cell(tr, "—"); cell(tr, c.unit);
+    return tr;
+  }));
+}
+
 function streamPush(points) {
-  if (!streamData) streamData = [[], [], [], []];
-  for (const p of points) {
-    streamData[0].push(p.t);
-    streamData[1].push(p.min[streamChannel]);
-    streamData[2].push(p.max[streamChannel]);
-    streamData[3].push(p.mean[streamChannel]);
+  for (const p of points) streamPoints.push(p);
+  // how many points the page has received (read by the soak benchmark, web/bench)
+  window.imuLabStreamReceived = (window.imuLabStreamReceived || 0) + points.length;
+  if (streamPoints.length > STREAM_KEEP) streamPoints.splice(0, streamPoints.length - STREAM_KEEP);
+  const last = streamPoints[streamPoints.length - 1];
+  if (last) {
+    const rows = $("stream-latest").tBodies[0].rows;
+    for (let k = 0; k < rows.length; k++) {
+      const m = last.mean[k];
+      rows[k].cells[1].textContent = m === null ? "—" : `${fmt(m, 5)} ± ${fmt(last.sd[k], 2)}`;
+      rows[k].cells[2].textContent = m === null ? "—" : `${fmt(last.min[k], 5)} … ${fmt(last.max[k], 5)}`;
+      rows[k].dataset.mean = m === null ? "" : String(m);
+    }
   }
-  const extra = streamData[0].length - STREAM_KEEP;
-  if (extra > 0) for (const a of streamData) a.splice(0, extra);
+  drawStream();
+}
+
+function drawStream() {
+  const k = streamChannel;
+  const c = CHANNELS[k] || { name: `channel ${k}`, unit: "" };
+  const data = [streamPoints.map((p) => p.t), streamPoints.map((p) => p.min[k]),
+    streamPoints.map((p) => p.max[k]), streamPoints.map((p) => p.mean[k])];
   if (!streamPlot) {
     streamPlot = new uPlot({
       width: plotWidth(), height: 220,
-      title: `${CHANNELS[streamChannel]} [deg/s]: mean, min and max per 0.1 s of device time`,
-      axes: [{ label: "device time [s]", values: numValues }, { label: "deg/s", size: 70, values: numValues }],
+      title: `${c.name} [${c.unit}]: mean, min and max per 0.1 s of device time`,
+      axes: [{ label: "device time [s]", values: numValues }, { label: c.unit, size: 70, values: numValues }],
       scales: { x: { time: false } },
       bands: [{ series: [2, 1], fill: "rgba(0, 90, 200, 0.15)" }],
       series: [{ label: "t [s]" }, { label: "min", stroke: "rgba(0,0,0,0.2)" },
         { label: "max", stroke: "rgba(0,0,0,0.2)" }, { label: "mean", stroke: "#1f77b4" }],
-    }, streamData, $("stream-plot"));
+    }, data, $("stream-plot"));
   } else {
-    streamPlot.setData(streamData);
+    streamPlot.setData(data);
   }
-  $("stream-plot").dataset.points = String(streamData[0].length);
+  const el = $("stream-plot");
+  el.dataset.points = String(streamPoints.length);
+  el.dataset.channel = c.name;
+  el.dataset.finite = String(data[3].filter((x) => x !== null && Number.isFinite(x)).length);
 }
 
 function renderRecord(r) {
@@ -426,14 +461,14 @@ function renderMagFit(r) {
   );
   div.dataset.model = f.model.join(",");
   div.dataset.adequate = d.adequate ? "yes" : "no";
-  div.appendChild(renderUpload(r.upload));
+  div.appendChild(renderUpload(r.upload, "mag"));
 }
 
 // The upload: only a plausible calibration, only after the user ticks the confirmation; RAM
 // only unless "write to flash" is ticked too (the CLI's --no-persist is the default here).
-function renderUpload(u) {
+function renderUpload(u, prefix) {
   const box = document.createElement("div");
-  box.id = "mag-upload";
+  box.id = `${prefix}-upload`;
   if (!u.plausible) {
     const p = document.createElement("p");
     p.className = "bad";
@@ -451,15 +486,15 @@ function renderUpload(u) {
   };
   const btn = document.createElement("button");
   btn.type = "button";
-  btn.id = "mag-upload-button";
+  btn.id = `${prefix}-upload-button`;
   btn.textContent = "Upload to the device";
   const state = document.createElement("span");
-  state.id = "mag-upload-state";
+  state.id = `${prefix}-upload-state`;
   btn.onclick = async () => {
-    if (!$("mag-confirm").checked) { showError("Tick the confirmation first: nothing was uploaded."); return; }
+    if (!$(`${prefix}-confirm`).checked) { showError("Tick the confirmation first: nothing was uploaded."); return; }
     showError("");
     try {
-      const r = await api("/api/live/mag/upload", { confirm: u.code, persist: $("mag-persist").checked });
+      const r = await api("/api/live/upload", { confirm: u.code, persist: $(`${prefix}-persist`).checked });
       state.textContent = r.persisted ? "applied and written to flash" : "applied in RAM only (not persisted; a reset forgets it)";
       state.dataset.applied = "yes";
       btn.disabled = true;
@@ -467,10 +502,171 @@ function renderUpload(u) {
   };
   const row = document.createElement("div");
   row.className = "row";
-  row.append(label("mag-confirm", `I confirm: replace the device's calibration with this fit (code ${u.code})`),
-    label("mag-persist", "also write it to flash"), btn, state);
+  row.append(label(`${prefix}-confirm`, `I confirm: replace the device's calibration with this fit (code ${u.code})`),
+    label(`${prefix}-persist`, "also write it to flash"), btn, state);
   box.appendChild(row);
   return box;
+}
+
+// ---------- accelerometer wizard ----------
+
+function renderAccel(a) {
+  const still = $("accel-still");
+  still.dataset.still = a.still === null ? "" : (a.still ? "yes" : "no");
+  const r = (x) => (x === null || x === undefined ? "—" : fmt(x, 2));
+  still.textContent = a.still === null
+    ? "stillness: waiting for the device's Allan tables (its noise)"
+    : `${a.still ? "still" : "moving"}: accelerometer variance ${r(a.accel_ratio)}×, gyro variance ` +
+      `${r(a.gyro_ratio)}× the noise's (limit ${a.rules.noise_k}×), gyro rate ${r(a.gyro_rate_dps)} deg/s ` +
+      `(limit ${a.rules.turn_dps})` + (a.noise ? `; noise σ ${fmt(a.noise.accel_sigma, 2)} ${a.noise.accel_unit}, ` +
+      `${fmt(a.noise.gyro_sigma, 2)} ${a.noise.gyro_unit}` : "");
+  $("accel-capture").disabled = a.armed;
+  $("accel-continuous").disabled = a.armed;
+  $("accel-cancel").disabled = !a.armed;
+  // the rows and warnings are rebuilt only when the poses change (the state comes ten times
+  // a second while capturing: the buttons stay put under the pointer)
+  const key = JSON.stringify([a.poses, a.same, a.missing, a.armed]);
+  const body = $("accel-poses").tBodies[0];
+  if (body.dataset.key !== key) {
+    body.dataset.key = key;
+    renderPoses(a, body);
+  }
+  const bar = $("accel-progress");
+  if (bar) {
+    bar.value = a.progress;
+    $("accel-pending-state").textContent = a.waiting_for_motion ? "turn the board to the next pose…"
+      : (a.still ? "hold it still…" : "waiting for the board to be still…");
+    $("accel-pending-progress").textContent = ` ${fmt(100 * a.progress, 3)} % of ${a.rules.hold_s} s`;
+  }
+}
+
+function renderPoses(a, body) {
+  const rows = a.poses.map((p, i) => {
+    const tr = document.createElement("tr");
+    tr.dataset.face = p.face;
+    tr.dataset.t = String(p.t);
+    cell(tr, String(i + 1));
+    cell(tr, p.face);
+    cell(tr, p.mean.map((m, k) => `${fmt(m, 5)} ± ${fmt(p.sigma[k], 2)}`).join(", "));
+    cell(tr, fmt(p.norm, 6));
+    const td = cell(tr, "");
+    const bar = document.createElement("progress");
+    bar.max = 1; bar.value = 1;
+    td.append(bar, ` ${fmt(p.seconds, 3)} s, ${p.samples} samples`);
+    const rm = document.createElement("button");
+    rm.type = "button"; rm.textContent = "Remove"; rm.className = "accel-remove";
+    rm.onclick = () => accelAct("/api/live/accel/remove", { index: i });
+    cell(tr, "").appendChild(rm);
+    return tr;
+  });
+  if (a.armed) {
+    const tr = document.createElement("tr");
+    tr.id = "accel-pending";
+    cell(tr, String(a.poses.length + 1));
+    cell(tr, "—");
+    cell(tr, "").id = "accel-pending-state";
+    cell(tr, "");
+    const td = cell(tr, "");
+    const bar = document.createElement("progress");
+    bar.id = "accel-progress";
+    bar.max = 1; bar.value = 0;
+    const label = document.createElement("span");
+    label.id = "accel-pending-progress";
+    td.append(bar, label);
+    cell(tr, "");
+    rows.push(tr);
+  }
+  body.replaceChildren(...rows);
+  body.dataset.poses = String(a.poses.length);
+  const w = $("accel-warnings");
+  const items = a.same.map((m) => {
+    const p = document.createElement("p");
+    p.className = "bad merge-warning";
+    p.textContent = `Poses ${m.a + 1} and ${m.b + 1} are the same orientation (${fmt(m.angle_deg, 2)}° apart, ` +
+      `under ${a.rules.merge_deg}°): a second capture of a pose adds no new direction. `;
+    const b = document.createElement("button");
+    b.type = "button"; b.textContent = `Merge ${m.a + 1} and ${m.b + 1}`; b.className = "accel-merge";
+    b.onclick = () => accelAct("/api/live/accel/merge", { a: m.a, b: m.b });
+    p.appendChild(b);
+    return p;
+  });
+  if (a.poses.length && a.missing.length) {
+    const p = document.createElement("p");
+    p.className = "missing-faces";
+    p.textContent = `Missing: no pose yet with ${a.missing.join(", ")} up.`;
+    items.push(p);
+  }
+  w.replaceChildren(...items);
+  w.dataset.same = String(a.same.length);
+  w.dataset.missing = a.missing.join(",");
+}
+
+async function accelAct(path, body = {}) {
+  showError("");
+  try {
+    const v = await api(path, body);
+    if (v && v.poses) renderAccel(v);
+    return v;
+  } catch (e) { showError(e.message); return null; }
+}
+
+function renderAccelFit(r) {
+  const f = r.fit;
+  const div = $("accel-result");
+  const p = (text, cls) => { const el = document.createElement("p"); el.textContent = text; if (cls) el.className = cls; return el; };
+  const t = document.createElement("table");
+  const head = t.insertRow();
+  for (const h of ["parameter", "x", "y", "z", "unit"]) { const th = document.createElement("th"); th.textContent = h; head.appendChild(th); }
+  const units = { offset: "m/s²", scale: "1", misalignment_deg: "deg" };
+  for (const name of ["offset", "scale", "misalignment_deg"]) {
+    const v = f.params[name];
+    if (!v) continue;
+    const sig = (f.sigma && f.sigma[name]) || [];
+    const tr = t.insertRow();
+    tr.dataset.param = name;
+    cell(tr, name);
+    v.forEach((x, k) => cell(tr, `${fmt(x, 6)} ± ${sig[k] === undefined ? "—" : fmt(sig[k], 2)}`));
+    cell(tr, units[name]);
+  }
+  const d = f.diagnosis || {};
+  const res = r.residuals.map((x, i) => `${i + 1}: ${fmt(x, 2)}`).join(", ");
+  div.replaceChildren(
+    p(`Model: ${f.model.join(" + ")}; residual RMS ${fmt(f.residual_rms, 3)} ${f.unit} ` +
+      `(noise floor ${fmt(f.noise_floor, 3)} ${f.unit}, ${f.n_residuals} poses)`),
+    p(`${d.adequate ? "ADEQUATE" : "NOT ADEQUATE"} — ${d.explanation || ""}`, d.adequate ? "ok" : "bad"),
+    t,
+    p(`Residual per pose, |corrected mean| − g [${r.residual_unit}]: ${res}`),
+    ...(r.warnings.same.length ? [p(`Warning: ${r.warnings.same.length} pair(s) of poses are the same orientation.`, "bad")] : []),
+    ...(r.warnings.missing.length ? [p(`Warning: no pose with ${r.warnings.missing.join(", ")} up.`, "bad")] : []),
+  );
+  div.dataset.model = f.model.join(",");
+  div.dataset.adequate = d.adequate ? "yes" : "no";
+  div.dataset.params = JSON.stringify(f.params);
+  div.dataset.sigma = JSON.stringify(f.sigma);
+  div.appendChild(renderUpload(r.upload, "accel"));
+}
+
+// ---------- verification: heading before → after ----------
+
+function renderVerify(v) {
+  $("verify-start").disabled = v.recording;
+  $("verify-stop").disabled = !v.recording;
+  $("verify-state").textContent = v.recording
+    ? `recording raw values: ${fmt(v.seconds, 3)} s` : "";
+  $("verify-state").dataset.seconds = String(v.seconds);
+  if (v.recording) return;
+  const one = (r) => (r ? `${fmt(r.rms_deg, 3)} ± ${fmt(r.sigma_deg, 2)}° rms (max ${fmt(r.max_deg, 3)}°, ${r.windows} windows)`
+    : "no window counted (no turn within ±70° of pitch)");
+  const div = $("verify-result");
+  const p = document.createElement("p");
+  p.textContent = `Heading inconsistency with the gyro over ${fmt(v.seconds, 3)} s of device time ` +
+    `(${v.check_window_s} s windows): before (raw) ${one(v.before)} → after (the uploaded calibration) ${one(v.after)}` +
+    (v.calibrated_again ? ` — the stream did not return to calibrated values: ${v.calibrated_again}` : "");
+  p.className = v.before && v.after && v.after.rms_deg < v.before.rms_deg ? "ok" : "bad";
+  div.replaceChildren(p);
+  div.dataset.before = v.before ? String(v.before.rms_deg) : "";
+  div.dataset.after = v.after ? String(v.after.rms_deg) : "";
+  div.dataset.windows = v.after ? String(v.after.windows) : "0";
 }
 
 window.startLive = (info) => {
@@ -479,6 +675,7 @@ window.startLive = (info) => {
   es.addEventListener("identity", (e) => {
     const id = JSON.parse(e.data);
     $("source").textContent = `device: ${info.port} — ${id.firmware} on ${id.board}, IMU ${id.imu_rate_hz} Hz, magnetometer ${id.mag_rate_hz} Hz`;
+    if (id.channels) setChannels(id.channels);
   });
   es.addEventListener("status", (e) => renderStatus(JSON.parse(e.data)));
   es.addEventListener("tables", (e) => renderTables(JSON.parse(e.data)));
@@ -486,6 +683,15 @@ window.startLive = (info) => {
   es.addEventListener("stream", (e) => streamPush([JSON.parse(e.data)]));
   es.addEventListener("record", (e) => renderRecord(JSON.parse(e.data)));
   es.addEventListener("link", (e) => showError(JSON.parse(e.data).error));
+  es.addEventListener("accel", (e) => renderAccel(JSON.parse(e.data)));
+  es.addEventListener("verify", (e) => renderVerify(JSON.parse(e.data)));
+  $("verify-start").onclick = async () => { const v = await act("/api/live/verify/start"); if (v) renderVerify(v); };
+  $("verify-stop").onclick = async () => { const v = await act("/api/live/verify/stop"); if (v) renderVerify(v); };
+  $("accel-capture").onclick = () => accelAct("/api/live/accel/capture", { continuous: false });
+  $("accel-continuous").onclick = () => accelAct("/api/live/accel/capture", { continuous: true });
+  $("accel-cancel").onclick = () => accelAct("/api/live/accel/cancel");
+  $("accel-clear").onclick = () => accelAct("/api/live/accel/clear");
+  $("accel-fit").onclick = async () => { const r = await accelAct("/api/live/accel/fit"); if (r) renderAccelFit(r); };
   es.addEventListener("mag", (e) => {
     const m = JSON.parse(e.data);
     magPoints.push(m.point);

@@ -23,8 +23,15 @@ impl Drop for Server {
 }
 
 fn serve(file: &str) -> Server {
+    serve_with(file, &[])
+}
+
+/// `imu-lab serve FILE OPTIONS… --listen 127.0.0.1:0`.
+fn serve_with(file: &str, options: &[&str]) -> Server {
     let mut child = Command::new(assert_cmd::cargo::cargo_bin("imu-lab"))
-        .args(["serve", file, "--listen", "127.0.0.1:0"])
+        .args(["serve", file])
+        .args(options)
+        .args(["--listen", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
@@ -228,4 +235,91 @@ fn a_missing_file_or_a_busy_port_is_refused_by_name() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains(&format!("--listen {port}")), "{err}");
+}
+
+/// A CSV that is not in the contract — a logger's line before the header, its own column names,
+/// raw gyro counts — served with `imu-lab fit`'s options to read it: the page offers the
+/// renamed column, fits it in deg/s and shows the command with those options, whose `--json`
+/// equals the page's export; a field that is not a number is refused (400) naming the file, the
+/// line and the column, as `imu-lab fit` names it.
+#[test]
+fn any_csv_fit_reads_is_served_with_its_options_and_a_bad_field_is_named() {
+    let key = key();
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, bad_line: Option<usize>| {
+        let path = dir.path().join(name);
+        let mut text = String::from("# logger v2, serial 0042\ntime_s,gyro_z_counts\n");
+        let mut s = key | 1;
+        for i in 0..4000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            // counts of a ±250 deg/s gyro: white noise of about 40 counts
+            let v = (s % 161) as i64 - 80;
+            if bad_line == Some(i + 3) {
+                text.push_str(&format!("{:.2},abc\n", i as f64 / 100.0));
+            } else {
+                text.push_str(&format!("{:.2},{v}\n", i as f64 / 100.0));
+            }
+        }
+        std::fs::write(&path, text).unwrap();
+        path.to_string_lossy().into_owned()
+    };
+    let options = [
+        "--skip-lines",
+        "1",
+        "--rename",
+        "time_s=t,gyro_z_counts=gz",
+        "--scale",
+        "0.0076336",
+    ];
+    let file = write("logger.csv", None);
+    let srv = serve_with(&file, &options);
+    let a = srv.addr.as_str();
+    let (st, info) = get(a, "/api/info");
+    assert_eq!(st, 200, "{info}");
+    let info: Value = serde_json::from_str(&info).unwrap();
+    assert_eq!(info["lab"]["columns"], serde_json::json!(["gz"]), "{info}");
+    let token = info["token"].as_str().unwrap();
+    let (st, view) = post(a, token, "/api/lab/select", r#"{"column":"gz"}"#);
+    assert_eq!(st, 200, "key {key}: {view}");
+    let view: Value = serde_json::from_str(&view).unwrap();
+    let command = view["command"].as_str().unwrap();
+    for flag in [
+        "--skip-lines 1",
+        "--rename time_s=t,gyro_z_counts=gz",
+        "--scale 0.0076336",
+    ] {
+        assert!(command.contains(flag), "{flag}: {command}");
+    }
+    assert_eq!(view["fit"]["unit"], "deg/s", "{}", view["fit"]);
+    let mut args: Vec<&str> = vec!["fit", &file];
+    args.extend(options);
+    args.extend(["--column", "gz", "--json"]);
+    let cli = stdout_json(&run_ok(&args));
+    let (_, exported) = get(a, "/api/lab/export.json");
+    assert_eq!(serde_json::from_str::<Value>(&exported).unwrap(), cli);
+    drop(srv);
+
+    let line = 3 + (key % 3000) as usize;
+    let bad = write("bad.csv", Some(line));
+    let srv = serve_with(&bad, &options);
+    let a = srv.addr.as_str();
+    let (_, info) = get(a, "/api/info");
+    let info: Value = serde_json::from_str(&info).unwrap();
+    let (st, resp) = post(
+        a,
+        info["token"].as_str().unwrap(),
+        "/api/lab/select",
+        r#"{"column":"gz"}"#,
+    );
+    assert_eq!(st, 400, "{resp}");
+    let err: Value = serde_json::from_str(&resp).unwrap();
+    let err = err["error"].as_str().unwrap();
+    assert!(
+        err.contains("bad.csv")
+            && err.contains(&format!("line {line}"))
+            && err.contains("\"gz\" (column 2)"),
+        "line {line}: {err}"
+    );
 }

@@ -109,6 +109,41 @@ impl Trajectory {
         Trajectory { keys }
     }
 
+    /// The calibration wizard's run (`imu-lab serve`'s accelerometer poses and magnetometer
+    /// turns), 80.5 s: level at 30° for 5 s, the standard run's turns and tumble (29 s), then
+    /// seven more poses held 5 s each, turned between in 1–2 s — y up, z down, y down, x up,
+    /// x down and two tilted (roll 45° pitch 30°, roll 135° pitch −35°) — and back level at
+    /// 30°: every face of the accelerometer once, its start and end the same attitude.
+    pub fn calibration() -> Trajectory {
+        let level = Euler::new(0.0, 0.0, 30.0);
+        let mut keys = vec![(0.0, level)];
+        // the standard run after its first 3 s, 2 s later: its level start held 5 s
+        keys.extend(
+            Trajectory::standard().keys[1..]
+                .iter()
+                .map(|&(t, e)| (t + 2.0, e)),
+        );
+        let mut t = keys[keys.len() - 1].0;
+        let mut pose = |turn: f64, roll: f64, pitch: f64, hold: f64| {
+            let e = Euler::new(roll, pitch, 750.0);
+            t += turn;
+            keys.push((t, e));
+            if hold > 0.0 {
+                t += hold;
+                keys.push((t, e));
+            }
+        };
+        pose(1.0, 450.0, 0.0, 5.0); // y up
+        pose(1.0, 540.0, 0.0, 5.0); // z down
+        pose(1.0, 630.0, 0.0, 5.0); // y down
+        pose(1.5, 720.0, 90.0, 5.0); // x up
+        pose(2.0, 720.0, -90.0, 5.0); // x down
+        pose(1.5, 765.0, 30.0, 5.0);
+        pose(1.5, 855.0, -35.0, 5.0);
+        pose(2.0, 1080.0, 0.0, 0.0); // level at 30° (750° ≡ 30°), where it starts
+        Trajectory { keys }
+    }
+
     /// Whether the board is still at `t` (no key moves it there).
     pub fn is_still(&self, t: f64) -> bool {
         self.at(t).1 == [0.0; 3]
@@ -138,6 +173,11 @@ pub struct Part {
     pub soft_iron: [[f64; 3]; 3],
     /// Gyro bias, deg/s, sensor axes.
     pub gyro_bias: [f64; 3],
+    /// The accelerometer's offset o (m/s²) and scale s per axis, in the terms of the
+    /// calibration's correction `a_cal = s·(a − o)` (imu-cal's six-pose fit): the part reads
+    /// `a = f/s + o` for a specific force `f`. None: o = 0, s = 1.
+    pub accel_offset: [f64; 3],
+    pub accel_scale: [f64; 3],
     /// White noise per sample: gyro deg/s, accelerometer m/s², magnetometer µT (standard
     /// deviations).
     pub noise: [f64; 3],
@@ -152,6 +192,8 @@ impl Part {
             hard_iron: [0.0; 3],
             soft_iron: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             gyro_bias: [0.0; 3],
+            accel_offset: [0.0; 3],
+            accel_scale: [1.0; 3],
             noise: [0.0; 3],
         }
     }
@@ -207,7 +249,7 @@ pub fn reading(traj: &Trajectory, part: &Part, t: f64, rng: &mut Rng) -> Reading
         *m += h;
     }
     let mut out = Reading {
-        accel: f,
+        accel: [0, 1, 2].map(|i| f[i] / part.accel_scale[i] + part.accel_offset[i]),
         gyro: [0, 1, 2].map(|i| w[i] + part.gyro_bias[i]),
         mag,
     };
@@ -327,6 +369,57 @@ mod tests {
                 assert!((a[i][j] - b[i][j]).abs() < 1e-12, "{a:?} {b:?}");
             }
         }
+    }
+
+    /// The calibration run ends where it starts; its holds are the eight poses, each 5 s,
+    /// every face of the accelerometer once (gravity's reaction along ±x, ±y, ±z).
+    #[test]
+    fn the_calibration_run_holds_eight_poses_and_ends_where_it_starts() {
+        let traj = Trajectory::calibration();
+        assert!((traj.duration() - 80.5).abs() < 1e-9, "{}", traj.duration());
+        let (a, b) = (traj.at(0.0).0.matrix(), traj.at(traj.duration()).0.matrix());
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((a[i][j] - b[i][j]).abs() < 1e-12, "{a:?} {b:?}");
+            }
+        }
+        // the still stretches (sampled every 0.1 s) and the face each holds; the standard run's
+        // last second (still, level) is too short to be a pose
+        let mut holds: Vec<(f64, f64, [f64; 3])> = Vec::new();
+        let mut rng = Rng::new(1);
+        for i in 0..(traj.duration() * 10.0) as usize {
+            let t = i as f64 / 10.0 + 0.05;
+            if !traj.is_still(t) {
+                continue;
+            }
+            let f = reading(&traj, &Part::ideal(), t, &mut rng)
+                .accel
+                .map(|x| x / G);
+            match holds.last_mut() {
+                Some(h) if t - h.1 < 0.11 => h.1 = t,
+                _ => holds.push((t, t, f)),
+            }
+        }
+        holds.retain(|h| h.1 - h.0 > 2.0);
+        assert_eq!(holds.len(), 8, "{holds:?}");
+        for h in &holds {
+            assert!(h.1 - h.0 > 4.8, "{h:?}");
+        }
+        let faces: Vec<String> = holds[..6]
+            .iter()
+            .map(|h| {
+                let k = (0..3)
+                    .max_by(|&i, &j| h.2[i].abs().total_cmp(&h.2[j].abs()))
+                    .unwrap();
+                assert!((h.2[k].abs() - 1.0).abs() < 1e-9, "{h:?}");
+                format!(
+                    "{}{}",
+                    if h.2[k] > 0.0 { "+" } else { "-" },
+                    ["x", "y", "z"][k]
+                )
+            })
+            .collect();
+        assert_eq!(faces, ["+z", "+y", "-z", "-y", "+x", "-x"]);
     }
 
     /// Level and still: gravity on +z, the field's horizontal part along +x when heading north.

@@ -16,10 +16,8 @@
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
-use imu_cal::accel::correction_matrix;
 use imu_cal::file::CalFile;
-use imu_cal::heading::{angle_diff, gyro_consistency, rms, tilt_compensated, Rms, Row};
-use imu_cal::lab::Params;
+use imu_cal::heading::{angle_diff, before_after, rms, tilt_compensated, Correction, Rms, Row};
 
 use crate::input::{self, InputArgs};
 
@@ -151,35 +149,6 @@ fn device_errors(path: &PathBuf, truth: &Truth, max_pitch: f64) -> Result<Vec<f6
     Ok(out)
 }
 
-/// The file's accelerometer and magnetometer corrections, in the recording's units (m/s², µT).
-struct Correction {
-    accel: ([[f64; 3]; 3], [f64; 3]),
-    mag: ([[f64; 3]; 3], [f64; 3]),
-    /// deg/s (the bias alone: the consistency check's gyro).
-    gyro_bias: [f64; 3],
-}
-
-impl Correction {
-    fn of(f: &CalFile) -> Correction {
-        let m = correction_matrix(&Params {
-            scale: Some(f.accel.scale),
-            misalignment_deg: Some(f.accel.misalignment_deg),
-            ..Params::default()
-        });
-        let am = [0, 1, 2].map(|i| [0, 1, 2].map(|j| m[(i, j)]));
-        Correction {
-            accel: (am, f.accel.offset),
-            mag: (f.mag.soft_iron, f.mag.hard_iron),
-            gyro_bias: f.gyro.bias,
-        }
-    }
-
-    fn apply((m, o): &([[f64; 3]; 3], [f64; 3]), v: [f64; 3]) -> [f64; 3] {
-        let d = [v[0] - o[0], v[1] - o[1], v[2] - o[2]];
-        [0, 1, 2].map(|i| m[i][0] * d[0] + m[i][1] * d[1] + m[i][2] * d[2])
-    }
-}
-
 pub fn run(a: Args) -> Result<()> {
     if !(a.window > 0.0 && a.window.is_finite()) {
         bail!(
@@ -217,12 +186,7 @@ pub fn run(a: Args) -> Result<()> {
             mag: [v(6), v(7), v(8)],
         };
         raw.push(row);
-        fitted.push(Row {
-            accel: Correction::apply(&corr.accel, row.accel),
-            mag: Correction::apply(&corr.mag, row.mag),
-            gyro: [0, 1, 2].map(|i| row.gyro[i] - corr.gyro_bias[i]),
-            ..row
-        });
+        fitted.push(corr.apply(&row));
     }
     if raw.len() < 2 {
         bail!(
@@ -290,10 +254,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let w = a.window;
-    let (c0, c1) = (
-        rms(&gyro_consistency(&raw, w, a.max_pitch), 1),
-        rms(&gyro_consistency(&fitted, w, a.max_pitch), 1),
-    );
+    let (c0, c1) = before_after(&raw, &corr, w, a.max_pitch);
     println!("consistency with the gyro (heading change over {w} s windows minus the gyro's; blind to an error that is the same at every attitude):");
     println!("  identity calibration:   {}", show(c0));
     println!("  {}:   {}", a.cal.display(), show(c1));

@@ -86,8 +86,18 @@ pub struct Args {
     /// column of the contract at --rate for --samples rows (the trajectory repeated), plus the
     /// truth columns roll_true, pitch_true, heading_true (degrees, heading magnetic), for the
     /// emulator (`sim/src/cli.js run --stream`) and `imu-lab heading --truth`.
-    #[arg(long, value_parser = ["standard"])]
+    /// `calibration` (80.5 s): eight poses held 5 s (every face of the accelerometer, two
+    /// tilted) around the standard run's turns, for `imu-lab serve`'s calibration wizard.
+    #[arg(long, value_parser = ["standard", "calibration"])]
     pub trajectory: Option<String>,
+    /// With --trajectory: the accelerometer's offset, m/s² per axis (X,Y,Z), as the
+    /// calibration's correction `s·(a − o)` names it.
+    #[arg(long, requires = "trajectory", value_delimiter = ',')]
+    pub accel_offset: Vec<f64>,
+    /// With --trajectory: the accelerometer's scale per axis (X,Y,Z; 1 = exact): the part reads
+    /// `f/s + o` for a specific force f.
+    #[arg(long, requires = "trajectory", value_delimiter = ',')]
+    pub accel_scale: Vec<f64>,
     /// With --trajectory: the part reading it — `ideal`, or `hard-iron` (25 µT of hard iron,
     /// soft iron, gyro bias 0.5 deg/s, the sensors' noise).
     #[arg(long, requires = "trajectory", value_parser = ["ideal", "hard-iron"], default_value = "hard-iron")]
@@ -126,12 +136,33 @@ fn positive(v: Option<f64>, flag: &str) -> Result<Option<f64>> {
 /// `--trajectory`: the stream of a board turned through a known trajectory, with its truth.
 fn trajectory(args: &Args) -> Result<()> {
     use imu_sim::trajectory::{write_stream, Part, Trajectory};
-    let traj = Trajectory::standard();
-    let part = if args.part == "ideal" {
+    let traj = if args.trajectory.as_deref() == Some("calibration") {
+        Trajectory::calibration()
+    } else {
+        Trajectory::standard()
+    };
+    let mut part = if args.part == "ideal" {
         Part::ideal()
     } else {
         Part::hard_iron()
     };
+    for (v, flag, lo, hi) in [
+        (&args.accel_offset, "--accel-offset", -5.0, 5.0),
+        (&args.accel_scale, "--accel-scale", 0.5, 2.0),
+    ] {
+        if !v.is_empty() && v.len() != 3 {
+            bail!("{flag}: give three comma-separated numbers (X,Y,Z), got {v:?}");
+        }
+        if let Some(x) = v.iter().find(|x| !(lo..=hi).contains(*x)) {
+            bail!("{flag} {x}: each axis must be between {lo} and {hi}");
+        }
+    }
+    if let [x, y, z] = args.accel_offset[..] {
+        part.accel_offset = [x, y, z];
+    }
+    if let [x, y, z] = args.accel_scale[..] {
+        part.accel_scale = [x, y, z];
+    }
     let seconds = args.samples as f64 / args.rate;
     let result = match &args.output {
         Some(p) => {

@@ -54,15 +54,15 @@ const QUEUE: usize = 256;
 /// The live side: what the reader thread keeps, and the channel to the pages.
 pub struct Live {
     pub port: String,
-    shared: Arc<Mutex<Snapshot>>,
-    tx: broadcast::Sender<(String, Value)>,
+    pub(super) shared: Arc<Mutex<Snapshot>>,
+    pub(super) tx: broadcast::Sender<(String, Value)>,
     record_dir: PathBuf,
     /// Requests for the device, sent by the reader thread (it owns the link).
-    requests: Mutex<mpsc::Sender<Pending>>,
+    pub(super) requests: Mutex<mpsc::Sender<Pending>>,
 }
 
 /// A request for the device and where its reply goes.
-type Pending = (Request, oneshot::Sender<Result<Reply, String>>);
+pub(super) type Pending = (Request, oneshot::Sender<Result<Reply, String>>);
 
 /// A request sent: its id, where its reply goes, and until when it may come.
 type Waiting = (
@@ -76,7 +76,7 @@ const REPLY_WAIT: Duration = Duration::from_secs(10);
 
 /// The latest of everything, for a page that connects now.
 #[derive(Default)]
-struct Snapshot {
+pub(super) struct Snapshot {
     identity: Value,
     status: Value,
     tables: Value,
@@ -88,13 +88,23 @@ struct Snapshot {
     link_error: Option<String>,
     /// The magnetometer wizard's points.
     mag: MagPoints,
-    /// The last fit's calibration, checked and ready for the device, with the one-time code
-    /// the page must send back to upload it.
-    mag_cal: Option<ReadyCal>,
+    /// The last fit's calibration (either wizard's), checked and ready for the device, with
+    /// the one-time code the page must send back to upload it.
+    ready_cal: Option<ReadyCal>,
+    /// The calibration file of the last upload from this page (TOML): a later fit of another
+    /// sensor updates its own section and keeps the others.
+    pub(super) cal_file: Option<String>,
+    /// The accelerometer's pose wizard.
+    pub(super) poses: super::poses::Wizard,
+    /// The device's noise (from its tables), for the pose wizard's stillness.
+    noise: Option<super::poses::Noise>,
+    /// The verification recording, while it runs.
+    pub(super) verify: Option<super::verify::Recording>,
 }
 
-/// A calibration the user may upload: the blob and its confirmation code.
+/// A calibration the user may upload: the calibration file, its blob and the confirmation code.
 struct ReadyCal {
+    toml: String,
     blob: Vec<u8>,
     code: String,
 }
@@ -160,28 +170,78 @@ struct Recording {
     failed: Option<String>,
 }
 
-/// The decimator: per channel the sum, minimum and maximum over the current window.
-struct Window {
+/// The channels of the decimated stream with their units: the ten calibrated columns of the
+/// contract, then the device's attitude estimate (roll, pitch, heading), when it sends one.
+pub const STREAM_CHANNELS: [(&str, &str); STREAM_N] = [
+    ("ax", "m/s²"),
+    ("ay", "m/s²"),
+    ("az", "m/s²"),
+    ("gx", "deg/s"),
+    ("gy", "deg/s"),
+    ("gz", "deg/s"),
+    ("mx", "µT"),
+    ("my", "µT"),
+    ("mz", "µT"),
+    ("temp", "°C"),
+    ("roll", "deg"),
+    ("pitch", "deg"),
+    ("heading", "deg"),
+];
+/// Channels of a stream point.
+pub const STREAM_N: usize = 13;
+/// Index of the heading in [`STREAM_CHANNELS`] (an angle: averaged unwrapped).
+const HEADING: usize = 12;
+
+/// The decimator: per channel the count, sum, sum of squares, minimum and maximum over the
+/// current window. Values are summed as offsets from the channel's first value in the window
+/// (the variance without cancellation; the heading unwrapped across 0/360°).
+pub(crate) struct Window {
     start: Option<f64>,
-    n: u32,
-    sum: [f64; 10],
-    min: [f64; 10],
-    max: [f64; 10],
+    /// Rows (IMU samples) in the window.
+    rows: u32,
+    n: [u32; STREAM_N],
+    first: [f64; STREAM_N],
+    sum: [f64; STREAM_N],
+    sq: [f64; STREAM_N],
+    min: [f64; STREAM_N],
+    max: [f64; STREAM_N],
 }
 
 impl Window {
-    fn new() -> Window {
+    pub(crate) fn new() -> Window {
         Window {
             start: None,
-            n: 0,
-            sum: [0.0; 10],
-            min: [f64::INFINITY; 10],
-            max: [f64::NEG_INFINITY; 10],
+            rows: 0,
+            n: [0; STREAM_N],
+            first: [0.0; STREAM_N],
+            sum: [0.0; STREAM_N],
+            sq: [0.0; STREAM_N],
+            min: [f64::INFINITY; STREAM_N],
+            max: [f64::NEG_INFINITY; STREAM_N],
         }
     }
 
+    fn add(&mut self, k: usize, x: f64) {
+        if !x.is_finite() {
+            return;
+        }
+        if self.n[k] == 0 {
+            self.first[k] = x;
+        }
+        let d = if k == HEADING {
+            imu_cal::heading::angle_diff(x, self.first[k])
+        } else {
+            x - self.first[k]
+        };
+        self.n[k] += 1;
+        self.sum[k] += d;
+        self.sq[k] += d * d;
+        self.min[k] = self.min[k].min(d);
+        self.max[k] = self.max[k].max(d);
+    }
+
     /// Add a row; returns the finished window's point when `t` starts a new one.
-    fn push(&mut self, t: f64, v: &[Option<f64>; 10]) -> Option<Value> {
+    pub(crate) fn push(&mut self, t: f64, v: &[Option<f64>; 10]) -> Option<Value> {
         let mut out = None;
         match self.start {
             Some(s) if t - s >= WINDOW_S || t < s => {
@@ -192,30 +252,56 @@ impl Window {
             None => self.start = Some(t),
             _ => {}
         }
-        self.n += 1;
+        self.rows += 1;
         for (k, x) in v.iter().enumerate() {
-            let x = x.unwrap_or(f64::NAN);
-            self.sum[k] += x;
-            self.min[k] = self.min[k].min(x);
-            self.max[k] = self.max[k].max(x);
+            if let Some(x) = x {
+                self.add(k, *x);
+            }
         }
         out
     }
 
-    fn point(&self) -> Option<Value> {
+    /// Add the device's attitude estimates (they come in frames of their own, a few ms after
+    /// the samples they cover: each counts in the window open when it arrives).
+    pub(crate) fn orientation(&mut self, o: &[imu_proto::Orientation]) {
+        for e in o {
+            self.add(10, f64::from(e.roll_deg));
+            self.add(11, f64::from(e.pitch_deg));
+            self.add(HEADING, f64::from(e.heading_deg));
+        }
+    }
+
+    /// The window's point: `t` (its first row, s of device time), `n` rows, and per channel of
+    /// [`STREAM_CHANNELS`] the mean, minimum, maximum and standard deviation (null: no value).
+    pub(crate) fn point(&self) -> Option<Value> {
         let t = self.start?;
-        if self.n == 0 {
+        if self.rows == 0 {
             return None;
         }
-        let n = f64::from(self.n);
         let f = noise_model::session::num;
-        Some(json!({
-            "t": t,
-            "n": self.n,
-            "mean": self.sum.iter().map(|s| f(s / n)).collect::<Vec<_>>(),
-            "min": self.min.iter().map(|&x| f(x)).collect::<Vec<_>>(),
-            "max": self.max.iter().map(|&x| f(x)).collect::<Vec<_>>(),
-        }))
+        let mut mean = Vec::with_capacity(STREAM_N);
+        let (mut min, mut max, mut sd) = (mean.clone(), mean.clone(), mean.clone());
+        for k in 0..STREAM_N {
+            if self.n[k] == 0 {
+                for v in [&mut mean, &mut min, &mut max, &mut sd] {
+                    v.push(Value::Null);
+                }
+                continue;
+            }
+            let n = f64::from(self.n[k]);
+            let m = self.sum[k] / n;
+            // the heading's mean back in [0, 360), its extremes shifted with it
+            let base = if k == HEADING {
+                (self.first[k] + m).rem_euclid(360.0) - m
+            } else {
+                self.first[k]
+            };
+            mean.push(f(base + m));
+            min.push(f(base + self.min[k]));
+            max.push(f(base + self.max[k]));
+            sd.push(f((self.sq[k] / n - m * m).max(0.0).sqrt()));
+        }
+        Some(json!({ "t": t, "n": self.rows, "mean": mean, "min": min, "max": max, "sd": sd }))
     }
 }
 
@@ -283,6 +369,9 @@ impl Live {
             Reply::Identity(id) => json!({
                 "firmware": id.firmware.as_str(), "board": id.board.as_str(),
                 "protocol": id.protocol, "imu_rate_hz": id.imu_rate_hz, "mag_rate_hz": id.mag_rate_hz,
+                "channels": STREAM_CHANNELS.iter()
+                    .map(|(name, unit)| json!({ "name": name, "unit": unit }))
+                    .collect::<Vec<_>>(),
             }),
             other => bail!("{port}: unexpected reply to Identify: {other:?}"),
         };
@@ -317,7 +406,7 @@ impl Live {
     }
 }
 
-fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
+pub(super) fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
     // no page open: nobody to tell
     let _ = tx.send((kind.to_string(), v));
 }
@@ -383,6 +472,15 @@ fn read_loop(
                     });
                 }
                 for p in points {
+                    if let Some(v) = s.verify.as_mut().and_then(|r| r.window(&p)) {
+                        send(tx, "verify", v);
+                    }
+                    if let Some(w) = super::poses::Win::from_point(&p) {
+                        let noise = s.noise;
+                        if let Some(v) = s.poses.window(w, noise) {
+                            send(tx, "accel", v);
+                        }
+                    }
                     if s.mag.on {
                         let m = |k: usize| p["mean"][k].as_f64().unwrap_or(f64::NAN);
                         let point = [m(6), m(7), m(8)];
@@ -404,6 +502,7 @@ fn read_loop(
                 }
             }
             DeviceMsg::Orientation(o) => {
+                window.orientation(&o);
                 if let Some(rec) = shared.lock().expect("snapshot").record.as_mut() {
                     rec.held.estimates(&o);
                 }
@@ -431,7 +530,10 @@ fn read_loop(
                 // a round is ten tables, one per channel, sent one after the other
                 if round_tables.len() == Channel::ALL.len() {
                     let v = json!({ "round": t.snapshot, "tables": round_tables });
-                    shared.lock().expect("snapshot").tables = v.clone();
+                    let mut s = shared.lock().expect("snapshot");
+                    s.noise = super::poses::noise_from_tables(&v).or(s.noise);
+                    s.tables = v.clone();
+                    drop(s);
                     send(tx, "tables", v);
                     round_tables = Vec::new();
                 }
@@ -466,6 +568,7 @@ pub async fn events(State(s): State<Shared>) -> Response {
             Value::Array(snap.stream.iter().cloned().collect()),
         ));
         v.push(("record".into(), record_state(&snap)));
+        v.push(("accel".into(), snap.poses.state()));
         if let Some(e) = &snap.link_error {
             v.push(("link".into(), json!({ "error": e })));
         }
@@ -501,7 +604,7 @@ fn record_state(s: &Snapshot) -> Value {
 struct Empty {}
 
 /// The body every live write takes: `{}` (anything else is a 400).
-fn empty(bytes: &Bytes) -> Option<Response> {
+pub(super) fn empty(bytes: &Bytes) -> Option<Response> {
     super::noise::body::<Empty>(bytes)
         .err()
         .map(|e| error(StatusCode::BAD_REQUEST, &e))
@@ -676,6 +779,7 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             ),
         );
     }
+    let existing = live.shared.lock().expect("snapshot").cal_file.clone();
     let fitted = tokio::task::spawn_blocking(move || {
         use imu_cal::session::{self as cal, Sensor};
         let col = |k: usize| points.iter().map(|p| p[k]).collect::<Vec<f64>>();
@@ -713,45 +817,67 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         };
         let loaded = cal::prepare(&input, &o)?;
         let run = cal::run(&loaded, &o)?;
-        // the calibration file `calibrate --out` would write, converted for the device with the
-        // plausibility checks `imu-lab device calibrate --upload` applies
-        let blob = cal::update_file(None, &loaded, &run).and_then(|toml| {
-            let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
-            let c = file.to_device().map_err(|e| e.to_string())?;
-            let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
-            imu_cal::device::encode_blob(&c, &mut buf)
-                .map(|b| b.to_vec())
-                .map_err(|e| format!("encoding the blob: {e}"))
-        });
-        Ok::<(String, Result<Vec<u8>, String>), String>((cal::json_out(&loaded, &run), blob))
+        Ok::<_, String>(calibration(&loaded, &run, existing.as_deref()))
     })
     .await;
-    let (text, blob) = match fitted {
+    let (v, upload) = match fitted {
         Ok(Ok(t)) => t,
         Ok(Err(e)) => return error(StatusCode::UNPROCESSABLE_ENTITY, &e),
         Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     };
-    let v: Value = match serde_json::from_str(&text) {
-        Ok(v) => v,
-        Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
-    };
-    let upload = match blob {
-        Ok(blob) if blob.len() <= imu_proto::MAX_CAL_BLOB => {
+    let upload = offer(live, upload);
+    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+}
+
+/// A fit's answer: the object `imu-lab calibrate --json` prints, and the calibration file
+/// `calibrate --out` would write (`existing` with this sensor's section set) with its blob,
+/// through the plausibility checks `imu-lab device calibrate --upload` applies — or why not.
+pub(super) fn calibration(
+    loaded: &imu_cal::session::Loaded,
+    run: &imu_cal::session::Outcome,
+    existing: Option<&str>,
+) -> (Value, Result<(String, Vec<u8>), String>) {
+    use imu_cal::session as cal;
+    let v = serde_json::from_str(&cal::json_out(loaded, run)).unwrap_or(Value::Null);
+    let ready = cal::update_file(existing, loaded, run).and_then(|toml| {
+        let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
+        let c = file.to_device().map_err(|e| e.to_string())?;
+        let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
+        let blob = imu_cal::device::encode_blob(&c, &mut buf)
+            .map(|b| b.to_vec())
+            .map_err(|e| format!("encoding the blob: {e}"))?;
+        if blob.len() > imu_proto::MAX_CAL_BLOB {
+            return Err(format!(
+                "a blob of {} B exceeds the device's {} B",
+                blob.len(),
+                imu_proto::MAX_CAL_BLOB
+            ));
+        }
+        Ok((toml, blob))
+    });
+    (v, ready)
+}
+
+/// Keep a plausible calibration for upload under a new one-time code (the page shows it with
+/// the confirmation); what the page is told: `{plausible, code}` or `{plausible: false,
+/// problem}`. An implausible fit withdraws the last offer.
+pub(super) fn offer(live: &Live, ready: Result<(String, Vec<u8>), String>) -> Value {
+    let mut snap = live.shared.lock().expect("snapshot");
+    match ready {
+        Ok((toml, blob)) => {
             let code = super::guard::new_token()[..8].to_string();
-            live.shared.lock().expect("snapshot").mag_cal = Some(ReadyCal {
+            snap.ready_cal = Some(ReadyCal {
+                toml,
                 blob,
                 code: code.clone(),
             });
             json!({ "plausible": true, "code": code })
         }
-        Ok(blob) => json!({ "plausible": false,
-            "problem": format!("a blob of {} B exceeds the device's {} B", blob.len(), imu_proto::MAX_CAL_BLOB) }),
         Err(problem) => {
-            live.shared.lock().expect("snapshot").mag_cal = None;
+            snap.ready_cal = None;
             json!({ "plausible": false, "problem": problem })
         }
-    };
-    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+    }
 }
 
 #[derive(Deserialize)]
@@ -763,10 +889,10 @@ struct UploadBody {
     persist: bool,
 }
 
-/// POST /api/live/mag/upload {"confirm": CODE, "persist": false}: send the last fit's
-/// calibration to the device, once, with the code its fit gave (403 without it: nothing is
-/// written to a device without the user's confirmation of that very calibration).
-pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
+/// POST /api/live/upload {"confirm": CODE, "persist": false}: send the last fit's calibration
+/// (either wizard's) to the device, once, with the code its fit gave (403 without it: nothing
+/// is written to a device without the user's confirmation of that very calibration).
+pub async fn upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     let b: UploadBody = match super::noise::body(&bytes) {
         Ok(b) => b,
         Err(e) => return error(StatusCode::BAD_REQUEST, &e),
@@ -774,9 +900,9 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     let Some(live) = s.live.as_ref() else {
         return error(StatusCode::CONFLICT, "no device: started on a recording");
     };
-    let blob = {
+    let ready = {
         let mut snap = live.shared.lock().expect("snapshot");
-        match &snap.mag_cal {
+        match &snap.ready_cal {
             None => return error(StatusCode::CONFLICT, "no plausible calibration fitted yet"),
             Some(c) if c.code != b.confirm => {
                 return error(
@@ -784,10 +910,10 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
                     "the confirmation code is not the one of the last fit: nothing uploaded",
                 )
             }
-            Some(_) => snap.mag_cal.take().expect("checked").blob,
+            Some(_) => snap.ready_cal.take().expect("checked"),
         }
     };
-    let Ok(blob) = imu_proto::Vec::from_slice(&blob) else {
+    let Ok(blob) = imu_proto::Vec::from_slice(&ready.blob) else {
         return error(StatusCode::UNPROCESSABLE_ENTITY, "the blob is too long");
     };
     let (reply_tx, reply_rx) = oneshot::channel();
@@ -803,6 +929,8 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     }
     match reply_rx.await {
         Ok(Ok(Reply::Ok)) => {
+            // the next fit of another sensor keeps this one's section
+            live.shared.lock().expect("snapshot").cal_file = Some(ready.toml);
             Json(json!({ "applied": true, "persisted": b.persist })).into_response()
         }
         Ok(Ok(Reply::Error(imu_proto::ErrorCode::BadCalibration(p)))) => error(
@@ -824,6 +952,58 @@ pub async fn mag_upload(State(s): State<Shared>, bytes: Bytes) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn orientation(t_us: u64, heading_deg: f32) -> imu_proto::Orientation {
+        imu_proto::Orientation {
+            seq: 0,
+            t_us,
+            q: [1.0, 0.0, 0.0, 0.0],
+            roll_deg: 1.0,
+            pitch_deg: -2.0,
+            heading_deg,
+            state: imu_proto::AhrsState::Tracking,
+        }
+    }
+
+    /// A window's point: each channel's mean, extremes and standard deviation (a random offset
+    /// and spread); the heading averaged across north (358° and 4° give 1°, not 181°); a
+    /// channel without values (no attitude estimate) is null.
+    #[test]
+    fn a_window_decimates_every_channel_and_the_heading_across_north() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .subsec_nanos();
+        let (offset, spread) = (
+            1e3 * f64::from(key % 1000) / 1000.0,
+            0.1 + f64::from(key % 7),
+        );
+        let mut w = Window::new();
+        let xs = [-1.0, 1.0, -1.0, 1.0];
+        for (i, x) in xs.iter().enumerate() {
+            let mut v = [None; 10];
+            v[3] = Some(offset + spread * x);
+            assert!(w.push(i as f64 * 1e-3, &v).is_none());
+        }
+        let p = w.point().unwrap();
+        assert_eq!(p["n"], 4);
+        let close = |v: &Value, x: f64| (v.as_f64().unwrap() - x).abs() < 1e-9 * (1.0 + x.abs());
+        assert!(close(&p["mean"][3], offset), "key {key}: {p}");
+        assert!(close(&p["sd"][3], spread), "key {key}: {p}");
+        assert!(close(&p["min"][3], offset - spread) && close(&p["max"][3], offset + spread));
+        assert!(p["mean"][0].is_null() && p["mean"][12].is_null());
+        w.orientation(&[orientation(0, 358.0), orientation(5_000, 4.0)]);
+        let p = w.point().unwrap();
+        assert!(close(&p["mean"][12], 1.0), "{p}");
+        assert!(
+            close(&p["min"][12], -2.0) && close(&p["max"][12], 4.0),
+            "{p}"
+        );
+        assert!(close(&p["sd"][12], 3.0), "{p}");
+        assert!(close(&p["mean"][10], 1.0) && close(&p["mean"][11], -2.0));
+        // the next window starts 0.1 s later and hands this one out
+        assert!(w.push(0.1, &[Some(0.0); 10]).is_some());
+    }
 
     /// Directions drawn at random around a random hard-iron offset: the whole sphere is covered;
     /// a turn in one plane covers only the equatorial band (12 of 72 bins).

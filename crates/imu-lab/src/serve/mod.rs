@@ -25,13 +25,15 @@ pub mod assets;
 pub mod guard;
 pub mod live;
 pub mod noise;
+pub mod poses;
 #[cfg(test)]
 mod tests;
+pub mod verify;
 
 /// What the server was given: a recording, or a device port.
 pub enum Source {
-    /// A CSV recording in the contract (the noise lab).
-    File(PathBuf),
+    /// A CSV recording and `imu-lab fit`'s options to read it (the noise lab).
+    File(crate::input::InputArgs),
     /// A device link (`/dev/ttyACM0`, `tcp:HOST:PORT`): the live page; recordings go into
     /// `record_dir`, each then open in the noise lab.
     Port { port: String, record_dir: PathBuf },
@@ -90,7 +92,15 @@ pub fn router(state: Shared) -> Router {
         .route("/api/live/mag/start", post(live::mag_start))
         .route("/api/live/mag/stop", post(live::mag_stop))
         .route("/api/live/mag/fit", post(live::mag_fit))
-        .route("/api/live/mag/upload", post(live::mag_upload))
+        .route("/api/live/accel/capture", post(poses::capture))
+        .route("/api/live/accel/cancel", post(poses::cancel))
+        .route("/api/live/accel/merge", post(poses::merge))
+        .route("/api/live/accel/remove", post(poses::remove))
+        .route("/api/live/accel/clear", post(poses::clear))
+        .route("/api/live/accel/fit", post(poses::fit))
+        .route("/api/live/upload", post(live::upload))
+        .route("/api/live/verify/start", post(verify::start))
+        .route("/api/live/verify/stop", post(verify::stop))
         .fallback(not_found)
         .layer(axum::middleware::from_fn_with_state(
             state.clone(),

@@ -29,7 +29,7 @@ const CURVE_PER_DECADE: usize = 12;
 
 /// The lab: the recording it works on (none yet in live mode) and the current column's state.
 pub struct Lab {
-    file: Mutex<Option<PathBuf>>,
+    file: Mutex<Option<InputArgs>>,
     state: Mutex<Option<Column>>,
 }
 
@@ -50,6 +50,9 @@ struct Data {
 struct Column {
     data: Arc<Data>,
     file: PathBuf,
+    /// The reading options of `imu-lab fit` the recording was opened with (`--rate`,
+    /// `--scale`, `--rename`, …), as flags.
+    flags: Vec<String>,
     terms: Option<Vec<String>>,
     /// The `imu-lab fit` options after the file and column that give this session.
     command: Vec<String>,
@@ -97,8 +100,8 @@ fn data_columns(names: &[String]) -> Vec<String> {
 }
 
 /// The recording's header read: its sensor columns.
-fn columns_of(file: &std::path::Path) -> Result<Vec<String>> {
-    let names = input::open_with(&input_args(file.to_path_buf()), &[], &SENSOR_COLUMNS)?.names;
+fn columns_of(args: &InputArgs) -> Result<Vec<String>> {
+    let names = input::open_with(args, &[], &SENSOR_COLUMNS)?.names;
     Ok(data_columns(&names))
 }
 
@@ -114,18 +117,44 @@ fn input_args(file: PathBuf) -> InputArgs {
     }
 }
 
+/// The reading options as `imu-lab fit`'s flags (none for a file in the contract).
+fn input_flags(a: &InputArgs) -> Vec<String> {
+    let mut v = Vec::new();
+    if let Some(r) = a.rate {
+        v.extend(["--rate".into(), r.to_string()]);
+    }
+    if a.ignore_time {
+        v.push("--ignore-time".into());
+    }
+    if a.skip_lines > 0 {
+        v.extend(["--skip-lines".into(), a.skip_lines.to_string()]);
+    }
+    if let Some(x) = a.scale {
+        v.extend(["--scale".into(), x.to_string()]);
+    }
+    if let Some(u) = &a.unit {
+        v.extend(["--unit".into(), u.clone()]);
+    }
+    if !a.rename.is_empty() {
+        v.extend(["--rename".into(), a.rename.join(",")]);
+    }
+    v
+}
+
 impl Lab {
     /// The lab on a recording: its header is read now, so a missing or malformed file is
     /// refused before the server starts.
-    pub fn open(file: PathBuf) -> Result<Lab> {
-        if columns_of(&file)?.is_empty() {
+    /// `args` are `imu-lab fit`'s reading options (any CSV `fit` takes: columns renamed,
+    /// scaled, a unit, a rate, metadata lines skipped), and the same errors for bad input.
+    pub fn open(args: InputArgs) -> Result<Lab> {
+        if columns_of(&args)?.is_empty() {
             return Err(anyhow!(
                 "{}: no sensor column (ax … mz) to analyse",
-                file.display()
+                args.file.display()
             ));
         }
         Ok(Lab {
-            file: Mutex::new(Some(file)),
+            file: Mutex::new(Some(args)),
             state: Mutex::new(None),
         })
     }
@@ -140,13 +169,14 @@ impl Lab {
 
     /// Study `file` from now on (a recording just made).
     pub async fn set_file(&self, file: PathBuf) -> Result<()> {
-        if columns_of(&file)?.is_empty() {
+        let args = input_args(file);
+        if columns_of(&args)?.is_empty() {
             return Err(anyhow!(
                 "{}: no sensor column (ax … mz) to analyse",
-                file.display()
+                args.file.display()
             ));
         }
-        *self.file.lock().await = Some(file);
+        *self.file.lock().await = Some(args);
         *self.state.lock().await = None;
         Ok(())
     }
@@ -158,10 +188,12 @@ impl Lab {
             None => Value::Null,
             Some(f) => match columns_of(&f) {
                 Ok(columns) => json!({
-                    "file": f.display().to_string(),
+                    "file": f.file.display().to_string(),
                     "columns": columns,
                 }),
-                Err(e) => json!({ "file": f.display().to_string(), "error": format!("{e:#}") }),
+                Err(e) => {
+                    json!({ "file": f.file.display().to_string(), "error": format!("{e:#}") })
+                }
             },
         }
     }
@@ -297,7 +329,8 @@ pub async fn select(State(s): State<Shared>, bytes: Bytes) -> Response {
         Ok(session) => {
             let c = Column {
                 data,
-                file,
+                flags: input_flags(&file),
+                file: file.file,
                 terms: None,
                 command: vec![],
                 session,
@@ -312,9 +345,9 @@ pub async fn select(State(s): State<Shared>, bytes: Bytes) -> Response {
 }
 
 /// The column `column` of `file`, with its temperature when the file has one.
-fn load(file: &std::path::Path, column: &str) -> Result<Data> {
-    let args = input_args(file.to_path_buf());
-    let columns = columns_of(file)?;
+fn load(args: &InputArgs, column: &str) -> Result<Data> {
+    let file = &args.file;
+    let columns = columns_of(args)?;
     if !columns.iter().any(|c| c == column) {
         return Err(anyhow!(
             "column {column:?}: not a sensor column of {} (it has {})",
@@ -322,7 +355,7 @@ fn load(file: &std::path::Path, column: &str) -> Result<Data> {
             columns.join(", ")
         ));
     }
-    let rec = input::load_with(&args, &[column], &["temp"])?;
+    let rec = input::load_with(args, &[column], &["temp"])?;
     let series = rec
         .column(column)
         .ok_or_else(|| anyhow!("column {column:?} missing"))?;
@@ -588,9 +621,9 @@ fn view_of(c: &Column) -> Value {
         "imu-lab".to_string(),
         "fit".into(),
         c.file.display().to_string(),
-        "--column".into(),
-        c.data.column.clone(),
     ];
+    command.extend(c.flags.iter().cloned());
+    command.extend(["--column".into(), c.data.column.clone()]);
     command.extend(c.command.iter().cloned());
     let current = names_of(s);
     json!({

@@ -52,7 +52,16 @@ fn app(file: &std::path::Path) -> Router {
     router(Arc::new(AppState {
         listen: HOST.parse().unwrap(),
         token: TOKEN.into(),
-        lab: noise::Lab::open(file.to_path_buf()).unwrap(),
+        lab: noise::Lab::open(crate::input::InputArgs {
+            file: file.to_path_buf(),
+            rate: None,
+            ignore_time: false,
+            skip_lines: 0,
+            scale: None,
+            unit: None,
+            rename: vec![],
+        })
+        .unwrap(),
         live: None,
     }))
 }
@@ -263,12 +272,20 @@ async fn malformed_requests_get_400_and_change_nothing() {
         ("/api/lab/auto", r#"{"steps":3}"#),
         ("/api/lab/auto", "nope"),
         ("/api/lab/reset", "{"),
-        ("/api/live/mag/upload", r#"{"confirm":"0123abcd"}"#),
+        ("/api/live/upload", r#"{"confirm":"0123abcd"}"#),
         (
-            "/api/live/mag/upload",
+            "/api/live/upload",
             r#"{"confirm":"0123abcd","persist":"yes"}"#,
         ),
-        ("/api/live/mag/upload", r#"{"persist":false}"#),
+        ("/api/live/upload", r#"{"persist":false}"#),
+        ("/api/live/accel/capture", r#"{"pose":3}"#),
+        ("/api/live/accel/capture", r#"{}"#),
+        ("/api/live/accel/merge", r#"{"a":0}"#),
+        ("/api/live/accel/merge", r#"{"a":0,"b":-1}"#),
+        ("/api/live/accel/remove", r#"{"index":"first"}"#),
+        ("/api/live/accel/fit", r#"{"model":"offset"}"#),
+        ("/api/live/verify/start", r#"{"seconds":30}"#),
+        ("/api/live/verify/stop", "stop"),
         ("/api/live/record", r#"{"file":"/etc/passwd"}"#),
         ("/api/live/mag/start", "x"),
     ] {
