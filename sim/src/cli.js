@@ -10,7 +10,7 @@
 // model/harness error (the decoded defmt log is printed); 2 = bad arguments.
 
 import { parseArgs } from 'node:util';
-import { writeFileSync } from 'node:fs';
+import { writeFileSync, openSync, writeSync, closeSync } from 'node:fs';
 import { Session, parseFault, parseDuration, parseClock } from './session.js';
 import { loadStreamCsv, generateStream, streamToCsv } from './stream.js';
 import { benchReport } from './bench.js';
@@ -21,7 +21,7 @@ const usage = `usage:
                    [--warmup S] [--exit-on-disconnect] [--fault SPEC]... [--clock mpu:-1.3%,qmc:-1.3%]
                    [--mpu-who-am-i 0x70]
                    [--instant-i2c] [--served DIR] [--summary F.json]
-                   [--log F.txt] [--quiet]
+                   [--log F.txt] [--quiet] [--mem-log S]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]
                    [--report F.md] [--json F.json]
@@ -34,6 +34,7 @@ const usage = `usage:
 fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:1s | stall:qmc@0s
             | stuck@20s | stuck@20s:50ms | hang@20s:50ms | overflow@30s:120ms
 --clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)
+--mem-log: print the process's memory (heap, rss; MiB) to stderr every S emulated seconds
 --mpu-who-am-i: what the IMU model answers to WHO_AM_I (0x68; 0x70 an MPU-6500)`;
 
 function fail(msg, code = 2) {
@@ -65,6 +66,32 @@ function parseWhoAmI(text) {
   return n;
 }
 
+/** `--mem-log S`: the interval of the memory lines, emulated seconds (> 0). */
+function parseMemLog(text) {
+  const n = Number(text);
+  if (!(Number.isFinite(n) && n > 0)) fail(`--mem-log '${text}': an interval in emulated seconds, e.g. 60`);
+  return n;
+}
+
+/**
+ * Prints the process's memory to stderr every `every` emulated seconds: the JS heap in use
+ * (live objects and garbage not yet collected), the heap's size, the resident set and the
+ * memory outside the heap held by buffers (ArrayBuffers, Buffers), all in MiB.
+ */
+function logMemory(s, every) {
+  let next = 0;
+  const mib = (b) => (b / 2 ** 20).toFixed(1);
+  s.emu.pollHooks.push((nanos) => {
+    if (nanos < next) return;
+    next = nanos + every * 1e9;
+    // With `node --expose-gc` the heap is collected first: what is used is what is retained.
+    if (typeof globalThis.gc === 'function') globalThis.gc();
+    const m = process.memoryUsage();
+    const what = typeof globalThis.gc === 'function' ? 'heap retained (after GC)' : 'heap used';
+    process.stderr.write(`pico-imu-sim: memory at ${(nanos / 1e9).toFixed(1)} s emulated: ${what} ${mib(m.heapUsed)} MiB of ${mib(m.heapTotal)} MiB, rss ${mib(m.rss)} MiB, array buffers ${mib(m.arrayBuffers)} MiB\n`);
+  });
+}
+
 async function cmdRun(v) {
   if (!v.elf) fail('run: --elf is required');
   const seconds = Number(v.seconds ?? 10);
@@ -73,9 +100,23 @@ async function cmdRun(v) {
   const clock = parseClock(v.clock);
   const stream = streamFrom(v, seconds);
   const mpuWhoAmI = parseWhoAmI(v['mpu-who-am-i']);
-  const s = new Session({ elf: v.elf, stream, faults, clock, mpuWhoAmI, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
-  if (!s.decoder.available) process.stderr.write(`pico-imu-sim: ${rawLogNote(v.log)}\n`);
+  // The log is written as it comes (a run of hours keeps none of it in memory): decoded lines
+  // to --log, or without the decoder the raw RTT bytes to --log's .rtt file.
+  const logFd = v.log ? openSync(v.log, 'w') : null;
+  let rawFd = null;
+  const s = new Session({
+    elf: v.elf, stream, faults, clock, mpuWhoAmI, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet,
+    // Every sample the models produce is kept only when --served asks for them.
+    record: !!v.served,
+    onLogLine: (l) => logFd !== null && writeSync(logFd, `${l}\n`),
+    onRawLog: (b) => rawFd !== null && writeSync(rawFd, b),
+  });
+  if (!s.decoder.available) {
+    process.stderr.write(`pico-imu-sim: ${rawLogNote(v.log)}\n`);
+    if (v.log) rawFd = openSync(`${v.log}.rtt`, 'w');
+  }
   const stopAt = seconds * 1e9;
+  if (v['mem-log'] !== undefined) logMemory(s, parseMemLog(v['mem-log']));
   let stop = null;
   if (v.port !== undefined || v['port-file']) {
     // Boot and run the warm-up before the port opens; afterwards emulated time advances only
@@ -96,10 +137,12 @@ async function cmdRun(v) {
     process.on('SIGTERM', onSignal);
     // --exit-on-disconnect: the run ends (successfully) when the host that connected goes away.
     let seenClient = false;
+    // Emulated time also waits while the host has a backlog of unread bytes (a host slower
+    // than the stream): the bytes wait in the socket, bounded, and none is dropped.
     const shouldPause = () => {
       if (s.client) seenClient = true;
       else if (seenClient && v['exit-on-disconnect']) s.emu.stop({ kind: 'disconnect', message: 'host disconnected' });
-      return !s.client;
+      return !s.client || s.hostBacklogged();
     };
     if (!stop) stop = await s.run(stopAt, { shouldPause });
     if (stop && (stop.kind === 'signal' || stop.kind === 'disconnect')) stop = null;
@@ -110,8 +153,7 @@ async function cmdRun(v) {
   const summary = s.summary();
   if (v.served) s.writeServed(v.served);
   if (v.summary) writeFileSync(v.summary, JSON.stringify(summary, null, 2));
-  if (v.log) writeFileSync(v.log, s.logLines.join('\n') + '\n');
-  if (!s.decoder.available && v.log) writeFileSync(`${v.log}.rtt`, s.decoder.rawBytes());
+  for (const fd of [logFd, rawFd]) if (fd !== null) closeSync(fd);
   const line = `emulated ${summary.emulated_s.toFixed(3)} s in ${summary.wall_s.toFixed(2)} s wall (${(summary.emulated_per_wall ?? 0).toFixed(3)} emulated s per wall s), CPU load ${summary.cpu_load_percent.toFixed(2)} %, I2C ${summary.i2c.transactions} transactions / ${summary.i2c.nacks} NACKs, MPU samples produced ${summary.mpu.produced} served ${summary.mpu.servedFifo + summary.mpu.servedRegs}, QMC produced ${summary.qmc.produced} served ${summary.qmc.served}`;
   process.stderr.write(`pico-imu-sim: ${line}\n`);
   if (stop) {
@@ -131,7 +173,7 @@ async function cmdGen(v) {
 // The options of every subcommand: values given once, flags, and --fault (repeatable).
 const STRING_OPTIONS = [
   'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock', 'mpu-who-am-i',
-  'served', 'summary', 'log', 'out', 'report', 'json', 'top', 'callers', 'pcs', 'from',
+  'served', 'summary', 'log', 'mem-log', 'out', 'report', 'json', 'top', 'callers', 'pcs', 'from',
 ];
 const BOOLEAN_OPTIONS = ['instant-i2c', 'exit-on-disconnect', 'quiet', 'copies', 'exact', 'tasks'];
 

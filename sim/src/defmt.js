@@ -1,6 +1,6 @@
 // Decodes defmt-RTT bytes with the firmware ELF by piping them through `defmt-print -e ELF`
 // (crate defmt-print, installed with `cargo install defmt-print`). Without it the raw bytes
-// are kept and the caller says how to decode them.
+// go to the caller, which says how to decode them.
 
 import { spawn, spawnSync } from 'node:child_process';
 
@@ -13,11 +13,15 @@ export function findDefmtPrint() {
   return null;
 }
 
+/**
+ * Nothing is kept: each decoded line goes to `onLine` as it comes and, without the decoder,
+ * each chunk of raw bytes to `onRaw`, so a run of any length holds no log in memory.
+ */
 export class DefmtDecoder {
-  constructor(elfPath, { onLine = () => {}, binary = findDefmtPrint() } = {}) {
-    this.lines = [];
-    this.raw = [];
+  constructor(elfPath, { onLine = () => {}, onRaw = () => {}, binary = findDefmtPrint() } = {}) {
     this.onLine = onLine;
+    this.onRaw = onRaw;
+    this.rawByteCount = 0;
     this.available = !!binary;
     if (!binary) return;
     this.proc = spawn(binary, ['-e', elfPath, '--log-format', '{t} {L} {s}', 'stdin'], { stdio: ['pipe', 'pipe', 'pipe'] });
@@ -26,26 +30,23 @@ export class DefmtDecoder {
       partial += chunk;
       const parts = partial.split('\n');
       partial = parts.pop();
-      for (const l of parts) {
-        this.lines.push(l);
-        this.onLine(l);
-      }
+      for (const l of parts) this.onLine(l);
     };
     this.proc.stdout.setEncoding('utf8').on('data', take);
     this.proc.stderr.setEncoding('utf8').on('data', take);
     this.exited = new Promise((resolve) => this.proc.on('close', () => {
-      if (partial) {
-        this.lines.push(partial);
-        this.onLine(partial);
-      }
+      if (partial) this.onLine(partial);
       resolve();
     }));
     this.proc.stdin.on('error', () => {});
   }
 
   push(bytes) {
-    this.raw.push(bytes);
     if (this.proc) this.proc.stdin.write(bytes);
+    else {
+      this.rawByteCount += bytes.length;
+      this.onRaw(bytes);
+    }
   }
 
   /** Flushes and waits for every decoded line. */
@@ -53,9 +54,5 @@ export class DefmtDecoder {
     if (!this.proc) return;
     this.proc.stdin.end();
     await this.exited;
-  }
-
-  rawBytes() {
-    return Buffer.concat(this.raw.map((b) => Buffer.from(b)));
   }
 }

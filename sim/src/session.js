@@ -72,28 +72,50 @@ export function parseClock(spec) {
   return out;
 }
 
+/** How many of the firmware's last log lines a session keeps (for a failure's report). */
+export const LOG_TAIL_LINES = 200;
+
+/**
+ * Bytes the host may leave unread on its TCP socket before emulated time waits for it (see
+ * `Session.hostBacklogged`): 256 KiB, about 4 s of the firmware's stream.
+ */
+export const HOST_BACKLOG_BYTES = 256 * 1024;
+
 export class Session {
-  /** `defmtPrint`: the decoder's binary (default: found on PATH; null: keep the log raw). */
-  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, mpuWhoAmI = 0x68, echoLog = false, markerSymbol, defmtPrint } = {}) {
-    this.logLines = [];
+  /**
+   * `defmtPrint`: the decoder's binary (default: found on PATH; null: keep the log raw).
+   * `record`: keep every sample the sensor models produce, for `writeServed` (grows by about
+   * 330 bytes of heap per sample: for bounded runs only). `onLogLine(line)`: where every decoded
+   * log line goes as it comes (the session itself keeps the last `LOG_TAIL_LINES`);
+   * `onRawLog(bytes)`: where the raw RTT bytes go when there is no decoder.
+   */
+  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, mpuWhoAmI = 0x68, echoLog = false, markerSymbol, defmtPrint, record = false, onLogLine = () => {}, onRawLog = () => {} } = {}) {
+    this.logLines = []; // the last LOG_TAIL_LINES lines
+    this.logLineCount = 0;
     this.decoder = new DefmtDecoder(elf, {
       onLine: (l) => {
+        this.logLineCount++;
         this.logLines.push(l);
+        if (this.logLines.length > 2 * LOG_TAIL_LINES) this.logLines.splice(0, this.logLines.length - LOG_TAIL_LINES);
+        onLogLine(l);
         if (echoLog) process.stderr.write(`[fw] ${l}\n`);
       },
+      onRaw: onRawLog,
       binary: defmtPrint,
     });
     this.emu = new Emulator({ elf, markerSymbol, onRtt: (b) => this.decoder.push(b) });
     this.bus = new I2cBus(this.emu.mcu, { index: 0, sda: 4, scl: 5, instant: instantI2c });
-    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu, whoAmI: mpuWhoAmI }));
-    this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream, { clockError: clock.qmc }));
+    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu, whoAmI: mpuWhoAmI, record }));
+    this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream, { clockError: clock.qmc, record }));
     this.usb = new CdcHost(this.emu);
-    this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0 };
+    // backlogPauses: the times emulated time waited for the host to read its backlog.
+    this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0, backlogPauses: 0, maxHostBacklog: 0 };
     this.client = null;
     this.usb.onData = (buf) => {
       if (this.client) {
         this.usbStats.toHost += buf.length;
         this.client.write(Buffer.from(buf));
+        this.usbStats.maxHostBacklog = Math.max(this.usbStats.maxHostBacklog, this.client.writableLength);
       } else {
         this.usbStats.droppedToHost += buf.length;
       }
@@ -178,6 +200,19 @@ export class Session {
     sock.on('close', drop);
   }
 
+  /**
+   * Whether the host has more than `HOST_BACKLOG_BYTES` unread: a host slower than the stream.
+   * The bytes wait in the socket's buffer, which would otherwise grow without bound; a run
+   * that asks this before each slice (`shouldPause`) lets emulated time wait for the host
+   * instead, as it waits while no host is connected, so nothing is dropped.
+   */
+  hostBacklogged() {
+    const waiting = !!this.client && this.client.writableLength > HOST_BACKLOG_BYTES;
+    if (waiting && !this.backlogged) this.usbStats.backlogPauses++;
+    this.backlogged = waiting;
+    return waiting;
+  }
+
   flushPendingHost() {
     if (this.pendingFromHost && this.usb.connected) {
       this.usb.write(this.pendingFromHost);
@@ -186,7 +221,10 @@ export class Session {
   }
 
   async run(untilNanos, opts = {}) {
-    this.emu.pollHooks.push(() => this.flushPendingHost());
+    if (!this.flushHook) {
+      this.flushHook = () => this.flushPendingHost();
+      this.emu.pollHooks.push(this.flushHook);
+    }
     const t0 = process.hrtime.bigint();
     const n0 = this.emu.clock.nanos;
     const paused0 = this.emu.pausedWallSeconds ?? 0;
@@ -229,6 +267,7 @@ export class Session {
       stream_wraps: this.mpu.stream.wraps,
       usb: { ...this.usbStats, enumerated: this.usb.connected, out_packets: e.usbOut.deliveries },
       flash: e.stats,
+      log_lines: this.logLineCount,
       faults: this.faults.map((f) => ({ spec: f.spec, fired_s: f.fired === null ? null : f.fired / 1e9 })),
       clock: this.clock,
       marks: marks ? { cycles: Object.fromEntries(marks.cycles), entries: Object.fromEntries(marks.entries) } : null,
