@@ -34,6 +34,7 @@ const usage = `usage:
 fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:1s | stall:qmc@0s
             | stuck@20s | stuck@20s:50ms | hang@20s:50ms | overflow@30s:120ms
 --clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)
+--seed: without --stream, a generated stream of at most 600 s, wrapped by longer runs
 --mem-log: print the process's memory (heap, rss; MiB) to stderr every S emulated seconds
 --mpu-who-am-i: what the IMU model answers to WHO_AM_I (0x68; 0x70 an MPU-6500)`;
 
@@ -48,12 +49,19 @@ function rawLogNote(log) {
   return `defmt-print not installed (optional): the firmware log stays raw${where}; \`cargo install defmt-print\` to decode it`;
 }
 
-function streamFrom(v, seconds) {
+/**
+ * The longest stream `run` generates, s: a longer run wraps it (counted in the summary's
+ * `stream_wraps`) rather than hold 80 kB of columns per second of emulated time (2.9 GB for ten
+ * hours).
+ */
+const RUN_STREAM_MAX_S = 600;
+
+function streamFrom(v, seconds, maxSeconds = Infinity) {
   if (v.stream) return loadStreamCsv(v.stream);
   const sine = v.sine ? v.sine.split(',').map(Number) : null;
   return generateStream({
     seed: Number(v.seed ?? 1),
-    seconds: Math.max(1, Math.ceil(seconds)),
+    seconds: Math.max(1, Math.ceil(Math.min(seconds, maxSeconds))),
     sine: sine ? { amplitude: sine[0], frequency: sine[1] } : null,
   });
 }
@@ -98,7 +106,7 @@ async function cmdRun(v) {
   const warmup = v.warmup ? parseDuration(v.warmup) : 0;
   const faults = (v.fault ?? []).map(parseFault);
   const clock = parseClock(v.clock);
-  const stream = streamFrom(v, seconds);
+  const stream = streamFrom(v, seconds, RUN_STREAM_MAX_S);
   const mpuWhoAmI = parseWhoAmI(v['mpu-who-am-i']);
   // The log is written as it comes (a run of hours keeps none of it in memory): decoded lines
   // to --log, or without the decoder the raw RTT bytes to --log's .rtt file.
