@@ -19,7 +19,6 @@ import { profile } from './profile.js';
 const usage = `usage:
   pico-imu-sim run --elf FW.elf [--seconds S] [--stream S.csv | --seed N] [--port P | --port-file F]
                    [--warmup S] [--exit-on-disconnect] [--fault SPEC]... [--clock mpu:-1.3%,qmc:-1.3%]
-                   [--mpu-who-am-i 0x70]
                    [--instant-i2c] [--served DIR] [--summary F.json]
                    [--log F.txt] [--quiet]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
@@ -33,8 +32,7 @@ const usage = `usage:
                    with each task's costliest functions)
 fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:1s | stall:qmc@0s
             | stuck@20s | stuck@20s:50ms | hang@20s:50ms | overflow@30s:120ms
---clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)
---mpu-who-am-i: what the IMU model answers to WHO_AM_I (0x68; 0x70 an MPU-6500)`;
+--clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)`;
 
 function fail(msg, code = 2) {
   process.stderr.write(`pico-imu-sim: ${msg}\n`);
@@ -57,14 +55,6 @@ function streamFrom(v, seconds) {
   });
 }
 
-/** `--mpu-who-am-i 0x70`: a byte, hex or decimal; the MPU-6050's own 0x68 without the option. */
-function parseWhoAmI(text) {
-  if (text === undefined) return 0x68;
-  const n = Number(text);
-  if (!(Number.isInteger(n) && n >= 0 && n <= 0xff)) fail(`--mpu-who-am-i '${text}': a byte, e.g. 0x70`);
-  return n;
-}
-
 async function cmdRun(v) {
   if (!v.elf) fail('run: --elf is required');
   const seconds = Number(v.seconds ?? 10);
@@ -72,8 +62,7 @@ async function cmdRun(v) {
   const faults = (v.fault ?? []).map(parseFault);
   const clock = parseClock(v.clock);
   const stream = streamFrom(v, seconds);
-  const mpuWhoAmI = parseWhoAmI(v['mpu-who-am-i']);
-  const s = new Session({ elf: v.elf, stream, faults, clock, mpuWhoAmI, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
+  const s = new Session({ elf: v.elf, stream, faults, clock, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet });
   if (!s.decoder.available) process.stderr.write(`pico-imu-sim: ${rawLogNote(v.log)}\n`);
   const stopAt = seconds * 1e9;
   let stop = null;
@@ -130,7 +119,7 @@ async function cmdGen(v) {
 
 // The options of every subcommand: values given once, flags, and --fault (repeatable).
 const STRING_OPTIONS = [
-  'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock', 'mpu-who-am-i',
+  'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock',
   'served', 'summary', 'log', 'out', 'report', 'json', 'top', 'callers', 'pcs', 'from',
 ];
 const BOOLEAN_OPTIONS = ['instant-i2c', 'exit-on-disconnect', 'quiet', 'copies', 'exact', 'tasks'];

@@ -74,7 +74,7 @@ export function parseClock(spec) {
 
 export class Session {
   /** `defmtPrint`: the decoder's binary (default: found on PATH; null: keep the log raw). */
-  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, mpuWhoAmI = 0x68, echoLog = false, markerSymbol, defmtPrint } = {}) {
+  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, echoLog = false, markerSymbol, defmtPrint } = {}) {
     this.logLines = [];
     this.decoder = new DefmtDecoder(elf, {
       onLine: (l) => {
@@ -85,7 +85,7 @@ export class Session {
     });
     this.emu = new Emulator({ elf, markerSymbol, onRtt: (b) => this.decoder.push(b) });
     this.bus = new I2cBus(this.emu.mcu, { index: 0, sda: 4, scl: 5, instant: instantI2c });
-    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu, whoAmI: mpuWhoAmI }));
+    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu }));
     this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream, { clockError: clock.qmc }));
     this.usb = new CdcHost(this.emu);
     this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0 };
