@@ -36,17 +36,8 @@ def walk(rec: pico_imu.Recording, column: str) -> None:
     f = pico_imu.fit(rec, column=column, auto=True)
     print(f"\n== Automatic walk on {column} (computed in {time.perf_counter() - t:.1f} s): "
           "diagnose → add the named effect → refit")
-    for i, s in enumerate(f.steps, 1):
-        edit = ", ".join([f"+ {a}" for a in s.added] + [f"− {r}" for r in s.removed])
-        print(f"  {i}. {edit:<24} χ²/dof {s.chi2_dof_before:.3g} → {s.chi2_dof_after:.3g}   "
-              f"RMS log-residual {s.rms_log_residual_before:.3g} → {s.rms_log_residual_after:.3g}   "
-              f"adequate {'yes' if s.adequate_before else 'no'} → {'yes' if s.adequate_after else 'no'}")
-        print(f"     {s.reading}")
-    print(f"Stop: {f.stop}.")
-    for term in f.terms:
-        est = ", ".join(f"{k} = {v:.4g} ± {term.sigma.get(k) or float('nan'):.2g} {term.units.get(k, '')}"
-                        for k, v in term.params.items() if v is not None)
-        print(f"  {term.effect:<18} {est}{'' if term.detected else '  (not detected)'}")
+    print(f.steps_text())
+    print(f.terms_text())
     print(f"Verdict: {f.verdict}")
 
 

@@ -41,18 +41,9 @@ def main() -> None:
     t = time.perf_counter()
     f = pico_imu.fit(data, auto=True, **kw)
     print(f"\n== Automatic walk (computed in {time.perf_counter() - t:.1f} s): diagnose → add the named effect → refit")
-    for i, s in enumerate(f.steps, 1):
-        edit = ", ".join([f"+ {a}" for a in s.added] + [f"− {r}" for r in s.removed])
-        print(f"  {i}. {edit:<24} χ²/dof {s.chi2_dof_before:.3g} → {s.chi2_dof_after:.3g}   "
-              f"RMS log-residual {s.rms_log_residual_before:.3g} → {s.rms_log_residual_after:.3g}   "
-              f"adequate {'yes' if s.adequate_before else 'no'} → {'yes' if s.adequate_after else 'no'}")
-        print(f"     {s.reading}")
-    print(f"Stop: {f.stop}.")
+    print(f.steps_text())
     print(f"\n== Final model of {f.column} [{f.unit}], {f.samples} samples at {f.rate_hz:.6g} Hz")
-    for term in f.terms:
-        est = ", ".join(f"{k} = {v:.4g} ± {term.sigma.get(k) or float('nan'):.2g} {term.units.get(k, '')}"
-                        for k, v in term.params.items() if v is not None)
-        print(f"  {term.effect:<18} {est}{'' if term.detected else '  (not detected)'}")
+    print(f.terms_text())
     print(f"Verdict: {f.verdict}")
     print(f"Diagnosis: {f.explanation}")
     if len(sys.argv) > 3:

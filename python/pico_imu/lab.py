@@ -119,6 +119,38 @@ class Fit:
         return (f"<Fit {self.column} [{self.unit}]: {' + '.join(t.effect for t in self.terms)}; "
                 f"χ²/dof = {self.chi2_dof:.3g}; {verdict}; {len(self.steps)} step(s)>")
 
+    def steps_text(self) -> str:
+        """The walk as text, as ``imu-lab fit --auto`` prints its steps: per step the edit,
+        χ²/dof and RMS log-residual before → after, adequacy before → after, and on the next line
+        the added effect's reading; then why the walk stopped. Empty for a fit without a walk."""
+        lines = []
+        for i, s in enumerate(self.steps, 1):
+            edit = ", ".join([f"+ {a}" for a in s.added] + [f"− {r}" for r in s.removed])
+            lines.append(
+                f"  {i}. {edit:<24} χ²/dof {s.chi2_dof_before:.3g} → {s.chi2_dof_after:.3g}   "
+                f"RMS log-residual {s.rms_log_residual_before:.3g} → {s.rms_log_residual_after:.3g}   "
+                f"adequate {'yes' if s.adequate_before else 'no'} → {'yes' if s.adequate_after else 'no'}")
+            lines.append(f"     {s.reading}")
+        if self.stop:
+            lines.append(f"Stop: {self.stop}.")
+        return "\n".join(lines)
+
+    def terms_text(self) -> str:
+        """The model's terms, one a line: every parameter with its 1σ and unit, and
+        ``(not detected)`` where the amplitude's interval includes zero."""
+        return "\n".join(f"  {t.effect:<18} {_estimates(t)}{'' if t.detected else '  (not detected)'}"
+                         for t in self.terms)
+
+    def __str__(self) -> str:
+        """The session in text: the walk (:meth:`steps_text`), the model (:meth:`terms_text`),
+        the verdict and the diagnosis."""
+        out = [f"{self.column} [{self.unit}]: {self.samples} samples at {self.rate_hz:.6g} Hz"]
+        if self.steps or self.stop:
+            out += ["Automatic walk: diagnose → add the named effect → refit", self.steps_text()]
+        out += [f"Model of {self.column} [{self.unit}]:", self.terms_text(),
+                f"Verdict: {self.verdict}", f"Diagnosis: {self.explanation}"]
+        return "\n".join(out)
+
     def _repr_html_(self) -> str:
         e = html.escape
         out = [f"<p><b>{e(self.column)} [{e(self.unit)}]</b>: {self.samples} samples at "

@@ -113,6 +113,29 @@ def test_repr_html_and_plot_show_the_walk(rng, tmp_path):
         f.plot(stage=9)
 
 
+def test_text_forms_carry_the_walk_and_every_estimate(rng, tmp_path):
+    rec = pico_imu.read_csv(record(rng, tmp_path))
+    for f in (pico_imu.fit(rec, column="gx", terms=["white", "rate_random_walk"], add=["markov"]),
+              pico_imu.fit(rec, column="gx", auto=True, max_steps=2)):
+        steps = f.steps_text().splitlines()
+        assert len(steps) == 2 * len(f.steps) + (1 if f.stop else 0), steps
+        for i, s in enumerate(f.steps):
+            line = steps[2 * i]
+            assert line.startswith(f"  {i + 1}. "), line
+            assert all(f"+ {a}" in line for a in s.added) and all(f"− {r}" in line for r in s.removed)
+            assert f"χ²/dof {s.chi2_dof_before:.3g} → {s.chi2_dof_after:.3g}" in line
+            assert steps[2 * i + 1].strip() == s.reading.strip()
+        terms = f.terms_text().splitlines()
+        assert [ln.split()[0] for ln in terms] == [t.effect for t in f.terms]
+        for ln, t in zip(terms, f.terms):
+            for k, v in t.params.items():
+                assert f"{k} = " in ln and t.units.get(k, "") in ln, (ln, k)
+            assert ln.endswith("(not detected)") == (not t.detected), ln
+        text = str(f)
+        assert f.terms_text() in text and f.steps_text() in text and f.verdict in text
+    assert f.steps or f.stop
+
+
 def test_bad_inputs_are_named(rng, tmp_path):
     y = rng.normal(0, 0.01, int(rng.integers(3_000, 8_000)))
     i = int(rng.integers(0, len(y)))

@@ -19,7 +19,6 @@ import { profile } from './profile.js';
 const usage = `usage:
   pico-imu-sim run --elf FW.elf [--seconds S] [--stream S.csv | --seed N] [--port P | --port-file F]
                    [--warmup S] [--exit-on-disconnect] [--fault SPEC]... [--clock mpu:-1.3%,qmc:-1.3%]
-                   [--mpu-who-am-i 0x70]
                    [--instant-i2c] [--served DIR] [--summary F.json]
                    [--log F.txt] [--quiet] [--mem-log S]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
@@ -35,8 +34,7 @@ fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:
             | stuck@20s | stuck@20s:50ms | hang@20s:50ms | overflow@30s:120ms
 --clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)
 --seed: without --stream, a generated stream of at most 600 s, wrapped by longer runs
---mem-log: print the process's memory (heap, rss; MiB) to stderr every S emulated seconds
---mpu-who-am-i: what the IMU model answers to WHO_AM_I (0x68; 0x70 an MPU-6500)`;
+--mem-log: print the process's memory (heap, rss; MiB) to stderr every S emulated seconds`;
 
 function fail(msg, code = 2) {
   process.stderr.write(`pico-imu-sim: ${msg}\n`);
@@ -64,14 +62,6 @@ function streamFrom(v, seconds, maxSeconds = Infinity) {
     seconds: Math.max(1, Math.ceil(Math.min(seconds, maxSeconds))),
     sine: sine ? { amplitude: sine[0], frequency: sine[1] } : null,
   });
-}
-
-/** `--mpu-who-am-i 0x70`: a byte, hex or decimal; the MPU-6050's own 0x68 without the option. */
-function parseWhoAmI(text) {
-  if (text === undefined) return 0x68;
-  const n = Number(text);
-  if (!(Number.isInteger(n) && n >= 0 && n <= 0xff)) fail(`--mpu-who-am-i '${text}': a byte, e.g. 0x70`);
-  return n;
 }
 
 /** `--mem-log S`: the interval of the memory lines, emulated seconds (> 0). */
@@ -107,13 +97,12 @@ async function cmdRun(v) {
   const faults = (v.fault ?? []).map(parseFault);
   const clock = parseClock(v.clock);
   const stream = streamFrom(v, seconds, RUN_STREAM_MAX_S);
-  const mpuWhoAmI = parseWhoAmI(v['mpu-who-am-i']);
   // The log is written as it comes (a run of hours keeps none of it in memory): decoded lines
   // to --log, or without the decoder the raw RTT bytes to --log's .rtt file.
   const logFd = v.log ? openSync(v.log, 'w') : null;
   let rawFd = null;
   const s = new Session({
-    elf: v.elf, stream, faults, clock, mpuWhoAmI, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet,
+    elf: v.elf, stream, faults, clock, instantI2c: !!v['instant-i2c'], echoLog: !v.quiet,
     // Every sample the models produce is kept only when --served asks for them.
     record: !!v.served,
     onLogLine: (l) => logFd !== null && writeSync(logFd, `${l}\n`),
@@ -180,7 +169,7 @@ async function cmdGen(v) {
 
 // The options of every subcommand: values given once, flags, and --fault (repeatable).
 const STRING_OPTIONS = [
-  'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock', 'mpu-who-am-i',
+  'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock',
   'served', 'summary', 'log', 'mem-log', 'out', 'report', 'json', 'top', 'callers', 'pcs', 'from',
 ];
 const BOOLEAN_OPTIONS = ['instant-i2c', 'exit-on-disconnect', 'quiet', 'copies', 'exact', 'tasks'];

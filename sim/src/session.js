@@ -89,7 +89,7 @@ export class Session {
    * log line goes as it comes (the session itself keeps the last `LOG_TAIL_LINES`);
    * `onRawLog(bytes)`: where the raw RTT bytes go when there is no decoder.
    */
-  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, mpuWhoAmI = 0x68, echoLog = false, markerSymbol, defmtPrint, record = false, onLogLine = () => {}, onRawLog = () => {} } = {}) {
+  constructor({ elf, stream, instantI2c = false, faults = [], clock = { mpu: 0, qmc: 0 }, echoLog = false, markerSymbol, defmtPrint, record = false, onLogLine = () => {}, onRawLog = () => {} } = {}) {
     this.logLines = []; // the last LOG_TAIL_LINES lines
     this.logLineCount = 0;
     this.decoder = new DefmtDecoder(elf, {
@@ -105,7 +105,7 @@ export class Session {
     });
     this.emu = new Emulator({ elf, markerSymbol, onRtt: (b) => this.decoder.push(b) });
     this.bus = new I2cBus(this.emu.mcu, { index: 0, sda: 4, scl: 5, instant: instantI2c });
-    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu, whoAmI: mpuWhoAmI, record }));
+    this.mpu = this.bus.attach(MPU_ADDR, new Mpu6050(stream, { clockError: clock.mpu, record }));
     this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream, { clockError: clock.qmc, record }));
     this.usb = new CdcHost(this.emu);
     // backlogPauses: the times emulated time waited for the host to read its backlog.

@@ -24,7 +24,6 @@ use crate::run;
 mod checks;
 mod faults;
 mod orientation;
-mod other_part;
 mod session;
 use checks::{check_calibration, check_losses, check_stamps, check_tables};
 use faults::{check_boot_stall, check_faults};
@@ -124,9 +123,6 @@ pub enum Scenario {
     /// The board turned through the standard trajectory twice, identity calibration then the
     /// part's: attitude and heading against the truth.
     Orientation,
-    /// The IMU answering WHO_AM_I as an MPU-6500: a calibration fitted for the MPU-6050 refused
-    /// (3 s).
-    OtherPart,
 }
 
 impl Scenario {
@@ -137,12 +133,11 @@ impl Scenario {
             Scenario::Sine => "sine",
             Scenario::BootStall => "boot-stall",
             Scenario::Orientation => "orientation",
-            Scenario::OtherPart => "other-part",
         }
     }
 }
 
-/// `cargo xtask e2e [--scenario faults|boot-stall|sine|orientation|other-part] [--seconds S] [--shift-ms MS] [--out DIR]`.
+/// `cargo xtask e2e [--scenario faults|boot-stall|sine|orientation] [--seconds S] [--shift-ms MS] [--out DIR]`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct E2eArgs {
     /// Which scenario to run.
@@ -182,7 +177,6 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
             Scenario::Sine => (20.0, &[], None, Some("3,3"), false),
             Scenario::BootStall => (3.0, &[], None, None, true),
             Scenario::Orientation => return orientation::orientation(args),
-            Scenario::OtherPart => return other_part::other_part(args),
         };
     let seconds: f64 = args.seconds.unwrap_or(default_s);
     let shift_ms = args.shift_ms;

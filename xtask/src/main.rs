@@ -234,7 +234,6 @@ fn test(extra: &[String]) -> Result<()> {
             e2e::Scenario::BootStall,
             e2e::Scenario::Sine,
             e2e::Scenario::Orientation,
-            e2e::Scenario::OtherPart,
         ] {
             e2e::e2e(&e2e::E2eArgs::scenario(scenario))?;
         }

@@ -37,8 +37,6 @@ pub struct Device {
     pub(crate) firmware: &'static str,
     /// When the last periodic status frame went out, µs.
     last_status_us: Option<u64>,
-    /// The IMU part as it identified itself (`None` until it has).
-    pub(crate) imu_chip: Option<imu_drivers::mpu6050::ChipId>,
 }
 
 impl Device {
@@ -60,7 +58,6 @@ impl Device {
             period: [Fine::ZERO; 2],
             firmware,
             last_status_us: None,
-            imu_chip: None,
         }
     }
 
@@ -116,7 +113,6 @@ impl Device {
                 )
             }
             SensorMsg::Report(r) => self.report(r, sink),
-            SensorMsg::ImuChip(chip) => self.imu_detected(*chip),
             SensorMsg::BusRecovered {
                 t_us,
                 pulses,

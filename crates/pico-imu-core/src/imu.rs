@@ -138,9 +138,6 @@ impl ImuService {
             return;
         }
         self.core.health.answered();
-        if let Some(chip) = cx.dev.chip() {
-            let _ = cx.out.push(SensorMsg::ImuChip(chip));
-        }
         self.capacity = cx.dev.fifo_capacity().unwrap_or(1024);
         self.core.wait_to_start(cx.delay, cx.now).await;
         if let Err(e) = cx.dev.start().await {

@@ -1,5 +1,5 @@
 //! What the sensor tasks tell the processing task.
-use imu_drivers::mpu6050::{ChipId, RawSample};
+use imu_drivers::mpu6050::RawSample;
 use imu_proto::{Event, GapCause, Sensor, SensorState, Vec};
 
 use crate::clock::Stamps;
@@ -28,9 +28,6 @@ pub enum SensorMsg {
     },
     /// A sensor service's state, counters and events.
     Report(Report),
-    /// The IMU answered its WHO_AM_I with this part (at each initialisation): a calibration
-    /// fitted for another part is refused from then on.
-    ImuChip(ChipId),
     /// The bus was recovered (SCL clocked, STOP) before a sensor's transfer.
     BusRecovered {
         t_us: u64,

@@ -1,7 +1,6 @@
 //! Host requests: identity, status, calibration, streaming mode, intervals, tables, the
 //! attitude filter's declination and expected field.
-use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, ImuPart, MAX_BLOB_LEN};
-use imu_drivers::mpu6050::ChipId;
+use imu_cal::device::{decode_blob, encode_blob, BlobError, Calibration, MAX_BLOB_LEN};
 use imu_proto::{
     CalFault, CalProblem, CalSource, CalStatus, DeviceMsg, ErrorCode, HostFrame, Identity,
     MagReference, OrientationConfig, Reply, Request, Scales, Vec, IMU_RATE_HZ, MAG_RATE_HZ,
@@ -45,16 +44,13 @@ pub fn cal_problem(e: BlobError) -> CalProblem {
 }
 
 /// Decode a blob and check it was fitted for the parts and ranges the device runs (`scales`:
-/// the physical unit per LSB of each sensor; the parts: [`crate::config::PARTS`], and the IMU
-/// part detected at boot, `imu_chip`, once known).
-pub fn decode_for(
-    blob: &[u8],
-    scales: &Scales,
-    imu_chip: Option<ChipId>,
-) -> Result<Calibration, CalProblem> {
+/// the physical unit per LSB of each sensor; the parts: [`crate::config::PARTS`]).
+pub fn decode_for(blob: &[u8], scales: &Scales) -> Result<Calibration, CalProblem> {
     let cal = decode_blob(blob).map_err(cal_problem)?;
-    if !fits_parts(&cal, imu_chip) {
-        return Err(CalProblem::OtherPart);
+    if let Some(f) = cal.fitted_for() {
+        if (f.imu, f.mag) != crate::config::PARTS {
+            return Err(CalProblem::OtherPart);
+        }
     }
     let lsb = [1.0 / scales.accel, 1.0 / scales.gyro, 1.0 / scales.mag];
     if !cal.fits_ranges(lsb) {
@@ -63,33 +59,7 @@ pub fn decode_for(
     Ok(cal)
 }
 
-/// Whether `cal` was fitted for the firmware's parts and, once the IMU has answered, for the
-/// part it identified as (an MPU-6500 sold as an MPU-6050 has other sensitivities, offsets and
-/// temperature behaviour). A calibration recording no parts passes here (`decode_blob` refuses
-/// those that must record them).
-pub fn fits_parts(cal: &Calibration, imu_chip: Option<ChipId>) -> bool {
-    let Some(f) = cal.fitted_for() else {
-        return true;
-    };
-    let detected = match imu_chip {
-        None => true,
-        Some(chip) => matches!((f.imu, chip), (ImuPart::Mpu6050, ChipId::Mpu6050)),
-    };
-    (f.imu, f.mag) == crate::config::PARTS && detected
-}
-
 impl Device {
-    /// The IMU identified itself as `chip`: a calibration in use that was fitted for another
-    /// part is dropped (identity, the status reporting `Rejected(OtherPart)`), and uploads are
-    /// checked against it from now on.
-    pub(crate) fn imu_detected(&mut self, chip: ChipId) {
-        self.imu_chip = Some(chip);
-        if !fits_parts(&self.pipeline.cal, Some(chip)) {
-            self.use_cal(Calibration::identity(), CalSource::Identity);
-            self.cal_status.fault = Some(CalFault::Rejected(CalProblem::OtherPart));
-        }
-    }
-
     fn use_cal(&mut self, cal: Calibration, source: CalSource) {
         self.pipeline.set_cal(cal);
         self.cal_status = CalStatus {
@@ -101,7 +71,7 @@ impl Device {
     /// Use a blob read from flash at boot; a bad one is reported and identity kept.
     pub fn load_stored(&mut self, blob: Option<&[u8]>) {
         let scales = self.pipeline.scales;
-        match blob.map(|b| decode_for(b, &scales, self.imu_chip)) {
+        match blob.map(|b| decode_for(b, &scales)) {
             None => self.use_cal(Calibration::identity(), CalSource::Identity),
             Some(Ok(cal)) => self.use_cal(cal, CalSource::Flash),
             Some(Err(e)) => {
@@ -157,7 +127,7 @@ impl Device {
                 }
             }
             Request::SetCalibration { blob, persist } => {
-                match decode_for(&blob, &self.pipeline.scales, self.imu_chip) {
+                match decode_for(&blob, &self.pipeline.scales) {
                     Ok(cal) => {
                         self.use_cal(cal, CalSource::Host);
                         // New corrections change the engines' input: old sums would mix scales.

@@ -32,15 +32,12 @@ export class Mpu6050 extends RegisterDevice {
   /**
    * @param stream source of physical values (Stream.imuAt)
    * @param opts.record keep every sample produced and whether it was served (for bit-exact checks)
-   * @param opts.whoAmI what WHO_AM_I reads (0x68; 0x70 an MPU-6500 sold as an MPU-6050): the
-   *   model is the MPU-6050 whatever it says
    */
-  constructor(stream, { record = true, clockError = 0, whoAmI = 0x68 } = {}) {
+  constructor(stream, { record = true, clockError = 0 } = {}) {
     super();
     this.stream = stream;
     this.record = record;
     this.clockError = clockError;
-    this.whoAmI = whoAmI;
     this.samples = []; // { k, slot, t, raw: Int16Array(7) [ax ay az temp gx gy gz], served: 0 | ns }
     this.stats = { produced: 0, overflows: 0, fifoResets: 0, servedFifo: 0, servedRegs: 0, overwrittenBytes: 0, resets: 0, stalledSlots: 0 };
     this.slots = new SlotGrid();
@@ -51,7 +48,7 @@ export class Mpu6050 extends RegisterDevice {
   powerOnReset(nanos = 0) {
     this.regs = new Uint8Array(128);
     this.regs[REG.PWR_MGMT_1] = 0x40; // SLEEP
-    this.regs[REG.WHO_AM_I] = this.whoAmI ?? 0x68;
+    this.regs[REG.WHO_AM_I] = 0x68;
     this.fifo = new Uint8Array(FIFO_SIZE);
     this.fifoOwner = new Array(FIFO_SIZE); // the sample each byte belongs to
     this.fifoHead = 0; // read index

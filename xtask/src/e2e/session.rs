@@ -14,7 +14,7 @@ use crate::emu_link::Link;
 
 /// A calibration far enough from identity that its effect on every channel is visible, within
 /// the datasheet bounds the device checks (docs/calibration.md, "Plausibility").
-pub(super) fn test_calibration() -> Result<Calibration> {
+fn test_calibration() -> Result<Calibration> {
     let m = [[1.02, 0.01, 0.0], [0.0, 0.98, -0.02], [0.005, 0.0, 1.01]];
     // The accelerometer's model is lower-triangular (T·K).
     let lower = [[1.02, 0.0, 0.0], [0.01, 0.98, 0.0], [0.005, -0.02, 1.01]];
