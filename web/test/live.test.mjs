@@ -69,7 +69,9 @@ before(async () => {
   const toml = wrongCalibration();
   console.log(`the device's calibration before the wizards:\n${toml}`);
   writeFileSync(join(dir, "wrong.toml"), toml);
+  const t0 = Date.now();
   imuLab(["device", "--port", PORT, "calibrate", "--upload", join(dir, "wrong.toml")]);
+  console.log(`written to the device's flash in ${(Date.now() - t0) / 1000} s`);
   srv = await serve(["--port", PORT, "--record-dir", dir]);
   ctx = await browser();
 });

@@ -459,6 +459,33 @@ impl Live {
     }
 }
 
+impl Live {
+    /// On the server's exit (Ctrl-C): a device a wizard left on raw values is switched back to
+    /// calibrated ones (what the next `imu-lab serve` does at its start too), said on stderr.
+    pub async fn calibrated_on_exit(&self) {
+        let mode = self.mode.lock().await;
+        if *mode == StreamMode::Calibrated {
+            return;
+        }
+        let wait = Duration::from_secs(3);
+        let req = request(self, Request::SetMode(StreamMode::Calibrated));
+        let problem = match tokio::time::timeout(wait, req).await {
+            Ok(Ok(Reply::Ok)) => {
+                eprintln!("imu-lab serve: the device streams calibrated values again");
+                return;
+            }
+            Ok(Ok(other)) => format!("it answered {other:?}"),
+            Ok(Err(e)) => e,
+            Err(_) => format!("no answer within {} s", wait.as_secs()),
+        };
+        eprintln!(
+            "imu-lab serve: warning: the device may still stream raw values ({problem}); \
+             `imu-lab device --port {} mode calibrated` switches it back",
+            self.port
+        );
+    }
+}
+
 pub(super) fn send(tx: &broadcast::Sender<(String, Value)>, kind: &str, v: Value) {
     // no page open: nobody to tell
     let _ = tx.send((kind.to_string(), v));
