@@ -596,11 +596,6 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             snap.poses.state(),
         )
     };
-    // capturing ends: the device back to calibrated values (the poses stay, raw)
-    let back = capturing(&s, false, false, false).await;
-    if !back.status().is_success() {
-        return back;
-    }
     if problem.poses.len() < 6 {
         return error(
             StatusCode::CONFLICT,
@@ -609,6 +604,11 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
                 problem.poses.len()
             ),
         );
+    }
+    // capturing ends: the device back to calibrated values (the poses stay, raw)
+    let back = capturing(&s, false, false, false).await;
+    if !back.status().is_success() {
+        return back;
     }
     let fitted = tokio::task::spawn_blocking(move || {
         use imu_cal::session::{self as cal, Sensor};
