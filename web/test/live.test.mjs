@@ -3,17 +3,76 @@
 // the device's own Allan tables arrive and are replaced by the next round with more samples and
 // narrower bounds, the decimated stream stays bounded, a recording made from the page opens in
 // the noise lab; the magnetometer wizard collects the field with its coverage and fits it.
+// The device holds a wrong calibration from the start (written to its flash, as a device
+// calibrated before would): the wizards fit raw values, so their fits are the part's all the
+// same.
 import { test, before, after } from "node:test";
 import assert from "node:assert/strict";
+import { writeFileSync } from "node:fs";
 import { join } from "node:path";
-import { OUT, browser, scratch, serve } from "./lib.mjs";
+import { OUT, browser, imuLab, scratch, serve } from "./lib.mjs";
 
 const PORT = process.env.IMU_LIVE_PORT;
 let srv, ctx;
 
+/// A uniform draw in ±[lo, hi].
+function signed(lo, hi) {
+  const x = lo + (hi - lo) * Math.random();
+  return Math.random() < 0.5 ? -x : x;
+}
+
+/// A wrong calibration for the device (within the datasheet bounds it checks): a hard iron of
+/// 10–40 µT an axis, a soft iron of 1 ± 3–10 % on its diagonal, an accelerometer offset of
+/// 0.2–0.8 m/s² and scale of 1 ± 2–6 % an axis, drawn at random. A fit of the calibrated
+/// values would be off by about that much.
+function wrongCalibration() {
+  const three = (f) => [f(), f(), f()];
+  const hard = three(() => signed(10, 40));
+  const soft = [0, 1, 2].map((i) => [0, 1, 2].map((j) => (i === j ? 1 + signed(0.03, 0.1) : 0)));
+  const offset = three(() => signed(0.2, 0.8));
+  const scale = three(() => 1 + signed(0.02, 0.06));
+  const v = (a) => `[${a.map((x) => x.toFixed(6)).join(", ")}]`;
+  return `# a deliberately wrong calibration (web/test/live.test.mjs)
+version = 1
+
+[accel]
+part = "MPU-6050"
+lsb_per_unit = ${8192 / 9.80665}
+offset = ${v(offset)}
+scale = ${v(scale)}
+misalignment_deg = [0.0, 0.0, 0.0]
+
+[gyro]
+part = "MPU-6050"
+lsb_per_unit = 131.0
+bias = [0.0, 0.0, 0.0]
+temp_coeff = [0.0, 0.0, 0.0]
+temp_ref = 25.0
+temp_lsb_per_c = 340.0
+temp_offset_c = 36.53
+scale = [1.0, 1.0, 1.0]
+misalignment_deg = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+
+[mag]
+part = "QMC5883L"
+lsb_per_unit = 120.0
+hard_iron = ${v(hard)}
+soft_iron = [${soft.map(v).join(", ")}]
+`;
+}
+
 before(async () => {
   if (!PORT) return;
-  srv = await serve(["--port", PORT, "--record-dir", scratch()]);
+  // the wrong calibration first, into the device's flash (the emulator serves one host at a
+  // time: this upload, then the server)
+  const dir = scratch();
+  const toml = wrongCalibration();
+  console.log(`the device's calibration before the wizards:\n${toml}`);
+  writeFileSync(join(dir, "wrong.toml"), toml);
+  const t0 = Date.now();
+  imuLab(["device", "--port", PORT, "calibrate", "--upload", join(dir, "wrong.toml")]);
+  console.log(`written to the device's flash in ${(Date.now() - t0) / 1000} s`);
+  srv = await serve(["--port", PORT, "--record-dir", dir]);
   ctx = await browser();
 });
 
@@ -100,7 +159,14 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   const page = await ctx.newPage();
   await page.goto(srv.url);
   await page.waitForSelector("#live-status[data-uptime]", { timeout: 60_000 });
+  assert.match(await page.textContent("#live-status"), /from flash/);
   await page.click("#mag-start");
+  // the device streams raw values while the wizard collects, and the page says so
+  await page.waitForSelector("#raw-banner[data-raw=yes]");
+  assert.match(await page.textContent("#raw-banner"), /corrections are off while the wizard collects/);
+  await page.waitForFunction(() => /stream\s*Raw/.test(document.querySelector("#live-status").textContent),
+    null, { timeout: 30_000 });
+  await page.waitForSelector("#stream-kind[data-raw=yes]");
   // the accelerometer's poses while the magnetometer's points are collected (the same turns)
   await accelPoses(page);
   // the emulated board turns through the simulator's standard trajectory: wait for half of the
@@ -109,6 +175,10 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   await page.waitForFunction((t) => Number(document.querySelector("#mag-state").dataset.coverage || 0) >= 0.5 ||
     Number(document.querySelector("#live-status").dataset.uptime) >= t + 60, t0, { timeout: 240_000 });
   await page.click("#mag-stop");
+  // every wizard done collecting: calibrated values again
+  await page.waitForSelector("#raw-banner[data-raw=no]", { state: "attached" });
+  await page.waitForFunction(() => /stream\s*Calibrated/.test(document.querySelector("#live-status").textContent),
+    null, { timeout: 30_000 });
   const points = Number(await page.getAttribute("#mag-state", "data-points"));
   const coverage = Number(await page.getAttribute("#mag-state", "data-coverage"));
   console.log(`magnetometer: ${points} points, coverage ${(100 * coverage).toFixed(1)} %`);
@@ -121,6 +191,16 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   console.log(`fit: ${model}; ${text.slice(0, 300)}`);
   assert.match(model, /hard_iron/);
   assert.match(text, /residual RMS [\d.e-]+ µT/);
+  const magTruth = JSON.parse(process.env.IMU_LIVE_MAG_TRUTH || "null");
+  if (magTruth) {
+    // the part's hard iron, not the one left over by the device's wrong calibration: 0.5 µT is
+    // 25 times the σ of the fits here (0.02 µT), far inside the 10–40 µT of the wrong one
+    const hard = JSON.parse(await page.getAttribute("#mag-result", "data-params")).hard_iron;
+    console.log(`hard iron: fitted ${hard} µT, the part's ${magTruth.hard_iron} µT`);
+    for (let k = 0; k < 3; k++) {
+      assert.ok(Math.abs(hard[k] - magTruth.hard_iron[k]) < 0.5, `hard iron ${k}: ${hard[k]} vs ${magTruth.hard_iron[k]} µT`);
+    }
+  }
   // the upload: refused without the confirmation, then sent to RAM only
   await page.click("#mag-upload-button");
   assert.match(await page.textContent("#error"), /confirmation/);

@@ -265,8 +265,8 @@ fn test(extra: &[String]) -> Result<()> {
 /// through the simulator's calibration run (`imu_sim::trajectory::Trajectory::calibration`:
 /// eight poses held 5 s around the standard run's turns) by a part with hard and soft iron and
 /// an accelerometer offset and scale drawn at random (printed, and handed to the test as its
-/// truth): the magnetometer wizard needs the field in many directions, the accelerometer's
-/// the poses; the stream loops.
+/// truth, with the part's hard iron): the magnetometer wizard needs the field in many
+/// directions, the accelerometer's the poses; the stream loops.
 fn serve_live_test() -> Result<()> {
     if serve::chromium().is_none() {
         return serve::browser_tests(&["live"], &[]);
@@ -314,9 +314,15 @@ fn serve_live_test() -> Result<()> {
         &out,
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
+    // the hard-iron part's hard iron (imu_sim::trajectory::Part::hard_iron), µT
+    let mag_truth = r#"{"hard_iron":[18.0,-12.0,12.0]}"#.to_string();
     serve::browser_tests(
         &["live"],
-        &[("IMU_LIVE_PORT", port), ("IMU_LIVE_ACCEL_TRUTH", truth)],
+        &[
+            ("IMU_LIVE_PORT", port),
+            ("IMU_LIVE_ACCEL_TRUTH", truth),
+            ("IMU_LIVE_MAG_TRUTH", mag_truth),
+        ],
     )
 }
 

@@ -357,6 +357,10 @@ function streamPush(points) {
   if (streamPoints.length > STREAM_KEEP) streamPoints.splice(0, streamPoints.length - STREAM_KEEP);
   const last = streamPoints[streamPoints.length - 1];
   if (last) {
+    $("stream-kind").textContent = last.raw
+      ? "Raw stream (nominal sensitivities, no corrections; decimated on the server)"
+      : "Calibrated stream (decimated on the server)";
+    $("stream-kind").dataset.raw = last.raw ? "yes" : "no";
     const rows = $("stream-latest").tBodies[0].rows;
     for (let k = 0; k < rows.length; k++) {
       const m = last.mean[k];
@@ -400,6 +404,17 @@ function renderRecord(r) {
     ? `recording to ${r.file}`
     : (r.summary ? `${r.file}: ${r.summary}` : "");
   $("record-state").dataset.recording = r.recording ? "yes" : "no";
+}
+
+// The device streams raw values while a wizard collects (the server says which).
+function renderMode(m) {
+  const el = $("raw-banner");
+  el.hidden = !m.raw;
+  el.textContent = m.raw
+    ? `Raw values: the device's corrections are off while the wizard collects (${m.for.join(", ")}); ` +
+      "calibrated values return when it stops."
+    : "";
+  el.dataset.raw = m.raw ? "yes" : "no";
 }
 
 // ---------- magnetometer wizard ----------
@@ -461,6 +476,8 @@ function renderMagFit(r) {
   );
   div.dataset.model = f.model.join(",");
   div.dataset.adequate = d.adequate ? "yes" : "no";
+  div.dataset.params = JSON.stringify(f.params);
+  div.dataset.sigma = JSON.stringify(f.sigma);
   div.appendChild(renderUpload(r.upload, "mag"));
 }
 
@@ -522,7 +539,8 @@ function renderAccel(a) {
       `${fmt(a.noise.gyro_sigma, 2)} ${a.noise.gyro_unit}` : "");
   $("accel-capture").disabled = a.armed;
   $("accel-continuous").disabled = a.armed;
-  $("accel-cancel").disabled = !a.armed;
+  // capturing (or holding raw values between captures) ends with Stop capturing
+  $("accel-cancel").disabled = !a.armed && !a.raw;
   // the rows and warnings are rebuilt only when the poses change (the state comes ten times
   // a second while capturing: the buttons stay put under the pointer)
   const key = JSON.stringify([a.poses, a.same, a.missing, a.armed]);
@@ -685,6 +703,7 @@ window.startLive = (info) => {
   es.addEventListener("link", (e) => showError(JSON.parse(e.data).error));
   es.addEventListener("accel", (e) => renderAccel(JSON.parse(e.data)));
   es.addEventListener("verify", (e) => renderVerify(JSON.parse(e.data)));
+  es.addEventListener("mode", (e) => renderMode(JSON.parse(e.data)));
   $("verify-start").onclick = async () => { const v = await act("/api/live/verify/start"); if (v) renderVerify(v); };
   $("verify-stop").onclick = async () => { const v = await act("/api/live/verify/stop"); if (v) renderVerify(v); };
   $("accel-capture").onclick = () => accelAct("/api/live/accel/capture", { continuous: false });
@@ -694,7 +713,8 @@ window.startLive = (info) => {
   $("accel-fit").onclick = async () => { const r = await accelAct("/api/live/accel/fit"); if (r) renderAccelFit(r); };
   es.addEventListener("mag", (e) => {
     const m = JSON.parse(e.data);
-    magPoints.push(m.point);
+    // the state alone when the page connects; then one point a window
+    if (m.point) magPoints.push(m.point);
     if (magPoints.length > 5000) magPoints.splice(0, magPoints.length - 5000);
     renderMagState(m);
     drawCloud();

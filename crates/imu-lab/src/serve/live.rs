@@ -6,13 +6,22 @@
 //!   causes from its `Gap` events, bus faults, CPU load), as they arrive (1 s);
 //! * `tables`: the device's own Allan tables, every channel of a round, each with its rows
 //!   (τ, deviation, 68.3 % bounds, EDF) derived on the host as `imu-lab device tables` does;
-//! * `stream`: the calibrated stream decimated on the server — per [`WINDOW_S`] of device time
-//!   and channel the mean, minimum and maximum — so a page follows a 1 kHz stream with ten
-//!   small messages a second whatever the rate;
+//! * `stream`: the stream decimated on the server — per [`WINDOW_S`] of device time and
+//!   channel the mean, minimum and maximum, and whether the values are raw — so a page follows
+//!   a 1 kHz stream with ten small messages a second whatever the rate;
 //! * `record`: the recording's state (the rows go to a CSV in the contract, the same rows
 //!   `imu-lab record` writes);
 //! * `mag`: while the magnetometer wizard collects, each window's mean field with the count and
-//!   the direction coverage; its fit and upload answer their own requests.
+//!   the direction coverage; its fit and upload answer their own requests;
+//! * `mode`: whether the server has the device stream raw values, and for which wizards.
+//!
+//! The wizards fit raw values (the nominal sensitivities, no corrections: what a calibration
+//! applies to), so a fit is right on a device that holds a calibration already. The device
+//! streams calibrated values unless a wizard needs raw ones ([`sync_mode`]): the magnetometer's
+//! while it collects, the accelerometer's from its first capture until Fit, Clear or Stop
+//! capturing, the verification while it records. Every batch says which kind it carries; a
+//! stream window never mixes the two (it ends at a switch), and each wizard takes only the
+//! raw windows.
 //!
 //! The server keeps only the last [`HISTORY`] stream windows and the latest tables, so neither
 //! it nor the page grows with the length of the session.
@@ -59,6 +68,9 @@ pub struct Live {
     record_dir: PathBuf,
     /// Requests for the device, sent by the reader thread (it owns the link).
     pub(super) requests: Mutex<mpsc::Sender<Pending>>,
+    /// The stream mode the server last set on the device (held while it is changed, so that
+    /// two requests cannot interleave their switches).
+    mode: tokio::sync::Mutex<StreamMode>,
 }
 
 /// A request for the device and where its reply goes.
@@ -102,6 +114,40 @@ pub(super) struct Snapshot {
     pub(super) verify: Option<super::verify::Recording>,
 }
 
+impl Snapshot {
+    /// Which wizards need the device's raw values now.
+    pub(super) fn raw_for(&self) -> Vec<&'static str> {
+        let mut v = Vec::new();
+        if self.mag.on {
+            v.push("the magnetometer wizard");
+        }
+        if self.poses.raw {
+            v.push("the accelerometer wizard");
+        }
+        if self.verify.is_some() {
+            v.push("the verification");
+        }
+        v
+    }
+
+    /// A wizard may not switch the stream to raw values while a recording to a file runs (its
+    /// rows are the calibrated contract): the refusal (409), or `None`.
+    pub(super) fn raw_refused(&self) -> Option<Response> {
+        self.record.is_some().then(|| {
+            error(
+                StatusCode::CONFLICT,
+                "a recording to a file is running: stop it first (the wizards switch the device \
+                 to raw values, the recording holds calibrated ones)",
+            )
+        })
+    }
+
+    fn mode_state(&self) -> Value {
+        let users = self.raw_for();
+        json!({ "raw": !users.is_empty(), "for": users })
+    }
+}
+
 /// A calibration the user may upload: the calibration file, its blob and the confirmation code.
 struct ReadyCal {
     toml: String,
@@ -115,7 +161,7 @@ pub const MAG_POINTS: usize = 5000;
 const BANDS: usize = 6;
 const SECTORS: usize = 12;
 
-/// The magnetometer wizard's collection: the mean field of every stream window while on.
+/// The magnetometer wizard's collection: the mean field of every raw stream window while on.
 #[derive(Default)]
 struct MagPoints {
     on: bool,
@@ -197,6 +243,8 @@ const HEADING: usize = 12;
 /// (the variance without cancellation; the heading unwrapped across 0/360°).
 pub(crate) struct Window {
     start: Option<f64>,
+    /// The rows are raw values (the device's corrections off).
+    raw: bool,
     /// Rows (IMU samples) in the window.
     rows: u32,
     n: [u32; STREAM_N],
@@ -211,6 +259,7 @@ impl Window {
     pub(crate) fn new() -> Window {
         Window {
             start: None,
+            raw: false,
             rows: 0,
             n: [0; STREAM_N],
             first: [0.0; STREAM_N],
@@ -271,8 +320,9 @@ impl Window {
         }
     }
 
-    /// The window's point: `t` (its first row, s of device time), `n` rows, and per channel of
-    /// [`STREAM_CHANNELS`] the mean, minimum, maximum and standard deviation (null: no value).
+    /// The window's point: `t` (its first row, s of device time), `n` rows, `raw` (the values
+    /// are raw, not calibrated), and per channel of [`STREAM_CHANNELS`] the mean, minimum,
+    /// maximum and standard deviation (null: no value).
     pub(crate) fn point(&self) -> Option<Value> {
         let t = self.start?;
         if self.rows == 0 {
@@ -301,7 +351,9 @@ impl Window {
             max.push(f(base + self.max[k]));
             sd.push(f((self.sq[k] / n - m * m).max(0.0).sqrt()));
         }
-        Some(json!({ "t": t, "n": self.rows, "mean": mean, "min": min, "max": max, "sd": sd }))
+        Some(
+            json!({ "t": t, "n": self.rows, "raw": self.raw, "mean": mean, "min": min, "max": max, "sd": sd }),
+        )
     }
 }
 
@@ -402,7 +454,35 @@ impl Live {
             tx,
             record_dir,
             requests: Mutex::new(req_tx),
+            mode: tokio::sync::Mutex::new(StreamMode::Calibrated),
         })
+    }
+}
+
+impl Live {
+    /// On the server's exit (Ctrl-C): a device a wizard left on raw values is switched back to
+    /// calibrated ones (what the next `imu-lab serve` does at its start too), said on stderr.
+    pub async fn calibrated_on_exit(&self) {
+        let mode = self.mode.lock().await;
+        if *mode == StreamMode::Calibrated {
+            return;
+        }
+        let wait = Duration::from_secs(3);
+        let req = request(self, Request::SetMode(StreamMode::Calibrated));
+        let problem = match tokio::time::timeout(wait, req).await {
+            Ok(Ok(Reply::Ok)) => {
+                eprintln!("imu-lab serve: the device streams calibrated values again");
+                return;
+            }
+            Ok(Ok(other)) => format!("it answered {other:?}"),
+            Ok(Err(e)) => e,
+            Err(_) => format!("no answer within {} s", wait.as_secs()),
+        };
+        eprintln!(
+            "imu-lab serve: warning: the device may still stream raw values ({problem}); \
+             `imu-lab device --port {} mode calibrated` switches it back",
+            self.port
+        );
     }
 }
 
@@ -420,6 +500,8 @@ fn read_loop(
 ) {
     let mut window = Window::new();
     let mut decim = Rows::default();
+    // the kind of values of the last batch (raw or calibrated)
+    let mut raw: Option<bool> = None;
     let mut round: Option<u32> = None;
     let mut round_tables: Vec<Value> = Vec::new();
     // requests sent, waiting for their reply: (id, where it goes, until when)
@@ -453,6 +535,18 @@ fn read_loop(
         match msg {
             DeviceMsg::Samples(b) => {
                 let mut points = Vec::new();
+                // the stream switched between raw and calibrated values: the window so far
+                // ends here, and the rows start again (none holds a magnetometer sample of the
+                // other kind)
+                if raw != Some(!b.calibrated) {
+                    if raw.is_some() {
+                        points.extend(window.point());
+                    }
+                    raw = Some(!b.calibrated);
+                    window = Window::new();
+                    decim = Rows::default();
+                }
+                window.raw = !b.calibrated;
                 decim.batch(&b, |r| {
                     if let Some(p) = window.push(r.t, &r.values) {
                         points.push(p);
@@ -481,7 +575,7 @@ fn read_loop(
                             send(tx, "accel", v);
                         }
                     }
-                    if s.mag.on {
+                    if s.mag.on && p["raw"] == true {
                         let m = |k: usize| p["mean"][k].as_f64().unwrap_or(f64::NAN);
                         let point = [m(6), m(7), m(8)];
                         if point.iter().all(|v| v.is_finite()) {
@@ -556,7 +650,11 @@ pub async fn events(State(s): State<Shared>) -> Response {
     let rx = live.tx.subscribe();
     let first: Vec<(String, Value)> = {
         let snap = live.shared.lock().expect("snapshot");
-        let mut v = vec![("identity".to_string(), snap.identity.clone())];
+        let mut v = vec![
+            ("identity".to_string(), snap.identity.clone()),
+            ("mode".into(), snap.mode_state()),
+            ("mag".into(), snap.mag.state()),
+        ];
         if !snap.status.is_null() {
             v.push(("status".into(), snap.status.clone()));
         }
@@ -622,6 +720,17 @@ pub async fn record(State(s): State<Shared>, bytes: Bytes) -> Response {
     let mut snap = live.shared.lock().expect("snapshot");
     if snap.record.is_some() {
         return error(StatusCode::CONFLICT, "already recording");
+    }
+    let users = snap.raw_for();
+    if !users.is_empty() {
+        return error(
+            StatusCode::CONFLICT,
+            &format!(
+                "the device streams raw values for {}: finish it first (a recording holds \
+                 calibrated values)",
+                users.join(" and ")
+            ),
+        );
     }
     let stamp = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -727,30 +836,94 @@ pub async fn open_recording(State(s): State<Shared>, bytes: Bytes) -> Response {
     }
 }
 
-/// POST /api/live/mag/start {}: collect the magnetometer's field (the mean of every 0.1 s) for
-/// the calibration, from an empty set.
+/// POST /api/live/mag/start {}: switch the device to raw values and collect the magnetometer's
+/// field (the mean of every 0.1 s) for the calibration, from an empty set.
 pub async fn mag_start(State(s): State<Shared>, bytes: Bytes) -> Response {
-    mag_switch(s, bytes, true)
+    mag_switch(s, bytes, true).await
 }
 
-/// POST /api/live/mag/stop {}: stop collecting (the points stay for the fit).
+/// POST /api/live/mag/stop {}: stop collecting (the points stay for the fit) and switch the
+/// device back to calibrated values (unless another wizard still needs raw ones).
 pub async fn mag_stop(State(s): State<Shared>, bytes: Bytes) -> Response {
-    mag_switch(s, bytes, false)
+    mag_switch(s, bytes, false).await
 }
 
-fn mag_switch(s: Shared, bytes: Bytes, on: bool) -> Response {
+async fn mag_switch(s: Shared, bytes: Bytes, on: bool) -> Response {
     if let Some(r) = empty(&bytes) {
         return r;
     }
     let Some(live) = s.live.as_ref() else {
         return error(StatusCode::CONFLICT, "no device: started on a recording");
     };
-    let mut snap = live.shared.lock().expect("snapshot");
-    if on {
-        snap.mag.points.clear();
+    {
+        let mut snap = live.shared.lock().expect("snapshot");
+        if on {
+            if let Some(r) = snap.raw_refused() {
+                return r;
+            }
+            snap.mag.points.clear();
+        }
+        snap.mag.on = on;
     }
-    snap.mag.on = on;
+    let switched = sync_mode(live).await;
+    let mut snap = live.shared.lock().expect("snapshot");
+    if let Err(e) = switched {
+        if on {
+            // no raw values: nothing collected
+            snap.mag.on = false;
+            send(&live.tx, "mode", snap.mode_state());
+            return error(StatusCode::BAD_GATEWAY, &e);
+        }
+        let mut v = snap.mag.state();
+        v["calibrated_again"] = json!(e);
+        return Json(v).into_response();
+    }
     Json(snap.mag.state()).into_response()
+}
+
+/// A request to the device through the link's reader, and its reply.
+pub(super) async fn request(live: &Live, req: Request) -> Result<Reply, String> {
+    let (tx, rx) = oneshot::channel();
+    live.requests
+        .lock()
+        .expect("requests")
+        .send((req, tx))
+        .map_err(|_| "the link to the device is closed".to_string())?;
+    rx.await
+        .map_err(|_| "the link's reader stopped".to_string())?
+}
+
+/// Bring the device's stream to what the wizards need now ([`Snapshot::raw_for`]): raw values
+/// while any needs them, calibrated otherwise; every page hears of it (`mode`). A failed switch
+/// is returned (and tried again at the next change).
+pub(super) async fn sync_mode(live: &Live) -> Result<(), String> {
+    let mut mode = live.mode.lock().await;
+    let (want, state) = {
+        let snap = live.shared.lock().expect("snapshot");
+        let raw = !snap.raw_for().is_empty();
+        (
+            if raw {
+                StreamMode::Raw
+            } else {
+                StreamMode::Calibrated
+            },
+            snap.mode_state(),
+        )
+    };
+    let res = if *mode == want {
+        Ok(())
+    } else {
+        match request(live, Request::SetMode(want)).await {
+            Ok(Reply::Ok) => {
+                *mode = want;
+                Ok(())
+            }
+            Ok(other) => Err(format!("the device refused SetMode({want:?}): {other:?}")),
+            Err(e) => Err(format!("switching the device to {want:?} values: {e}")),
+        }
+    };
+    send(&live.tx, "mode", state);
+    res
 }
 
 /// POST /api/live/mag/fit {}: the calibration lab's walk on the points collected (what `imu-lab

@@ -137,14 +137,15 @@ pub fn error(status: StatusCode, message: &str) -> Response {
     r
 }
 
-/// Serve until Ctrl-C: bind `listen`, print the URL, answer.
+/// Serve until Ctrl-C: bind `listen`, print the URL, answer; on a device left on raw values by
+/// a wizard, switch it back to calibrated ones before exiting.
 pub fn serve(listen: SocketAddr, source: Source) -> Result<()> {
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the server's runtime")?;
-    rt.block_on(async move {
+    let r = rt.block_on(async move {
         let listener = tokio::net::TcpListener::bind(listen)
             .await
             .with_context(|| format!("--listen {listen}: cannot bind"))?;
@@ -160,8 +161,25 @@ pub fn serve(listen: SocketAddr, source: Source) -> Result<()> {
         println!("imu-lab serve: http://{bound}/");
         use std::io::Write;
         let _ = std::io::stdout().flush();
-        axum::serve(listener, router(state))
-            .await
-            .context("serving")
-    })
+        let server = axum::serve(listener, router(state.clone()));
+        let Some(live) = state.live.as_ref() else {
+            return server.await.context("serving");
+        };
+        // Ctrl-C with the device on raw values for a wizard: calibrated values again first
+        let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+        ctrlc::set_handler(move || {
+            let _ = tx.send(());
+        })
+        .context("setting the Ctrl-C handler")?;
+        tokio::select! {
+            r = async { server.await } => r.context("serving"),
+            _ = rx.recv() => {
+                live.calibrated_on_exit().await;
+                Ok(())
+            }
+        }
+    });
+    // a fit still running on a blocking thread is not waited for
+    rt.shutdown_timeout(std::time::Duration::from_secs(1));
+    r
 }

@@ -6,6 +6,11 @@
 //! `imu-lab calibrate accel --auto`) on the captured means, and the upload shared with the
 //! magnetometer wizard.
 //!
+//! The poses are raw values (the nominal sensitivities, no corrections: what the calibration
+//! applies to): the first capture switches the device to raw values, and it stays so until Fit,
+//! Clear or Stop capturing; only raw windows are judged and captured (a switch starts the
+//! stillness over).
+//!
 //! Still means, over the last [`STILL_WINDOWS`] windows (0.5 s): the accelerometer's variance
 //! and the gyro's (pooled over the windows, summed over the three axes) within [`NOISE_K`]
 //! times the noise's, and the gyro's mean rate under [`TURN_DPS`] (a turn at a constant rate
@@ -55,6 +60,8 @@ fn hold_windows() -> usize {
 #[derive(Clone, Copy, Debug)]
 pub struct Win {
     pub t: f64,
+    /// Raw values (the device's corrections off), not calibrated ones.
+    pub raw: bool,
     pub n: f64,
     pub a: [f64; 3],
     pub a_var: [f64; 3],
@@ -72,6 +79,7 @@ impl Win {
         };
         Some(Win {
             t: p["t"].as_f64()?,
+            raw: p["raw"] == true,
             n: p["n"].as_f64()?,
             a: three("mean", 0)?,
             a_var: three("sd", 0)?.map(|s| s * s),
@@ -231,6 +239,9 @@ pub struct Wizard {
     pub continuous: bool,
     /// The board has moved since the last pose (continuous captures wait for it).
     moved: bool,
+    /// The wizard has the device stream raw values (from the first capture until Fit, Clear or
+    /// Stop capturing).
+    pub raw: bool,
     recent: VecDeque<Win>,
     run: Vec<Win>,
     pub poses: Vec<Captured>,
@@ -246,6 +257,11 @@ impl Wizard {
     /// under way, the stillness changing, a pose captured).
     pub fn window(&mut self, w: Win, noise: Option<Noise>) -> Option<Value> {
         self.noise = noise;
+        // raw and calibrated windows are never judged or captured together
+        if self.recent.back().is_some_and(|r| r.raw != w.raw) {
+            self.recent.clear();
+            self.run.clear();
+        }
         self.recent.push_back(w);
         while self.recent.len() > STILL_WINDOWS {
             self.recent.pop_front();
@@ -297,10 +313,14 @@ impl Wizard {
         Ok(())
     }
 
-    /// Capture the current still stretch's last [`HOLD_S`] when armed, it is that long, and
-    /// (continuous captures) the board has moved since the last pose.
+    /// Capture the current still stretch's last [`HOLD_S`] when armed, it is that long, of raw
+    /// values, and (continuous captures) the board has moved since the last pose.
     fn try_capture(&mut self) -> bool {
-        if !self.armed || !self.moved || self.run.len() < hold_windows() {
+        if !self.armed
+            || !self.moved
+            || self.run.len() < hold_windows()
+            || !self.run.iter().all(|w| w.raw)
+        {
             return false;
         }
         self.poses.push(Captured::from_windows(&self.run));
@@ -367,6 +387,7 @@ impl Wizard {
         };
         json!({
             "armed": self.armed,
+            "raw": self.raw,
             "continuous": self.continuous,
             "waiting_for_motion": self.armed && self.continuous && !self.moved,
             "still": self.still,
@@ -442,6 +463,54 @@ fn change(s: &Shared, f: impl FnOnce(&mut Wizard) -> Result<(), String>) -> Resp
     Json(v).into_response()
 }
 
+/// Capture (`continuous`: every hold) or stop capturing (`on` false, `clear`: forgetting the
+/// poses): the device streams raw values from the first capture, calibrated ones again when
+/// capturing stops; the wizard's new state to every page, or why not (409 refused, 502 the
+/// device did not switch to raw values).
+async fn capturing(s: &Shared, on: bool, continuous: bool, clear: bool) -> Response {
+    let live = match live(s) {
+        Ok(l) => l,
+        Err(r) => return *r,
+    };
+    let was_raw = {
+        let mut snap = live.shared.lock().expect("snapshot");
+        if on {
+            if let Some(r) = snap.raw_refused() {
+                return r;
+            }
+        }
+        let w = &mut snap.poses;
+        let was_raw = w.raw;
+        if clear {
+            w.poses.clear();
+        }
+        if let Err(e) = w.arm(on, continuous) {
+            return error(StatusCode::CONFLICT, &e);
+        }
+        w.raw = on;
+        was_raw
+    };
+    let switched = super::live::sync_mode(live).await;
+    let mut snap = live.shared.lock().expect("snapshot");
+    if let (Err(e), true) = (&switched, on) {
+        // no raw values: no capture
+        let w = &mut snap.poses;
+        w.raw = was_raw;
+        let _ = w.arm(false, false);
+        let v = w.state();
+        drop(snap);
+        send(&live.tx, "accel", v);
+        return error(StatusCode::BAD_GATEWAY, e);
+    }
+    let mut v = snap.poses.state();
+    drop(snap);
+    send(&live.tx, "accel", v.clone());
+    if let Err(e) = switched {
+        v["calibrated_again"] = json!(e);
+    }
+    Json(v).into_response()
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaptureBody {
@@ -449,33 +518,32 @@ struct CaptureBody {
     continuous: bool,
 }
 
-/// POST /api/live/accel/capture {"continuous": false}: capture the next still hold as a pose
-/// (`true`: and every hold after it, one a hold, until cancelled).
+/// POST /api/live/accel/capture {"continuous": false}: switch the device to raw values and
+/// capture the next still hold as a pose (`true`: and every hold after it, one a hold, until
+/// cancelled).
 pub async fn capture(State(s): State<Shared>, bytes: Bytes) -> Response {
     let b: CaptureBody = match super::noise::body(&bytes) {
         Ok(b) => b,
         Err(e) => return error(StatusCode::BAD_REQUEST, &e),
     };
-    change(&s, |w| w.arm(true, b.continuous))
+    capturing(&s, true, b.continuous, false).await
 }
 
-/// POST /api/live/accel/cancel {}: stop waiting for a hold.
+/// POST /api/live/accel/cancel {}: stop waiting for a hold; the device back to calibrated
+/// values.
 pub async fn cancel(State(s): State<Shared>, bytes: Bytes) -> Response {
     if let Some(r) = empty(&bytes) {
         return r;
     }
-    change(&s, |w| w.arm(false, false))
+    capturing(&s, false, false, false).await
 }
 
-/// POST /api/live/accel/clear {}: forget every pose.
+/// POST /api/live/accel/clear {}: forget every pose; the device back to calibrated values.
 pub async fn clear(State(s): State<Shared>, bytes: Bytes) -> Response {
     if let Some(r) = empty(&bytes) {
         return r;
     }
-    change(&s, |w| {
-        w.poses.clear();
-        w.arm(false, false)
-    })
+    capturing(&s, false, false, true).await
 }
 
 #[derive(Deserialize)]
@@ -537,6 +605,11 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             ),
         );
     }
+    // capturing ends: the device back to calibrated values (the poses stay, raw)
+    let back = capturing(&s, false, false, false).await;
+    if !back.status().is_success() {
+        return back;
+    }
     let fitted = tokio::task::spawn_blocking(move || {
         use imu_cal::session::{self as cal, Sensor};
         let o = cal::Options {
@@ -594,6 +667,7 @@ mod tests {
     fn win(t: f64, a: [f64; 3], a_sd: f64, g: [f64; 3], g_sd: f64) -> Win {
         Win {
             t,
+            raw: true,
             n: 100.0,
             a,
             a_var: [a_sd * a_sd; 3],
@@ -679,6 +753,65 @@ mod tests {
         assert!(w.armed && w.continuous);
         w.arm(false, false).unwrap();
         assert!(!w.armed && !w.continuous);
+    }
+
+    /// Only raw windows become a pose: calibrated ones (the stream before the device switched)
+    /// are judged for stillness but never captured, and a switch starts the hold again (no
+    /// pose mixes the two kinds of values).
+    #[test]
+    fn only_raw_windows_are_captured_and_a_switch_starts_the_hold_again() {
+        let (key, mut u) = rng();
+        let a0 = [9.0 * u() - 4.5, 9.0 * u() - 4.5, 5.0 + 3.0 * u()];
+        // the calibrated values differ from the raw ones by a correction of up to 0.5 m/s²
+        let cal = a0.map(|x| x + 0.5 * (2.0 * u() - 1.0));
+        let mut w = Wizard::default();
+        let mut t = 0.0;
+        let mut feed = |w: &mut Wizard, a: [f64; 3], raw: bool, k: usize| {
+            for _ in 0..k {
+                t += WINDOW_S;
+                let a = a.map(|x| x + 0.004 * (2.0 * u() - 1.0));
+                w.window(
+                    Win {
+                        raw,
+                        ..win(t, a, 0.04, [0.0; 3], 0.05)
+                    },
+                    Some(NOISE),
+                );
+            }
+        };
+        // still and calibrated for 3 s: asked for a pose, none is taken at once
+        feed(&mut w, cal, false, 30);
+        assert_eq!(w.state()["still"], true, "key {key}");
+        w.arm(true, false).unwrap();
+        assert!(w.poses.is_empty(), "key {key}");
+        // two calibrated windows still come before the switch
+        feed(&mut w, cal, false, 2);
+        assert!(w.poses.is_empty(), "key {key}");
+        // raw: the stillness is judged over raw windows only, then the hold
+        feed(&mut w, a0, true, 4 + 9);
+        assert!(w.poses.is_empty(), "key {key}: {}", w.state());
+        feed(&mut w, a0, true, 1);
+        assert_eq!(w.poses.len(), 1, "key {key}");
+        for (m, a) in w.poses[0].mean.iter().zip(a0) {
+            assert!((m - a).abs() < 0.004, "key {key}: {:?}", w.poses[0]);
+        }
+        // after a calibrated window, asked again: not at once; a calibrated window in the
+        // middle of the hold starts it again
+        feed(&mut w, cal, false, 1);
+        w.arm(true, false).unwrap();
+        assert_eq!(w.poses.len(), 1, "key {key}");
+        feed(&mut w, a0, true, 8);
+        assert!(
+            w.state()["progress"].as_f64().unwrap() > 0.3,
+            "key {key}: {}",
+            w.state()
+        );
+        feed(&mut w, cal, false, 1);
+        assert_eq!(w.state()["progress"], 0.0, "key {key}");
+        feed(&mut w, a0, true, 4 + 9);
+        assert_eq!(w.poses.len(), 1, "key {key}");
+        feed(&mut w, a0, true, 1);
+        assert_eq!(w.poses.len(), 2, "key {key}");
     }
 
     /// The same orientation twice is flagged (and a merge keeps one pose, the weighted mean);

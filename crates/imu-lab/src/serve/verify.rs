@@ -11,11 +11,9 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use imu_cal::heading::{Rms, Row};
-use imu_proto::{Reply, Request, StreamMode};
 use serde_json::{json, Value};
-use tokio::sync::oneshot;
 
-use super::live::{empty, send, Live, WINDOW_S};
+use super::live::{empty, send, sync_mode, WINDOW_S};
 use super::{error, Shared};
 
 /// Most rows a verification recording keeps (10 minutes of windows).
@@ -24,21 +22,18 @@ pub const MAX_ROWS: usize = 6000;
 pub const CHECK_WINDOW_S: f64 = 2.0;
 /// Rows beyond this pitch are left out (the heading is ill-defined near the vertical), degrees.
 pub const MAX_PITCH_DEG: f64 = 70.0;
-/// Windows dropped after the switch to raw values (a window may hold both kinds).
-const SETTLE: usize = 2;
 
 /// A verification recording under way.
 #[derive(Default)]
 pub struct Recording {
     pub rows: Vec<Row>,
-    skipped: usize,
 }
 
 impl Recording {
-    /// One stream window (its means); returns its progress to send once a second.
+    /// One stream window (its means); returns its progress to send once a second. Only raw
+    /// windows count (those before the device's switch are calibrated; no window holds both).
     pub fn window(&mut self, p: &Value) -> Option<Value> {
-        if self.skipped < SETTLE {
-            self.skipped += 1;
+        if p["raw"] != true {
             return None;
         }
         let m = |k: usize| p["mean"][k].as_f64().filter(|x| x.is_finite());
@@ -65,25 +60,6 @@ impl Recording {
     }
 }
 
-/// A request to the device through the link's reader, and its reply.
-async fn request(live: &Live, req: Request) -> Result<Reply, String> {
-    let (tx, rx) = oneshot::channel();
-    live.requests
-        .lock()
-        .expect("requests")
-        .send((req, tx))
-        .map_err(|_| "the link to the device is closed".to_string())?;
-    rx.await
-        .map_err(|_| "the link's reader stopped".to_string())?
-}
-
-async fn set_mode(live: &Live, mode: StreamMode) -> Result<(), String> {
-    match request(live, Request::SetMode(mode)).await? {
-        Reply::Ok => Ok(()),
-        other => Err(format!("the device refused SetMode({mode:?}): {other:?}")),
-    }
-}
-
 fn rms_json(r: Option<Rms>) -> Value {
     match r {
         Some(r) => json!({ "rms_deg": r.rms, "sigma_deg": noise_model::session::num(r.sigma),
@@ -102,7 +78,7 @@ pub async fn start(State(s): State<Shared>, bytes: Bytes) -> Response {
         return error(StatusCode::CONFLICT, "no device: started on a recording");
     };
     {
-        let snap = live.shared.lock().expect("snapshot");
+        let mut snap = live.shared.lock().expect("snapshot");
         if snap.cal_file.is_none() {
             return error(
                 StatusCode::CONFLICT,
@@ -112,15 +88,16 @@ pub async fn start(State(s): State<Shared>, bytes: Bytes) -> Response {
         if snap.verify.is_some() {
             return error(StatusCode::CONFLICT, "already recording the verification");
         }
+        if let Some(r) = snap.raw_refused() {
+            return r;
+        }
+        snap.verify = Some(Recording::default());
     }
-    if let Err(e) = set_mode(live, StreamMode::Raw).await {
+    if let Err(e) = sync_mode(live).await {
+        live.shared.lock().expect("snapshot").verify = None;
         return error(StatusCode::BAD_GATEWAY, &e);
     }
-    let mut snap = live.shared.lock().expect("snapshot");
-    let rec = Recording::default();
-    let v = rec.state();
-    snap.verify = Some(rec);
-    drop(snap);
+    let v = Recording::default().state();
     send(&live.tx, "verify", v.clone());
     Json(v).into_response()
 }
@@ -142,7 +119,7 @@ pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
         };
         (rec, snap.cal_file.clone().unwrap_or_default())
     };
-    let back = set_mode(live, StreamMode::Calibrated).await;
+    let back = sync_mode(live).await;
     let file = match imu_cal::file::CalFile::from_toml(&toml) {
         Ok(f) => f,
         Err(e) => {
