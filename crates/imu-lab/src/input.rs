@@ -66,6 +66,21 @@ pub struct InputArgs {
     pub rename: Vec<String>,
 }
 
+impl InputArgs {
+    /// A file in the contract, read with every flag at its default.
+    pub fn for_file(file: impl Into<PathBuf>) -> InputArgs {
+        InputArgs {
+            file: file.into(),
+            rate: None,
+            ignore_time: false,
+            skip_lines: 0,
+            scale: None,
+            unit: None,
+            rename: vec![],
+        }
+    }
+}
+
 /// One selected column.
 #[derive(Debug, Clone)]
 pub struct Series {
@@ -453,15 +468,7 @@ mod tests {
     use std::io::Write;
 
     fn args(file: &tempfile::NamedTempFile) -> InputArgs {
-        InputArgs {
-            file: file.path().to_path_buf(),
-            rate: None,
-            ignore_time: false,
-            skip_lines: 0,
-            scale: None,
-            unit: None,
-            rename: vec![],
-        }
+        InputArgs::for_file(file.path())
     }
 
     fn csv(text: &str) -> tempfile::NamedTempFile {

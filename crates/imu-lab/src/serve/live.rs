@@ -644,8 +644,9 @@ fn read_loop(
 
 /// GET /api/live/events: the current state, then every update, as server-sent events.
 pub async fn events(State(s): State<Shared>) -> Response {
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device(&s) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let rx = live.tx.subscribe();
     let first: Vec<(String, Value)> = {
@@ -708,14 +709,30 @@ pub(super) fn empty(bytes: &Bytes) -> Option<Response> {
         .map(|e| error(StatusCode::BAD_REQUEST, &e))
 }
 
+/// The device behind the page, or 409 when serve was started on a recording.
+pub(super) fn device(s: &Shared) -> Result<&Live, Box<Response>> {
+    s.live.as_ref().ok_or_else(|| {
+        Box::new(error(
+            StatusCode::CONFLICT,
+            "no device: started on a recording",
+        ))
+    })
+}
+
+/// A request to the device with an empty body: 400 for any other body, 409 without a device.
+pub(super) fn device_post<'a>(s: &'a Shared, bytes: &Bytes) -> Result<&'a Live, Box<Response>> {
+    if let Some(r) = empty(bytes) {
+        return Err(Box::new(r));
+    }
+    device(s)
+}
+
 /// POST /api/live/record {}: start writing the stream to a new CSV in the recording directory
 /// (a name the server chooses: the page cannot name a file).
 pub async fn record(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let mut snap = live.shared.lock().expect("snapshot");
     if snap.record.is_some() {
@@ -769,11 +786,9 @@ pub async fn record(State(s): State<Shared>, bytes: Bytes) -> Response {
 
 /// POST /api/live/stop {}: finish the recording (every row written) and say what it holds.
 pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let mut snap = live.shared.lock().expect("snapshot");
     let Some(mut rec) = snap.record.take() else {
@@ -814,11 +829,9 @@ pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
 
 /// POST /api/live/open {}: the last finished recording in the noise lab.
 pub async fn open_recording(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let file = live
         .shared
@@ -849,11 +862,9 @@ pub async fn mag_stop(State(s): State<Shared>, bytes: Bytes) -> Response {
 }
 
 async fn mag_switch(s: Shared, bytes: Bytes, on: bool) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     {
         let mut snap = live.shared.lock().expect("snapshot");
@@ -930,11 +941,9 @@ pub(super) async fn sync_mode(live: &Live) -> Result<(), String> {
 /// calibrate mag --auto --json` does on a recording of them): the model, its parameters with σ,
 /// the residual, the diagnosis.
 pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let (points, coverage): (Vec<[f64; 3]>, f64) = {
         let snap = live.shared.lock().expect("snapshot");
@@ -1070,8 +1079,9 @@ pub async fn upload(State(s): State<Shared>, bytes: Bytes) -> Response {
         Ok(b) => b,
         Err(e) => return error(StatusCode::BAD_REQUEST, &e),
     };
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device(&s) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let ready = {
         let mut snap = live.shared.lock().expect("snapshot");

@@ -105,18 +105,6 @@ fn columns_of(args: &InputArgs) -> Result<Vec<String>> {
     Ok(data_columns(&names))
 }
 
-fn input_args(file: PathBuf) -> InputArgs {
-    InputArgs {
-        file,
-        rate: None,
-        ignore_time: false,
-        skip_lines: 0,
-        scale: None,
-        unit: None,
-        rename: vec![],
-    }
-}
-
 /// The reading options as `imu-lab fit`'s flags (none for a file in the contract).
 fn input_flags(a: &InputArgs) -> Vec<String> {
     let mut v = Vec::new();
@@ -169,7 +157,7 @@ impl Lab {
 
     /// Study `file` from now on (a recording just made).
     pub async fn set_file(&self, file: PathBuf) -> Result<()> {
-        let args = input_args(file);
+        let args = InputArgs::for_file(file);
         if columns_of(&args)?.is_empty() {
             return Err(anyhow!(
                 "{}: no sensor column (ax … mz) to analyse",

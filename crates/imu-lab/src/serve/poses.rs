@@ -33,7 +33,7 @@ use axum::Json;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
-use super::live::{empty, send, Live, WINDOW_S};
+use super::live::{device, device_post, empty, send, WINDOW_S};
 use super::{error, Shared};
 
 /// Windows over which stillness is judged (0.5 s).
@@ -438,18 +438,9 @@ impl Wizard {
 
 // ---------- the page's requests ----------
 
-fn live(s: &Shared) -> Result<&Live, Box<Response>> {
-    s.live.as_ref().ok_or_else(|| {
-        Box::new(error(
-            StatusCode::CONFLICT,
-            "no device: started on a recording",
-        ))
-    })
-}
-
 /// Apply `f` to the wizard; its new state to the page (and every page), or the refusal (409).
 fn change(s: &Shared, f: impl FnOnce(&mut Wizard) -> Result<(), String>) -> Response {
-    let live = match live(s) {
+    let live = match device(s) {
         Ok(l) => l,
         Err(r) => return *r,
     };
@@ -468,7 +459,7 @@ fn change(s: &Shared, f: impl FnOnce(&mut Wizard) -> Result<(), String>) -> Resp
 /// capturing stops; the wizard's new state to every page, or why not (409 refused, 502 the
 /// device did not switch to raw values).
 async fn capturing(s: &Shared, on: bool, continuous: bool, clear: bool) -> Response {
-    let live = match live(s) {
+    let live = match device(s) {
         Ok(l) => l,
         Err(r) => return *r,
     };
@@ -581,10 +572,7 @@ pub async fn remove(State(s): State<Shared>, bytes: Bytes) -> Response {
 /// calibrate accel --auto --json` does on a recording holding them): the model, its parameters
 /// with σ, each pose's residual, the diagnosis; and the calibration for upload when plausible.
 pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let live = match live(&s) {
+    let live = match device_post(&s, &bytes) {
         Ok(l) => l,
         Err(r) => return *r,
     };

@@ -52,16 +52,7 @@ fn app(file: &std::path::Path) -> Router {
     router(Arc::new(AppState {
         listen: HOST.parse().unwrap(),
         token: TOKEN.into(),
-        lab: noise::Lab::open(crate::input::InputArgs {
-            file: file.to_path_buf(),
-            rate: None,
-            ignore_time: false,
-            skip_lines: 0,
-            scale: None,
-            unit: None,
-            rename: vec![],
-        })
-        .unwrap(),
+        lab: noise::Lab::open(crate::input::InputArgs::for_file(file)).unwrap(),
         live: None,
     }))
 }

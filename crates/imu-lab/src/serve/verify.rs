@@ -13,7 +13,7 @@ use axum::Json;
 use imu_cal::heading::{Rms, Row};
 use serde_json::{json, Value};
 
-use super::live::{empty, send, sync_mode, WINDOW_S};
+use super::live::{device_post, send, sync_mode, WINDOW_S};
 use super::{error, Shared};
 
 /// Most rows a verification recording keeps (10 minutes of windows).
@@ -71,11 +71,9 @@ fn rms_json(r: Option<Rms>) -> Value {
 /// POST /api/live/verify/start {}: switch the stream to raw values and record (after an upload
 /// from this page: its calibration is the one judged).
 pub async fn start(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     {
         let mut snap = live.shared.lock().expect("snapshot");
@@ -106,11 +104,9 @@ pub async fn start(State(s): State<Shared>, bytes: Bytes) -> Response {
 /// gyro before (raw) and after (the uploaded calibration applied on the host), degrees rms
 /// with their uncertainties.
 pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
-    if let Some(r) = empty(&bytes) {
-        return r;
-    }
-    let Some(live) = s.live.as_ref() else {
-        return error(StatusCode::CONFLICT, "no device: started on a recording");
+    let live = match device_post(&s, &bytes) {
+        Ok(live) => live,
+        Err(r) => return *r,
     };
     let (rec, toml) = {
         let mut snap = live.shared.lock().expect("snapshot");
