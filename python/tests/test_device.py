@@ -8,6 +8,7 @@ them these tests skip, saying so; the argument and port checks at the end run ev
 import _thread
 import math
 import os
+import signal
 import socket
 import subprocess
 import threading
@@ -314,8 +315,18 @@ def test_orientation_settings(emu):
         assert dev.set_orientation(declination_deg=0.0, learn=True)["field_ut"] is None
 
 
+@pytest.fixture
+def python_sigint():
+    """Python's own Ctrl-C handler for the test, whatever the process inherited: a runner
+    started in the background of a shell without job control has SIGINT ignored, and then
+    `_thread.interrupt_main` does nothing."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @needs_emulator
-def test_ctrl_c_interrupts_a_long_recording_and_the_gil_is_free(emu):
+def test_ctrl_c_interrupts_a_long_recording_and_the_gil_is_free(emu, python_sigint):
     ticks = [0]
     stop = threading.Event()
 
