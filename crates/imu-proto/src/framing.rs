@@ -3,8 +3,8 @@
 use serde::{de::DeserializeOwned, Serialize};
 
 use crate::{
-    batch, orientation, status, table, AllanTable, Orientation, SampleBatch, Status, Vec,
-    MAX_ORIENTATIONS,
+    batch, orientation, status, table, AllanTable, BatchWriter, Orientation, SampleBatch, Scales,
+    Status, Vec, MAX_ORIENTATIONS,
 };
 
 /// Wire-format version carried in the first byte of every frame.
@@ -421,6 +421,20 @@ impl FrameEncoder {
         out: &mut [u8],
     ) -> Result<usize, EncodeError> {
         self.encode_by(out, |buf| batch::write(batch, buf))
+    }
+
+    /// Frame the batch `batch` has written as its samples came ([`BatchWriter`]), with
+    /// `calibrated` and `scales`, into `out`: byte for byte what
+    /// [`FrameEncoder::encode_samples`] writes for the same samples (tested). The samples stay
+    /// in `batch` until it is cleared.
+    pub fn encode_batch(
+        &mut self,
+        batch: &mut BatchWriter,
+        calibrated: bool,
+        scales: &Scales,
+        out: &mut [u8],
+    ) -> Result<usize, EncodeError> {
+        frame(batch.finish(PROTOCOL_VERSION, calibrated, scales), out)
     }
 
     /// Encode `DeviceMsg::Table(table)` as one frame into `out`, byte for byte what

@@ -13,8 +13,8 @@
 use imu_cal::device::{Calibration, Prepared};
 use imu_drivers::mpu6050::RawSample;
 use imu_proto::{
-    DeviceMsg, Event, GapCause, ImuSample, MagSample, Orientation, SampleBatch, Scales, Sensor,
-    StreamMode, Vec, MAG_PERIOD_US, MAX_ORIENTATIONS,
+    BatchWriter, DeviceMsg, Event, GapCause, MagSample, Orientation, Scales, Sensor, StreamMode,
+    Vec, MAG_PERIOD_US, MAX_ORIENTATIONS,
 };
 
 use crate::ahrs::{self, Accum, Ahrs, GyroStep, MAX_SUM};
@@ -65,7 +65,8 @@ pub struct Pipeline {
     pub(crate) engines: Engines,
     pub(crate) scales: Scales,
     pub(crate) mode: StreamMode,
-    batch: SampleBatch,
+    /// The batch being assembled, in its wire form (each sample encoded as it comes).
+    batch: BatchWriter,
     /// The slot expected next on each sensor's grid (`None` before its first sample).
     next_k: [Option<u32>; 2],
     /// The latest raw temperature, for the gyro's temperature term and the status.
@@ -98,12 +99,7 @@ impl Pipeline {
             engines: Engines::new(),
             scales,
             mode: StreamMode::Calibrated,
-            batch: SampleBatch {
-                calibrated: true,
-                scales,
-                imu: Vec::new(),
-                mag: Vec::new(),
-            },
+            batch: BatchWriter::new(),
             next_k: [None; 2],
             last_temp: None,
             counts: SampleCounts::default(),
@@ -311,20 +307,19 @@ impl Pipeline {
             let mut seq = stamps.k0;
             for ((s, (accel, gyro, temp)), t_us) in samples.iter().zip(&fixed).zip(stamps.iter_us())
             {
-                let out = ImuSample {
-                    seq,
-                    t_us,
-                    accel: if raw { s.accel.map(i32::from) } else { *accel },
-                    gyro: if raw { s.gyro.map(i32::from) } else { *gyro },
-                    temp: *temp,
+                let (accel, gyro) = if raw {
+                    (&s.accel.map(i32::from), &s.gyro.map(i32::from))
+                } else {
+                    (accel, gyro)
                 };
-                seq = seq.wrapping_add(1);
-                if self.batch.imu.push(out).is_err() {
+                // Encoded straight into the batch's frame content.
+                if !self.batch.push_imu(seq, t_us, accel, gyro, *temp) {
                     self.flush(outbox, sink);
                     // The batch was just emptied, so this cannot fail; ignore rather than panic.
-                    let _ = self.batch.imu.push(out);
+                    let _ = self.batch.push_imu(seq, t_us, accel, gyro, *temp);
                 }
-                if self.batch.imu.len() >= BATCH_IMU {
+                seq = seq.wrapping_add(1);
+                if self.batch.imu_len() >= BATCH_IMU {
                     self.flush(outbox, sink);
                 }
             }
@@ -363,11 +358,11 @@ impl Pipeline {
                     mag
                 },
             };
-            if self.batch.mag.push(out).is_err() {
+            if !self.batch.push_mag(out) {
                 self.flush(outbox, sink);
-                let _ = self.batch.mag.push(out);
+                let _ = self.batch.push_mag(out);
             }
-            if self.batch.mag.is_full() {
+            if self.batch.mag_full() {
                 self.flush(outbox, sink);
             }
         }
@@ -376,15 +371,12 @@ impl Pipeline {
 
     /// Send the batch assembled so far (if any).
     pub fn flush(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) {
-        if self.batch.imu.is_empty() && self.batch.mag.is_empty() {
+        if self.batch.is_empty() {
             return;
         }
-        self.batch.calibrated = self.mode != StreamMode::Raw;
-        self.batch.scales = self.scales;
-        // Framed in place (no copy of the batch into a `DeviceMsg`), then emptied.
-        outbox.send_samples(&self.batch, sink);
-        self.batch.imu.clear();
-        self.batch.mag.clear();
+        let calibrated = self.mode != StreamMode::Raw;
+        outbox.send_batch(&mut self.batch, calibrated, &self.scales, sink);
+        self.batch.clear();
     }
 
     /// Forget the Allan state (new corrections, or the host asked). The grids go on: slot
