@@ -94,12 +94,12 @@ impl Device {
         match msg {
             SensorMsg::Imu {
                 stamps,
-                samples,
+                frames,
                 after,
             } => {
                 self.period[0] = stamps.period;
                 self.pipeline
-                    .imu_burst(samples, stamps, *after, &mut self.outbox, sink)
+                    .imu_burst(frames, stamps, *after, &mut self.outbox, sink)
             }
             SensorMsg::Mag { stamps, xyz, after } => {
                 self.period[1] = stamps.period;
