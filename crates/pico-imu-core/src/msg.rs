@@ -1,5 +1,5 @@
 //! What the sensor tasks tell the processing task.
-use imu_drivers::mpu6050::FifoFrame;
+use imu_drivers::mpu6050::{FifoFrame, RawSample};
 use imu_proto::{Event, GapCause, Sensor, SensorState, Vec};
 
 use crate::clock::Stamps;
@@ -30,6 +30,22 @@ impl FifoFrames {
             n: 0,
             bytes: [0; BURST_MAX * FIFO_FRAME_MAX],
         }
+    }
+
+    /// The frames the part would send for `samples` (at most [`BURST_MAX`]) in `layout`:
+    /// big-endian values, the temperature (0 for `None`) only in the 14-byte layout. For tests
+    /// and replays; the device reads them from the FIFO.
+    pub fn of(layout: FifoFrame, samples: &[RawSample]) -> Self {
+        let mut f = Self::new(layout);
+        for (bytes, s) in f.bytes.chunks_exact_mut(layout.bytes()).zip(samples) {
+            let temp = (layout == FifoFrame::AccelTempGyro).then_some(s.temp.unwrap_or(0));
+            let values = s.accel.into_iter().chain(temp).chain(s.gyro);
+            for (b, x) in bytes.chunks_exact_mut(2).zip(values) {
+                b.copy_from_slice(&x.to_be_bytes());
+            }
+            f.n += 1;
+        }
+        f
     }
 
     /// The frames' bytes.
