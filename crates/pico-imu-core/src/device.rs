@@ -37,6 +37,8 @@ pub struct Device {
     pub(crate) firmware: &'static str,
     /// When the last periodic status frame went out, µs.
     last_status_us: Option<u64>,
+    /// The attitude filter's settings in flash (the defaults while none are stored).
+    pub(crate) stored_orientation: crate::requests::OrientationSetting,
 }
 
 impl Device {
@@ -58,6 +60,7 @@ impl Device {
             period: [Fine::ZERO; 2],
             firmware,
             last_status_us: None,
+            stored_orientation: crate::requests::DEFAULT_ORIENTATION,
         }
     }
 

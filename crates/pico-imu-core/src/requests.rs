@@ -17,12 +17,97 @@ pub const ALLAN_LEVELS: u8 = allan::stream::DEVICE_PARAMS[1] as u8;
 pub const ALLAN_LEVELS_MAG: u8 = allan::stream::MAG_PARAMS[1] as u8;
 const _: () = assert!(allan::stream::MAG_PARAMS[0] == allan::stream::DEVICE_PARAMS[0]);
 
-/// A calibration the host asked to persist; the firmware pauses sampling, writes it and
+/// What a flash record holds: each is one key of the device's store (src/storage.rs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Record {
+    /// The calibration blob (`imu_cal::device::encode_blob`).
+    Calibration,
+    /// The attitude filter's host settings ([`encode_orientation`]).
+    Orientation,
+}
+
+/// A record to write to flash for request `id`: a calibration the host asked to persist, or the
+/// attitude filter's settings the host changed. The firmware pauses sampling, writes it and
 /// reports back through [`Device::persisted`].
 #[derive(Debug, Clone)]
 pub struct PersistRequest {
     pub id: u16,
+    pub record: Record,
     pub blob: Vec<u8, MAX_CAL_BLOB>,
+}
+
+/// The attitude filter's settings a host sets: the declination (0.01°) and the expected field
+/// (`None`: learnt by the device).
+pub type OrientationSetting = (i16, Option<MagReference>);
+
+/// The settings a device without a stored record uses: no declination, a learnt reference.
+pub(crate) const DEFAULT_ORIENTATION: OrientationSetting = (0, None);
+
+/// Format of the orientation record.
+const ORIENTATION_FORMAT: u8 = 1;
+
+/// The orientation record: its format (1), the declination (i16 LE, 0.01°), then 0 for a learnt
+/// reference or 1, the field (u32 LE, nT) and the dip (i16 LE, 0.01°).
+pub fn encode_orientation((declination_cdeg, reference): OrientationSetting) -> Vec<u8, 10> {
+    let mut v = Vec::new();
+    let _ = v.push(ORIENTATION_FORMAT);
+    let _ = v.extend_from_slice(&declination_cdeg.to_le_bytes());
+    match reference {
+        None => {
+            let _ = v.push(0);
+        }
+        Some(r) => {
+            let _ = v.push(1);
+            let _ = v.extend_from_slice(&r.field_nt.to_le_bytes());
+            let _ = v.extend_from_slice(&r.dip_cdeg.to_le_bytes());
+        }
+    }
+    v
+}
+
+/// Why an orientation record was not used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RecordError {
+    /// Another format than [`encode_orientation`]'s (the byte found).
+    Format(u8),
+    /// Shorter or longer than its format says.
+    Length(usize),
+    /// A value outside what `SetOrientation` accepts.
+    OutOfRange,
+}
+
+/// The settings of an orientation record, checked as `SetOrientation` checks them.
+pub fn decode_orientation(b: &[u8]) -> Result<OrientationSetting, RecordError> {
+    let (&format, rest) = b.split_first().ok_or(RecordError::Length(0))?;
+    if format != ORIENTATION_FORMAT {
+        return Err(RecordError::Format(format));
+    }
+    let setting = match rest {
+        [d0, d1, 0] => (i16::from_le_bytes([*d0, *d1]), None),
+        [d0, d1, 1, f0, f1, f2, f3, p0, p1] => (
+            i16::from_le_bytes([*d0, *d1]),
+            Some(MagReference {
+                field_nt: u32::from_le_bytes([*f0, *f1, *f2, *f3]),
+                dip_cdeg: i16::from_le_bytes([*p0, *p1]),
+            }),
+        ),
+        _ => return Err(RecordError::Length(b.len())),
+    };
+    if orientation_in_range(setting) {
+        Ok(setting)
+    } else {
+        Err(RecordError::OutOfRange)
+    }
+}
+
+/// What `SetOrientation` accepts: declination within ±180°, field 1–1000 µT, dip within ±90°.
+fn orientation_in_range((declination_cdeg, reference): OrientationSetting) -> bool {
+    (-18_000..=18_000).contains(&declination_cdeg)
+        && reference.is_none_or(|r| {
+            (1_000..=1_000_000).contains(&r.field_nt) && (-9_000..=9_000).contains(&r.dip_cdeg)
+        })
 }
 
 /// The wire's reason for a blob the device refuses.
@@ -133,7 +218,11 @@ impl Device {
                         // New corrections change the engines' input: old sums would mix scales.
                         self.reset_allan();
                         if persist {
-                            return Some(PersistRequest { id, blob });
+                            return Some(PersistRequest {
+                                id,
+                                record: Record::Calibration,
+                                blob,
+                            });
                         }
                         Reply::Ok
                     }
@@ -163,22 +252,51 @@ impl Device {
             Request::SetOrientation {
                 declination_cdeg,
                 reference,
-            } => self.set_orientation(declination_cdeg, reference),
+            } => {
+                let setting = (declination_cdeg, reference);
+                match self.set_orientation(setting) {
+                    // A setting other than the one in flash is stored (the reply comes with
+                    // the write's outcome); the same one again writes nothing.
+                    Reply::Ok if setting != self.stored_orientation => {
+                        let mut blob = Vec::new();
+                        // Ten bytes at most, into room for a calibration blob.
+                        let _ = blob.extend_from_slice(&encode_orientation(setting));
+                        return Some(PersistRequest {
+                            id,
+                            record: Record::Orientation,
+                            blob,
+                        });
+                    }
+                    r => r,
+                }
+            }
             Request::GetOrientation => Reply::Orientation(self.orientation_config()),
         };
         self.send(&DeviceMsg::Reply { id, reply }, sink);
         None
     }
 
-    /// The attitude filter's declination and expected field (RAM only: lost at a reset).
-    fn set_orientation(&mut self, declination_cdeg: i16, reference: Option<MagReference>) -> Reply {
-        let ok_decl = (-18_000..=18_000).contains(&declination_cdeg);
-        let ok_ref = reference.is_none_or(|r| {
-            (1_000..=1_000_000).contains(&r.field_nt) && (-9_000..=9_000).contains(&r.dip_cdeg)
-        });
-        if !ok_decl || !ok_ref {
+    /// Use the attitude filter settings read from flash at boot (`None`: none stored); a
+    /// damaged or unusable record is reported and the defaults kept (no declination, a learnt
+    /// reference).
+    pub fn load_orientation(&mut self, record: Option<&[u8]>) -> Result<(), RecordError> {
+        let setting = match record.map(decode_orientation) {
+            None => return Ok(()),
+            Some(Err(e)) => return Err(e),
+            Some(Ok(s)) => s,
+        };
+        self.set_orientation(setting);
+        self.stored_orientation = setting;
+        Ok(())
+    }
+
+    /// The attitude filter's declination and expected field (in RAM here; a change is stored
+    /// by the caller of [`Device::handle`]).
+    fn set_orientation(&mut self, setting: OrientationSetting) -> Reply {
+        if !orientation_in_range(setting) {
             return Reply::Error(ErrorCode::OutOfRange);
         }
+        let (declination_cdeg, reference) = setting;
         let ahrs = &mut self.pipeline.ahrs;
         ahrs.set_declination(f32::from(declination_cdeg) * 0.01);
         let ut_per_count = self.pipeline.scales.mag;
@@ -208,24 +326,184 @@ impl Device {
         }
     }
 
-    /// Report the outcome of a [`PersistRequest`].
-    pub fn persisted(&mut self, id: u16, ok: bool, sink: &mut impl FrameSink) {
-        let reply = if ok {
-            self.cal_status = CalStatus {
-                source: CalSource::Flash,
-                fault: None,
-            };
-            Reply::Ok
-        } else {
-            self.cal_status.fault = Some(CalFault::Flash);
-            Reply::Error(ErrorCode::FlashWrite)
+    /// Report the outcome of a [`PersistRequest`] (its settings are in use either way).
+    pub fn persisted(&mut self, req: &PersistRequest, ok: bool, sink: &mut impl FrameSink) {
+        let reply = match (req.record, ok) {
+            (Record::Calibration, true) => {
+                self.cal_status = CalStatus {
+                    source: CalSource::Flash,
+                    fault: None,
+                };
+                Reply::Ok
+            }
+            (Record::Calibration, false) => {
+                self.cal_status.fault = Some(CalFault::Flash);
+                Reply::Error(ErrorCode::FlashWrite)
+            }
+            (Record::Orientation, true) => {
+                if let Ok(s) = decode_orientation(&req.blob) {
+                    self.stored_orientation = s;
+                }
+                Reply::Ok
+            }
+            (Record::Orientation, false) => Reply::Error(ErrorCode::FlashWrite),
         };
-        self.send(&DeviceMsg::Reply { id, reply }, sink);
+        self.send(&DeviceMsg::Reply { id: req.id, reply }, sink);
     }
 
     /// Forget all Allan state. The round in progress describes the old state: abandoned.
     pub fn reset_allan(&mut self) {
         self.pipeline.reset_allan();
         self.tables.abandon();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use imu_proto::FrameReader;
+
+    struct Sink(std::vec::Vec<u8>);
+
+    impl FrameSink for Sink {
+        fn room(&self) -> usize {
+            usize::MAX
+        }
+        fn put(&mut self, frame: &[u8]) {
+            self.0.extend_from_slice(frame);
+        }
+    }
+
+    impl Sink {
+        /// The replies sent so far, emptied.
+        fn replies(&mut self) -> std::vec::Vec<(u16, Reply)> {
+            let mut rd = FrameReader::<4096>::new();
+            let mut out = std::vec::Vec::new();
+            rd.feed::<DeviceMsg>(&self.0, |m| {
+                if let Ok(DeviceMsg::Reply { id, reply }) = m {
+                    out.push((id, reply));
+                }
+            });
+            self.0.clear();
+            out
+        }
+    }
+
+    fn device() -> Device {
+        Device::new(crate::config::scales(), "test")
+    }
+
+    /// Settings drawn from a generator seeded by the clock (a fresh realisation every run):
+    /// every declination and reference `SetOrientation` accepts, and learnt references.
+    fn settings(n: usize) -> std::vec::Vec<OrientationSetting> {
+        let mut x = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1;
+        let mut next = move |lo: i64, hi: i64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            lo + (x % (hi - lo + 1) as u64) as i64
+        };
+        (0..n)
+            .map(|_| {
+                let decl = next(-18_000, 18_000) as i16;
+                let reference = (next(0, 2) > 0).then(|| MagReference {
+                    field_nt: next(1_000, 1_000_000) as u32,
+                    dip_cdeg: next(-9_000, 9_000) as i16,
+                });
+                (decl, reference)
+            })
+            .collect()
+    }
+
+    fn set(
+        dev: &mut Device,
+        sink: &mut Sink,
+        id: u16,
+        s: OrientationSetting,
+    ) -> Option<PersistRequest> {
+        let req = Request::SetOrientation {
+            declination_cdeg: s.0,
+            reference: s.1,
+        };
+        dev.handle(HostFrame { id, req }, 0, 0, sink)
+    }
+
+    /// The record reads back as written, and a damaged one is refused with its reason.
+    #[test]
+    fn orientation_records_round_trip_and_bad_ones_are_refused() {
+        for s in settings(500) {
+            assert_eq!(decode_orientation(&encode_orientation(s)), Ok(s));
+        }
+        let good = encode_orientation((150, None));
+        assert_eq!(decode_orientation(&[]), Err(RecordError::Length(0)));
+        assert_eq!(decode_orientation(&good[..3]), Err(RecordError::Length(3)));
+        let mut wrong = good.clone();
+        wrong[0] = 7;
+        assert_eq!(decode_orientation(&wrong), Err(RecordError::Format(7)));
+        let far = encode_orientation((18_001, None));
+        assert_eq!(decode_orientation(&far), Err(RecordError::OutOfRange));
+        let weak = MagReference {
+            field_nt: 999,
+            dip_cdeg: 0,
+        };
+        let r = encode_orientation((0, Some(weak)));
+        assert_eq!(decode_orientation(&r), Err(RecordError::OutOfRange));
+        let mut tail = encode_orientation((0, None));
+        let _ = tail.push(0);
+        assert_eq!(decode_orientation(&tail), Err(RecordError::Length(5)));
+    }
+
+    /// A new setting asks for a flash write (the reply waits for it); a device booting with the
+    /// written record uses the same settings; the same setting again writes nothing; a failed
+    /// write is reported; a record that cannot be used leaves the defaults.
+    #[test]
+    fn orientation_settings_are_stored_and_survive_a_reboot() {
+        let mut sink = Sink(std::vec::Vec::new());
+        let mut dev = device();
+        // The defaults need no record.
+        assert!(set(&mut dev, &mut sink, 1, DEFAULT_ORIENTATION).is_none());
+        assert_eq!(sink.replies(), [(1, Reply::Ok)]);
+        for (k, s) in settings(50).into_iter().enumerate() {
+            let id = 10 + k as u16;
+            let req = set(&mut dev, &mut sink, id, s).expect("a changed setting is stored");
+            assert_eq!(req.record, Record::Orientation);
+            assert!(sink.replies().is_empty(), "the reply waits for the write");
+            dev.persisted(&req, true, &mut sink);
+            assert_eq!(sink.replies(), [(id, Reply::Ok)]);
+            let before = dev.orientation_config();
+            assert_eq!(before.declination_cdeg, s.0);
+            // Reboot: a fresh device reading the record.
+            let mut again = device();
+            assert_eq!(again.load_orientation(Some(&req.blob)), Ok(()));
+            let after = again.orientation_config();
+            assert_eq!(after.declination_cdeg, s.0);
+            assert_eq!(after.reference, before.reference);
+            assert_eq!(after.reference.is_some(), s.1.is_some());
+            // The same setting again: nothing to write.
+            assert!(set(&mut again, &mut sink, id, s).is_none());
+            assert_eq!(sink.replies(), [(id, Reply::Ok)]);
+            assert!(set(&mut dev, &mut sink, id, s).is_none());
+            assert_eq!(sink.replies(), [(id, Reply::Ok)]);
+        }
+        // A write that fails: the setting is in use, the host told.
+        let req = set(&mut dev, &mut sink, 99, (-4_321, None)).expect("stored");
+        dev.persisted(&req, false, &mut sink);
+        assert_eq!(sink.replies(), [(99, Reply::Error(ErrorCode::FlashWrite))]);
+        assert_eq!(dev.orientation_config().declination_cdeg, -4_321);
+        // Nothing stored, or a damaged record: the defaults.
+        let mut fresh = device();
+        assert_eq!(fresh.load_orientation(None), Ok(()));
+        assert_eq!(
+            fresh.load_orientation(Some(&[1, 2])),
+            Err(RecordError::Length(2))
+        );
+        let c = fresh.orientation_config();
+        assert_eq!((c.declination_cdeg, c.reference), (0, None));
+        // Out of range: refused, nothing to store.
+        assert!(set(&mut fresh, &mut sink, 7, (20_000, None)).is_none());
+        assert_eq!(sink.replies(), [(7, Reply::Error(ErrorCode::OutOfRange))]);
     }
 }
