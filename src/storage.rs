@@ -1,5 +1,5 @@
 //! Settings storage: the calibration blob (`imu_cal::device::encode_blob`) and the attitude
-//! filter's host settings (`pico_imu_core::requests::encode_orientation`), each one key of a
+//! filter's host settings (`pico_imu_core::settings::encode_orientation`), each one key of a
 //! sequential-storage map in the last 64 KiB of the 2 MiB flash (memory.x reserves it).
 //! Read at boot; written only on the host's request, while sampling is paused (a flash
 //! program/erase stalls execute-in-place, so the CPU would stall mid-measurement).

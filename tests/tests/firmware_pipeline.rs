@@ -19,6 +19,7 @@ use pico_imu_core::mag::{MagService, Slots};
 use pico_imu_core::msg::{self, FifoFrames, SensorMsg, BURST_MAX};
 use pico_imu_core::outbox::FrameSink;
 use pico_imu_core::replay;
+use pico_imu_core::requests::{PersistRequest, Record};
 use pico_imu_core::sensor::Tick;
 use pico_imu_core::tables::{TABLE_FRAME_ROOM, TABLE_SPACING_US};
 use pico_imu_tests::mpu6050_model::Motion;
@@ -538,9 +539,9 @@ fn persisting_a_calibration_waits_for_the_flash_write() {
     let p = dev
         .handle(HostFrame { id: 7, req }, 0, 0, &mut sink)
         .expect("a persist request");
-    assert_eq!(p.id, 7);
+    assert_eq!((p.id, p.record), (7, Record::Calibration));
     assert!(sink.messages().is_empty(), "no reply before the write");
-    dev.persisted(7, true, &mut sink);
+    dev.persisted(&p, true, &mut sink);
     assert_eq!(
         sink.messages(),
         vec![DeviceMsg::Reply {
@@ -549,7 +550,7 @@ fn persisting_a_calibration_waits_for_the_flash_write() {
         }]
     );
     assert_eq!(dev.cal_status().source, CalSource::Flash);
-    dev.persisted(8, false, &mut sink);
+    dev.persisted(&PersistRequest { id: 8, ..p }, false, &mut sink);
     assert_eq!(
         sink.messages(),
         vec![DeviceMsg::Reply {

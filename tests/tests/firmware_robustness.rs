@@ -154,7 +154,7 @@ proptest! {
             let before = sink.frames;
             if let Some(p) = dev.handle(HostFrame { id: i as u16, req }, 0, 0, &mut sink) {
                 prop_assert_eq!(sink.frames, before, "no reply before the flash write");
-                dev.persisted(p.id, i % 2 == 0, &mut sink);
+                dev.persisted(&p, i % 2 == 0, &mut sink);
             }
             prop_assert_eq!(sink.frames, before + 1);
         }
@@ -173,7 +173,7 @@ proptest! {
                 Some(Ok(f)) => {
                     handled += 1;
                     if let Some(p) = dev.handle(f, 0, 0, &mut sink) {
-                        dev.persisted(p.id, true, &mut sink);
+                        dev.persisted(&p, true, &mut sink);
                     }
                 }
                 Some(Err(_)) => dev.rejected_frame(),

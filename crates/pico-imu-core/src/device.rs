@@ -38,7 +38,7 @@ pub struct Device {
     /// When the last periodic status frame went out, µs.
     last_status_us: Option<u64>,
     /// The attitude filter's settings in flash (the defaults while none are stored).
-    pub(crate) stored_orientation: crate::requests::OrientationSetting,
+    pub(crate) stored_orientation: crate::settings::OrientationSetting,
 }
 
 impl Device {
@@ -60,7 +60,7 @@ impl Device {
             period: [Fine::ZERO; 2],
             firmware,
             last_status_us: None,
-            stored_orientation: crate::requests::DEFAULT_ORIENTATION,
+            stored_orientation: crate::settings::DEFAULT_ORIENTATION,
         }
     }
 
