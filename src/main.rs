@@ -54,6 +54,7 @@ use pico_imu_core::imu::ImuService;
 use pico_imu_core::mag::MagService;
 use pico_imu_core::msg::{self, SensorMsg};
 use pico_imu_core::outbox::FrameSink;
+use pico_imu_core::requests::Record;
 use pico_imu_core::schedule::{self, Housekeeping, MagTicks, StatusLog};
 use pico_imu_core::sensor::Tick;
 use static_cell::StaticCell;
@@ -244,12 +245,22 @@ async fn start(spawner: Spawner) {
         concat!("pico-imu ", env!("CARGO_PKG_VERSION")),
     ));
     let mut blob = [0u8; imu_proto::MAX_CAL_BLOB];
-    match store.load(&mut blob).await {
+    match store.load(Record::Calibration, &mut blob).await {
         Ok(Some(n)) => device.load_stored(Some(&blob[..n])),
         Ok(None) => device.load_stored(None),
         Err(()) => device.flash_unreadable(),
     }
     info!("calibration: {}", device.cal_status());
+    // The attitude filter's declination and expected field as the host last set them; an
+    // unreadable or unusable record leaves the defaults (no declination, a learnt reference).
+    let stored = match store.load(Record::Orientation, &mut blob).await {
+        Ok(n) => device.load_orientation(n.map(|n| &blob[..n])),
+        Err(()) => Ok(()),
+    };
+    match stored {
+        Ok(()) => info!("orientation: {}", device.orientation_config()),
+        Err(e) => warn!("orientation record not used: {}", e),
+    }
 
     spawner.spawn(usb_task(usb).expect("spawn usb_task"));
     spawner.spawn(tick_task(tick).expect("spawn tick_task"));
@@ -545,10 +556,10 @@ async fn process_task(
                         // timer at the latest, schedule::IMU_FALLBACK_US after its last burst.
                         run.sender().send(false);
                         Timer::after_micros(schedule::IMU_FALLBACK_US + 10_000).await;
-                        let ok = store.save(&req.blob).await.is_ok();
+                        let ok = store.save(req.record, &req.blob).await.is_ok();
                         run.sender().send(true);
-                        info!("calibration persisted: {}", ok);
-                        device.persisted(req.id, ok, &mut sink);
+                        info!("{} persisted: {}", req.record, ok);
+                        device.persisted(&req, ok, &mut sink);
                     }
                 }
             },

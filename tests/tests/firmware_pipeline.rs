@@ -6,7 +6,7 @@ use std::collections::BTreeSet;
 
 use embassy_futures::block_on;
 use imu_drivers::asynch::{Mpu6050, Qmc5883};
-use imu_drivers::mpu6050::{Address, RawSample};
+use imu_drivers::mpu6050::{decode_fifo_frame, Address, FifoFrame, RawSample};
 use imu_proto::{
     CalFault, CalProblem, CalSource, Channel, DeviceMsg, Event, FrameReader, GapCause, HostFrame,
     Reply, Request, SampleBatch, Sensor, SensorState, StreamMode, MAX_FRAME,
@@ -16,9 +16,10 @@ use pico_imu_core::config;
 use pico_imu_core::device::Device;
 use pico_imu_core::imu::{count_may_be_stale, ImuService};
 use pico_imu_core::mag::{MagService, Slots};
-use pico_imu_core::msg::{self, SensorMsg, BURST_MAX};
+use pico_imu_core::msg::{self, FifoFrames, SensorMsg, BURST_MAX};
 use pico_imu_core::outbox::FrameSink;
 use pico_imu_core::replay;
+use pico_imu_core::requests::{PersistRequest, Record};
 use pico_imu_core::sensor::Tick;
 use pico_imu_core::tables::{TABLE_FRAME_ROOM, TABLE_SPACING_US};
 use pico_imu_tests::mpu6050_model::Motion;
@@ -155,14 +156,14 @@ impl Rig {
     fn feed(&mut self, msgs: msg::Out) {
         for m in msgs {
             match &m {
-                SensorMsg::Imu {
-                    stamps, samples, ..
-                } => {
-                    for (i, raw) in samples.iter().enumerate() {
+                SensorMsg::Imu { stamps, frames, .. } => {
+                    // The frames travel as the part sent them; decoded here as the driver does.
+                    let fb = frames.layout.bytes();
+                    for (i, f) in frames.as_bytes().chunks_exact(fb).enumerate() {
                         self.imu_out.push(Delivered {
                             k: stamps.k0 + i as u32,
                             t_us: stamps.us(i as u32),
-                            raw: *raw,
+                            raw: decode_fifo_frame(f, frames.layout).expect("a whole frame"),
                         });
                     }
                 }
@@ -425,7 +426,7 @@ fn an_unpaired_imu_sample_waits_for_the_next_burst_and_precedes_a_split() {
                 t0: u64::from(k0) * 1000 * US,
                 period: 1000 * US,
             },
-            samples: v,
+            frames: FifoFrames::of(FifoFrame::AccelTempGyro, &v),
             after,
         }
     };
@@ -538,9 +539,9 @@ fn persisting_a_calibration_waits_for_the_flash_write() {
     let p = dev
         .handle(HostFrame { id: 7, req }, 0, 0, &mut sink)
         .expect("a persist request");
-    assert_eq!(p.id, 7);
+    assert_eq!((p.id, p.record), (7, Record::Calibration));
     assert!(sink.messages().is_empty(), "no reply before the write");
-    dev.persisted(7, true, &mut sink);
+    dev.persisted(&p, true, &mut sink);
     assert_eq!(
         sink.messages(),
         vec![DeviceMsg::Reply {
@@ -549,7 +550,7 @@ fn persisting_a_calibration_waits_for_the_flash_write() {
         }]
     );
     assert_eq!(dev.cal_status().source, CalSource::Flash);
-    dev.persisted(8, false, &mut sink);
+    dev.persisted(&PersistRequest { id: 8, ..p }, false, &mut sink);
     assert_eq!(
         sink.messages(),
         vec![DeviceMsg::Reply {

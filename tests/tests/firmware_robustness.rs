@@ -1,13 +1,13 @@
 //! No panic path from host input or bus data: the device state machine is hammered with random
 //! host frames (decoded or not) and random sensor data, and the fault state machine is checked
 //! step by step.
-use imu_drivers::mpu6050::RawSample;
+use imu_drivers::mpu6050::{FifoFrame, RawSample};
 use imu_proto::{Event, FrameReader, GapCause, HostFrame, Sensor, SensorState, MAX_FRAME};
 use pico_imu_core::clock::{Fine, Stamps, US};
 use pico_imu_core::config;
 use pico_imu_core::device::Device;
 use pico_imu_core::health::{Health, LOSE_AFTER_US, RETRY_FIRST_MS, RETRY_MAX_MS, STALL_AFTER_US};
-use pico_imu_core::msg::{Report, SensorMsg, BURST_MAX};
+use pico_imu_core::msg::{FifoFrames, Report, SensorMsg, BURST_MAX};
 use pico_imu_core::outbox::FrameSink;
 use proptest::prelude::*;
 
@@ -40,6 +40,19 @@ fn raw() -> impl Strategy<Value = RawSample> {
         .prop_map(|(accel, temp, gyro)| RawSample { accel, temp, gyro })
 }
 
+/// The FIFO frames of `v` as the part sends them (with the temperature or without), the count
+/// claiming `extra` frames more than were written (even past the buffer).
+fn fifo_frames(v: &[RawSample], temp: bool, extra: usize) -> FifoFrames {
+    let layout = if temp {
+        FifoFrame::AccelTempGyro
+    } else {
+        FifoFrame::AccelGyro
+    };
+    let mut f = FifoFrames::of(layout, v);
+    f.n += extra;
+    f
+}
+
 fn cause() -> impl Strategy<Value = Option<GapCause>> {
     proptest::option::of(prop_oneof![
         Just(GapCause::FifoOverflow),
@@ -64,11 +77,13 @@ fn sensor_msg() -> impl Strategy<Value = SensorMsg> {
         (
             stamps(),
             proptest::collection::vec(raw(), 0..=BURST_MAX),
+            any::<bool>(),
+            0usize..4,
             cause()
         )
-            .prop_map(|(stamps, v, after)| SensorMsg::Imu {
+            .prop_map(|(stamps, v, temp, extra, after)| SensorMsg::Imu {
                 stamps,
-                samples: imu_proto::Vec::from_slice(&v).unwrap(),
+                frames: fifo_frames(&v, temp, extra),
                 after,
             }),
         (stamps(), any::<[i16; 3]>(), cause()).prop_map(|(stamps, xyz, after)| SensorMsg::Mag {
@@ -139,7 +154,7 @@ proptest! {
             let before = sink.frames;
             if let Some(p) = dev.handle(HostFrame { id: i as u16, req }, 0, 0, &mut sink) {
                 prop_assert_eq!(sink.frames, before, "no reply before the flash write");
-                dev.persisted(p.id, i % 2 == 0, &mut sink);
+                dev.persisted(&p, i % 2 == 0, &mut sink);
             }
             prop_assert_eq!(sink.frames, before + 1);
         }
@@ -158,7 +173,7 @@ proptest! {
                 Some(Ok(f)) => {
                     handled += 1;
                     if let Some(p) = dev.handle(f, 0, 0, &mut sink) {
-                        dev.persisted(p.id, true, &mut sink);
+                        dev.persisted(&p, true, &mut sink);
                     }
                 }
                 Some(Err(_)) => dev.rejected_frame(),

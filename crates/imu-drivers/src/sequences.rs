@@ -284,6 +284,40 @@ macro_rules! drivers {
                 Ok(done)
             }
 
+            /// [`Self::read_fifo_counted`] without decoding: as many whole frames as `count`
+            /// holds and `out` has room for, read straight into `out` (FIFO order, big-endian
+            /// as the part sends them, in the configured layout: [`Self::fifo_frame`]), so a
+            /// caller can decode each frame where its values are used. Returns how many frames.
+            pub $($async)? fn read_fifo_counted_raw(&mut self, count: u16, out: &mut [u8]) -> Result<usize, MpuError<I2C>> {
+                let frame = self.config.fifo.ok_or(m::Error::NotConfigured)?;
+                let chip = self.chip.ok_or(m::Error::NotConfigured)?;
+                // Overflow from the count, as in `read_fifo_counted_with`.
+                if count >= chip.fifo_capacity() {
+                    return Err(m::Error::FifoOverflow);
+                }
+                // min(count / frame size, room) by subtraction (no divide on the Cortex-M0+).
+                let fb = frame.bytes();
+                let (mut wanted, mut left, mut room) = (0, count as usize, out.len());
+                while left >= fb && room >= fb {
+                    left -= fb;
+                    room -= fb;
+                    wanted += 1;
+                }
+                let mut done = 0;
+                while done < wanted {
+                    let n = (wanted - done).min(FIFO_CHUNK_FRAMES);
+                    let bytes = &mut out[done * fb..(done + n) * fb];
+                    self.i2c.write_read(self.address, &[mr::FIFO_R_W], bytes) $(.$await)? ?;
+                    done += n;
+                }
+                Ok(done)
+            }
+
+            /// The FIFO frame layout configured (`None` before `init`).
+            pub fn fifo_frame(&self) -> Option<m::FifoFrame> {
+                self.config.fifo
+            }
+
             /// Empty the FIFO and clear a pending overflow: [`Self::stop_fifo`],
             /// [`Self::start_fifo`], then read INT_STATUS.
             pub $($async)? fn reset_fifo(&mut self) -> Result<(), MpuError<I2C>> {

@@ -217,14 +217,20 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
     /// The bookkeeping of a sample: absolute for the first of its run, else the differences.
     #[inline(always)]
     fn head<S: Sample>(&mut self, s: &S, prev: Option<&S>) {
+        self.head_of::<S>(s.seq(), s.t_us(), prev.map(|p| (p.seq(), p.t_us())));
+    }
+
+    /// [`Cursor::head`] from the parts: this sample's `seq` and `t_us`, the previous one's.
+    #[inline(always)]
+    fn head_of<S: Sample>(&mut self, seq: u32, t_us: u64, prev: Option<(u32, u64)>) {
         match prev {
             None => {
-                self.varint(s.seq());
-                self.varint_u64(s.t_us());
+                self.varint(seq);
+                self.varint_u64(t_us);
             }
-            Some(p) => {
-                self.varint(s.seq().wrapping_sub(p.seq()));
-                self.zigzag_i64(time_delta::<S>(s.t_us(), p.t_us()));
+            Some((p_seq, p_t)) => {
+                self.varint(seq.wrapping_sub(p_seq));
+                self.zigzag_i64(time_delta::<S>(t_us, p_t));
             }
         }
     }
@@ -241,8 +247,14 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
 
     fn imu(&mut self, s: &ImuSample, prev: Option<&ImuSample>) {
         self.head(s, prev);
-        let [ax, ay, az] = s.accel;
-        let [gx, gy, gz] = s.gyro;
+        self.imu_values(&s.accel, &s.gyro, s.temp);
+    }
+
+    /// An IMU sample's values (after its bookkeeping).
+    #[inline(always)]
+    fn imu_values(&mut self, accel: &[i32; 3], gyro: &[i32; 3], temp: Option<i32>) {
+        let [ax, ay, az] = *accel;
+        let [gx, gy, gz] = *gyro;
         self.zigzag(ax);
         self.zigzag(ay);
         self.zigzag(az);
@@ -252,7 +264,7 @@ impl<const CHECKED: bool> Cursor<'_, CHECKED> {
         // `Option`: a 0 byte for `None`, a 1 byte and the value for `Some` (`Cursor::option`'s
         // form, written out: on this per-sample path LLVM lays out the match tighter than the
         // helper's closure; docs/benchmarks.md).
-        match s.temp {
+        match temp {
             Some(t) => {
                 self.byte(1);
                 self.zigzag(t);
@@ -305,6 +317,139 @@ fn write_with<const CHECKED: bool>(mut c: Cursor<'_, CHECKED>, batch: &SampleBat
         prev = Some(s);
     }
     c.pos
+}
+
+/// Where the first IMU sample's bytes go in a [`BatchWriter`]'s content: the version byte,
+/// the variant, `calibrated`, the five scales and the IMU count (one byte: below 128).
+const IMU_AT: usize = 1 + 1 + 1 + 5 * 4 + 1;
+const _: () = assert!(MAX_BATCH_IMU < 128 && MAX_BATCH_MAG < 128);
+
+/// Bytes of a [`BatchWriter`]'s content at its longest: the version byte and the longest
+/// postcard bytes of a full batch.
+const WRITER_BYTES: usize = 1 + MAX_SAMPLES_POSTCARD;
+
+/// A `DeviceMsg::Samples` batch written in its wire form as the samples arrive: each IMU sample
+/// is encoded once, straight into the frame's content (version byte and postcard bytes),
+/// instead of being kept as an [`ImuSample`] and encoded when the batch is sent. The header
+/// (`calibrated`, the scales, the count) and the magnetometer's few samples are written when
+/// the batch is finished. The bytes are those of [`write`] for the same samples (proptested in
+/// `tests/batch.rs`), so the wire format is the one documented in docs/protocol.md.
+#[repr(C, align(4))]
+pub struct BatchWriter {
+    /// The content: bytes `..IMU_AT` written by [`BatchWriter::finish`], the IMU samples' bytes
+    /// from `IMU_AT` to `end`.
+    buf: [u8; WRITER_BYTES],
+    end: usize,
+    imu: usize,
+    /// The previous IMU sample's `seq` and `t_us` (the next one is written as differences).
+    prev: (u32, u64),
+    mag: Vec<MagSample, MAX_BATCH_MAG>,
+}
+
+impl Default for BatchWriter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl BatchWriter {
+    pub const fn new() -> Self {
+        Self {
+            buf: [0; WRITER_BYTES],
+            end: IMU_AT,
+            imu: 0,
+            prev: (0, 0),
+            mag: Vec::new(),
+        }
+    }
+
+    /// IMU samples in the batch.
+    pub fn imu_len(&self) -> usize {
+        self.imu
+    }
+
+    /// Magnetometer samples in the batch.
+    pub fn mag_len(&self) -> usize {
+        self.mag.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.imu == 0 && self.mag.is_empty()
+    }
+
+    /// Forget the samples: the next batch starts empty.
+    pub fn clear(&mut self) {
+        self.end = IMU_AT;
+        self.imu = 0;
+        self.mag.clear();
+    }
+
+    /// Append an IMU sample (the fields of [`ImuSample`]); `false` (nothing written) if the
+    /// batch already holds [`MAX_BATCH_IMU`].
+    #[inline(always)]
+    pub fn push_imu(
+        &mut self,
+        seq: u32,
+        t_us: u64,
+        accel: &[i32; 3],
+        gyro: &[i32; 3],
+        temp: Option<i32>,
+    ) -> bool {
+        if self.imu >= MAX_BATCH_IMU {
+            return false;
+        }
+        let prev = (self.imu > 0).then_some(self.prev);
+        // Unchecked: `end` ≤ IMU_AT + imu · IMU_SAMPLE_MAX with imu < MAX_BATCH_IMU, so this
+        // sample's longest encoding ends within `buf` (WRITER_BYTES covers the whole batch).
+        let mut c = Cursor::<false> {
+            buf: &mut self.buf,
+            pos: self.end,
+        };
+        c.head_of::<ImuSample>(seq, t_us, prev);
+        c.imu_values(accel, gyro, temp);
+        self.end = c.pos;
+        self.imu += 1;
+        self.prev = (seq, t_us);
+        true
+    }
+
+    /// Append a magnetometer sample; `false` (nothing kept) if the batch already holds
+    /// [`MAX_BATCH_MAG`].
+    pub fn push_mag(&mut self, s: MagSample) -> bool {
+        self.mag.push(s).is_ok()
+    }
+
+    /// Whether no further magnetometer sample fits.
+    pub fn mag_full(&self) -> bool {
+        self.mag.is_full()
+    }
+
+    /// The frame content of `DeviceMsg::Samples` with these samples, `calibrated` and `scales`:
+    /// the version byte, then the postcard bytes [`write`] produces for the same batch. The
+    /// samples stay until [`BatchWriter::clear`].
+    pub fn finish(&mut self, version: u8, calibrated: bool, scales: &Scales) -> &[u8] {
+        let mut c = Cursor::<false> {
+            buf: &mut self.buf,
+            pos: 0,
+        };
+        c.byte(version);
+        c.byte(SAMPLES_VARIANT);
+        c.byte(u8::from(calibrated));
+        c.scales(scales);
+        c.byte(self.imu as u8);
+        debug_assert_eq!(c.pos, IMU_AT);
+        // The magnetometer's run after the IMU's: its count (one byte) and at most
+        // MAX_BATCH_MAG samples at their longest, within WRITER_BYTES.
+        c.pos = self.end;
+        c.byte(self.mag.len() as u8);
+        let mut prev = None;
+        for s in &self.mag {
+            c.mag(s, prev);
+            prev = Some(s);
+        }
+        let n = c.pos;
+        &self.buf[..n]
+    }
 }
 
 #[cfg(test)]

@@ -60,6 +60,7 @@ mod status;
 pub mod table;
 mod wire;
 
+pub use batch::BatchWriter;
 pub use contract::*;
 pub use framing::*;
 pub use heapless::{String, Vec};

@@ -385,8 +385,9 @@ pub enum Request {
     GetTables,
     /// The attitude filter's declination (0.01°, east positive, within ±180°) and expected
     /// field (strength 1–1000 µT, dip within ±90°; `None`: learnt by the device, a reference
-    /// already learnt kept). Held in RAM: lost at a reset (the flash holds the calibration
-    /// only). Answered `Ok` or `Error(OutOfRange)`.
+    /// already learnt kept). A setting other than the one stored is written to flash (sampling
+    /// paused meanwhile, as for a persisted calibration) and used again after a reset.
+    /// Answered `Ok`, `Error(OutOfRange)`, or `Error(FlashWrite)` (in use, but not stored).
     SetOrientation {
         declination_cdeg: i16,
         reference: Option<MagReference>,

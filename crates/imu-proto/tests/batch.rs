@@ -306,3 +306,84 @@ fn later_samples_carry_differences() {
     let back: DeviceMsg = decode(&mut out[..n - 1]).unwrap();
     assert_eq!(back, DeviceMsg::Samples(b));
 }
+
+/// What a [`BatchWriter`] is fed: IMU and magnetometer samples interleaved in any order, and
+/// the points where the batch is sent.
+#[derive(Debug, Clone)]
+enum Feed {
+    Imu(ImuSample),
+    Mag(MagSample),
+    Send,
+}
+
+fn arb_feed() -> impl Strategy<Value = (std::vec::Vec<Feed>, bool, [f32; 5])> {
+    let imu = (
+        arb_u32(),
+        arb_u64(),
+        [arb_i32(), arb_i32(), arb_i32()],
+        [arb_i32(), arb_i32(), arb_i32()],
+        proptest::option::of(arb_i32()),
+    )
+        .prop_map(|p| Feed::Imu(imu_sample(p)));
+    let mag = (arb_u32(), arb_u64(), [arb_i32(), arb_i32(), arb_i32()])
+        .prop_map(|(seq, t_us, mag)| Feed::Mag(MagSample { seq, t_us, mag }));
+    // Long enough to fill both sensors' runs (32 and 16) now and then between sends.
+    let feed = prop_oneof![20 => imu, 4 => mag, 1 => Just(Feed::Send)];
+    (
+        proptest::collection::vec(feed, 0..120),
+        any::<bool>(),
+        [arb_f32(), arb_f32(), arb_f32(), arb_f32(), arb_f32()],
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1000))]
+
+    /// The batch written in its wire form as samples arrive (`BatchWriter`, the firmware's
+    /// path) frames byte for byte as the `SampleBatch` of the same samples through
+    /// `encode_samples` and through serde, over random samples and batch boundaries; a full
+    /// run refuses the next sample and leaves the batch as it was.
+    #[test]
+    fn the_batch_written_as_samples_arrive_frames_like_the_sample_batch(
+        (feed, calibrated, s) in arb_feed()
+    ) {
+        let mut w = BatchWriter::new();
+        let (mut imu, mut mag) = (std::vec::Vec::new(), std::vec::Vec::new());
+        let mut enc = FrameEncoder::new();
+        let mut out = std::vec![0u8; MAX_FRAME];
+        let mut sends = 0;
+        for f in feed.iter().chain([&Feed::Send]) {
+            match f {
+                Feed::Imu(x) => {
+                    let took = w.push_imu(x.seq, x.t_us, &x.accel, &x.gyro, x.temp);
+                    prop_assert_eq!(took, imu.len() < MAX_BATCH_IMU);
+                    if took {
+                        imu.push(*x);
+                    }
+                }
+                Feed::Mag(x) => {
+                    let took = w.push_mag(*x);
+                    prop_assert_eq!(took, mag.len() < MAX_BATCH_MAG);
+                    if took {
+                        mag.push(*x);
+                    }
+                }
+                Feed::Send => {
+                    prop_assert_eq!(w.imu_len(), imu.len());
+                    prop_assert_eq!(w.mag_len(), mag.len());
+                    prop_assert_eq!(w.is_empty(), imu.is_empty() && mag.is_empty());
+                    prop_assert_eq!(w.mag_full(), mag.len() == MAX_BATCH_MAG);
+                    let b = batch_of(calibrated, &imu, &mag, s);
+                    let n = enc.encode_batch(&mut w, calibrated, &b.scales, &mut out).unwrap();
+                    prop_assert_eq!(&out[..n], &direct_frame(&b)[..]);
+                    prop_assert_eq!(&out[..n], &serde_frame(&b)[..]);
+                    w.clear();
+                    imu.clear();
+                    mag.clear();
+                    sends += 1;
+                }
+            }
+        }
+        prop_assert!(sends >= 1);
+    }
+}

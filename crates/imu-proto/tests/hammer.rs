@@ -168,6 +168,50 @@ proptest! {
     }
 }
 
+/// Content for the fused CRC and COBS scan: as for `cobs_input`, plus zero-heavy strings (a
+/// zero every few bytes, as in sample batches) and long runs of zeros.
+fn frame_content() -> impl Strategy<Value = std::vec::Vec<u8>> {
+    prop_oneof![
+        cobs_input(),
+        proptest::collection::vec(prop_oneof![3 => 1u8..=255, 1 => Just(0u8)], 0..900),
+        (0usize..600).prop_map(|n| std::vec![0u8; n]),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(1000))]
+
+    /// The frame encoder's one scan (CRC, zeros turned into code bytes as they come), fed the
+    /// content in random pieces, writes what the `crc` and `cobs` crates make of
+    /// `version | content | CRC-32 LE`, then the delimiter.
+    #[test]
+    fn the_fused_crc_and_cobs_scan_matches_the_crates(
+        content in frame_content(),
+        cuts in proptest::collection::vec(0usize..900, 0..6),
+    ) {
+        let mut b = FrameBuilder::<4096>::new();
+        b.start();
+        let mut cuts: std::vec::Vec<usize> =
+            cuts.into_iter().map(|c| c.min(content.len())).collect();
+        cuts.sort_unstable();
+        let mut from = 0;
+        for c in cuts.into_iter().chain([content.len()]) {
+            b.push(&content[from..c]);
+            from = c;
+        }
+        let ours = b.finish(1).expect("room").to_vec();
+        let mut payload = std::vec![PROTOCOL_VERSION];
+        payload.extend_from_slice(&content);
+        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&payload);
+        payload.extend_from_slice(&crc.to_le_bytes());
+        let mut theirs = std::vec![0u8; cobs::max_encoding_length(payload.len())];
+        let m = cobs::try_encode(&payload, &mut theirs).expect("room");
+        theirs.truncate(m);
+        theirs.push(0);
+        prop_assert_eq!(ours, theirs);
+    }
+}
+
 #[test]
 fn cobs_encode_refuses_a_short_buffer_instead_of_panicking() {
     let src = [1u8; 300];

@@ -37,6 +37,8 @@ pub struct Device {
     pub(crate) firmware: &'static str,
     /// When the last periodic status frame went out, µs.
     last_status_us: Option<u64>,
+    /// The attitude filter's settings in flash (the defaults while none are stored).
+    pub(crate) stored_orientation: crate::settings::OrientationSetting,
 }
 
 impl Device {
@@ -58,6 +60,7 @@ impl Device {
             period: [Fine::ZERO; 2],
             firmware,
             last_status_us: None,
+            stored_orientation: crate::settings::DEFAULT_ORIENTATION,
         }
     }
 
@@ -94,12 +97,12 @@ impl Device {
         match msg {
             SensorMsg::Imu {
                 stamps,
-                samples,
+                frames,
                 after,
             } => {
                 self.period[0] = stamps.period;
                 self.pipeline
-                    .imu_burst(samples, stamps, *after, &mut self.outbox, sink)
+                    .imu_burst(frames, stamps, *after, &mut self.outbox, sink)
             }
             SensorMsg::Mag { stamps, xyz, after } => {
                 self.period[1] = stamps.period;

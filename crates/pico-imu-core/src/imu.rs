@@ -23,13 +23,13 @@ use embedded_hal_async::delay::DelayNs;
 use embedded_hal_async::i2c::I2c;
 use imu_drivers::asynch::Mpu6050;
 use imu_drivers::mpu6050 as mpu;
-use imu_proto::{GapCause, Sensor, SensorState, Vec, IMU_PERIOD_US};
+use imu_proto::{GapCause, Sensor, SensorState, IMU_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime};
 use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::imu_config;
 use crate::cycle_marker::{self, Stage};
-use crate::msg::{Out, SensorMsg, BURST_MAX};
+use crate::msg::{FifoFrames, Out, SensorMsg, BURST_MAX};
 use crate::sensor::{delay_until, Core, Lead, Phase, Tick, SETUP, WRITE_MARGIN};
 
 /// Bytes of one FIFO frame (accel, temperature, gyro).
@@ -263,22 +263,28 @@ impl ImuService {
                 return;
             }
             let slot = cx.out.len();
+            let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
+            // The message made whole before the read (the frames the count promises, the
+            // discontinuity before them), so that it is written in place: built with defaults
+            // and filled in after, it went through a copy on the stack (≈ 60 cycles per ms).
+            let expected = usize::from(frames).min(BURST_MAX);
             let _ = cx.out.push(SensorMsg::Imu {
-                stamps: Default::default(),
-                samples: Vec::new(),
-                after: None,
+                stamps: self.core.clock.stamps(self.core.next_k, expected as u32),
+                frames: FifoFrames::new(layout),
+                after: self.core.after,
             });
-            let Some(SensorMsg::Imu { samples, .. }) = cx.out.last_mut() else {
+            let Some(SensorMsg::Imu { frames, .. }) = cx.out.last_mut() else {
                 return;
             };
             cycle_marker::enter(Stage::I2c);
+            // The frames read straight into the message, undecoded (at most BURST_MAX).
             let r = cx
                 .dev
-                .read_fifo_counted_with(count, BURST_MAX, |s| {
-                    // At most BURST_MAX frames: never full.
-                    let _ = samples.push(s);
-                })
+                .read_fifo_counted_raw(count, &mut frames.bytes[..BURST_MAX * layout.bytes()])
                 .await;
+            if let Ok(n) = r {
+                frames.n = n;
+            }
             cycle_marker::leave();
             let n = match r {
                 Ok(n) => n,
@@ -292,16 +298,13 @@ impl ImuService {
                     return;
                 }
             };
-            let stamps = self.core.clock.stamps(self.core.next_k, n as u32);
-            let after = self.core.after.take();
-            if let Some(SensorMsg::Imu {
-                stamps: s,
-                after: a,
-                ..
-            }) = cx.out.last_mut()
-            {
-                *s = stamps;
-                *a = after;
+            self.core.after = None;
+            if n != expected {
+                // Not what the count promised (another frame layout): the stamps of what came.
+                let stamps = self.core.clock.stamps(self.core.next_k, n as u32);
+                if let Some(SensorMsg::Imu { stamps: s, .. }) = cx.out.last_mut() {
+                    *s = stamps;
+                }
             }
             self.core.next_k = self.core.next_k.wrapping_add(n as u32);
             self.core.fresh = false;

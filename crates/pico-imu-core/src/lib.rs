@@ -62,4 +62,5 @@ pub mod replay;
 pub mod requests;
 pub mod schedule;
 pub mod sensor;
+pub mod settings;
 pub mod tables;

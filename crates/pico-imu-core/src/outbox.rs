@@ -1,8 +1,8 @@
 //! Frame output with a bounded queue: a frame is queued whole or dropped (and counted), never
 //! split and never waited for, so a host that stops reading cannot stall the sampling path.
 use imu_proto::{
-    AllanTable, DeviceMsg, EncodeError, FrameEncoder, Orientation, SampleBatch, Status, Vec,
-    MAX_FRAME, MAX_ORIENTATIONS,
+    AllanTable, BatchWriter, DeviceMsg, EncodeError, FrameEncoder, Orientation, Scales, Status,
+    Vec, MAX_FRAME, MAX_ORIENTATIONS,
 };
 
 /// Where encoded frames go (a byte pipe to the USB task on the device, a `Vec` in tests).
@@ -67,10 +67,19 @@ impl Outbox {
         self.queue(encoded, sink)
     }
 
-    /// Encode `DeviceMsg::Samples(batch)` with the hand-written batch encoder (the same bytes
-    /// as [`Outbox::send`], a fraction of the cycles) and queue it if it fits whole.
-    pub fn send_samples(&mut self, batch: &SampleBatch, sink: &mut impl FrameSink) -> Sent {
-        let encoded = self.enc.encode_samples(batch, &mut self.buf.0[..MAX_FRAME]);
+    /// Frame the batch written in its wire form as the samples came ([`BatchWriter`]; the same
+    /// bytes as [`Outbox::send`] of `DeviceMsg::Samples` with those samples, a fraction of the
+    /// cycles) and queue it if it fits whole.
+    pub fn send_batch(
+        &mut self,
+        batch: &mut BatchWriter,
+        calibrated: bool,
+        scales: &Scales,
+        sink: &mut impl FrameSink,
+    ) -> Sent {
+        let encoded =
+            self.enc
+                .encode_batch(batch, calibrated, scales, &mut self.buf.0[..MAX_FRAME]);
         self.queue(encoded, sink)
     }
 

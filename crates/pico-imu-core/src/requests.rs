@@ -9,6 +9,9 @@ use imu_proto::{
 
 use crate::device::Device;
 use crate::outbox::FrameSink;
+use crate::settings::{
+    decode_orientation, encode_orientation, orientation_in_range, OrientationSetting, RecordError,
+};
 
 /// Allan engine overlap factor and levels, as reported in [`Identity`]: the engine types'
 /// own parameters.
@@ -17,11 +20,23 @@ pub const ALLAN_LEVELS: u8 = allan::stream::DEVICE_PARAMS[1] as u8;
 pub const ALLAN_LEVELS_MAG: u8 = allan::stream::MAG_PARAMS[1] as u8;
 const _: () = assert!(allan::stream::MAG_PARAMS[0] == allan::stream::DEVICE_PARAMS[0]);
 
-/// A calibration the host asked to persist; the firmware pauses sampling, writes it and
+/// What a flash record holds: each is one key of the device's store (src/storage.rs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Record {
+    /// The calibration blob (`imu_cal::device::encode_blob`).
+    Calibration,
+    /// The attitude filter's host settings ([`encode_orientation`]).
+    Orientation,
+}
+
+/// A record to write to flash for request `id`: a calibration the host asked to persist, or the
+/// attitude filter's settings the host changed. The firmware pauses sampling, writes it and
 /// reports back through [`Device::persisted`].
 #[derive(Debug, Clone)]
 pub struct PersistRequest {
     pub id: u16,
+    pub record: Record,
     pub blob: Vec<u8, MAX_CAL_BLOB>,
 }
 
@@ -133,7 +148,11 @@ impl Device {
                         // New corrections change the engines' input: old sums would mix scales.
                         self.reset_allan();
                         if persist {
-                            return Some(PersistRequest { id, blob });
+                            return Some(PersistRequest {
+                                id,
+                                record: Record::Calibration,
+                                blob,
+                            });
                         }
                         Reply::Ok
                     }
@@ -163,22 +182,51 @@ impl Device {
             Request::SetOrientation {
                 declination_cdeg,
                 reference,
-            } => self.set_orientation(declination_cdeg, reference),
+            } => {
+                let setting = (declination_cdeg, reference);
+                match self.set_orientation(setting) {
+                    // A setting other than the one in flash is stored (the reply comes with
+                    // the write's outcome); the same one again writes nothing.
+                    Reply::Ok if setting != self.stored_orientation => {
+                        let mut blob = Vec::new();
+                        // Ten bytes at most, into room for a calibration blob.
+                        let _ = blob.extend_from_slice(&encode_orientation(setting));
+                        return Some(PersistRequest {
+                            id,
+                            record: Record::Orientation,
+                            blob,
+                        });
+                    }
+                    r => r,
+                }
+            }
             Request::GetOrientation => Reply::Orientation(self.orientation_config()),
         };
         self.send(&DeviceMsg::Reply { id, reply }, sink);
         None
     }
 
-    /// The attitude filter's declination and expected field (RAM only: lost at a reset).
-    fn set_orientation(&mut self, declination_cdeg: i16, reference: Option<MagReference>) -> Reply {
-        let ok_decl = (-18_000..=18_000).contains(&declination_cdeg);
-        let ok_ref = reference.is_none_or(|r| {
-            (1_000..=1_000_000).contains(&r.field_nt) && (-9_000..=9_000).contains(&r.dip_cdeg)
-        });
-        if !ok_decl || !ok_ref {
+    /// Use the attitude filter settings read from flash at boot (`None`: none stored); a
+    /// damaged or unusable record is reported and the defaults kept (no declination, a learnt
+    /// reference).
+    pub fn load_orientation(&mut self, record: Option<&[u8]>) -> Result<(), RecordError> {
+        let setting = match record.map(decode_orientation) {
+            None => return Ok(()),
+            Some(Err(e)) => return Err(e),
+            Some(Ok(s)) => s,
+        };
+        self.set_orientation(setting);
+        self.stored_orientation = setting;
+        Ok(())
+    }
+
+    /// The attitude filter's declination and expected field (in RAM here; a change is stored
+    /// by the caller of [`Device::handle`]).
+    fn set_orientation(&mut self, setting: OrientationSetting) -> Reply {
+        if !orientation_in_range(setting) {
             return Reply::Error(ErrorCode::OutOfRange);
         }
+        let (declination_cdeg, reference) = setting;
         let ahrs = &mut self.pipeline.ahrs;
         ahrs.set_declination(f32::from(declination_cdeg) * 0.01);
         let ut_per_count = self.pipeline.scales.mag;
@@ -208,24 +256,136 @@ impl Device {
         }
     }
 
-    /// Report the outcome of a [`PersistRequest`].
-    pub fn persisted(&mut self, id: u16, ok: bool, sink: &mut impl FrameSink) {
-        let reply = if ok {
-            self.cal_status = CalStatus {
-                source: CalSource::Flash,
-                fault: None,
-            };
-            Reply::Ok
-        } else {
-            self.cal_status.fault = Some(CalFault::Flash);
-            Reply::Error(ErrorCode::FlashWrite)
+    /// Report the outcome of a [`PersistRequest`] (its settings are in use either way).
+    pub fn persisted(&mut self, req: &PersistRequest, ok: bool, sink: &mut impl FrameSink) {
+        let reply = match (req.record, ok) {
+            (Record::Calibration, true) => {
+                self.cal_status = CalStatus {
+                    source: CalSource::Flash,
+                    fault: None,
+                };
+                Reply::Ok
+            }
+            (Record::Calibration, false) => {
+                self.cal_status.fault = Some(CalFault::Flash);
+                Reply::Error(ErrorCode::FlashWrite)
+            }
+            (Record::Orientation, true) => {
+                if let Ok(s) = decode_orientation(&req.blob) {
+                    self.stored_orientation = s;
+                }
+                Reply::Ok
+            }
+            (Record::Orientation, false) => Reply::Error(ErrorCode::FlashWrite),
         };
-        self.send(&DeviceMsg::Reply { id, reply }, sink);
+        self.send(&DeviceMsg::Reply { id: req.id, reply }, sink);
     }
 
     /// Forget all Allan state. The round in progress describes the old state: abandoned.
     pub fn reset_allan(&mut self) {
         self.pipeline.reset_allan();
         self.tables.abandon();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::settings::tests::settings;
+    use crate::settings::DEFAULT_ORIENTATION;
+    use imu_proto::FrameReader;
+
+    struct Sink(std::vec::Vec<u8>);
+
+    impl FrameSink for Sink {
+        fn room(&self) -> usize {
+            usize::MAX
+        }
+        fn put(&mut self, frame: &[u8]) {
+            self.0.extend_from_slice(frame);
+        }
+    }
+
+    impl Sink {
+        /// The replies sent so far, emptied.
+        fn replies(&mut self) -> std::vec::Vec<(u16, Reply)> {
+            let mut rd = FrameReader::<4096>::new();
+            let mut out = std::vec::Vec::new();
+            rd.feed::<DeviceMsg>(&self.0, |m| {
+                if let Ok(DeviceMsg::Reply { id, reply }) = m {
+                    out.push((id, reply));
+                }
+            });
+            self.0.clear();
+            out
+        }
+    }
+
+    fn device() -> Device {
+        Device::new(crate::config::scales(), "test")
+    }
+
+    fn set(
+        dev: &mut Device,
+        sink: &mut Sink,
+        id: u16,
+        s: OrientationSetting,
+    ) -> Option<PersistRequest> {
+        let req = Request::SetOrientation {
+            declination_cdeg: s.0,
+            reference: s.1,
+        };
+        dev.handle(HostFrame { id, req }, 0, 0, sink)
+    }
+
+    /// A new setting asks for a flash write (the reply waits for it); a device booting with the
+    /// written record uses the same settings; the same setting again writes nothing; a failed
+    /// write is reported; a record that cannot be used leaves the defaults.
+    #[test]
+    fn orientation_settings_are_stored_and_survive_a_reboot() {
+        let mut sink = Sink(std::vec::Vec::new());
+        let mut dev = device();
+        // The defaults need no record.
+        assert!(set(&mut dev, &mut sink, 1, DEFAULT_ORIENTATION).is_none());
+        assert_eq!(sink.replies(), [(1, Reply::Ok)]);
+        for (k, s) in settings(50).into_iter().enumerate() {
+            let id = 10 + k as u16;
+            let req = set(&mut dev, &mut sink, id, s).expect("a changed setting is stored");
+            assert_eq!(req.record, Record::Orientation);
+            assert!(sink.replies().is_empty(), "the reply waits for the write");
+            dev.persisted(&req, true, &mut sink);
+            assert_eq!(sink.replies(), [(id, Reply::Ok)]);
+            let before = dev.orientation_config();
+            assert_eq!(before.declination_cdeg, s.0);
+            // Reboot: a fresh device reading the record.
+            let mut again = device();
+            assert_eq!(again.load_orientation(Some(&req.blob)), Ok(()));
+            let after = again.orientation_config();
+            assert_eq!(after.declination_cdeg, s.0);
+            assert_eq!(after.reference, before.reference);
+            assert_eq!(after.reference.is_some(), s.1.is_some());
+            // The same setting again: nothing to write.
+            assert!(set(&mut again, &mut sink, id, s).is_none());
+            assert_eq!(sink.replies(), [(id, Reply::Ok)]);
+            assert!(set(&mut dev, &mut sink, id, s).is_none());
+            assert_eq!(sink.replies(), [(id, Reply::Ok)]);
+        }
+        // A write that fails: the setting is in use, the host told.
+        let req = set(&mut dev, &mut sink, 99, (-4_321, None)).expect("stored");
+        dev.persisted(&req, false, &mut sink);
+        assert_eq!(sink.replies(), [(99, Reply::Error(ErrorCode::FlashWrite))]);
+        assert_eq!(dev.orientation_config().declination_cdeg, -4_321);
+        // Nothing stored, or a damaged record: the defaults.
+        let mut fresh = device();
+        assert_eq!(fresh.load_orientation(None), Ok(()));
+        assert_eq!(
+            fresh.load_orientation(Some(&[1, 2])),
+            Err(RecordError::Length(2))
+        );
+        let c = fresh.orientation_config();
+        assert_eq!((c.declination_cdeg, c.reference), (0, None));
+        // Out of range: refused, nothing to store.
+        assert!(set(&mut fresh, &mut sink, 7, (20_000, None)).is_none());
+        assert_eq!(sink.replies(), [(7, Reply::Error(ErrorCode::OutOfRange))]);
     }
 }

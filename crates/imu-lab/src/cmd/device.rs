@@ -6,7 +6,8 @@
 //! * `calibrate --upload cal.toml|cal.bin` / `--download [--out cal.bin]` — the calibration in
 //!   flash (`imu_cal::file` TOML → fixed-point blob);
 //! * `orientation [--declination DEG] [--field-ut B --dip-deg D | --learn]` — the attitude
-//!   filter's declination and expected field (RAM only on the device: lost at a reset);
+//!   filter's declination and expected field (kept in the device's flash: a change pauses
+//!   sampling for the write);
 //! * `reset-allan`, `mode off|calibrated|raw`.
 use std::path::PathBuf;
 use std::time::Duration;
