@@ -71,10 +71,14 @@ test("the named effect is shown, a click adds it, χ²/dof falls to adequate", a
   const chi2After = Number(await page.getAttribute("#chi2", "data-value"));
   const row = await page.textContent("#steps tbody tr");
   console.log(`after + ${effect}: χ²/dof ${chi2After}; step row: ${row}`);
-  assert.ok(chi2After < chi2Before, `${chi2After} < ${chi2Before}`);
-  assert.ok(chi2After < 2, `χ²/dof ${chi2After} is adequate`);
+  // Adequate by the lab's own criterion (global p at least 1e-3, noise_model::assess::P_GLOBAL):
+  // with about ten degrees of freedom a right model's χ²/dof exceeds 2 in a few percent of draws.
+  const verdict = await page.textContent("#verdict");
+  assert.match(verdict, /^ADEQUATE/);
+  const pGlobal = Number(verdict.match(/global p = ([0-9.e+-]+)/)?.[1]);
+  assert.ok(pGlobal >= 1e-3, `global p ${pGlobal} (${verdict})`);
+  assert.ok(chi2After * 5 < chi2Before, `χ²/dof ${chi2Before} → ${chi2After}: fell at least five-fold`);
   assert.match(row, /\+ markov/);
-  assert.match(await page.textContent("#verdict"), /^ADEQUATE/);
   assert.match(await page.textContent("#command"), /--add markov$/);
   // every parameter row carries a unit or is a shape parameter with its own
   const values = await page.locator("#params tbody td:nth-child(3)").allTextContents();
