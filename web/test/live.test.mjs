@@ -198,6 +198,7 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
     return (Number(m.coverage || 0) >= 0.5 && Number(m.headingCoverage || 0) >= 0.9) ||
       Number(document.querySelector("#live-status").dataset.uptime) >= t + 90;
   }, t0, { timeout: 240_000 });
+  await shotInView(page, "#mag-method", join(OUT, "mag-level-collecting.png"));
   await page.click("#mag-stop");
   const seen = await page.evaluate(() => { clearInterval(window.seenTimer); return window.seenLevel; });
   console.log(`collecting after the poses: ${(Date.now() - waited) / 1000} s until the coverage and the level circle`);
@@ -272,6 +273,16 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   await verification(page);
   await page.close();
 });
+
+/// A screenshot of the viewport with `selector` scrolled to its top: the raw-values banner,
+/// sticky at the top of the page, shows above a wizard while it collects.
+async function shotInView(page, selector, path) {
+  await page.evaluate((sel) => {
+    const el = document.querySelector(sel);
+    window.scrollTo(0, el.getBoundingClientRect().top + window.scrollY - 60);
+  }, selector);
+  await page.screenshot({ path });
+}
 
 /// `got` within `tol` of `want`, element by element.
 function close(got, want, tol, what) {
@@ -427,7 +438,7 @@ async function accelPoses(page) {
   console.log(`merge warning: ${warning}`);
   assert.match(warning, /Poses 1 and 2 are the same orientation \([\d.e-]+° apart/);
   assert.match(await page.textContent("#accel-warnings"), /Missing: no pose yet with .* up/);
-  await page.locator("#accel-wizard").screenshot({ path: join(OUT, "accel-merge-warning.png") });
+  await shotInView(page, "#accel-wizard", join(OUT, "accel-merge-warning.png"));
   await page.click(".accel-merge");
   await page.waitForFunction(() => document.querySelector("#accel-poses tbody").dataset.poses === "1" &&
     document.querySelector("#accel-warnings").dataset.same === "0");

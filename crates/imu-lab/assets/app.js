@@ -433,11 +433,17 @@ function drawProjections(cv, points, panels, circle) {
   const ctx = cv.getContext("2d");
   ctx.clearRect(0, 0, cv.width, cv.height);
   if (!points.length) return;
-  let r = circle ? circle * 1.2 : 1;
-  for (const p of points) for (let k = 0; k < 3; k++) r = Math.max(r, Math.abs(p[k]));
   const w = cv.width / panels.length;
   panels.forEach(([a, b, la, lb, pick], i) => {
+    // each panel scaled to the points it picks (the level turn's: the level ones), the others
+    // drawn as far as the panel reaches
+    let r = circle ? circle * 1.2 : 1;
+    for (const p of points) if (!pick || pick(p)) r = Math.max(r, Math.abs(p[a]), Math.abs(p[b]));
     const x0 = i * w + w / 2, y0 = cv.height / 2, k = (cv.height / 2 - 20) / r;
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(i * w + 10, 10, w - 20, cv.height - 20);
+    ctx.clip();
     ctx.strokeStyle = "#bbb";
     ctx.strokeRect(i * w + 10, 10, w - 20, cv.height - 20);
     ctx.fillStyle = "#222";
@@ -453,6 +459,7 @@ function drawProjections(cv, points, panels, circle) {
       ctx.fillStyle = on ? "rgba(31, 119, 180, 0.6)" : "rgba(150, 150, 150, 0.25)";
       ctx.fillRect(x0 + p[a] * k - 1, y0 - p[b] * k - 1, 2, 2);
     }
+    ctx.restore();
   });
 }
 

@@ -1150,21 +1150,19 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             ..cal::Options::new(Sensor::Mag)
         };
         let loaded = cal::prepare(&input, &o)?;
-        if method == MagMethod::Level {
-            if let cal::Data::Mag(p) = &loaded.data {
-                if p.plane != Some([0, 1]) {
-                    let sd = p.principal_sd;
-                    return Err(format!(
-                        "the level points are not a turn in the x–y plane (principal s.d. \
-                         {:.2}/{:.2}/{:.2} µT): turn the board flat about its z axis through a \
-                         full turn, or fit the full sphere",
-                        sd[0], sd[1], sd[2]
-                    ));
-                }
-            }
+        let (plane, sd) = match &loaded.data {
+            cal::Data::Mag(p) => (p.plane, p.principal_sd),
+            _ => (None, [f64::NAN; 3]),
+        };
+        if method == MagMethod::Level && plane != Some([0, 1]) {
+            return Err(shape_problem(method, plane, sd).unwrap_or_default());
         }
         let run = cal::run(&loaded, &o)?;
-        Ok::<_, String>(calibration(&loaded, &run))
+        let (v, mut fit) = calibration(&loaded, &run);
+        if let Some(p) = shape_problem(method, plane, sd) {
+            fit = Err(p);
+        }
+        Ok::<_, String>((v, fit))
     })
     .await;
     let (v, fit) = match fitted {
@@ -1188,6 +1186,28 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         "upload": upload,
     }))
     .into_response()
+}
+
+/// Why points of this shape (the plane the lab found in them, if any, and their principal
+/// standard deviations, µT) cannot give the method's upload: the level turn needs a turn in
+/// x–y; the sphere's points that lie in a plane (a turn about one axis) determine no
+/// out-of-plane terms, and their upload would set the device's to zero and identity.
+fn shape_problem(method: MagMethod, plane: Option<[usize; 2]>, sd: [f64; 3]) -> Option<String> {
+    match (method, plane) {
+        (MagMethod::Level, Some([0, 1])) | (MagMethod::Sphere, None) => None,
+        (MagMethod::Level, _) => Some(format!(
+            "the level points are not a turn in the x–y plane (principal s.d. \
+             {:.2}/{:.2}/{:.2} µT): turn the board flat about its z axis through a full turn, \
+             or fit the full sphere",
+            sd[0], sd[1], sd[2]
+        )),
+        (MagMethod::Sphere, Some(_)) => Some(format!(
+            "the points lie in a plane (principal s.d. {:.2}/{:.2}/{:.2} µT): a turn about one \
+             axis does not determine the out-of-plane terms; choose the level turn (which keeps \
+             them from the device) or turn the board through more orientations",
+            sd[0], sd[1], sd[2]
+        )),
+    }
 }
 
 /// A fit's answer: the object `imu-lab calibrate --json` prints, and a calibration file with
@@ -1421,6 +1441,23 @@ mod tests {
         assert!(close(&p["mean"][10], 1.0) && close(&p["mean"][11], -2.0));
         // the next window starts 0.1 s later and hands this one out
         assert!(w.push(0.1, &[Some(0.0); 10]).is_some());
+    }
+
+    /// The level turn needs a turn in x–y; a sphere's points in a plane get no upload (it
+    /// would zero the out-of-plane terms), each with the shape named.
+    #[test]
+    fn points_of_the_wrong_shape_get_no_upload() {
+        let sd = [25.0, 24.0, 0.05];
+        assert_eq!(shape_problem(MagMethod::Level, Some([0, 1]), sd), None);
+        assert_eq!(shape_problem(MagMethod::Sphere, None, sd), None);
+        let side = shape_problem(MagMethod::Level, Some([0, 2]), sd).unwrap();
+        assert!(side.contains("not a turn in the x–y plane") && side.contains("25.00/24.00/0.05"));
+        assert!(shape_problem(MagMethod::Level, None, sd).is_some());
+        let flat = shape_problem(MagMethod::Sphere, Some([0, 1]), sd).unwrap();
+        assert!(
+            flat.contains("lie in a plane") && flat.contains("level turn"),
+            "{flat}"
+        );
     }
 
     /// The level turn takes a window's samples only when the board was level and turned
