@@ -21,16 +21,24 @@ function signed(lo, hi) {
   return Math.random() < 0.5 ? -x : x;
 }
 
+const PART = JSON.parse(process.env.IMU_LIVE_MAG_TRUTH || "null");
+
 /// A wrong calibration for the device (within the datasheet bounds it checks): a hard iron of
 /// 10–40 µT an axis, a soft iron of 1 ± 3–10 % on its diagonal, an accelerometer offset of
 /// 0.2–0.8 m/s² and scale of 1 ± 2–6 % an axis, drawn at random. A fit of the calibrated
-/// values would be off by about that much.
+/// values would be off by about that much. Its gyro bias is a right one (the part's within
+/// 0.05 deg/s an axis, or 0.1–0.5 deg/s without the part): a gyro calibrated before, which
+/// the wizards' uploads must keep.
+let WRONG = null;
 function wrongCalibration() {
   const three = (f) => [f(), f(), f()];
   const hard = three(() => signed(10, 40));
   const soft = [0, 1, 2].map((i) => [0, 1, 2].map((j) => (i === j ? 1 + signed(0.03, 0.1) : 0)));
   const offset = three(() => signed(0.2, 0.8));
   const scale = three(() => 1 + signed(0.02, 0.06));
+  const bias = [0, 1, 2].map((k) => (PART ? PART.gyro_bias[k] + signed(0, 0.05) : signed(0.1, 0.5)));
+  const r6 = (a) => a.map((x) => Number(x.toFixed(6)));
+  WRONG = { hard: r6(hard), soft: soft.map(r6), offset: r6(offset), scale: r6(scale), bias: r6(bias) };
   const v = (a) => `[${a.map((x) => x.toFixed(6)).join(", ")}]`;
   return `# a deliberately wrong calibration (web/test/live.test.mjs)
 version = 1
@@ -45,7 +53,7 @@ misalignment_deg = [0.0, 0.0, 0.0]
 [gyro]
 part = "MPU-6050"
 lsb_per_unit = 131.0
-bias = [0.0, 0.0, 0.0]
+bias = ${v(bias)}
 temp_coeff = [0.0, 0.0, 0.0]
 temp_ref = 25.0
 temp_lsb_per_c = 340.0
@@ -160,6 +168,18 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   await page.goto(srv.url);
   await page.waitForSelector("#live-status[data-uptime]", { timeout: 60_000 });
   assert.match(await page.textContent("#live-status"), /from flash/);
+  // the level turn's view while collecting: its heading coverage and tilt warning, sampled
+  // every 50 ms by the test (the calibration run's level start and level turn, then its tilts)
+  await page.check("#mag-method-level");
+  await page.evaluate(() => {
+    window.seenLevel = [];
+    window.seenTimer = setInterval(() => {
+      const m = document.querySelector("#mag-state").dataset;
+      const t = document.querySelector("#mag-tilt");
+      window.seenLevel.push({ cover: Number(m.headingCoverage || 0), tilted: t.dataset.tilted === "yes" && !t.hidden,
+        text: t.textContent });
+    }, 50);
+  });
   await page.click("#mag-start");
   // the device streams raw values while the wizard collects, and the page says so
   await page.waitForSelector("#raw-banner[data-raw=yes]");
@@ -169,12 +189,19 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   await page.waitForSelector("#stream-kind[data-raw=yes]");
   // the accelerometer's poses while the magnetometer's points are collected (the same turns)
   await accelPoses(page);
-  // the emulated board turns through the simulator's standard trajectory: wait for half of the
-  // directions (or 60 s of device time)
+  // the emulated board turns through the simulator's calibration run: wait for half of the
+  // directions and the level turn's full circle (or 90 s of device time: the run is 80.5 s)
   const t0 = Number(await page.getAttribute("#live-status", "data-uptime"));
-  await page.waitForFunction((t) => Number(document.querySelector("#mag-state").dataset.coverage || 0) >= 0.5 ||
-    Number(document.querySelector("#live-status").dataset.uptime) >= t + 60, t0, { timeout: 240_000 });
+  const waited = Date.now();
+  await page.waitForFunction((t) => {
+    const m = document.querySelector("#mag-state").dataset;
+    return (Number(m.coverage || 0) >= 0.5 && Number(m.headingCoverage || 0) >= 0.9) ||
+      Number(document.querySelector("#live-status").dataset.uptime) >= t + 90;
+  }, t0, { timeout: 240_000 });
+  await shotInView(page, "#mag-method", join(OUT, "mag-level-collecting.png"));
   await page.click("#mag-stop");
+  const seen = await page.evaluate(() => { clearInterval(window.seenTimer); return window.seenLevel; });
+  console.log(`collecting after the poses: ${(Date.now() - waited) / 1000} s until the coverage and the level circle`);
   // every wizard done collecting: calibrated values again
   await page.waitForSelector("#raw-banner[data-raw=no]", { state: "attached" });
   await page.waitForFunction(() => /stream\s*Calibrated/.test(document.querySelector("#live-status").textContent),
@@ -184,14 +211,18 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   console.log(`magnetometer: ${points} points, coverage ${(100 * coverage).toFixed(1)} %`);
   assert.ok(points >= 20 && points <= 5000, `${points} points`);
   assert.ok(coverage > 0.2, `coverage ${coverage}`);
+  await levelTurn(page, seen);
+  // the full sphere
+  await page.check("#mag-method-sphere");
   await page.click("#mag-fit");
+  await page.waitForSelector("#mag-result[data-method=sphere]", { timeout: 120_000 });
   await page.waitForSelector("#mag-result[data-model]", { timeout: 120_000 });
   const model = await page.getAttribute("#mag-result", "data-model");
   const text = await page.textContent("#mag-result");
   console.log(`fit: ${model}; ${text.slice(0, 300)}`);
   assert.match(model, /hard_iron/);
   assert.match(text, /residual RMS [\d.e-]+ µT/);
-  const magTruth = JSON.parse(process.env.IMU_LIVE_MAG_TRUTH || "null");
+  const magTruth = PART;
   if (magTruth) {
     // the part's hard iron, not the one left over by the device's wrong calibration: 0.5 µT is
     // 25 times the σ of the fits here (0.02 µT), far inside the 10–40 µT of the wrong one
@@ -201,6 +232,11 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
       assert.ok(Math.abs(hard[k] - magTruth.hard_iron[k]) < 0.5, `hard iron ${k}: ${hard[k]} vs ${magTruth.hard_iron[k]} µT`);
     }
   }
+  // the upload says what it changes and what it keeps (the device's accelerometer and gyro)
+  assert.match(await page.textContent("#mag-upload-replaces"), /magnetometer's hard iron/);
+  const keeps = await page.textContent("#mag-upload-keeps");
+  assert.match(keeps, /accelerometer's offset/);
+  assert.match(keeps, /gyro's bias/);
   // the upload: refused without the confirmation, then sent to RAM only
   await page.click("#mag-upload-button");
   assert.match(await page.textContent("#error"), /confirmation/);
@@ -221,10 +257,110 @@ test("calibration wizards: the magnetometer's point cloud and coverage, the acce
   await page.waitForFunction(() => /set by the host, not persisted/.test(document.querySelector("#live-status").textContent),
     null, { timeout: 60_000 });
   await page.screenshot({ path: join(OUT, "mag-wizard.png"), fullPage: true });
+  // read back: the magnetometer's is the fit's, the accelerometer's and the gyro's the device's
+  const fitted = JSON.parse(await page.getAttribute("#mag-result", "data-params"));
+  const back = await readBack(page);
+  close(back.mag.hard_iron, fitted.hard_iron, 1e-3, "magnetometer hard iron (the fit's)");
+  close(back.mag.soft_iron.flat(), fitted.soft_iron.flat(), 1e-6, "soft iron (the fit's)");
+  keptAccelAndGyro(back, "after the magnetometer's upload");
   await accelFit(page);
+  // the accelerometer's upload keeps the magnetometer's uploaded before and the gyro's
+  const after = await readBack(page);
+  close(after.mag.hard_iron, fitted.hard_iron, 1e-3, "magnetometer hard iron kept by the accelerometer's upload");
+  close(after.gyro.bias, WRONG.bias, 1e-5, "gyro bias kept by the accelerometer's upload");
+  const accel = JSON.parse(await page.getAttribute("#accel-result", "data-params"));
+  close(after.accel.offset, accel.offset, 1e-5, "accelerometer offset (the fit's)");
   await verification(page);
   await page.close();
 });
+
+/// A screenshot of the viewport with `selector` scrolled to its top: the raw-values banner,
+/// sticky at the top of the page, shows above a wizard while it collects.
+async function shotInView(page, selector, path) {
+  await page.evaluate((sel) => {
+    const el = document.querySelector(sel);
+    window.scrollTo(0, el.getBoundingClientRect().top + window.scrollY - 60);
+  }, selector);
+  await page.screenshot({ path });
+}
+
+/// `got` within `tol` of `want`, element by element.
+function close(got, want, tol, what) {
+  assert.equal(got.length, want.length, what);
+  for (let k = 0; k < want.length; k++) {
+    assert.ok(Math.abs(got[k] - want[k]) <= tol, `${what} [${k}]: ${got[k]}, expected ${want[k]} (±${tol})`);
+  }
+}
+
+/// The device's calibration, read from it by the server (GetCalibration).
+async function readBack(page) {
+  const v = await page.evaluate(async () => (await fetch("/api/live/calibration")).json());
+  console.log(`read back (${v.source}): accel offset ${v.accel.offset} m/s², scale ${v.accel.scale}; ` +
+    `gyro bias ${v.gyro.bias} deg/s; mag hard iron ${v.mag.hard_iron} µT, soft iron ${JSON.stringify(v.mag.soft_iron)}`);
+  return v;
+}
+
+/// The accelerometer's and gyro's terms are the wrong calibration's, written before the
+/// wizards (the fixed point keeps them within 1e-5 m/s², 1e-6 and 1e-5 deg/s).
+function keptAccelAndGyro(back, when) {
+  close(back.accel.offset, WRONG.offset, 1e-5, `accelerometer offset kept ${when}`);
+  close(back.accel.scale, WRONG.scale, 1e-6, `accelerometer scale kept ${when}`);
+  close(back.gyro.bias, WRONG.bias, 1e-5, `gyro bias kept ${when}`);
+}
+
+/// The level turn (2-D, Jaime et al.) on the points collected: its heading coverage rose while
+/// collecting and the tilt warning showed on the run's tilts; the planar fit recovers the
+/// part's in-plane centre; its upload replaces x and y and keeps the device's z terms, its
+/// accelerometer and gyro.
+async function levelTurn(page, seen) {
+  const started = Date.now();
+  const covers = seen.map((s) => s.cover);
+  const last = covers[covers.length - 1];
+  const warned = seen.filter((s) => s.tilted);
+  console.log(`level turn: heading coverage sampled ${covers.length} times, ${covers[0]} → ${last}; ` +
+    `tilt warning in ${warned.length} samples${warned.length ? `: ${warned[0].text}` : ""}`);
+  assert.ok(covers[0] < 0.5 && last >= 0.9, `heading coverage ${covers[0]} → ${last}`);
+  assert.ok(covers.some((c) => c > covers[0] && c < last), "the coverage rises through values between");
+  assert.ok(warned.length > 0 && /tilted [\d.]+° \(the bound is 5°\)/.test(warned[0].text), "the tilt warning");
+  await page.click("#mag-fit");
+  await page.waitForSelector("#mag-result[data-method=level]", { timeout: 120_000 });
+  const text = await page.textContent("#mag-result");
+  const model = await page.getAttribute("#mag-result", "data-model");
+  const params = JSON.parse(await page.getAttribute("#mag-result", "data-params"));
+  const sigma = JSON.parse(await page.getAttribute("#mag-result", "data-sigma"));
+  console.log(`level-turn fit: ${model}; ${text.slice(0, 400)}`);
+  console.log(`level-turn fit: hard iron ${params.hard_iron} ± ${sigma.hard_iron} µT, soft_iron_2d ${JSON.stringify(params.soft_iron_2d)}`);
+  assert.match(model, /hard_iron/);
+  assert.doesNotMatch(model, /(^|,)soft_iron(,|$)/, "the planar problem, not the sphere's");
+  assert.equal(await page.getAttribute("#mag-result", "data-adequate"), "yes", text);
+  assert.match(text, /heading coverage [\d.]+ %/);
+  if (model.includes("soft_iron_2d")) {
+    for (const k of ["r", "q", "theta_deg", "sigma"]) {
+      assert.ok(await page.locator(`#mag-result tr[data-param="soft_iron_2d.${k}"]`).count() === 1, k);
+    }
+  }
+  if (PART) {
+    // the in-plane centre: the hard iron plus the soft iron's coupling of the constant vertical
+    // field (sensor z is up: B_z = −F·sin(dip)); 0.5 µT, as for the sphere
+    const bz = -PART.field_ut * Math.sin(PART.dip_deg * Math.PI / 180);
+    const want = [0, 1].map((k) => PART.hard_iron[k] + PART.soft_iron[k][2] * bz);
+    console.log(`level-turn fit: in-plane centre ${params.hard_iron.slice(0, 2)} µT, the part's ${want} µT`);
+    close(params.hard_iron.slice(0, 2), want, 0.5, "the level turn's in-plane hard iron");
+  }
+  assert.match(await page.textContent("#mag-upload-replaces"), /in-plane terms/);
+  assert.match(await page.textContent("#mag-upload-keeps"), /out-of-plane terms.*hard iron z/);
+  await page.check("#mag-confirm");
+  await page.click("#mag-upload-button");
+  await page.waitForSelector("#mag-upload-state[data-applied=yes]", { timeout: 60_000 });
+  const back = await readBack(page);
+  close(back.mag.hard_iron.slice(0, 2), params.hard_iron.slice(0, 2), 1e-3, "in-plane hard iron (the fit's)");
+  close(back.mag.hard_iron.slice(2), WRONG.hard.slice(2), 1e-3, "z hard iron (the device's, kept)");
+  close(back.mag.soft_iron[2], WRONG.soft[2], 1e-6, "the soft iron's z row (the device's, kept)");
+  close([back.mag.soft_iron[0][2], back.mag.soft_iron[1][2]], [0, 0], 0, "no coupling from z in x and y");
+  keptAccelAndGyro(back, "after the level turn's upload");
+  console.log(`level turn: fit, upload and read-back in ${(Date.now() - started) / 1000} s`);
+  await page.locator("#mag-result").screenshot({ path: join(OUT, "mag-level.png") });
+}
 
 /// The verification recording after the uploads: 30 s of device time in raw values, the
 /// heading's consistency with the gyro before (raw) and after (the calibration uploaded).
@@ -245,6 +381,19 @@ async function verification(page) {
   // as the board turns; the fitted calibration leaves the gyro's noise and the 0.1 s windows
   assert.ok(windows >= 5, `${windows} windows`);
   assert.ok(before > 2 && after < before / 3, `before ${before}°, after ${after}°`);
+  // on the sphere: the part's 25 µT of hard iron spread the raw |B| by about 15 µT rms; the
+  // calibration leaves the noise of 0.1 s means and the fit's error (well under 1 µT): a fall
+  // by ten at least; the accelerometer's drawn offset (0.05–0.3 m/s² an axis) and scale
+  // spread the raw |a|, the fit leaves millimetres per second squared: by three at least
+  const d = await page.evaluate(() => ({ ...document.querySelector("#verify-result").dataset }));
+  const magnitudes = await page.textContent("#verify-magnitudes");
+  console.log(`verification on the sphere: ${magnitudes}`);
+  const [mb, ma, ab, aa] = [d.magBefore, d.magAfter, d.accelBefore, d.accelAfter].map(Number);
+  assert.ok(mb > 3 && ma < mb / 10, `|B| spread ${mb} → ${ma} µT`);
+  assert.ok(Number(d.magAfterSigma) > 0, `its uncertainty ${d.magAfterSigma}`);
+  assert.ok(ab > 0 && aa < ab / 3, `|a| spread ${ab} → ${aa} m/s²`);
+  if (PART) assert.ok(Math.abs(Number(d.field) - PART.field_ut) < 2.5, `field ${d.field} µT (the part's soft iron scales it by 1 ± 5 %)`);
+  assert.ok(Number(await page.getAttribute("#verify-cloud", "data-points")) > 100);
   // back to calibrated values
   await page.waitForFunction(() => /Calibrated/.test(document.querySelector("#live-status").textContent), null, { timeout: 30_000 });
   await page.locator("#verify-wizard").screenshot({ path: join(OUT, "verify.png") });
@@ -263,21 +412,33 @@ async function accelPoses(page) {
   }));
   const captured = (n) => page.waitForFunction((n) => Number(document.querySelector("#accel-poses tbody").dataset.poses) > n,
     n, { timeout: 180_000 });
-  // one pose, asked for while the board moves: the progress bar, then the pose
+  // one pose, asked for while the board moves: the progress bar, then the pose; the page asks
+  // for the same pose again as soon as the first is taken (the emulated board runs five times
+  // faster than real time here: its 5 s holds last a second, too short for a round trip of
+  // the test's own)
   await page.waitForSelector("#accel-still[data-still=no]", { timeout: 180_000 });
+  await page.evaluate(() => {
+    const body = document.querySelector("#accel-poses tbody");
+    const again = new MutationObserver(() => {
+      if (Number(body.dataset.poses) >= 1) { again.disconnect(); document.querySelector("#accel-capture").click(); }
+    });
+    again.observe(body, { attributes: true, attributeFilter: ["data-poses"] });
+  });
   await page.click("#accel-capture");
-  await page.waitForSelector("#accel-progress", { state: "attached" });
+  // the pending row with its bar, or the pose already (the emulated board runs faster than
+  // real time: it may have come to rest for the hold's second before the click arrived)
+  await page.waitForFunction(() => document.querySelector("#accel-progress") ||
+    Number(document.querySelector("#accel-poses tbody").dataset.poses) > 0, null, { timeout: 60_000 });
+  console.log(`first capture: ${await page.$("#accel-progress") ? "pending, its progress bar shown" : "taken at once"}`);
   await captured(0);
-  // the same pose again at once (the board still held: its last second): the same orientation
-  // twice
-  await page.click("#accel-capture");
+  // the same pose again at once (the board still held): the same orientation twice
   await captured(1);
   await page.waitForSelector(".merge-warning");
   const warning = await page.textContent(".merge-warning");
   console.log(`merge warning: ${warning}`);
-  assert.match(warning, /Poses 1 and 2 are the same orientation \([\d.]+° apart/);
+  assert.match(warning, /Poses 1 and 2 are the same orientation \([\d.e-]+° apart/);
   assert.match(await page.textContent("#accel-warnings"), /Missing: no pose yet with .* up/);
-  await page.locator("#accel-wizard").screenshot({ path: join(OUT, "accel-merge-warning.png") });
+  await shotInView(page, "#accel-wizard", join(OUT, "accel-merge-warning.png"));
   await page.click(".accel-merge");
   await page.waitForFunction(() => document.querySelector("#accel-poses tbody").dataset.poses === "1" &&
     document.querySelector("#accel-warnings").dataset.same === "0");

@@ -314,8 +314,10 @@ fn serve_live_test() -> Result<()> {
         &out,
     )?;
     let port = format!("tcp:127.0.0.1:{}", sim.port);
-    // the hard-iron part's hard iron (imu_sim::trajectory::Part::hard_iron), µT
-    let mag_truth = r#"{"hard_iron":[18.0,-12.0,12.0]}"#.to_string();
+    // the hard-iron part (imu_sim::trajectory::Part::hard_iron): its hard iron (µT), soft
+    // iron, the place's field (µT, dip in degrees: the level turn's in-plane centre holds the
+    // soft iron's coupling of the vertical field) and its gyro bias (deg/s)
+    let mag_truth = r#"{"hard_iron":[18.0,-12.0,12.0],"soft_iron":[[1.05,0.02,0.0],[0.02,0.97,0.01],[0.0,0.01,1.0]],"field_ut":50.0,"dip_deg":60.0,"gyro_bias":[0.4,-0.3,0.2]}"#.to_string();
     serve::browser_tests(
         &["live"],
         &[

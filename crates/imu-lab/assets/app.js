@@ -419,32 +419,84 @@ function renderMode(m) {
 
 // ---------- magnetometer wizard ----------
 
-const magPoints = []; // at most the server's MAG_POINTS (5000)
+const magPoints = []; // at most the server's MAG_POINTS (5000): [x, y, z, level (1/0)]
+let magLast = null; // the last state the server sent
 
-function drawCloud() {
-  const cv = $("mag-cloud");
+// The wizard's method: "sphere" (3-D) or "level" (the level turn, 2-D).
+function magMethod() {
+  return $("mag-method-level").checked ? "level" : "sphere";
+}
+
+// Points in three projections (or, for the level turn, the x–y plane of the level points),
+// each panel scaled to its largest value; `circle`: a circle of that radius around the origin.
+function drawProjections(cv, points, panels, circle) {
   const ctx = cv.getContext("2d");
   ctx.clearRect(0, 0, cv.width, cv.height);
-  if (!magPoints.length) return;
-  let r = 1;
-  for (const p of magPoints) for (const v of p) r = Math.max(r, Math.abs(v));
-  const panels = [[0, 1, "mx", "my"], [1, 2, "my", "mz"], [0, 2, "mx", "mz"]];
-  panels.forEach(([a, b, la, lb], i) => {
-    const x0 = i * 300 + 150, y0 = 150, k = 130 / r;
+  if (!points.length) return;
+  const w = cv.width / panels.length;
+  panels.forEach(([a, b, la, lb, pick], i) => {
+    // each panel scaled to the points it picks (the level turn's: the level ones), the others
+    // drawn as far as the panel reaches
+    let r = circle ? circle * 1.2 : 1;
+    for (const p of points) if (!pick || pick(p)) r = Math.max(r, Math.abs(p[a]), Math.abs(p[b]));
+    const x0 = i * w + w / 2, y0 = cv.height / 2, k = (cv.height / 2 - 20) / r;
+    ctx.save();
+    ctx.beginPath();
+    ctx.rect(i * w + 10, 10, w - 20, cv.height - 20);
+    ctx.clip();
     ctx.strokeStyle = "#bbb";
-    ctx.strokeRect(i * 300 + 10, 10, 280, 280);
+    ctx.strokeRect(i * w + 10, 10, w - 20, cv.height - 20);
     ctx.fillStyle = "#222";
-    ctx.fillText(`${la} → / ${lb} ↑ [µT], ±${fmt(r, 3)} µT`, i * 300 + 16, 24);
-    ctx.fillStyle = "rgba(31, 119, 180, 0.6)";
-    for (const p of magPoints) ctx.fillRect(x0 + p[a] * k - 1, y0 - p[b] * k - 1, 2, 2);
+    ctx.fillText(`${la} → / ${lb} ↑ [µT], ±${fmt(r, 3)} µT`, i * w + 16, 24);
+    if (circle) {
+      ctx.strokeStyle = "#c00";
+      ctx.beginPath();
+      ctx.arc(x0, y0, circle * k, 0, 2 * Math.PI);
+      ctx.stroke();
+    }
+    for (const p of points) {
+      const on = pick ? pick(p) : true;
+      ctx.fillStyle = on ? "rgba(31, 119, 180, 0.6)" : "rgba(150, 150, 150, 0.25)";
+      ctx.fillRect(x0 + p[a] * k - 1, y0 - p[b] * k - 1, 2, 2);
+    }
+    ctx.restore();
   });
 }
 
+function drawCloud() {
+  const cv = $("mag-cloud");
+  if (magMethod() === "level") {
+    // the level points in x–y (the tilted ones grey: the level turn leaves them out)
+    drawProjections(cv, magPoints, [[0, 1, "mx", "my", (p) => p[3] === 1]]);
+  } else {
+    drawProjections(cv, magPoints, [[0, 1, "mx", "my"], [1, 2, "my", "mz"], [0, 2, "mx", "mz"]]);
+  }
+}
+
 function renderMagState(m) {
-  $("mag-state").textContent = `${m.points} points, coverage ${fmt(100 * m.coverage, 3)} % of the directions` +
+  magLast = m;
+  const level = magMethod() === "level";
+  const el = $("mag-state");
+  el.textContent = (level
+    ? `${m.level_points} level points of ${m.points}, heading coverage ${fmt(100 * m.heading_coverage, 3)} % ` +
+      `of the ${m.heading_bins} bins of 10°`
+    : `${m.points} points, coverage ${fmt(100 * m.coverage, 3)} % of the directions`) +
     (m.collecting ? " — collecting" : "");
-  $("mag-state").dataset.points = String(m.points);
-  $("mag-state").dataset.coverage = String(m.coverage);
+  el.dataset.points = String(m.points);
+  el.dataset.coverage = String(m.coverage);
+  el.dataset.levelPoints = String(m.level_points);
+  el.dataset.headingCoverage = String(m.heading_coverage);
+  el.dataset.tilt = m.tilt_deg === null || m.tilt_deg === undefined ? "" : String(m.tilt_deg);
+  const tilt = $("mag-tilt");
+  const tilted = level && m.collecting && m.tilt_deg !== null && m.tilt_deg !== undefined &&
+    m.tilt_deg > m.level_tilt_deg;
+  tilt.hidden = !tilted;
+  tilt.textContent = tilted
+    ? `Not level: the board is tilted ${fmt(m.tilt_deg, 3)}° (the bound is ${m.level_tilt_deg}°): ` +
+      "these points are left out of the level turn; lay it flat."
+    : "";
+  tilt.dataset.tilted = tilted ? "yes" : "no";
+  $("mag-method-help").hidden = !level;
   $("mag-start").disabled = m.collecting;
   $("mag-stop").disabled = !m.collecting;
 }
@@ -456,24 +508,43 @@ function renderMagFit(r) {
   const t = document.createElement("table");
   const head = t.insertRow();
   for (const h of ["parameter", "value", "1σ", "unit"]) { const th = document.createElement("th"); th.textContent = h; head.appendChild(th); }
-  for (const [name, v] of Object.entries(f.params || {})) {
-    const values = Array.isArray(v) ? v.flat() : [v];
-    const sig = f.sigma && f.sigma[name] !== undefined ? (Array.isArray(f.sigma[name]) ? f.sigma[name].flat() : [f.sigma[name]]) : [];
+  const row = (name, values, sig, unit) => {
     const tr = t.insertRow();
+    tr.dataset.param = name;
     cell(tr, name);
     cell(tr, values.map((x) => fmt(x, 4)).join(", "));
     cell(tr, sig.map((x) => fmt(x, 2)).join(", "));
-    cell(tr, name.includes("soft") ? "1 (a matrix)" : f.unit);
+    cell(tr, unit);
+  };
+  // soft_iron_2d (Jaime et al., eqs. 4–5): the ellipse's semi-axes r and q, its tilt θ and σ = q/r
+  const units2d = { r: f.unit, q: f.unit, theta_deg: "deg", sigma: "1 (σ = q/r)" };
+  for (const [name, v] of Object.entries(f.params || {})) {
+    const s = f.sigma ? f.sigma[name] : undefined;
+    if (name === "soft_iron_2d" && v && typeof v === "object") {
+      for (const k of ["r", "q", "theta_deg", "sigma"]) {
+        row(`soft_iron_2d.${k}`, [v[k]], s && s[k] !== undefined ? [s[k]] : [], units2d[k]);
+      }
+      continue;
+    }
+    const values = Array.isArray(v) ? v.flat() : [v];
+    const sig = s !== undefined && s !== null ? (Array.isArray(s) ? s.flat() : [s]) : [];
+    row(name, values, sig, name.includes("soft") ? "1 (a matrix)" : f.unit);
   }
   const d = f.diagnosis || {};
+  const cover = r.method === "level"
+    ? `level turn: the ${f.n_residuals} magnetometer samples of ${r.level_windows} windows taken level (tilt within ` +
+      `${r.level_tilt_deg}°, under ${r.level_rate_dps} deg/s about x and y), heading coverage ` +
+      `${fmt(100 * r.heading_coverage, 3)} %`
+    : `full sphere: coverage ${fmt(100 * r.coverage, 3)} %`;
   div.replaceChildren(
     p(`Model: ${f.model.join(" + ")}; residual RMS ${fmt(f.residual_rms, 3)} ${f.unit} ` +
-      `(noise floor ${fmt(f.noise_floor, 3)} ${f.unit}, ${f.n_residuals} residuals); coverage ${fmt(100 * r.coverage, 3)} %`),
+      `(noise floor ${fmt(f.noise_floor, 3)} ${f.unit}, ${f.n_residuals} residuals); ${cover}`),
     p(`${d.adequate ? "ADEQUATE" : "NOT ADEQUATE"} — ${d.explanation || ""}`, d.adequate ? "ok" : "bad"),
     t,
     ...(f.steps || []).map((s) => p(`step: + ${s.added.join(", ")}${s.removed && s.removed.length ? ", − " + s.removed.join(", ") : ""}: ` +
       `residual RMS ${fmt(s.rms_residual_before, 3)} → ${fmt(s.rms_residual_after, 3)} ${s.rms_unit}`)),
   );
+  div.dataset.method = r.method;
   div.dataset.model = f.model.join(",");
   div.dataset.adequate = d.adequate ? "yes" : "no";
   div.dataset.params = JSON.stringify(f.params);
@@ -481,8 +552,9 @@ function renderMagFit(r) {
   div.appendChild(renderUpload(r.upload, "mag"));
 }
 
-// The upload: only a plausible calibration, only after the user ticks the confirmation; RAM
-// only unless "write to flash" is ticked too (the CLI's --no-persist is the default here).
+// The upload: only a plausible calibration, only after the user ticks the confirmation, which
+// says what the upload changes and what it keeps of the device's calibration (read from it);
+// RAM only unless "write to flash" is ticked too (the CLI's --no-persist is the default here).
 function renderUpload(u, prefix) {
   const box = document.createElement("div");
   box.id = `${prefix}-upload`;
@@ -501,6 +573,21 @@ function renderUpload(u, prefix) {
     l.append(c, " ", text);
     return l;
   };
+  const list = (title, items, id) => {
+    const d = document.createElement("div");
+    d.id = id;
+    const h = document.createElement("p");
+    h.textContent = title;
+    const ul = document.createElement("ul");
+    ul.replaceChildren(...items.map((x) => { const li = document.createElement("li"); li.textContent = x; return li; }));
+    d.append(h, ul);
+    return d;
+  };
+  box.append(
+    list("The upload changes:", u.replaces, `${prefix}-upload-replaces`),
+    list(`It keeps, from the device's current calibration (${u.device}, read from the device):`, u.keeps,
+      `${prefix}-upload-keeps`),
+  );
   const btn = document.createElement("button");
   btn.type = "button";
   btn.id = `${prefix}-upload-button`;
@@ -519,7 +606,7 @@ function renderUpload(u, prefix) {
   };
   const row = document.createElement("div");
   row.className = "row";
-  row.append(label(`${prefix}-confirm`, `I confirm: replace the device's calibration with this fit (code ${u.code})`),
+  row.append(label(`${prefix}-confirm`, `I confirm: change the device's calibration as listed above, keeping the rest (code ${u.code})`),
     label(`${prefix}-persist`, "also write it to flash"), btn, state);
   box.appendChild(row);
   return box;
@@ -681,10 +768,32 @@ function renderVerify(v) {
     `(${v.check_window_s} s windows): before (raw) ${one(v.before)} → after (the uploaded calibration) ${one(v.after)}` +
     (v.calibrated_again ? ` — the stream did not return to calibrated values: ${v.calibrated_again}` : "");
   p.className = v.before && v.after && v.after.rms_deg < v.before.rms_deg ? "ok" : "bad";
-  div.replaceChildren(p);
+  // the magnitudes on the sphere: |B| around the field, |a| around g, raw and corrected
+  const m = v.magnitudes;
+  const spread = (r, unit) => (r ? `${fmt(r.rms, 3)} ± ${fmt(r.sigma, 2)} ${unit} rms (max ${fmt(r.max, 3)} ${unit})` : "—");
+  const q = document.createElement("p");
+  q.id = "verify-magnitudes";
+  q.textContent = `On the sphere: |B| around ${fmt(m.field_ut, 4)} µT (${m.field_from}): before (raw) ` +
+    `${spread(m.mag_before, m.mag_unit)} → after ${spread(m.mag_after, m.mag_unit)}; |a| around g = ` +
+    `${fmt(m.g, 6)} m/s²: before ${spread(m.accel_before, m.accel_unit)} → after ${spread(m.accel_after, m.accel_unit)} ` +
+    `(uncertainties from blocks of ${m.block_windows} windows). The corrected points below, with the circle of ` +
+    `${fmt(m.field_ut, 4)} µT.`;
+  q.className = m.mag_before && m.mag_after && m.mag_after.rms < m.mag_before.rms ? "ok" : "bad";
+  div.replaceChildren(p, q);
   div.dataset.before = v.before ? String(v.before.rms_deg) : "";
   div.dataset.after = v.after ? String(v.after.rms_deg) : "";
   div.dataset.windows = v.after ? String(v.after.windows) : "0";
+  const num = (r) => (r ? String(r.rms) : "");
+  div.dataset.magBefore = num(m.mag_before);
+  div.dataset.magAfter = num(m.mag_after);
+  div.dataset.magAfterSigma = m.mag_after ? String(m.mag_after.sigma) : "";
+  div.dataset.accelBefore = num(m.accel_before);
+  div.dataset.accelAfter = num(m.accel_after);
+  div.dataset.field = String(m.field_ut);
+  const cv = $("verify-cloud");
+  cv.hidden = false;
+  cv.dataset.points = String(m.cloud.length);
+  drawProjections(cv, m.cloud, [[0, 1, "mx", "my"], [1, 2, "my", "mz"], [0, 2, "mx", "mz"]], m.field_ut);
 }
 
 window.startLive = (info) => {
@@ -714,7 +823,7 @@ window.startLive = (info) => {
   es.addEventListener("mag", (e) => {
     const m = JSON.parse(e.data);
     // the state alone when the page connects; then one point a window
-    if (m.point) magPoints.push(m.point);
+    if (m.point) magPoints.push([...m.point, m.level ? 1 : 0]);
     if (magPoints.length > 5000) magPoints.splice(0, magPoints.length - 5000);
     renderMagState(m);
     drawCloud();
@@ -724,7 +833,13 @@ window.startLive = (info) => {
     if (m) { magPoints.length = 0; drawCloud(); renderMagState(m); }
   };
   $("mag-stop").onclick = async () => { const m = await act("/api/live/mag/stop"); if (m) renderMagState(m); };
-  $("mag-fit").onclick = async () => { const r = await act("/api/live/mag/fit"); if (r) renderMagFit(r); };
+  $("mag-fit").onclick = async () => {
+    showError("");
+    try { renderMagFit(await api("/api/live/mag/fit", { method: magMethod() })); } catch (err) { showError(err.message); }
+  };
+  for (const id of ["mag-method-sphere", "mag-method-level"]) {
+    $(id).onchange = () => { if (magLast) renderMagState(magLast); drawCloud(); };
+  }
   const act = async (path) => {
     showError("");
     try { return await api(path, {}); } catch (err) { showError(err.message); return null; }

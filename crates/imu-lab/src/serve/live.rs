@@ -48,6 +48,8 @@ use serde_json::{json, Value};
 use tokio::sync::{broadcast, oneshot};
 use tokio_stream::wrappers::BroadcastStream;
 
+use super::level::LEVEL_TILT_DEG;
+use super::merge::Section;
 use super::{error, Shared};
 use crate::link::Link;
 use imu_link::device::table_rows;
@@ -100,12 +102,13 @@ pub(super) struct Snapshot {
     link_error: Option<String>,
     /// The magnetometer wizard's points.
     mag: MagPoints,
-    /// The last fit's calibration (either wizard's), checked and ready for the device, with
-    /// the one-time code the page must send back to upload it.
+    /// The last fit's calibration (either wizard's), merged into the device's current one,
+    /// checked and ready for the device, with the one-time code the page must send back to
+    /// upload it.
     ready_cal: Option<ReadyCal>,
-    /// The calibration file of the last upload from this page (TOML): a later fit of another
-    /// sensor updates its own section and keeps the others.
-    pub(super) cal_file: Option<String>,
+    /// The device's whole calibration after the last upload from this page (the verification
+    /// applies it on the host).
+    pub(super) uploaded: Option<Uploaded>,
     /// The accelerometer's pose wizard.
     pub(super) poses: super::poses::Wizard,
     /// The device's noise (from its tables), for the pose wizard's stillness.
@@ -148,27 +151,101 @@ impl Snapshot {
     }
 }
 
-/// A calibration the user may upload: the calibration file, its blob and the confirmation code.
+/// A calibration the user may upload: the device's current calibration with the fitted part
+/// replaced ([`super::merge`]), its blob, the device's blob it was merged into (an upload is
+/// refused when the device holds another one by then) and the confirmation code.
 struct ReadyCal {
-    toml: String,
+    cal: imu_cal::device::Calibration,
     blob: Vec<u8>,
+    device_blob: Vec<u8>,
+    section: Section,
+    /// The field magnitude of a magnetometer fit of the sphere, µT.
+    field: Option<f64>,
     code: String,
+}
+
+/// The device's calibration after an upload from this page.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Uploaded {
+    pub cal: imu_cal::device::Calibration,
+    /// The field magnitude of the last magnetometer fit of the sphere uploaded, µT (none after
+    /// a level turn's: its field is the horizontal one).
+    pub field: Option<f64>,
 }
 
 /// Most magnetometer points the wizard keeps (ten a second: over 8 minutes).
 pub const MAG_POINTS: usize = 5000;
+/// Most magnetometer samples of level windows the level turn keeps (100 s at 200 Hz).
+pub const LEVEL_SAMPLES: usize = 20_000;
 /// Direction bins of the coverage: 6 bands of equal area in elevation × 12 in azimuth.
 const BANDS: usize = 6;
 const SECTORS: usize = 12;
 
-/// The magnetometer wizard's collection: the mean field of every raw stream window while on.
+/// The magnetometer wizard's collection: the mean field of every raw stream window while on,
+/// with the board's tilt from level in that window and its rate about the horizontal axes (the
+/// accelerometer's and the gyro's means; the level turn takes the points within
+/// [`LEVEL_TILT_DEG`] and [`super::level::LEVEL_RATE_DPS`]).
 #[derive(Default)]
 struct MagPoints {
     on: bool,
     points: VecDeque<[f64; 3]>,
+    /// The tilt of each point and the rate about x and y then, degrees and deg/s (`None`: no
+    /// accelerometer or gyro mean in its window).
+    tilts: VecDeque<Option<(f64, f64)>>,
+    /// The magnetometer's samples of the level windows (each sample once): the level turn
+    /// fits these, twenty a window at 200 Hz, so that the noise floor the lab estimates from
+    /// the residuals' second differences holds thousands of them (from the 0.1 s means of one
+    /// turn, about 140, it scatters by 12 % and the verdict with it).
+    level_samples: VecDeque<[f64; 3]>,
 }
 
 impl MagPoints {
+    /// One window's mean field and the board's tilt then; the oldest point goes beyond
+    /// [`MAG_POINTS`].
+    fn push(&mut self, m: [f64; 3], tilt: Option<(f64, f64)>, samples: &[[f64; 3]]) {
+        if tilt.is_some_and(super::level::is_level) {
+            self.level_samples.extend(samples);
+            while self.level_samples.len() > LEVEL_SAMPLES {
+                self.level_samples.pop_front();
+            }
+        }
+        self.points.push_back(m);
+        self.tilts.push_back(tilt);
+        while self.points.len() > MAG_POINTS {
+            self.points.pop_front();
+            self.tilts.pop_front();
+        }
+    }
+
+    fn clear(&mut self) {
+        self.points.clear();
+        self.tilts.clear();
+        self.level_samples.clear();
+    }
+
+    /// Whether point `k` was taken with the board level and turning about the vertical only.
+    fn is_level(&self, k: usize) -> bool {
+        self.tilts
+            .get(k)
+            .copied()
+            .flatten()
+            .is_some_and(super::level::is_level)
+    }
+
+    /// The points taken level (the level turn's).
+    fn level_points(&self) -> Vec<[f64; 3]> {
+        (0..self.points.len())
+            .filter(|&k| self.is_level(k))
+            .map(|k| self.points[k])
+            .collect()
+    }
+
+    /// The share of 10° heading bins the level points sweep (their x–y components).
+    fn heading_coverage(&self) -> f64 {
+        let xy: Vec<[f64; 2]> = self.level_points().iter().map(|p| [p[0], p[1]]).collect();
+        super::level::heading_coverage(&xy)
+    }
+
     /// The share of direction bins (around the points' mean, a first guess of the hard iron)
     /// that hold a point: how much of the sphere the turns have covered.
     fn coverage(&self) -> f64 {
@@ -201,7 +278,17 @@ impl MagPoints {
     }
 
     fn state(&self) -> Value {
-        json!({ "collecting": self.on, "points": self.points.len(), "coverage": self.coverage() })
+        json!({
+            "collecting": self.on,
+            "points": self.points.len(),
+            "coverage": self.coverage(),
+            "level_points": self.level_points().len(),
+            "heading_coverage": self.heading_coverage(),
+            "tilt_deg": self.tilts.back().copied().flatten().map(|t| t.0),
+            "level_tilt_deg": LEVEL_TILT_DEG,
+            "level_rate_dps": super::level::LEVEL_RATE_DPS,
+            "heading_bins": super::level::HEADING_BINS,
+        })
     }
 }
 
@@ -500,6 +587,10 @@ fn read_loop(
 ) {
     let mut window = Window::new();
     let mut decim = Rows::default();
+    // the window's magnetometer samples, each once (the rows hold a sample until the next),
+    // for the level turn's fit
+    let mut win_mag: Vec<[f64; 3]> = Vec::new();
+    let mut last_mag: Option<[f64; 3]> = None;
     // the kind of values of the last batch (raw or calibrated)
     let mut raw: Option<bool> = None;
     let mut round: Option<u32> = None;
@@ -540,16 +631,24 @@ fn read_loop(
                 // other kind)
                 if raw != Some(!b.calibrated) {
                     if raw.is_some() {
-                        points.extend(window.point());
+                        points.extend(window.point().map(|p| (p, std::mem::take(&mut win_mag))));
                     }
                     raw = Some(!b.calibrated);
                     window = Window::new();
                     decim = Rows::default();
+                    win_mag.clear();
+                    last_mag = None;
                 }
                 window.raw = !b.calibrated;
                 decim.batch(&b, |r| {
                     if let Some(p) = window.push(r.t, &r.values) {
-                        points.push(p);
+                        points.push((p, std::mem::take(&mut win_mag)));
+                    }
+                    if let (Some(x), Some(y), Some(z)) = (r.values[6], r.values[7], r.values[8]) {
+                        if last_mag != Some([x, y, z]) {
+                            win_mag.push([x, y, z]);
+                            last_mag = Some([x, y, z]);
+                        }
                     }
                 });
                 let mut s = shared.lock().expect("snapshot");
@@ -565,7 +664,7 @@ fn read_loop(
                         }
                     });
                 }
-                for p in points {
+                for (p, samples) in points {
                     if let Some(v) = s.verify.as_mut().and_then(|r| r.window(&p)) {
                         send(tx, "verify", v);
                     }
@@ -579,12 +678,12 @@ fn read_loop(
                         let m = |k: usize| p["mean"][k].as_f64().unwrap_or(f64::NAN);
                         let point = [m(6), m(7), m(8)];
                         if point.iter().all(|v| v.is_finite()) {
-                            s.mag.points.push_back(point);
-                            while s.mag.points.len() > MAG_POINTS {
-                                s.mag.points.pop_front();
-                            }
+                            let tilt = super::level::tilt_deg([m(0), m(1), m(2)])
+                                .zip(Some(m(3).hypot(m(4))).filter(|r| r.is_finite()));
+                            s.mag.push(point, tilt, &samples);
                             let mut v = s.mag.state();
                             v["point"] = json!(point);
+                            v["level"] = json!(tilt.is_some_and(super::level::is_level));
                             send(tx, "mag", v);
                         }
                     }
@@ -872,7 +971,7 @@ async fn mag_switch(s: Shared, bytes: Bytes, on: bool) -> Response {
             if let Some(r) = snap.raw_refused() {
                 return r;
             }
-            snap.mag.points.clear();
+            snap.mag.clear();
         }
         snap.mag.on = on;
     }
@@ -937,36 +1036,89 @@ pub(super) async fn sync_mode(live: &Live) -> Result<(), String> {
     res
 }
 
-/// POST /api/live/mag/fit {}: the calibration lab's walk on the points collected (what `imu-lab
-/// calibrate mag --auto --json` does on a recording of them): the model, its parameters with σ,
-/// the residual, the diagnosis.
+/// The magnetometer wizard's method.
+#[derive(Deserialize, Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum MagMethod {
+    /// The full sphere (3-D): every point, the calibration lab's walk in 3-D.
+    #[default]
+    Sphere,
+    /// The level turn (2-D, Jaime et al.): the points taken level, the planar problem.
+    Level,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct MagFitBody {
+    #[serde(default)]
+    method: MagMethod,
+}
+
+/// POST /api/live/mag/fit {"method": "sphere" | "level"} (`{}`: the sphere): the calibration
+/// lab's walk on the points collected (what `imu-lab calibrate mag --auto --json` does on a
+/// recording of them): the model, its parameters with σ, the residual, the diagnosis. The
+/// level turn fits only the points taken level ([`super::level`]), as planar data in x–y.
 pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
-    let live = match device_post(&s, &bytes) {
+    let b: MagFitBody = match super::noise::body(&bytes) {
+        Ok(b) => b,
+        Err(e) => return error(StatusCode::BAD_REQUEST, &e),
+    };
+    let live = match device(&s) {
         Ok(live) => live,
         Err(r) => return *r,
     };
-    let (points, coverage): (Vec<[f64; 3]>, f64) = {
+    // the sphere: the 0.1 s means; the level turn: the samples of the level windows (at the
+    // magnetometer's rate)
+    let (points, rate_hz, coverage, heading_coverage, level_windows, all) = {
         let snap = live.shared.lock().expect("snapshot");
-        (
-            snap.mag.points.iter().copied().collect(),
-            snap.mag.coverage(),
-        )
+        let m = &snap.mag;
+        match b.method {
+            MagMethod::Sphere => (
+                m.points.iter().copied().collect::<Vec<[f64; 3]>>(),
+                1.0 / WINDOW_S,
+                m.coverage(),
+                None,
+                0,
+                m.points.len(),
+            ),
+            MagMethod::Level => (
+                m.level_samples.iter().copied().collect(),
+                snap.identity["mag_rate_hz"].as_f64().unwrap_or(200.0),
+                m.coverage(),
+                Some(m.heading_coverage()),
+                m.level_points().len(),
+                m.points.len(),
+            ),
+        }
     };
-    if points.len() < 20 {
+    let enough = match b.method {
+        MagMethod::Sphere => points.len() >= 20,
+        MagMethod::Level => level_windows >= 20,
+    };
+    if !enough {
         return error(
             StatusCode::CONFLICT,
-            &format!(
-                "{} magnetometer points: collect 20 at least, turning the board",
-                points.len()
-            ),
+            &match b.method {
+                MagMethod::Sphere => format!(
+                    "{} magnetometer points: collect 20 at least, turning the board",
+                    points.len()
+                ),
+                MagMethod::Level => format!(
+                    "{level_windows} of the {all} magnetometer points were taken level (within \
+                     {LEVEL_TILT_DEG}° of tilt, turning about the vertical only: under {} deg/s \
+                     about x and y): collect 20 at least, turning the board flat",
+                    super::level::LEVEL_RATE_DPS
+                ),
+            },
         );
     }
-    let existing = live.shared.lock().expect("snapshot").cal_file.clone();
+    let method = b.method;
     let fitted = tokio::task::spawn_blocking(move || {
         use imu_cal::session::{self as cal, Sensor};
         let col = |k: usize| points.iter().map(|p| p[k]).collect::<Vec<f64>>();
         let (x, y, z) = (col(0), col(1), col(2));
-        // one segment: the points are consecutive windows without gaps
+        // one segment: consecutive windows (a level turn's points skip the tilted ones, which
+        // only the noise floor's second differences see)
         let segments = vec![std::ops::Range {
             start: 0,
             end: points.len(),
@@ -989,7 +1141,7 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
                     values: &z,
                 },
             ],
-            rate_hz: 1.0 / WINDOW_S,
+            rate_hz,
             segments: &segments,
             shown: "the page's magnetometer points",
         };
@@ -998,62 +1150,146 @@ pub async fn mag_fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             ..cal::Options::new(Sensor::Mag)
         };
         let loaded = cal::prepare(&input, &o)?;
+        let (plane, sd) = match &loaded.data {
+            cal::Data::Mag(p) => (p.plane, p.principal_sd),
+            _ => (None, [f64::NAN; 3]),
+        };
+        if method == MagMethod::Level && plane != Some([0, 1]) {
+            return Err(shape_problem(method, plane, sd).unwrap_or_default());
+        }
         let run = cal::run(&loaded, &o)?;
-        Ok::<_, String>(calibration(&loaded, &run, existing.as_deref()))
+        let (v, mut fit) = calibration(&loaded, &run);
+        if let Some(p) = shape_problem(method, plane, sd) {
+            fit = Err(p);
+        }
+        Ok::<_, String>((v, fit))
     })
     .await;
-    let (v, upload) = match fitted {
+    let (v, fit) = match fitted {
         Ok(Ok(t)) => t,
         Ok(Err(e)) => return error(StatusCode::UNPROCESSABLE_ENTITY, &e),
         Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     };
-    let upload = offer(live, upload);
-    Json(json!({ "coverage": coverage, "fit": v, "upload": upload })).into_response()
+    let (section, field) = match method {
+        MagMethod::Sphere => (Section::Mag, v["params"]["field"].as_f64()),
+        MagMethod::Level => (Section::MagPlane, None),
+    };
+    let upload = offer(live, fit, section, field).await;
+    Json(json!({
+        "method": match method { MagMethod::Sphere => "sphere", MagMethod::Level => "level" },
+        "coverage": coverage,
+        "heading_coverage": heading_coverage,
+        "level_windows": level_windows,
+        "level_tilt_deg": LEVEL_TILT_DEG,
+        "level_rate_dps": super::level::LEVEL_RATE_DPS,
+        "fit": v,
+        "upload": upload,
+    }))
+    .into_response()
 }
 
-/// A fit's answer: the object `imu-lab calibrate --json` prints, and the calibration file
-/// `calibrate --out` would write (`existing` with this sensor's section set) with its blob,
-/// through the plausibility checks `imu-lab device calibrate --upload` applies — or why not.
+/// Why points of this shape (the plane the lab found in them, if any, and their principal
+/// standard deviations, µT) cannot give the method's upload: the level turn needs a turn in
+/// x–y; the sphere's points that lie in a plane (a turn about one axis) determine no
+/// out-of-plane terms, and their upload would set the device's to zero and identity.
+fn shape_problem(method: MagMethod, plane: Option<[usize; 2]>, sd: [f64; 3]) -> Option<String> {
+    match (method, plane) {
+        (MagMethod::Level, Some([0, 1])) | (MagMethod::Sphere, None) => None,
+        (MagMethod::Level, _) => Some(format!(
+            "the level points are not a turn in the x–y plane (principal s.d. \
+             {:.2}/{:.2}/{:.2} µT): turn the board flat about its z axis through a full turn, \
+             or fit the full sphere",
+            sd[0], sd[1], sd[2]
+        )),
+        (MagMethod::Sphere, Some(_)) => Some(format!(
+            "the points lie in a plane (principal s.d. {:.2}/{:.2}/{:.2} µT): a turn about one \
+             axis does not determine the out-of-plane terms; choose the level turn (which keeps \
+             them from the device) or turn the board through more orientations",
+            sd[0], sd[1], sd[2]
+        )),
+    }
+}
+
+/// A fit's answer: the object `imu-lab calibrate --json` prints, and a calibration file with
+/// this sensor's section set as `calibrate --out` writes it, through the plausibility checks
+/// `imu-lab device calibrate --upload` applies — or why not.
 pub(super) fn calibration(
     loaded: &imu_cal::session::Loaded,
     run: &imu_cal::session::Outcome,
-    existing: Option<&str>,
-) -> (Value, Result<(String, Vec<u8>), String>) {
+) -> (Value, Result<imu_cal::file::CalFile, String>) {
     use imu_cal::session as cal;
     let v = serde_json::from_str(&cal::json_out(loaded, run)).unwrap_or(Value::Null);
-    let ready = cal::update_file(existing, loaded, run).and_then(|toml| {
-        let file = imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string())?;
-        let c = file.to_device().map_err(|e| e.to_string())?;
-        let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
-        let blob = imu_cal::device::encode_blob(&c, &mut buf)
-            .map(|b| b.to_vec())
-            .map_err(|e| format!("encoding the blob: {e}"))?;
-        if blob.len() > imu_proto::MAX_CAL_BLOB {
-            return Err(format!(
-                "a blob of {} B exceeds the device's {} B",
-                blob.len(),
-                imu_proto::MAX_CAL_BLOB
-            ));
-        }
-        Ok((toml, blob))
-    });
-    (v, ready)
+    let file = cal::update_file(None, loaded, run)
+        .and_then(|toml| imu_cal::file::CalFile::from_toml(&toml).map_err(|e| e.to_string()));
+    (v, file)
 }
 
-/// Keep a plausible calibration for upload under a new one-time code (the page shows it with
-/// the confirmation); what the page is told: `{plausible, code}` or `{plausible: false,
-/// problem}`. An implausible fit withdraws the last offer.
-pub(super) fn offer(live: &Live, ready: Result<(String, Vec<u8>), String>) -> Value {
+/// The calibration the device uses now: its blob as sent, decoded, and where it came from.
+pub(super) async fn device_calibration(
+    live: &Live,
+) -> Result<(Vec<u8>, imu_cal::device::Calibration, String), String> {
+    match request(live, Request::GetCalibration).await {
+        Ok(Reply::Calibration { blob, status }) => {
+            let cal = imu_cal::device::decode_blob(&blob)
+                .map_err(|e| format!("the device's calibration: {e}"))?;
+            Ok((blob.to_vec(), cal, imu_link::device::format_cal(&status)))
+        }
+        Ok(other) => Err(format!("unexpected reply to GetCalibration: {other:?}")),
+        Err(e) => Err(format!("reading the device's calibration: {e}")),
+    }
+}
+
+/// GET /api/live/calibration: the calibration the device uses now (read from it), every
+/// parameter in the calibration file's units, and where it came from.
+pub async fn get_calibration(State(s): State<Shared>) -> Response {
+    let live = match device(&s) {
+        Ok(live) => live,
+        Err(r) => return *r,
+    };
+    match device_calibration(live).await {
+        Ok((_, cal, source)) => {
+            let mut v = super::merge::physical_json(&cal);
+            v["source"] = json!(source);
+            Json(v).into_response()
+        }
+        Err(e) => error(StatusCode::BAD_GATEWAY, &e),
+    }
+}
+
+/// Offer a plausible fit for upload: the device's calibration is read now and the fit merged
+/// into it ([`super::merge`]: only the fitted part replaced), kept under a new one-time code
+/// that the page shows with the confirmation; what the page is told: `{plausible, code,
+/// replaces, keeps, device}` or `{plausible: false, problem}`. Anything else withdraws the last
+/// offer.
+pub(super) async fn offer(
+    live: &Live,
+    fit: Result<imu_cal::file::CalFile, String>,
+    section: Section,
+    field: Option<f64>,
+) -> Value {
+    let merged = match fit {
+        Ok(file) => match device_calibration(live).await {
+            Ok((device_blob, device, source)) => {
+                super::merge::merge(&device, &file, section).map(|m| (m, device_blob, source))
+            }
+            Err(e) => Err(format!("{e}: nothing to merge the fit into")),
+        },
+        Err(e) => Err(e),
+    };
     let mut snap = live.shared.lock().expect("snapshot");
-    match ready {
-        Ok((toml, blob)) => {
+    match merged {
+        Ok((m, device_blob, source)) => {
             let code = super::guard::new_token()[..8].to_string();
             snap.ready_cal = Some(ReadyCal {
-                toml,
-                blob,
+                cal: m.cal,
+                blob: m.blob,
+                device_blob,
+                section,
+                field,
                 code: code.clone(),
             });
-            json!({ "plausible": true, "code": code })
+            json!({ "plausible": true, "code": code, "replaces": m.replaces, "keeps": m.keeps,
+                    "device": source })
         }
         Err(problem) => {
             snap.ready_cal = None;
@@ -1072,8 +1308,10 @@ struct UploadBody {
 }
 
 /// POST /api/live/upload {"confirm": CODE, "persist": false}: send the last fit's calibration
-/// (either wizard's) to the device, once, with the code its fit gave (403 without it: nothing
-/// is written to a device without the user's confirmation of that very calibration).
+/// (either wizard's, merged into the device's) to the device, once, with the code its fit gave
+/// (403 without it: nothing is written to a device without the user's confirmation of that
+/// very calibration). The device's calibration is read again first: when it is no longer the
+/// one the fit was merged into (uploaded from elsewhere meanwhile), 409 and nothing is sent.
 pub async fn upload(State(s): State<Shared>, bytes: Bytes) -> Response {
     let b: UploadBody = match super::noise::body(&bytes) {
         Ok(b) => b,
@@ -1096,39 +1334,56 @@ pub async fn upload(State(s): State<Shared>, bytes: Bytes) -> Response {
             Some(_) => snap.ready_cal.take().expect("checked"),
         }
     };
+    match device_calibration(live).await {
+        Ok((now, _, _)) if now == ready.device_blob => {}
+        Ok((_, _, source)) => {
+            return error(
+                StatusCode::CONFLICT,
+                &format!(
+                    "the device's calibration ({source}) changed since the fit was merged into \
+                     it: nothing uploaded; fit again"
+                ),
+            )
+        }
+        Err(e) => return error(StatusCode::BAD_GATEWAY, &format!("{e}: nothing uploaded")),
+    }
     let Ok(blob) = imu_proto::Vec::from_slice(&ready.blob) else {
         return error(StatusCode::UNPROCESSABLE_ENTITY, "the blob is too long");
     };
-    let (reply_tx, reply_rx) = oneshot::channel();
-    let sent = live.requests.lock().expect("requests").send((
+    match request(
+        live,
         Request::SetCalibration {
             blob,
             persist: b.persist,
         },
-        reply_tx,
-    ));
-    if sent.is_err() {
-        return error(StatusCode::BAD_GATEWAY, "the link to the device is closed");
-    }
-    match reply_rx.await {
-        Ok(Ok(Reply::Ok)) => {
-            // the next fit of another sensor keeps this one's section
-            live.shared.lock().expect("snapshot").cal_file = Some(ready.toml);
+    )
+    .await
+    {
+        Ok(Reply::Ok) => {
+            let mut snap = live.shared.lock().expect("snapshot");
+            let field = match ready.section {
+                Section::Mag => ready.field,
+                Section::MagPlane => None,
+                Section::Accel => snap.uploaded.and_then(|u| u.field),
+            };
+            snap.uploaded = Some(Uploaded {
+                cal: ready.cal,
+                field,
+            });
             Json(json!({ "applied": true, "persisted": b.persist })).into_response()
         }
-        Ok(Ok(Reply::Error(imu_proto::ErrorCode::BadCalibration(p)))) => error(
+        Ok(Reply::Error(imu_proto::ErrorCode::BadCalibration(p))) => error(
             StatusCode::UNPROCESSABLE_ENTITY,
             &format!(
                 "the device refused the calibration: {}",
                 imu_link::device::cal_problem(&p)
             ),
         ),
-        Ok(Ok(other)) => error(
+        Ok(other) => error(
             StatusCode::BAD_GATEWAY,
             &format!("the device did not apply the calibration: {other:?}"),
         ),
-        Ok(Err(e)) => error(StatusCode::BAD_GATEWAY, &e),
-        Err(_) => error(StatusCode::BAD_GATEWAY, "the link's reader stopped"),
+        Err(e) => error(StatusCode::BAD_GATEWAY, &e),
     }
 }
 
@@ -1186,6 +1441,60 @@ mod tests {
         assert!(close(&p["mean"][10], 1.0) && close(&p["mean"][11], -2.0));
         // the next window starts 0.1 s later and hands this one out
         assert!(w.push(0.1, &[Some(0.0); 10]).is_some());
+    }
+
+    /// The level turn needs a turn in x–y; a sphere's points in a plane get no upload (it
+    /// would zero the out-of-plane terms), each with the shape named.
+    #[test]
+    fn points_of_the_wrong_shape_get_no_upload() {
+        let sd = [25.0, 24.0, 0.05];
+        assert_eq!(shape_problem(MagMethod::Level, Some([0, 1]), sd), None);
+        assert_eq!(shape_problem(MagMethod::Sphere, None, sd), None);
+        let side = shape_problem(MagMethod::Level, Some([0, 2]), sd).unwrap();
+        assert!(side.contains("not a turn in the x–y plane") && side.contains("25.00/24.00/0.05"));
+        assert!(shape_problem(MagMethod::Level, None, sd).is_some());
+        let flat = shape_problem(MagMethod::Sphere, Some([0, 1]), sd).unwrap();
+        assert!(
+            flat.contains("lie in a plane") && flat.contains("level turn"),
+            "{flat}"
+        );
+    }
+
+    /// The level turn takes a window's samples only when the board was level and turned
+    /// about the vertical: tilted windows (over 5°), windows turning about x or y (over
+    /// 5 deg/s) and windows without an accelerometer mean are shown but not fitted; the heading
+    /// coverage counts the level windows only.
+    #[test]
+    fn the_level_turn_takes_the_level_windows_only() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .subsec_nanos();
+        let tilt = 0.1 + 4.8 * f64::from(key % 1000) / 1000.0;
+        let mut m = MagPoints::default();
+        for k in 0..36 {
+            let a = f64::from(k * 10 + 5).to_radians();
+            let p = [20.0 + 25.0 * a.cos(), -10.0 + 25.0 * a.sin(), -40.0];
+            let samples = [p, [p[0] + 0.1, p[1], p[2]]];
+            // a quarter of the turn level, the rest tilted, turning about x, or unknown
+            let levelness = match k {
+                0..=8 => Some((tilt, 1.0)),
+                9..=17 => Some((10.0 - tilt, 1.0)),
+                18..=26 => Some((tilt, 6.0)),
+                _ => None,
+            };
+            m.push(p, levelness, &samples);
+        }
+        assert_eq!(m.points.len(), 36, "key {key}");
+        assert_eq!(m.level_points().len(), 9, "key {key}");
+        assert_eq!(m.level_samples.len(), 18, "key {key}");
+        assert!(
+            (m.heading_coverage() - 9.0 / 36.0).abs() < 1e-12,
+            "key {key}: {}",
+            m.heading_coverage()
+        );
+        m.clear();
+        assert!(m.level_samples.is_empty() && m.points.is_empty() && m.tilts.is_empty());
     }
 
     /// Directions drawn at random around a random hard-iron offset: the whole sphere is covered;

@@ -1,8 +1,10 @@
 //! `imu-lab serve`: the lab as a local web app. An axum server on a loopback address serves one
 //! page (HTML, script, style and the vendored plotting library, all embedded in the binary) and
 //! a small JSON API over the library sessions: the noise lab ([`noise`]) on a recording, and the
-//! live device ([`live`]) over the same link `imu-lab record` uses, with the magnetometer
-//! calibration (collect, fit with `imu_cal::session`, upload after an explicit confirmation).
+//! live device ([`live`]) over the same link `imu-lab record` uses, with the calibration
+//! wizards (the magnetometer's sphere or level turn, [`level`]; the accelerometer's poses,
+//! [`poses`]; fits with `imu_cal::session`, uploads merged into the device's calibration,
+//! [`merge`], after an explicit confirmation; the verification, [`verify`]).
 //!
 //! Safe by default ([`guard`]): it binds to 127.0.0.1, answers only requests whose `Host` is the
 //! address it listens on (DNS rebinding), refuses writes from another origin (403) and writes
@@ -23,7 +25,9 @@ use serde_json::json;
 
 pub mod assets;
 pub mod guard;
+pub mod level;
 pub mod live;
+pub mod merge;
 pub mod noise;
 pub mod poses;
 #[cfg(test)]
@@ -99,6 +103,7 @@ pub fn router(state: Shared) -> Router {
         .route("/api/live/accel/clear", post(poses::clear))
         .route("/api/live/accel/fit", post(poses::fit))
         .route("/api/live/upload", post(live::upload))
+        .route("/api/live/calibration", get(live::get_calibration))
         .route("/api/live/verify/start", post(verify::start))
         .route("/api/live/verify/stop", post(verify::stop))
         .fallback(not_found)

@@ -576,13 +576,9 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         Ok(l) => l,
         Err(r) => return *r,
     };
-    let (problem, existing, state) = {
+    let (problem, state) = {
         let snap = live.shared.lock().expect("snapshot");
-        (
-            snap.poses.problem(),
-            snap.cal_file.clone(),
-            snap.poses.state(),
-        )
+        (snap.poses.problem(), snap.poses.state())
     };
     if problem.poses.len() < 6 {
         return error(
@@ -611,10 +607,7 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         };
         let run = cal::run(&loaded, &o)?;
         let residuals = run.report.model.fitted.residuals.clone();
-        Ok::<_, String>((
-            super::live::calibration(&loaded, &run, existing.as_deref()),
-            residuals,
-        ))
+        Ok::<_, String>((super::live::calibration(&loaded, &run), residuals))
     })
     .await;
     let ((v, ready), residuals) = match fitted {
@@ -622,7 +615,7 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
         Ok(Err(e)) => return error(StatusCode::UNPROCESSABLE_ENTITY, &e),
         Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     };
-    let upload = super::live::offer(live, ready);
+    let upload = super::live::offer(live, ready, super::merge::Section::Accel, None).await;
     Json(json!({
         "fit": v,
         "residuals": residuals,

@@ -279,6 +279,9 @@ async fn malformed_requests_get_400_and_change_nothing() {
         ("/api/live/verify/stop", "stop"),
         ("/api/live/record", r#"{"file":"/etc/passwd"}"#),
         ("/api/live/mag/start", "x"),
+        ("/api/live/mag/fit", r#"{"method":"cube"}"#),
+        ("/api/live/mag/fit", r#"{"method":"level","points":5}"#),
+        ("/api/live/mag/fit", "level"),
     ] {
         let (st, resp) = send(&app, post(path).body(body.to_string().into()).unwrap()).await;
         assert_eq!(st, StatusCode::BAD_REQUEST, "{path} {body:?}: {resp}");
