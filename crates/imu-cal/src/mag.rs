@@ -58,7 +58,8 @@ use crate::lab::{
     model_names, params_sigma, CalError, Effect, Fitted, NoiseFloor, Params, Problem, SoftIron2d,
 };
 use crate::solve::{
-    covariance, data_key, fit_model, lmeds, lstsq, mean, sigma_second_diff, sym_eigen,
+    covariance, data_key, fit_model, lmeds, lstsq, mean, second_diff_dof, sigma_second_diff,
+    sym_eigen,
 };
 use nalgebra::{DMatrix, DVector, Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
 use std::sync::OnceLock;
@@ -388,14 +389,15 @@ impl MagProblem {
             if r.len() >= 20 && sigma.is_finite() {
                 return NoiseFloor {
                     sigma,
-                    dof: (r.len() - 2) as f64,
+                    dof: second_diff_dof(r.len()),
                     method,
                 };
             }
         }
         NoiseFloor {
             sigma: self.sigma,
-            dof: (self.m.len() as f64 - 2.0).max(1.0),
+            // One estimate per axis, averaged.
+            dof: second_diff_dof(self.m.len()) * if self.plane.is_some() { 2.0 } else { 3.0 },
             method: "per-axis second differences (MAD; no robust fit of the data succeeded)",
         }
     }
