@@ -389,8 +389,12 @@ async fn imu_task(
     mag_read: &'static MagReadSignal,
 ) -> ! {
     let mut run = run.receiver().expect("watch receiver for imu_task");
-    let mut imu = Mpu6050::new(BusDevice::new(bus), Address::Ad0Low);
-    let mut svc = ImuService::new(BusTiming::from_hz(I2C_HZ));
+    // The driver and the service live in statics (the task is spawned once), so that its future
+    // holds pointers to them: the fields its polls reach lie nearer its start.
+    static IMU: StaticCell<Mpu6050<BusDevice>> = StaticCell::new();
+    static SVC: StaticCell<ImuService> = StaticCell::new();
+    let imu = IMU.init(Mpu6050::new(BusDevice::new(bus), Address::Ad0Low));
+    let svc = SVC.init(ImuService::new(BusTiming::from_hz(I2C_HZ)));
     let mut last_us = now_us();
     let mut was = svc.state();
     loop {
@@ -402,7 +406,7 @@ async fn imu_task(
         msgs.clear();
         // The fallback alarm is idle until the next burst: it times the tick's own waits.
         let mut delay = alarm::Delay(alarm::IMU_FALLBACK);
-        let cx = &mut Tick::new(&mut imu, &mut delay, &now_us, msgs);
+        let cx = &mut Tick::new(imu, &mut delay, &now_us, msgs);
         if wait_running(&mut run).await {
             svc.resume(cx).await;
         } else {
@@ -432,9 +436,14 @@ async fn mag_task(
     mag_read: &'static MagReadSignal,
 ) -> ! {
     let mut run = run.receiver().expect("watch receiver for mag_task");
-    let mut mag = Qmc5883::new(BusDevice::new(bus));
-    let mut svc = MagService::new(BusTiming::from_hz(I2C_HZ));
-    let mut turns = MagTicks::new();
+    // The driver, the service and the tick plan live in statics (the task is spawned once), so
+    // that its future holds pointers to them: the fields its polls reach lie nearer its start.
+    static MAG: StaticCell<Qmc5883<BusDevice>> = StaticCell::new();
+    static SVC: StaticCell<MagService> = StaticCell::new();
+    static TURNS: StaticCell<MagTicks> = StaticCell::new();
+    let mag = MAG.init(Qmc5883::new(BusDevice::new(bus)));
+    let svc = SVC.init(MagService::new(BusTiming::from_hz(I2C_HZ)));
+    let turns = TURNS.init(MagTicks::new());
     let mut was = svc.state();
     loop {
         let at = Instant::from_micros(turns.next_at(svc.next_poll_us(), now_us()));
@@ -453,7 +462,7 @@ async fn mag_task(
             }
             // The tick alarm is idle until the next tick: it times the tick's own waits.
             svc.tick(&mut Tick::new(
-                &mut mag,
+                mag,
                 &mut alarm::Delay(alarm::MAG_TICK),
                 &now_us,
                 msgs,
