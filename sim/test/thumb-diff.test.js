@@ -73,14 +73,22 @@ function describeMismatch(r) {
 
 const found = locateElf();
 
-test('the Thumb routines change the engine exactly as the Rust path does, call by call', { skip: found.elf ? false : found.why }, () => {
+/** The program run once (it runs both checks); the emulator, the stop and the wall time. */
+let ran = null;
+function runOnce() {
+  if (ran) return ran;
   const emu = new Emulator({ elf: found.elf });
+  const wall0 = performance.now();
+  const stop = emu.runUntil((CYCLE_CAP * 1e9) / (emu.mcu.clkSys || 125e6));
+  ran = { emu, stop, wall: (performance.now() - wall0) / 1000 };
+  return ran;
+}
+
+test('the Thumb routines change the engine exactly as the Rust path does, call by call', { skip: found.elf ? false : found.why }, () => {
+  const { emu, stop, wall } = runOnce();
   const sym = emu.elf.symbols.get('THUMB_CHECK');
   assert.ok(sym, `${found.elf} has no THUMB_CHECK symbol`);
   assert.equal(sym.size, REPORT.size, 'THUMB_CHECK size: the Report layout changed; update REPORT here');
-  const wall0 = performance.now();
-  const stop = emu.runUntil((CYCLE_CAP * 1e9) / (emu.mcu.clkSys || 125e6));
-  const wall = (performance.now() - wall0) / 1000;
   const r = readReport(emu, sym.value);
   const cycles = emu.core.cycles;
   const thumbSamples = 2 * r.pairTaken + r.singleTaken;
@@ -109,4 +117,26 @@ test('the Thumb routines change the engine exactly as the Rust path does, call b
   assert.ok(r.singleTaken >= 5000, `the single routine took only ${r.singleTaken} samples`);
   assert.ok(thumbSamples >= 0.5 * samples, `the Thumb routines took only ${thumbSamples} of ${samples} samples`);
   REPORT.edgeNames.forEach((n, i) => assert.ok(r.edges[i] > 0, `no call hit the edge \`${n}\``));
+});
+
+/** The magnetometer run's edges (crates/allan/thumb-check, `mag_edge`). */
+const MAG_EDGE_NAMES = ['|z| = gate - 1', 'gate raised', 'gate < 2^11', '|z| >= 2^15', '|z| = 2^16 - 1', 'i16 extremes', 'square waves at |z| >= 2^14', 'counts >= 4096', '|z| >= 2^26'];
+
+test("the magnetometer engines' Thumb routine changes the engine exactly as the Rust path does, over the whole i16 range", { skip: found.elf ? false : found.why }, () => {
+  const { emu, stop } = runOnce();
+  const sym = emu.elf.symbols.get('THUMB_CHECK_MAG');
+  assert.ok(sym, `${found.elf} has no THUMB_CHECK_MAG symbol`);
+  assert.equal(sym.size, REPORT.size, 'THUMB_CHECK_MAG size: the Report layout changed; update REPORT here');
+  const r = readReport(emu, sym.value);
+  console.log(
+    `thumb-diff (magnetometer): ${r.singleCalls} single calls, pico_imu_allan_mag_push took ${r.singleTaken} (${((100 * r.singleTaken) / r.singleCalls).toFixed(1)} %), ${r.segments} segments, longest ${r.maxT} samples`,
+  );
+  console.log(`thumb-diff (magnetometer) edges: ${MAG_EDGE_NAMES.map((n, i) => `${n}: ${r.edges[i]}`).join(', ')}`);
+  if (r.panicLine) assert.fail(`the test program panicked at line ${r.panicLine} of crates/allan/thumb-check (magnetometer run, after ${r.cases} calls)`);
+  assert.equal(r.state, DONE, `THUMB_CHECK_MAG.state = 0x${r.state.toString(16)}: the magnetometer run did not finish (stop: ${stop?.message ?? 'cycle cap'})`);
+  assert.equal(r.mismatches, 0, describeMismatch(r).replace('pico_imu_allan_push_small', 'pico_imu_allan_mag_push'));
+  assert.ok(r.cases >= 10000, `only ${r.cases} calls compared`);
+  assert.equal(r.singleTaken, r.singlePredicted, 'samples taken by pico_imu_allan_mag_push vs steady samples');
+  assert.ok(r.singleTaken >= 0.8 * r.singleCalls, `the routine took only ${r.singleTaken} of ${r.singleCalls} samples`);
+  MAG_EDGE_NAMES.forEach((n, i) => assert.ok(r.edges[i] > 0, `no call hit the magnetometer edge \`${n}\``));
 });

@@ -4,7 +4,7 @@
 //! hand-scheduled Thumb routines of `thumb.rs`).
 
 #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
-use super::{thumb, DeviceEngine, DEVICE_PARAMS};
+use super::{thumb, DeviceEngine, MagEngine, DEVICE_PARAMS, MAG_PARAMS};
 use super::{Engine, Sum128};
 
 /// Which Thumb routines took the samples of an [`Engine::push_pair_traced`] call (`false` and 0
@@ -55,6 +55,14 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         // narrow), so only exact values pass; the general path recomputes z in i64.
         let z = y.wrapping_sub(self.offset);
         if z.unsigned_abs() < gate || self.raise_gate(y) {
+            #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
+            if THUMB {
+                if let Some(e) = self.as_mag_engine() {
+                    // SAFETY: the steady conditions were just checked (any gate).
+                    unsafe { thumb::push_mag(e, z) };
+                    return true;
+                }
+            }
             let gate = self.gate;
             // gate = max |y| + 1 here: one `LSRS` tests gate < 2^SMALL_GATE_BITS (2^11 for P = 8).
             if gate >> Self::SMALL_GATE_BITS == 0 {
@@ -132,6 +140,16 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         ([P, L, R, S] == DEVICE_PARAMS)
             // SAFETY: with these parameters `Self` is `DeviceEngine`.
             .then(|| unsafe { &mut *(self as *mut Self).cast::<DeviceEngine>() })
+    }
+
+    /// `self` as the firmware's [`MagEngine`](super::MagEngine), which has a Thumb routine for
+    /// single samples of any size, if that is what it is.
+    #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
+    #[inline(always)]
+    fn as_mag_engine(&mut self) -> Option<&mut MagEngine> {
+        ([P, L, R, S] == MAG_PARAMS)
+            // SAFETY: with these parameters `Self` is `MagEngine`.
+            .then(|| unsafe { &mut *(self as *mut Self).cast::<MagEngine>() })
     }
 
     /// The steady state: the base ring is full (t ≥ 3P, so every unit-stride level has D2 and

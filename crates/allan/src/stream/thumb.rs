@@ -32,7 +32,7 @@
 //! r2 = window (w[24 − a] = lo θ[t − a]), r5 = lo θ of the sample, r4/r6 = lo θ[t − m] and
 //! lo θ[t − 2m] (they swap roles from level to level), r1, r3, r7 scratch.
 
-use super::{DeviceEngine, Engine};
+use super::{DeviceEngine, Engine, MagEngine};
 use core::mem::offset_of;
 
 // What the code below assumes about the layout (offsets are immediates in the instructions).
@@ -55,6 +55,23 @@ const _: () = {
     assert!(FULL - THETA <= 31 && NARROW - THETA <= 31 && GATE - THETA <= 124);
     assert!(RINGS - THETA <= 255 && OFFSET - THETA <= 124);
 };
+// `MagEngine` (fewer levels: S = 18) has the same layout from `theta` on, so only `theta`'s
+// offset and S differ in its routine.
+const MAG_THETA: usize = offset_of!(MagEngine, theta);
+const _: () = {
+    assert!(offset_of!(MagEngine, sums) == 0);
+    assert!(MAG_THETA.is_multiple_of(4) && MAG_THETA / 4 <= 255);
+    assert!(offset_of!(MagEngine, base) == BASE - (THETA - MAG_THETA));
+    assert!(offset_of!(MagEngine, t) - MAG_THETA == T - THETA);
+    assert!(offset_of!(MagEngine, base_head) - MAG_THETA == HEAD - THETA);
+    assert!(offset_of!(MagEngine, heads) - MAG_THETA == HEADS - THETA);
+    assert!(offset_of!(MagEngine, full) - MAG_THETA == FULL - THETA);
+    assert!(offset_of!(MagEngine, narrow) - MAG_THETA == NARROW - THETA);
+    assert!(offset_of!(MagEngine, gate) - MAG_THETA == GATE - THETA);
+    assert!(offset_of!(MagEngine, rings) - MAG_THETA == RINGS - THETA);
+    assert!(offset_of!(MagEngine, offset) - MAG_THETA == OFFSET - THETA);
+    assert!(super::MAG_PARAMS[3] == 18 && super::DEVICE_PARAMS[3] == 20);
+};
 
 extern "C" {
     /// One steady-state sample z (already offset, |z| < gate < 2^11), either parity.
@@ -62,6 +79,9 @@ extern "C" {
     /// Two samples y0, y1 if they are steady-state ones (|y − offset| < gate < 2^11, t even):
     /// returns 1; else 0 and nothing changed.
     fn pico_imu_allan_push_pair_small(engine: *mut DeviceEngine, y0: i32, y1: i32) -> u32;
+    /// One steady-state sample z of a `MagEngine` (already offset, |z| < gate, any gate),
+    /// either parity.
+    fn pico_imu_allan_mag_push(engine: *mut MagEngine, z: i32);
 }
 
 /// `push_steady::<true>` on `e` (conditions checked by the caller).
@@ -74,6 +94,18 @@ pub(super) unsafe fn push_small(e: &mut DeviceEngine, z: i32) {
     // touches only `*e` (and the stack) and calls `strided`/`strided_tail` on it like
     // `push_steady` does.
     unsafe { pico_imu_allan_push_small(e, z) }
+}
+
+/// `push_steady` on a magnetometer engine `e` (conditions checked by the caller), with
+/// range-tested squares: for any gate, the QMC5883L's whole i16 range included.
+///
+/// # Safety
+/// The base ring is full and narrow (`gate != 0`) and |z| < `gate`.
+#[inline(always)]
+pub(super) unsafe fn push_mag(e: &mut MagEngine, z: i32) {
+    // SAFETY: as for `push_small`, without the gate's upper bound (every square is
+    // range-tested).
+    unsafe { pico_imu_allan_mag_push(e, z) }
 }
 
 /// Two `push_steady::<true>` calls on `e` when both samples are steady-state ones and the
@@ -150,9 +182,64 @@ core::arch::global_asm!(
     "    bl pico_imu_allan_carry",
     "    b 4\\c\\()3b",
     ".endm",
-    // The four unit-stride levels of one sample (P = 8): leaves lo θ[t − 16] in r4.
-    ".macro APP_UNIT",
+    // APP_LEVEL for any narrow input (`MagEngine`): each square with the range test of the
+    // strided levels (one multiply when |D| < 2^15), a wider one out of line to the level's
+    // stubs 4c5 (D2) and 4c6 (D3), which call `add_square_wide`.
+    ".macro APP_LEVEL_R tm, t2, o2, o3, s2, s3, c",
+    "    ldr \\t2, [r2, #\\o2]",
+    "    ldr r7, [r2, #\\o3]",
+    "    APP_D23 \\tm, \\t2, r7",
+    "    asrs r7, r1, #15",
+    "    adds r7, r7, #1",
+    "    cmp r7, #1",
+    "    bhi 4\\c\\()5f",
+    "    muls r1, r1, r1",
+    "    ldr r7, [r0, #\\s2]",
+    "    adds r7, r7, r1",
+    "    str r7, [r0, #\\s2]",
+    "    bcs 4\\c\\()0f",
+    "4\\c\\()1:",
+    "    asrs r7, r3, #15",
+    "    adds r7, r7, #1",
+    "    cmp r7, #1",
+    "    bhi 4\\c\\()6f",
+    "    muls r3, r3, r3",
+    "    ldr r7, [r0, #\\s3]",
+    "    adds r7, r7, r3",
+    "    str r7, [r0, #\\s3]",
+    "    bcs 4\\c\\()2f",
+    "4\\c\\()3:",
+    ".endm",
+    // APP_CARRY and the wide-square stubs of APP_LEVEL_R's level \c.
+    ".macro APP_CARRY_R c, s2, s3",
+    "    APP_CARRY \\c, \\s2, \\s3",
+    "4\\c\\()5:",
+    "    movs r7, #\\s2",
+    "    adds r7, r7, r0",
+    "    bl pico_imu_allan_add_square_wide",
+    "    b 4\\c\\()1b",
+    "4\\c\\()6:",
+    "    mov r1, r3",
+    "    movs r7, #\\s3",
+    "    adds r7, r7, r0",
+    "    bl pico_imu_allan_add_square_wide",
+    "    b 4\\c\\()3b",
+    ".endm",
+    // The four unit-stride levels of one sample (P = 8): leaves lo θ[t − 16] in r4. \mag = 1:
+    // with range-tested squares (any narrow input), else with one multiply (gate < 2^11).
+    ".macro APP_UNIT mag",
     "    ldr r4, [r2, #92]",
+    ".if \\mag",
+    "    APP_LEVEL_R r4, r6, 88, 84, 0, 16, 1",
+    "    APP_LEVEL_R r6, r4, 80, 72, 32, 48, 2",
+    "    APP_LEVEL_R r4, r6, 64, 48, 64, 80, 3",
+    "    APP_LEVEL_R r6, r4, 32, 0, 96, 112, 4",
+    "    b 499f",
+    "    APP_CARRY_R 1, 0, 16",
+    "    APP_CARRY_R 2, 32, 48",
+    "    APP_CARRY_R 3, 64, 80",
+    "    APP_CARRY_R 4, 96, 112",
+    ".else",
     "    APP_LEVEL r4, r6, 88, 84, 0, 16, 1",
     "    APP_LEVEL r6, r4, 80, 72, 32, 48, 2",
     "    APP_LEVEL r4, r6, 64, 48, 64, 80, 3",
@@ -162,17 +249,18 @@ core::arch::global_asm!(
     "    APP_CARRY 2, 32, 48",
     "    APP_CARRY 3, 64, 80",
     "    APP_CARRY 4, 96, 112",
+    ".endif",
     "499:",
     ".endm",
     // The cascade for a sample whose count t_c (before it) was even, as `cascade` does.
     // In: r0 = self, r5 = lo θ now, [sp] = lo θ[t_c − 24], [sp, #4] = t_c. Out: r6 = &theta,
     // [sp, #8] = self; r4 and r5 kept.
-    ".macro APP_CASCADE",
+    ".macro APP_CASCADE theta4, s",
     // Sample 1's cascade (its count t was even), as `cascade` does: θ[t − 24] enters level
     // K0's ring; the value it displaces moves on (`cascade_up`) if its index is a multiple of 4.
     // θ[t − 24] = θ[t+2] − (lo θ[t+2] − lo θ[t−24]) as i32, exact (26 samples below 2^11).
     "    str r0, [sp, #8]",
-    "    movs r6, #{theta4}",
+    "    movs r6, #\\theta4",
     "    lsls r6, r6, #2",
     "    adds r6, r0, r6", // r6 = &theta from here on
     "    ldr r3, [r6, #4]",
@@ -236,7 +324,7 @@ core::arch::global_asm!(
     "    adds r2, #96",
     "    mov r4, r1",
     "    subs r4, r4, r6",
-    "    cmp r4, #{heads0} + {s}",
+    "    cmp r4, #{heads0} + \\s",
     "    bne 24b",
     "26:",
     "    mov r4, r12",
@@ -246,7 +334,46 @@ core::arch::global_asm!(
     ".endm",
     // The strided levels for a sample whose count (before it) was odd, as `strided` does.
     // In: r0 = self, r4 = lo θ[t − 16], r5 = lo θ[t], r6 = &theta. Uses [sp] to [sp, #8].
-    ".macro APP_STRIDED",
+    // Σ D2² += D2² (r1) and Σ D3² += D3² (r3) for the sums at r2: one multiply when |D| < 2^15,
+    // else `add_square_wide`; l numbers the labels. Clobbers r1, r3, r7.
+    ".macro APP_SQUARES l",
+    "    asrs r7, r1, #15",
+    "    adds r7, r7, #1",
+    "    cmp r7, #1",
+    "    bhi \\l\\()0f",
+    "    muls r1, r1, r1",
+    "    ldr r7, [r2, #0]",
+    "    adds r7, r7, r1",
+    "    str r7, [r2, #0]",
+    "    bcc \\l\\()1f",
+    "    adds r7, r2, #4",
+    "    bl pico_imu_allan_carry",
+    "    b \\l\\()1f",
+    "\\l\\()0:",
+    "    mov r7, r2",
+    "    bl pico_imu_allan_add_square_wide",
+    "\\l\\()1:", // Σ D3² += D3², the same way
+    "    asrs r7, r3, #15",
+    "    adds r7, r7, #1",
+    "    cmp r7, #1",
+    "    bhi \\l\\()2f",
+    "    muls r3, r3, r3",
+    "    ldr r7, [r2, #16]",
+    "    adds r7, r7, r3",
+    "    str r7, [r2, #16]",
+    "    bcc \\l\\()3f",
+    "    movs r7, #20",
+    "    adds r7, r7, r2",
+    "    bl pico_imu_allan_carry",
+    "    b \\l\\()3f",
+    "\\l\\()2:",
+    "    mov r1, r3",
+    "    mov r7, r2",
+    "    adds r7, #16",
+    "    bl pico_imu_allan_add_square_wide",
+    "\\l\\()3:",
+    ".endm",
+    ".macro APP_STRIDED s, mag",
     // Sample 2's strided levels (its count t+1 was odd), as `strided` does: level K0 here when
     // it is full and narrow and its differences are below 2^16 (gate < 2^10), else `strided`.
     "    ldrb r1, [r6, #{full}]",
@@ -259,10 +386,12 @@ core::arch::global_asm!(
     "    bhi 17f",
     "    b 10f",
     "17:",
+    ".if \\mag == 0",
     "    ldr r2, [r6, #{gate}]",
     "    lsrs r2, r2, #10",
     "    beq 18f",
     "    b 10f",
+    ".endif",
     "18:",
     "    str r1, [sp, #4]", // fast = min(full, narrow)
     "    ldrb r2, [r6, #{heads0}]",
@@ -270,6 +399,12 @@ core::arch::global_asm!(
     "    adds r3, #{rings}", // &rings[0]
     "    APP_RING",
     "    APP_D23 r4, r7, r2",
+    ".if \\mag",
+    "    mov r4, r7", // lo θ[t − 2m]: level K0 + 1's θ[t − m]
+    "    mov r2, r0",
+    "    adds r2, #{k0sums}",
+    "    APP_SQUARES 5",
+    ".else",
     "    muls r1, r1, r1",
     "    muls r3, r3, r3",
     "    mov r4, r7", // lo θ[t − 2m]: level K0 + 1's θ[t − m]
@@ -290,6 +425,7 @@ core::arch::global_asm!(
     "    adds r7, r7, r2",
     "    bl pico_imu_allan_carry",
     "2:",
+    ".endif",
     "    ldr r1, [r6, #{t}]",
     "    lsls r1, r1, #30",
     "    bmi 11f",
@@ -319,45 +455,10 @@ core::arch::global_asm!(
     "    lsls r2, r2, #5",
     "    adds r2, r2, r0",
     "    adds r2, #{k0sums}", // &sums[K0 + j]
-    // Σ D2² += D2²: one multiply when |D2| < 2^15, else `add_square_wide`.
-    "    asrs r7, r1, #15",
-    "    adds r7, r7, #1",
-    "    cmp r7, #1",
-    "    bhi 20f",
-    "    muls r1, r1, r1",
-    "    ldr r7, [r2, #0]",
-    "    adds r7, r7, r1",
-    "    str r7, [r2, #0]",
-    "    bcc 21f",
-    "    adds r7, r2, #4",
-    "    bl pico_imu_allan_carry",
-    "    b 21f",
-    "20:",
-    "    mov r7, r2",
-    "    bl pico_imu_allan_add_square_wide",
-    "21:", // Σ D3² += D3², the same way
-    "    asrs r7, r3, #15",
-    "    adds r7, r7, #1",
-    "    cmp r7, #1",
-    "    bhi 22f",
-    "    muls r3, r3, r3",
-    "    ldr r7, [r2, #16]",
-    "    adds r7, r7, r3",
-    "    str r7, [r2, #16]",
-    "    bcc 23f",
-    "    movs r7, #20",
-    "    adds r7, r7, r2",
-    "    bl pico_imu_allan_carry",
-    "    b 23f",
-    "22:",
-    "    mov r1, r3",
-    "    mov r7, r2",
-    "    adds r7, #16",
-    "    bl pico_imu_allan_add_square_wide",
-    "23:",
+    "    APP_SQUARES 2",
     "    ldr r1, [sp, #0]",
     "    adds r1, r1, #1",
-    "    cmp r1, #{s}",
+    "    cmp r1, #\\s",
     "    beq 11f",
     "    str r1, [sp, #0]",
     "    ldr r2, [sp, #8]",
@@ -370,11 +471,19 @@ core::arch::global_asm!(
     "    b 11f",
     "13:",
     "    mov r1, r3",
+    ".if \\mag",
+    "    bl {mag_strided_tail}",
+    ".else",
     "    bl {strided_tail}",
+    ".endif",
     "    b 11f",
     "10:",
     "    mov r1, r4",
+    ".if \\mag",
+    "    bl {mag_strided}",
+    ".else",
     "    bl {strided}",
+    ".endif",
     "11:",
     ".endm",
     ".p2align 2",
@@ -449,30 +558,34 @@ core::arch::global_asm!(
     "    strb r6, [r3, #{head}]",
     // Sample 1: window at h + 1, θ = lo θ[t + 1] in r5.
     "    adds r2, r4, #4",
-    "    APP_UNIT",
+    "    APP_UNIT 0",
     "    str r5, [r2, #0]",
     "    str r5, [r2, #96]", // θ[t + 1] enters slot h + 1 and its mirror
     // Sample 2: window at h + 2.
     "    ldr r5, [sp, #8]",
     "    adds r2, r2, #4",
-    "    APP_UNIT",
-    "    APP_CASCADE",
-    "    APP_STRIDED",
+    "    APP_UNIT 0",
+    "    APP_CASCADE {theta4}, {s}",
+    "    APP_STRIDED {s}, 0",
     "    movs r0, #1",
     "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
     ".size pico_imu_allan_push_pair_small, . - pico_imu_allan_push_pair_small",
     // One sample: the same steps as the pair's first, then the cascade (even count) or the
     // strided levels (odd count). Used at the ends of bursts that do not split into pairs.
+    // name: the symbol; theta4 and s: the engine's `THETA / 4` and S; mag = 1: `MagEngine`'s
+    // routine (range-tested squares, any gate), 0: `DeviceEngine`'s (gate < 2^11).
+    ".macro APP_SINGLE name, theta4, s, mag",
+    ".pushsection .text.\\name,\"ax\",%progbits",
     ".p2align 2",
-    ".global pico_imu_allan_push_small",
-    ".type pico_imu_allan_push_small,%function",
+    ".global \\name",
+    ".type \\name,%function",
     ".thumb_func",
-    "pico_imu_allan_push_small:",
+    "\\name:",
     "    push {{r4, r5, r6, r7, lr}}",
     // [sp] = lo θ[t − 24], [sp, #4] = t, [sp, #8] scratch.
     "    sub sp, #12",
-    "    movs r3, #{theta4}",
+    "    movs r3, #\\theta4",
     "    lsls r3, r3, #2",
     "    adds r3, r0, r3",
     "    ldrb r4, [r3, #{head}]",
@@ -507,23 +620,27 @@ core::arch::global_asm!(
     "    subs r2, #96", // … or at slot 0 when h + 1 wraps
     "3:",
     "    strb r6, [r3, #{head}]",
-    "    APP_UNIT",
+    "    APP_UNIT \\mag",
     "    ldr r1, [sp, #4]",
     "    lsls r2, r1, #31",
     "    beq 30f",
     "    b 31f",
     "30:", // even count: the cascade (θ[t − 24] from θ[t + 1])
-    "    APP_CASCADE",
+    "    APP_CASCADE \\theta4, \\s",
     "    b 32f",
     "31:", // odd count: the strided levels
-    "    movs r6, #{theta4}",
+    "    movs r6, #\\theta4",
     "    lsls r6, r6, #2",
     "    adds r6, r0, r6",
-    "    APP_STRIDED",
+    "    APP_STRIDED \\s, \\mag",
     "32:",
     "    add sp, #12",
     "    pop {{r4, r5, r6, r7, pc}}",
-    ".size pico_imu_allan_push_small, . - pico_imu_allan_push_small",
+    ".size \\name, . - \\name",
+    ".popsection",
+    ".endm",
+    "    APP_SINGLE pico_imu_allan_push_small, {theta4}, {s}, 0",
+    "    APP_SINGLE pico_imu_allan_mag_push, {mag_theta4}, {mag_s}, 1",
     // [r7] (a Sum128) += r1² as a 64-bit square (any i32 r1); clobbers r1 and r7 only.
     ".type pico_imu_allan_add_square_wide,%function",
     ".thumb_func",
@@ -578,7 +695,13 @@ core::arch::global_asm!(
     "9:",
     "    bx lr",
     ".size pico_imu_allan_carry, . - pico_imu_allan_carry",
+    ".purgem APP_SINGLE",
+    ".purgem APP_STRIDED",
+    ".purgem APP_SQUARES",
+    ".purgem APP_CASCADE",
     ".purgem APP_UNIT",
+    ".purgem APP_CARRY_R",
+    ".purgem APP_LEVEL_R",
     ".purgem APP_CARRY",
     ".purgem APP_RING",
     ".purgem APP_D23",
@@ -599,4 +722,8 @@ core::arch::global_asm!(
     strided_tail = sym Engine::<8, 24, 12, 20>::strided_tail,
     s = const 20,
     strided = sym Engine::<8, 24, 12, 20>::strided,
+    mag_theta4 = const MAG_THETA / 4,
+    mag_s = const 18,
+    mag_strided_tail = sym Engine::<8, 22, 12, 18>::strided_tail,
+    mag_strided = sym Engine::<8, 22, 12, 18>::strided,
 );

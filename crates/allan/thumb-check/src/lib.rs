@@ -27,13 +27,19 @@
 //! [`Engine::first_difference`]: allan::Engine::first_difference
 #![no_std]
 
-use allan::DeviceEngine;
+use allan::{DeviceEngine, Engine, MagEngine};
 
 /// Calls compared in a run (each `push` or `push_pair` on both engines).
 pub const CASES: u32 = 22_000;
 
 /// The generator's seed.
 pub const SEED: u32 = 0x2545_f491;
+
+/// Calls compared in the magnetometer run ([`run_mag`]).
+pub const MAG_CASES: u32 = 10_000;
+
+/// Its generator's seed.
+pub const MAG_SEED: u32 = 0x6d61_6721;
 
 /// [`Report::state`] while the run goes on.
 pub const RUNNING: u32 = 0x5255_4e21;
@@ -44,6 +50,40 @@ pub const DONE: u32 = 0x444f_4e45;
 pub const ROUTINE_PAIR: u32 = 1;
 /// [`Report::first_routine`] of a mismatch in a `push` call.
 pub const ROUTINE_SINGLE: u32 = 2;
+
+/// Edge counters of the magnetometer run ([`run_mag`], [`Report::edges`]).
+pub mod mag_edge {
+    /// A steady sample with |z| = gate − 1 (the largest the routine takes without a new gate).
+    pub const GATE_MINUS_ONE: usize = 0;
+    /// A new largest |z| in the steady state (the gate is raised, the routine takes it).
+    pub const RAISED: usize = 1;
+    /// A steady sample with gate < 2^11 (the IMU engines' small range: no wide square).
+    pub const GATE_BELOW_2_11: usize = 2;
+    /// A steady sample with |z| ≥ 2^15 (every unit-stride square of a square wave is wide).
+    pub const Z_FROM_2_15: usize = 3;
+    /// A steady sample with |z| = 2^16 − 1 (one i16 extreme after the other).
+    pub const Z_I16_SPAN: usize = 4;
+    /// A sample of i16::MIN or i16::MAX.
+    pub const I16_EXTREME: usize = 5;
+    /// A steady sample of a square wave with |z| ≥ 2^14.
+    pub const SQUARE_WAVE: usize = 6;
+    /// A steady sample at a count of 4096 or more (levels up to m = 2^10 full).
+    pub const LONG_SEGMENT: usize = 7;
+    /// A sample with |z| ≥ 2^26 (a wide base ring: the routine must not run).
+    pub const WIDE: usize = 8;
+    /// Their names, for reports.
+    pub const NAMES: [&str; super::edge::COUNT] = [
+        "|z| = gate - 1",
+        "gate raised",
+        "gate < 2^11",
+        "|z| >= 2^15",
+        "|z| = 2^16 - 1",
+        "i16 extremes",
+        "square waves at |z| >= 2^14",
+        "counts >= 4096",
+        "|z| >= 2^26",
+    ];
+}
 
 /// Edge counters ([`Report::edges`]), each the number of calls that hit that edge.
 pub mod edge {
@@ -488,6 +528,121 @@ pub fn run(report: &mut Report, a: &mut DeviceEngine, b: &mut DeviceEngine, case
     report.state = DONE;
 }
 
+/// The magnetometer's engines (`MagEngine`, single samples, the firmware's way): two engines in
+/// lock step as in [`run`], engine A through [`Engine::push`] (the Thumb routine
+/// `pico_imu_allan_mag_push` for every steady sample, whatever its size), B through
+/// [`Engine::push_portable`]. The inputs are the QMC5883L's: i16 counts around a random field,
+/// noise and square waves up to the whole i16 span (|z| = 2^16 − 1: the widest unit-stride and
+/// strided-level squares), i16 extremes, and now and then calibrated values beyond i16 (up to
+/// |z| ≥ 2^26, where the routine must decline). Only `single_*` counts are used in `report`.
+///
+/// [`Engine::push`]: allan::Engine::push
+/// [`Engine::push_portable`]: allan::Engine::push_portable
+pub fn run_mag(report: &mut Report, a: &mut MagEngine, b: &mut MagEngine, cases: u32, seed: u32) {
+    *report = Report::new();
+    report.state = RUNNING;
+    a.reset();
+    b.reset();
+    let mut rng = Rng(seed | 1);
+    let mut mirror = Mirror::default();
+    report.segments = 1;
+    let mut episode = 0u32;
+    while report.cases < cases {
+        if rng.below(3) == 0 || (mirror.amax >= 1 << 11 && rng.coin()) {
+            a.gap();
+            b.gap();
+            mirror.gap();
+            report.segments += 1;
+        }
+        compare(report, a, b, None);
+        let base = if mirror.t == 0 {
+            match rng.below(8) {
+                0 => i16::MIN as i32,
+                1 => i16::MAX as i32,
+                _ => rng.within(1 << 15) as i32,
+            }
+        } else {
+            mirror.offset
+        };
+        // Every 40th episode is long (a segment past 4096 samples).
+        let long = episode % 40 == 5;
+        episode += 1;
+
+        let amp = match rng.below(8) {
+            0..=2 => 1 + rng.below(2047),
+            3..=4 => 2048 + rng.below(1 << 14),
+            5..=6 => 1 << 16,
+            _ if long => 1 << 16,
+            _ => 1 << (20 + rng.below(10)),
+        };
+        let square = !long && rng.below(3) == 0;
+        let half = 1 << rng.below(6);
+        let sign = if rng.coin() { 1 } else { -1 };
+        let len = if long {
+            4200 + rng.below(400)
+        } else {
+            1 + rng.below(96)
+        };
+        for k in 0..len {
+            if report.cases >= cases {
+                break;
+            }
+            let v = if square {
+                let v = if (k / half) & 1 == 0 { 1 } else { -1 };
+                base as i64 + sign * v * amp as i64
+            } else if amp > 1 << 16 {
+                base as i64 + rng.within(amp)
+            } else if amp == 1 << 16 && rng.below(16) == 0 {
+                // An i16 extreme now and then: |z| up to 2^16 − 1.
+                if rng.coin() {
+                    i16::MIN as i64
+                } else {
+                    i16::MAX as i64
+                }
+            } else {
+                base as i64 + rng.within(amp)
+            };
+            // Raw counts are i16; calibrated ones (`amp` > 2^16) may go beyond.
+            let y = if amp > 1 << 16 {
+                v.clamp(i32::MIN as i64, i32::MAX as i64) as i32
+            } else {
+                v.clamp(i16::MIN as i64, i16::MAX as i64) as i32
+            };
+            let t = mirror.t;
+            let gate = mirror.gate();
+            let z = mirror.z_abs(y);
+            let taken_predicted = gate != 0 && z.max(gate - 1) < 1 << 26;
+            let e = &mut report.edges;
+            if taken_predicted {
+                e[mag_edge::GATE_MINUS_ONE] += (z + 1 == gate) as u32;
+                e[mag_edge::RAISED] += (z >= gate) as u32;
+                e[mag_edge::GATE_BELOW_2_11] += (gate < 1 << 11) as u32;
+                e[mag_edge::Z_FROM_2_15] += (z >= 1 << 15) as u32;
+                e[mag_edge::Z_I16_SPAN] += (z == (1 << 16) - 1) as u32;
+                e[mag_edge::SQUARE_WAVE] += (square && z >= 1 << 14) as u32;
+                e[mag_edge::LONG_SEGMENT] += (t >= 4096) as u32;
+            }
+            e[mag_edge::I16_EXTREME] += (y == i16::MIN as i32 || y == i16::MAX as i32) as u32;
+            e[mag_edge::WIDE] += (z >= 1 << 26) as u32;
+            mirror.push(y);
+            report.single_predicted += taken_predicted as u32;
+            let taken = a.push_traced(y);
+            b.push_portable(y);
+            report.single_calls += 1;
+            report.single_taken += taken as u32;
+            compare(
+                report,
+                a,
+                b,
+                Some((ROUTINE_SINGLE, [y, 0], 2 * taken as u32, t)),
+            );
+            report.cases += 1;
+            report.max_t = report.max_t.max(mirror.t.min(u32::MAX as u64) as u32);
+        }
+    }
+    report.state = DONE;
+}
+
 /// Counts the edges sample `y` hits when pushed now.
 fn note_edges(report: &mut Report, mirror: &Mirror, y: i32, square: bool) {
     let gate = mirror.gate();
@@ -528,10 +683,10 @@ fn note_edges(report: &mut Report, mirror: &Mirror, y: i32, square: bool) {
 
 /// Compares the engines after call `case` (`None`: after a reset or gap); on a difference records
 /// it (the first one in full) and sets A back to B's state.
-fn compare(
+fn compare<const P: usize, const L: usize, const R: usize, const S: usize>(
     report: &mut Report,
-    a: &mut DeviceEngine,
-    b: &DeviceEngine,
+    a: &mut Engine<P, L, R, S>,
+    b: &Engine<P, L, R, S>,
     call: Option<(u32, [i32; 2], u32, u64)>,
 ) {
     let Some(field) = a.first_difference(b) else {
@@ -583,6 +738,29 @@ mod tests {
         assert!(report.pair_predicted >= 5000 && report.single_predicted >= 5000);
         for (i, &n) in report.edges.iter().enumerate() {
             assert!(n > 0, "edge `{}` never hit", edge::NAMES[i]);
+        }
+    }
+
+    /// The same for the magnetometer run: no difference, most samples offered to the routine,
+    /// every edge hit.
+    #[test]
+    fn a_host_mag_run_finds_no_difference_and_covers_the_edges() {
+        let mut report = Box::new(Report::new());
+        let (mut a, mut b) = (Box::new(MagEngine::new()), Box::new(MagEngine::new()));
+        run_mag(&mut report, &mut a, &mut b, MAG_CASES, MAG_SEED);
+        std::println!("{report:?}");
+        assert_eq!(report.state, DONE);
+        assert_eq!(report.cases, MAG_CASES);
+        assert_eq!(report.mismatches, 0);
+        assert_eq!(report.single_taken, 0, "no Thumb code on the host");
+        assert!(
+            report.single_predicted * 2 >= report.single_calls,
+            "the Thumb routine would take only {} of {} samples",
+            report.single_predicted,
+            report.single_calls
+        );
+        for (i, &n) in report.edges.iter().enumerate() {
+            assert!(n > 0, "edge `{}` never hit", mag_edge::NAMES[i]);
         }
     }
 }
