@@ -1,7 +1,7 @@
 //! The per-sample entry points and the steady-state path: once the base ring is full and the
 //! unit-stride levels are narrow, every sample with |z| below the gate takes `push_steady`
 //! (or, for a [`DeviceEngine`](super::DeviceEngine) with the `thumb-asm` feature on ARM, the
-//! hand-scheduled Thumb routines of `thumb.rs`).
+//! hand-scheduled Thumb routines of `thumb.rs`; a [`MagEngine`](super::MagEngine), its own).
 
 #[cfg(all(target_arch = "arm", feature = "thumb-asm"))]
 use super::{thumb, DeviceEngine, MagEngine, DEVICE_PARAMS, MAG_PARAMS};
@@ -9,14 +9,15 @@ use super::{Engine, Sum128};
 
 /// Which Thumb routines took the samples of an [`Engine::push_pair_traced`] call (`false` and 0
 /// off ARM, without `thumb-asm`, and for engines other than
-/// [`DeviceEngine`](super::DeviceEngine)).
+/// [`DeviceEngine`](super::DeviceEngine) and [`MagEngine`](super::MagEngine); a `MagEngine`'s
+/// samples are counted in `singles`).
 #[doc(hidden)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ThumbTaken {
     /// `pico_imu_allan_push_pair_small` took both samples.
     pub pair: bool,
-    /// Samples `pico_imu_allan_push_small` took one at a time (0, 1 or 2), when the pair
-    /// routine declined them.
+    /// Samples `pico_imu_allan_push_small` (`pico_imu_allan_mag_push` for a `MagEngine`) took
+    /// one at a time (0, 1 or 2), when the pair routine declined them.
     pub singles: u8,
 }
 
@@ -36,9 +37,9 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
         self.push_with::<false>(y);
     }
 
-    /// [`Engine::push`], also saying whether the Thumb routine `pico_imu_allan_push_small` took
-    /// the sample (never off ARM or without `thumb-asm`), so a test can tell that the code it
-    /// checks actually ran.
+    /// [`Engine::push`], also saying whether a Thumb routine (`pico_imu_allan_push_small`, or
+    /// `pico_imu_allan_mag_push` for a [`MagEngine`](super::MagEngine)) took the sample (never
+    /// off ARM or without `thumb-asm`), so a test can tell that the code it checks actually ran.
     #[doc(hidden)]
     #[inline]
     pub fn push_traced(&mut self, y: i32) -> bool {
@@ -91,7 +92,8 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// (`stream/thumb.rs`) when they are steady-state samples and the segment's count is even
     /// (feed a segment in pairs from its start to keep it so); everything else, and every other
     /// build, goes through [`Engine::push`]. Single samples of a `DeviceEngine` in the steady
-    /// state take the same Thumb code, one at a time.
+    /// state take the same Thumb code, one at a time; a [`MagEngine`](super::MagEngine)'s steady
+    /// samples, of any size, take their own routine (range-tested squares) one at a time.
     #[inline]
     pub fn push_pair(&mut self, y0: i32, y1: i32) {
         self.push_pair_with(y0, y1);

@@ -8,7 +8,12 @@
 //! (the Rust path takes the pair then). It does exactly what two calls of `push_steady::<true>`
 //! do, in the same 32-bit arithmetic, so the sums are bit for bit the same (the emulator's
 //! end-to-end test compares the device's tables with the host's Rust engine). A second routine
-//! does the same for one sample of either parity (`push_small`, from [`Engine::push`]).
+//! does the same for one sample of either parity (`push_small`, from [`Engine::push`]), and a
+//! second instance of it serves the magnetometer's [`MagEngine`] (`push_mag`): the same steps
+//! with every square range-tested (one multiply when |D| < 2^15, else a 64-bit square out of
+//! line), so it takes every steady sample whatever the gate (the QMC5883L's counts at the
+//! bench's noise reach |y − c| ≈ 2^13, its i16 extremes 2^16 − 1); only `theta`'s offset and S
+//! differ in `MagEngine`'s layout.
 //!
 //! The pair, step by step:
 //!

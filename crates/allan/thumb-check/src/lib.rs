@@ -1,6 +1,7 @@
 //! Per-call differential test of allan's hand-written Thumb routines
-//! (`pico_imu_allan_push_pair_small`, `pico_imu_allan_push_small` in
-//! crates/allan/src/stream/thumb.rs) against the pure-Rust path they replace.
+//! (`pico_imu_allan_push_pair_small`, `pico_imu_allan_push_small`,
+//! `pico_imu_allan_mag_push` in crates/allan/src/stream/thumb.rs) against the pure-Rust path
+//! they replace. The magnetometer's routine has its own run, [`run_mag`].
 //!
 //! Two [`DeviceEngine`]s run in lock step on one deterministic stream of calls: engine A takes
 //! every call the firmware's way ([`Engine::push_pair`] / [`Engine::push`], which enter the Thumb
