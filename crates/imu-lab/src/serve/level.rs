@@ -96,19 +96,7 @@ pub fn heading_coverage(p: &[[f64; 2]]) -> f64 {
 mod tests {
     use super::*;
 
-    fn rng() -> (u64, impl FnMut() -> f64) {
-        let key = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos() as u64;
-        let mut s = key | 1;
-        (key, move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        })
-    }
+    use crate::serve::tests::rng;
 
     /// An arc of a random span around a random hard iron (with noise): the coverage is the
     /// span's share of the 36 bins (within the two bins its ends may touch); the centre is the

@@ -205,20 +205,7 @@ pub fn physical_json(cal: &Calibration) -> serde_json::Value {
 mod tests {
     use super::*;
 
-    /// A uniform (0, 1) generator keyed by the clock (the key printed on failure).
-    fn rng() -> (u64, impl FnMut() -> f64) {
-        let key = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos() as u64;
-        let mut s = key | 1;
-        (key, move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        })
-    }
+    use crate::serve::tests::rng;
 
     /// A plausible calibration file with every section drawn at random.
     fn drawn(u: &mut impl FnMut() -> f64) -> CalFile {

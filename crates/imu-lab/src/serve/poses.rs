@@ -630,20 +630,7 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
 mod tests {
     use super::*;
 
-    /// A uniform (0, 1) generator with a key drawn from the clock (printed on failure).
-    fn rng() -> (u64, impl FnMut() -> f64) {
-        let key = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos() as u64;
-        let mut s = key | 1;
-        (key, move || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        })
-    }
+    use crate::serve::tests::rng;
 
     fn win(t: f64, a: [f64; 3], a_sd: f64, g: [f64; 3], g_sd: f64) -> Win {
         Win {

@@ -14,6 +14,22 @@ const HOST: &str = "127.0.0.1:8750";
 const TOKEN: &str = "0123456789abcdef0123456789abcdef";
 
 /// A contract CSV of white noise (σ drawn at random) at 100 Hz in deg/s, `n` rows.
+/// A uniform (0, 1) generator keyed by the clock, for the serve modules' randomized tests (the
+/// key is printed on failure).
+pub(super) fn rng() -> (u64, impl FnMut() -> f64) {
+    let key = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos() as u64;
+    let mut s = key | 1;
+    (key, move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    })
+}
+
 fn recording(n: usize) -> (tempfile::NamedTempFile, u64) {
     let key = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
