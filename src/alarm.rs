@@ -21,7 +21,7 @@ use embassy_rp::pac;
 use embassy_time::{Duration, Instant};
 use embedded_hal_async::delay::DelayNs;
 
-use crate::statics::{ALARM_FIRED, ALARM_WAKERS};
+use crate::statics::{ALARM_FIRED, ALARM_WAKERS, DMA_WAITING, DMA_WAKER};
 
 // Alarms are programmed in embassy-time ticks: they must be the TIMER's µs.
 const _: () = assert!(embassy_time::TICK_HZ == 1_000_000);
@@ -30,8 +30,8 @@ const _: () = assert!(embassy_time::TICK_HZ == 1_000_000);
 #[derive(Clone, Copy)]
 pub struct Alarm(usize);
 
-/// The I2C transaction deadline (`crate::bus`): transactions hold the bus mutex, so one runs
-/// at a time.
+/// The I2C transaction deadline (`crate::bus`, `crate::i2c_dma`): transactions hold the bus
+/// mutex, so one runs at a time.
 pub const DEADLINE: Alarm = Alarm(1);
 /// The magnetometer task's ticks.
 pub const MAG_TICK: Alarm = Alarm(2);
@@ -50,6 +50,15 @@ impl Alarm {
             return false;
         }
         true
+    }
+
+    /// Arm for the low 32 bits `at_us` of a µs instant well ahead, without a waker: a DMA
+    /// transfer's deadline ([`DEADLINE`]), whose interrupt wakes that transfer's waker. Two
+    /// stores, where [`Self::arm`] registers a waker (a critical section on the M0+) and reads
+    /// the 64-bit time again.
+    pub fn arm_deadline(self, at_us: u32) {
+        ALARM_FIRED[self.0].store(false, Ordering::Relaxed);
+        pac::TIMER.alarm(self.0).write_value(at_us);
     }
 
     /// Whether the alarm has fired since it was last armed.
@@ -149,6 +158,10 @@ fn fire(n: usize) {
 impl Handler<TIMER_IRQ_1> for AlarmHandler {
     unsafe fn on_interrupt() {
         fire(1);
+        // The deadline of a DMA transfer (`crate::i2c_dma`), armed without a waker of its own.
+        if DMA_WAITING.load(Ordering::Relaxed) {
+            DMA_WAKER.wake();
+        }
     }
 }
 

@@ -28,7 +28,7 @@ const RECOVERY_HALF_PERIOD_US: u32 = 5;
 /// Longest a transaction may take before it is abandoned: the longest one (a FIFO chunk of
 /// 16 × 14 bytes) needs ≈ 5.7 ms at 400 kHz. A slave holding SDA low can otherwise stall a
 /// transfer for ever; after a timeout the controller is re-created before the next use.
-const TRANSACTION_TIMEOUT_MS: u64 = 25;
+const TRANSACTION_TIMEOUT_US: u32 = 25_000;
 
 pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 
@@ -132,7 +132,7 @@ impl BusDevice {
 pub enum BusError {
     /// The controller's report (NACK, lost arbitration, …).
     Hal(i2c::Error),
-    /// Abandoned at its deadline ([`TRANSACTION_TIMEOUT_MS`]).
+    /// Abandoned at its deadline ([`TRANSACTION_TIMEOUT_US`]).
     Timeout,
 }
 
@@ -183,7 +183,7 @@ impl Bus {
 
 /// When a transaction started at `now` must be abandoned.
 fn deadline(now: Instant) -> Instant {
-    now + Duration::from_millis(TRANSACTION_TIMEOUT_MS)
+    now + Duration::from_micros(u64::from(TRANSACTION_TIMEOUT_US))
 }
 
 impl AsyncI2c for BusDevice {
@@ -207,13 +207,13 @@ impl AsyncI2c for BusDevice {
         };
         let bus = &mut *guard;
         bus.ready()?;
-        let deadline = deadline(Instant::now());
-        // SAFETY: the transfer is pinned on this future's stack and driven here to its end or
-        // dropped by `Deadline` (which aborts the channels) before this future returns; the
-        // sensor tasks await this future to completion, never leak it.
-        let r = {
-            let transfer = core::pin::pin!(unsafe { bus.dma.write_read(address, write, read) });
-            Deadline::new(deadline, transfer).await
+        // SAFETY: the transfer is driven here to its end (it keeps its own deadline), or dropped
+        // with this future (which aborts the channels); the sensor tasks await this future to
+        // completion, never leak it.
+        let r = unsafe {
+            bus.dma
+                .write_read(address, write, read, TRANSACTION_TIMEOUT_US)
+                .await
         };
         self.last_start_us = bus.dma.last_start_us();
         bus.ended(r)
@@ -255,7 +255,8 @@ impl BusDevice {
     }
 }
 
-/// `fut`, abandoned (`None`) once `deadline` has passed: a cheap `embassy_time::with_timeout`.
+/// `fut`, abandoned (`None`) once `deadline` has passed: a cheap `embassy_time::with_timeout`,
+/// for embassy's path (the DMA path keeps its own deadline, cheaper still: `crate::i2c_dma`).
 ///
 /// `with_timeout` polls a `Timer` on every poll, and each poll re-registers the task with
 /// embassy's timer queue, which walks the queue and re-arms the time driver's alarm; even one

@@ -7,13 +7,14 @@
 //! `n` read commands, RESTART on the first read after a write, STOP on the last) into
 //! IC_DATA_CMD; an RX channel paced by DREQ_I2C0_RX copies the received bytes from IC_DATA_CMD
 //! into the caller's buffer. The task sleeps until the RX channel's completion interrupt
-//! (`DmaDoneHandler` on DMA_IRQ_0) or an I2C TX_ABRT (a NACK, lost arbitration; `I2cAbortHandler`,
-//! bound next to embassy's I2C handler). The controller's STOP after the last byte (one SCL
-//! period) is not waited for: `settle` checks for its STOP_DET before the next transaction of
-//! either path. Both channels are aborted whenever a transfer ends early, including when its
-//! future is dropped (the transaction deadline in `bus.rs`), so the RX channel never writes into
-//! a buffer that is gone — provided the future is dropped or completed, never leaked: hence
-//! [`I2cDma::write_read`] is `unsafe`, with that as its contract.
+//! (`DmaDoneHandler` on DMA_IRQ_0), an I2C TX_ABRT (a NACK, lost arbitration; `I2cAbortHandler`,
+//! bound next to embassy's I2C handler), or the transfer's deadline (`alarm::DEADLINE`, armed
+//! with two stores: its interrupt wakes the same waker). The controller's STOP after the last
+//! byte (one SCL period) is not waited for: `settle` checks for its STOP_DET before the next
+//! transaction of either path. Both channels are aborted whenever a transfer ends early,
+//! including at its deadline and when its future is dropped, so the RX channel never writes
+//! into a buffer that is gone — provided the future is dropped or completed, never leaked:
+//! hence [`I2cDma::write_read`] is `unsafe`, with that as its contract.
 use core::future::poll_fn;
 use core::sync::atomic::{compiler_fence, Ordering};
 use core::task::Poll;
@@ -27,6 +28,7 @@ use embassy_rp::peripherals::{DMA_CH0, DMA_CH1};
 use embassy_rp::Peri;
 use embassy_time::{Duration, Instant};
 
+use crate::alarm;
 use crate::statics::{DMA_WAITING, DMA_WAKER};
 
 /// Longest read done by DMA; longer ones go through embassy's path. The MPU-6050 driver reads
@@ -97,6 +99,8 @@ pub struct I2cDma {
 enum Ending {
     Done,
     Abort(u32),
+    /// The transfer's deadline passed first.
+    Timeout,
 }
 
 impl I2cDma {
@@ -160,6 +164,7 @@ impl I2cDma {
 
     /// Write `write` (may be empty) to `address`, then read `read.len()` bytes (repeated start
     /// after a write), then STOP. `fits(write, read)` must hold (else `Err(InvalidReadBufferLength)`).
+    /// `None`: abandoned `timeout_us` after its start (the controller's state is then unknown).
     ///
     /// # Safety
     ///
@@ -172,9 +177,10 @@ impl I2cDma {
         address: u8,
         write: &[u8],
         read: &mut [u8],
-    ) -> Result<(), Error> {
+        timeout_us: u32,
+    ) -> Option<Result<(), Error>> {
         if !Self::fits(write, read) {
-            return Err(Error::InvalidReadBufferLength);
+            return Some(Err(Error::InvalidReadBufferLength));
         }
         let n = read.len();
         // Restore the read slots the previous transfer marked, then mark this one's.
@@ -191,8 +197,14 @@ impl I2cDma {
         let cmds = self.cmds[start..].as_ptr();
         // SAFETY: the command list lives in `self`, borrowed for the whole transfer; `read` is
         // the caller's, under this function's own contract.
-        let (waiting, running) =
-            unsafe { self.start(address, cmds, write.len() + n, read.as_mut_ptr(), n)? };
+        let started = unsafe { self.start(address, cmds, write.len() + n, read.as_mut_ptr(), n) };
+        let (waiting, running) = match started {
+            Ok(guards) => guards,
+            Err(e) => return Some(Err(e)),
+        };
+        // The deadline: the transfer's own TIMER alarm, whose interrupt wakes this transfer's
+        // waker (`alarm::DEADLINE`), so that arming it is two stores.
+        alarm::DEADLINE.arm_deadline((self.last_start_us as u32).wrapping_add(timeout_us));
         let ending = wait_end(pac::DMA.ch(RX_CH)).await;
         self.finish(ending, waiting, running)
     }
@@ -274,14 +286,20 @@ impl I2cDma {
         Ok((waiting, running))
     }
 
-    /// The end of a transfer begun by [`Self::start`].
+    /// The end of a transfer begun by [`Self::start`] (`None`: its deadline passed).
     #[inline(always)]
-    fn finish(&mut self, ending: Ending, waiting: Waiting, running: Running) -> Result<(), Error> {
+    fn finish(
+        &mut self,
+        ending: Ending,
+        waiting: Waiting,
+        running: Running,
+    ) -> Option<Result<(), Error>> {
         let i2c = pac::I2C0;
+        alarm::DEADLINE.disarm();
         match ending {
             // Both channels have run their counts out: only the DMA requests to turn off.
             Ending::Done => running.finished(),
-            Ending::Abort(_) => drop(running),
+            Ending::Abort(_) | Ending::Timeout => drop(running),
         }
         drop(waiting);
         i2c.ic_intr_mask()
@@ -290,15 +308,17 @@ impl I2cDma {
         match ending {
             Ending::Done => {
                 self.stop_pending = true;
-                Ok(())
+                Some(Ok(()))
             }
             Ending::Abort(source) => {
                 let reason = abort_reason(source);
                 // A NACK ends with a STOP the controller sends itself; after lost arbitration
                 // the bus is someone else's and no STOP of ours follows.
                 self.stop_pending = !matches!(reason, AbortReason::ArbitrationLoss);
-                Err(Error::Abort(reason))
+                Some(Err(Error::Abort(reason)))
             }
+            // The controller's state is unknown: the caller re-creates it.
+            Ending::Timeout => None,
         }
     }
 }
@@ -336,6 +356,7 @@ impl Running {
 
 impl Drop for Running {
     fn drop(&mut self) {
+        alarm::DEADLINE.disarm();
         pac::I2C0
             .ic_dma_cr()
             .write_value(pac::i2c::regs::IcDmaCr(0));
@@ -350,8 +371,8 @@ impl Drop for Running {
     }
 }
 
-/// Sleep until the RX channel has copied its last byte or TX_ABRT is raised; an abort is read
-/// and cleared (which also ends its hold on the TX FIFO).
+/// Sleep until the RX channel has copied its last byte, TX_ABRT is raised, or the transfer's
+/// deadline passes; an abort is read and cleared (which also ends its hold on the TX FIFO).
 async fn wait_end(rx: pac::dma::Channel) -> Ending {
     let i2c = pac::I2C0;
     let ended = || {
@@ -360,7 +381,10 @@ async fn wait_end(rx: pac::dma::Channel) -> Ending {
             i2c.ic_clr_tx_abrt().read();
             return Some(Ending::Abort(source));
         }
-        (!rx.ctrl_trig().read().busy()).then_some(Ending::Done)
+        if !rx.ctrl_trig().read().busy() {
+            return Some(Ending::Done);
+        }
+        alarm::DEADLINE.fired().then_some(Ending::Timeout)
     };
     poll_fn(|cx| {
         if let Some(e) = ended() {
