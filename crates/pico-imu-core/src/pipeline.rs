@@ -24,18 +24,46 @@ use crate::engines::{Engines, ImuInputs};
 use crate::msg::{FifoFrames, BURST_MAX};
 use crate::outbox::{FrameSink, Outbox};
 
-/// IMU samples per batch frame: 25, so that every 100 ms carries the same four batch encodings
-/// (with full 32-sample batches one window in eight carried four and the others three, and was
-/// the CPU's worst 100 ms window; docs/benchmarks.md). Below [`imu_proto::MAX_BATCH_IMU`]: a
-/// batch of any length up to it is the same message.
-pub const BATCH_IMU: usize = 25;
-const _: () = assert!(BATCH_IMU <= imu_proto::MAX_BATCH_IMU && 100 % BATCH_IMU == 0);
+/// IMU bursts per batch frame, in turn: a frame after two bursts, then one after three, so that
+/// any ten bursts in a row (100 ms at nominal clocks) carry four batch frames with the samples
+/// of ten bursts. Counted in samples instead (a frame every 25), a burst of 11 samples next to
+/// one of 9 moved a frame's boundary into the other burst and one 100 ms window in ten carried
+/// five frames (docs/benchmarks.md, "Flattening the heaviest windows").
+pub const BATCH_BURSTS: [u8; 2] = [2, 3];
 
-/// Attitude estimates per frame: five (25 ms), so every 100 ms carries four such frames; with
-/// four a frame (one magnetometer hand-over) the fifth frame's fixed costs (framing, queueing,
-/// the USB task) came to ≈ 30 cycles per ms more (docs/benchmarks.md).
-pub const ORIENTATIONS_PER_FRAME: usize = 5;
-const _: () = assert!(ORIENTATIONS_PER_FRAME <= MAX_ORIENTATIONS);
+/// The attitude estimates go out with the batch frame, right after it (every 2 or 3 bursts,
+/// 4 to 6 estimates), so that their frames follow the same turns; with no bursts (the IMU
+/// missing) a frame goes out when this many wait: [`MAX_ORIENTATIONS`], all a frame holds.
+pub const ORIENTATIONS_MAX_WAIT: usize = MAX_ORIENTATIONS;
+
+/// When the batch goes out: after the bursts of [`BATCH_BURSTS`] in turn. (A batch that would
+/// exceed [`imu_proto::MAX_BATCH_IMU`] samples goes out at once, before the sample that does
+/// not fit; three bursts of 11 do not fit, a rare event.)
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BatchTurns {
+    bursts: u8,
+    long: bool,
+}
+
+impl BatchTurns {
+    pub const fn new() -> Self {
+        Self {
+            bursts: 0,
+            long: false,
+        }
+    }
+
+    /// After a burst (an IMU message's samples): whether the batch goes out now.
+    pub fn after_burst(&mut self) -> bool {
+        self.bursts += 1;
+        if self.bursts < BATCH_BURSTS[usize::from(self.long)] {
+            return false;
+        }
+        self.bursts = 0;
+        self.long = !self.long;
+        true
+    }
+}
 
 /// What the sample path counts.
 #[derive(Debug, Clone, Copy, Default)]
@@ -67,6 +95,8 @@ pub struct Pipeline {
     pub(crate) mode: StreamMode,
     /// The batch being assembled, in its wire form (each sample encoded as it comes).
     batch: BatchWriter,
+    /// When it goes out.
+    batch_turns: BatchTurns,
     /// The slot expected next on each sensor's grid (`None` before its first sample).
     next_k: [Option<u32>; 2],
     /// The latest raw temperature, for the gyro's temperature term and the status.
@@ -100,6 +130,7 @@ impl Pipeline {
             scales,
             mode: StreamMode::Calibrated,
             batch: BatchWriter::new(),
+            batch_turns: BatchTurns::new(),
             next_k: [None; 2],
             last_temp: None,
             counts: SampleCounts::default(),
@@ -155,7 +186,8 @@ impl Pipeline {
     }
 
     /// Run the oldest queued attitude update (integer arithmetic, ≈ 2,350 cycles on the M0+);
-    /// its estimate is streamed (not in mode `Off`), five to a frame. Returns whether more wait.
+    /// its estimate is streamed (not in mode `Off`), with the next batch frame or when
+    /// [`ORIENTATIONS_MAX_WAIT`] wait. Returns whether more wait.
     pub fn attitude_step(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) -> bool {
         // Worked on in place and dropped after: popped by value, the 64-byte entry was copied
         // byte by byte (≈ 270 cycles an update).
@@ -191,9 +223,8 @@ impl Pipeline {
                 heading_deg: a.heading_deg,
                 state: a.state,
             });
-            if self.orient.len() >= ORIENTATIONS_PER_FRAME {
-                outbox.send_orientations(&self.orient, sink);
-                self.orient.clear();
+            if self.orient.len() >= ORIENTATIONS_MAX_WAIT {
+                self.send_orientations(outbox, sink);
             }
         }
         cycle_marker::leave();
@@ -372,9 +403,10 @@ impl Pipeline {
                     let _ = self.batch.push_imu(seq, t_us, accel, gyro, *temp);
                 }
                 seq = seq.wrapping_add(1);
-                if self.batch.imu_len() >= BATCH_IMU {
-                    self.flush(outbox, sink);
-                }
+            }
+            if self.batch_turns.after_burst() {
+                self.flush(outbox, sink);
+                self.send_orientations(outbox, sink);
             }
         }
         cycle_marker::leave();
@@ -420,6 +452,15 @@ impl Pipeline {
             }
         }
         cycle_marker::leave();
+    }
+
+    /// Send the attitude estimates waiting (if any).
+    fn send_orientations(&mut self, outbox: &mut Outbox, sink: &mut impl FrameSink) {
+        if self.orient.is_empty() {
+            return;
+        }
+        outbox.send_orientations(&self.orient, sink);
+        self.orient.clear();
     }
 
     /// Send the batch assembled so far (if any).
@@ -496,7 +537,7 @@ mod tests {
             let mut sink = Sink(std::vec::Vec::new());
             let fb = layout.bytes();
             let mut frames = FifoFrames::new(layout);
-            frames.n = BATCH_IMU.min(BURST_MAX);
+            frames.n = BURST_MAX;
             let values: std::vec::Vec<std::vec::Vec<i16>> = (0..frames.n)
                 .map(|_| (0..fb / 2).map(|_| next()).collect())
                 .collect();
@@ -534,8 +575,9 @@ mod tests {
         }
     }
 
-    /// Magnetometer samples queue updates; stepping runs them and sends the estimates four to
-    /// a frame; a full queue keeps the gyro's sums for the next update (no rotation lost).
+    /// Magnetometer samples queue updates; stepping runs them and their estimates wait for the
+    /// next batch frame; a full queue keeps the gyro's sums for the next update (no rotation
+    /// lost).
     #[test]
     fn updates_queue_run_and_fold_when_full() {
         let mut p = Pipeline::new(crate::config::scales());
@@ -564,15 +606,177 @@ mod tests {
             steps += 1;
         }
         assert_eq!(steps + 1, 8);
+        let estimates = |sink: &Sink| {
+            let mut reader = FrameReader::<4096>::new();
+            let mut estimates = std::vec::Vec::new();
+            for &byte in &sink.0 {
+                if let Some(Ok(DeviceMsg::Orientation(o))) = reader.push::<DeviceMsg>(byte) {
+                    estimates.extend(o);
+                }
+            }
+            estimates
+        };
+        // The first update starts the filter (no estimate); seven more wait for the batch.
+        assert!(estimates(&sink).is_empty());
+        // 13 bursts so far: turns after bursts 2, 5, 7, 10 and 12; the next after 15.
+        let (b, st) = burst(130, 131);
+        p.imu_burst(&b, &st, None, &mut out, &mut sink);
+        assert!(estimates(&sink).is_empty(), "after burst 14");
+        let (b, st) = burst(140, 131);
+        p.imu_burst(&b, &st, None, &mut out, &mut sink);
+        let got = estimates(&sink);
+        assert_eq!(got.len(), 7, "{got:?}");
+        assert!(got.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+    }
+
+    /// Without a batch turn (the IMU's sums given directly) the estimates go out when a
+    /// frame's worth waits.
+    #[test]
+    fn estimates_go_out_without_turns_when_a_frame_is_full() {
+        let mut p = Pipeline::new(crate::config::scales());
+        let mut out = Outbox::new();
+        let mut sink = Sink(std::vec::Vec::new());
+        let mut frames = 0;
         let mut reader = FrameReader::<4096>::new();
-        let mut estimates = std::vec::Vec::new();
-        for &byte in &sink.0 {
-            if let Some(Ok(DeviceMsg::Orientation(o))) = reader.push::<DeviceMsg>(byte) {
-                estimates.extend(o);
+        p.imu_period = 1000 * US;
+        // The first update starts the filter and gives no estimate.
+        for k in 0..=(3 * ORIENTATIONS_MAX_WAIT) as u32 {
+            p.acc.add_sums(&[0, 0, 5 * 8192], &[0, 0, 0], 5);
+            p.mag_sample(
+                k,
+                5000 * u64::from(k),
+                [3000, 0, -5000],
+                None,
+                &mut out,
+                &mut sink,
+            );
+            while p.attitude_step(&mut out, &mut sink) {}
+            for &byte in &std::mem::take(&mut sink.0) {
+                if let Some(Ok(DeviceMsg::Orientation(o))) = reader.push::<DeviceMsg>(byte) {
+                    assert_eq!(o.len(), ORIENTATIONS_MAX_WAIT, "estimate {k}");
+                    frames += 1;
+                }
             }
         }
-        // The first update starts the filter (no estimate); seven more, one frame of them sent.
-        assert_eq!(estimates.len(), ORIENTATIONS_PER_FRAME, "{estimates:?}");
-        assert!(estimates.windows(2).all(|w| w[1].seq == w[0].seq + 1));
+        assert_eq!(frames, 3);
+    }
+
+    /// The batch turns: after 2 bursts, then 3, in turn, from any start: any ten bursts in a
+    /// row hold four turns, and the bursts between two turns alternate between 2 and 3.
+    #[test]
+    fn batch_turns_hold_four_in_any_ten_bursts() {
+        let mut x = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1;
+        for _ in 0..50 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            let n = 20 + (x % 2000) as usize;
+            let mut t = BatchTurns::new();
+            let turns: std::vec::Vec<bool> = (0..n).map(|_| t.after_burst()).collect();
+            for (i, w) in turns.windows(10).enumerate() {
+                let c = w.iter().filter(|&&b| b).count();
+                assert_eq!(c, 4, "bursts {i}..{}: {c} turns", i + 10);
+            }
+            let at: std::vec::Vec<usize> = (0..n).filter(|&i| turns[i]).collect();
+            assert_eq!(at[0], 1, "the first turn after two bursts");
+            for (j, g) in at.windows(2).map(|w| w[1] - w[0]).enumerate() {
+                assert_eq!(g, if j % 2 == 0 { 3 } else { 2 }, "turn {j}");
+            }
+        }
+    }
+
+    /// Bursts of 8 to 12 samples (random): every sample reaches a batch frame once and in
+    /// order, a batch frame goes out exactly at the turns, and the attitude estimates follow
+    /// it; a batch that would pass 32 samples goes out at once, 32 in it.
+    #[test]
+    fn batches_follow_the_burst_turns() {
+        let mut x = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1;
+        let mut next = move |m: u64| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x % m
+        };
+        let mut p = Pipeline::new(crate::config::scales());
+        let mut out = Outbox::new();
+        let mut sink = Sink(std::vec::Vec::new());
+        let mut turns = BatchTurns::new();
+        let mut reader = FrameReader::<4096>::new();
+        let (mut k, mut seqs, mut mag_k) = (0u32, std::vec::Vec::new(), 0u32);
+        // IMU samples in the batch.
+        let mut held = 0;
+        for b in 0..200 {
+            let n = 8 + next(5) as usize;
+            let mut frames = FifoFrames::new(FifoFrame::AccelTempGyro);
+            frames.n = n;
+            // At rest, z up: the filter's estimates need gravity.
+            for f in frames.bytes.chunks_exact_mut(14).take(n) {
+                f[4..6].copy_from_slice(&8192i16.to_be_bytes());
+            }
+            let stamps = Stamps {
+                k0: k,
+                t0: u64::from(k) * 1000 * US,
+                period: 1000 * US,
+            };
+            k += n as u32;
+            p.imu_burst(&frames, &stamps, None, &mut out, &mut sink);
+            let turn = turns.after_burst();
+            held += n;
+            let full = held > imu_proto::MAX_BATCH_IMU;
+            if full {
+                held -= imu_proto::MAX_BATCH_IMU;
+            }
+            if turn {
+                held = 0;
+            }
+            // Two magnetometer samples a burst, their updates run after it.
+            for _ in 0..2 {
+                p.mag_sample(
+                    mag_k,
+                    5000 * u64::from(mag_k),
+                    [3000, 0, -5000],
+                    None,
+                    &mut out,
+                    &mut sink,
+                );
+                mag_k += 1;
+            }
+            while p.attitude_step(&mut out, &mut sink) {}
+            let mut kinds = std::vec::Vec::new();
+            for &byte in &std::mem::take(&mut sink.0) {
+                match reader.push::<DeviceMsg>(byte) {
+                    Some(Ok(DeviceMsg::Samples(s))) => {
+                        assert!(s.imu.len() <= imu_proto::MAX_BATCH_IMU);
+                        seqs.extend(s.imu.iter().map(|s| s.seq));
+                        kinds.push('b');
+                    }
+                    Some(Ok(DeviceMsg::Orientation(_))) => kinds.push('o'),
+                    _ => {}
+                }
+            }
+            // The filter's first updates give no estimate: the first turns may carry none.
+            let mut want: std::vec::Vec<char> = match turn {
+                false => vec![],
+                true if b < 2 && kinds.len() == usize::from(full) + 1 => vec!['b'],
+                true => vec!['b', 'o'],
+            };
+            if full {
+                want.insert(0, 'b');
+            }
+            assert_eq!(kinds, want, "burst {b}");
+        }
+        p.flush(&mut out, &mut sink);
+        reader.feed::<DeviceMsg>(&sink.0, |m| {
+            if let Ok(DeviceMsg::Samples(s)) = m {
+                seqs.extend(s.imu.iter().map(|s| s.seq));
+            }
+        });
+        assert_eq!(seqs, (0..k).collect::<std::vec::Vec<u32>>());
     }
 }
