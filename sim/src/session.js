@@ -81,6 +81,15 @@ export const LOG_TAIL_LINES = 200;
  */
 export const HOST_BACKLOG_BYTES = 256 * 1024;
 
+/**
+ * Bytes from the host the emulator holds before the device takes them (before enumeration, and
+ * queued for the OUT endpoint): 64 KiB. Past it the host's socket is paused, and TCP's flow
+ * control holds the host back, so a host that sends faster than the firmware reads (or before
+ * it can) neither grows the emulator's memory without bound nor loses a byte; reading resumes
+ * once half of it is taken (`Session.hostInBytes`).
+ */
+export const HOST_IN_BYTES = 64 * 1024;
+
 export class Session {
   /**
    * `defmtPrint`: the decoder's binary (default: found on PATH; null: keep the log raw).
@@ -109,7 +118,8 @@ export class Session {
     this.qmc = this.bus.attach(QMC_ADDR, new Qmc5883l(stream, { clockError: clock.qmc, record }));
     this.usb = new CdcHost(this.emu);
     // backlogPauses: the times emulated time waited for the host to read its backlog.
-    this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0, backlogPauses: 0, maxHostBacklog: 0 };
+    // hostInPauses: the times the host's socket was paused, its bytes not yet taken by the device.
+    this.usbStats = { toHost: 0, fromHost: 0, droppedToHost: 0, backlogPauses: 0, maxHostBacklog: 0, hostInPauses: 0 };
     this.client = null;
     this.usb.onData = (buf) => {
       if (this.client) {
@@ -187,6 +197,7 @@ export class Session {
       this.usbStats.fromHost += d.length;
       if (this.usb.connected) this.usb.write(d);
       else this.pendingFromHost = Buffer.concat([this.pendingFromHost ?? Buffer.alloc(0), d]);
+      this.paceHostIn();
     });
     const drop = () => {
       if (this.client !== sock) return;
@@ -217,6 +228,30 @@ export class Session {
     if (this.pendingFromHost && this.usb.connected) {
       this.usb.write(this.pendingFromHost);
       this.pendingFromHost = null;
+    }
+    this.paceHostIn();
+  }
+
+  /** Bytes from the host held by the emulator, not yet taken by the device. */
+  hostInBytes() {
+    const ep = this.usb.cdc.outEndpoint;
+    const queued = ep >= 0 ? this.emu.usbOut.queuedBytes(ep) : 0;
+    return (this.pendingFromHost?.length ?? 0) + queued;
+  }
+
+  /**
+   * Pauses the host's socket while it has more than `HOST_IN_BYTES` waiting, resumes it when
+   * half of that is taken (called on every arrival and from the run loop's poll hook).
+   */
+  paceHostIn() {
+    const sock = this.client;
+    if (!sock) return;
+    const held = this.hostInBytes();
+    if (!sock.isPaused() && held > HOST_IN_BYTES) {
+      sock.pause();
+      this.usbStats.hostInPauses++;
+    } else if (sock.isPaused() && held <= HOST_IN_BYTES / 2) {
+      sock.resume();
     }
   }
 

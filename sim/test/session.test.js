@@ -6,7 +6,7 @@ import { connect } from 'node:net';
 import { mkdtempSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
-import { Session } from '../src/session.js';
+import { Session, HOST_IN_BYTES } from '../src/session.js';
 import { generateStream } from '../src/stream.js';
 import { spinElf, until } from './helpers.js';
 
@@ -80,4 +80,38 @@ test('closing the session does not wait for a host that keeps its end open', { t
   assert.ok(Date.now() - t0 < 1500, `close took ${Date.now() - t0} ms`);
   a.destroy();
   b.destroy();
+});
+
+test('a host that sends faster than the device takes is paused, not buffered without bound, and loses nothing', { timeout: 20000 }, async () => {
+  const s = session();
+  const port = await s.listen(0);
+  const h = await host(port);
+  await until('the host to be served', () => s.client);
+  // Random bytes of a random length, 4 to 8 times the limit (the device is not enumerated:
+  // everything waits in the emulator).
+  const n = HOST_IN_BYTES * (4 + Math.floor(Math.random() * 5)) + Math.floor(Math.random() * 1000);
+  const sent = Buffer.alloc(n);
+  for (let i = 0; i < n; i++) sent[i] = Math.floor(Math.random() * 256);
+  h.write(sent);
+  await until('the host to be paused', () => s.usbStats.hostInPauses > 0);
+  await new Promise((r) => setTimeout(r, 100));
+  // One socket read (at most 64 KiB) may land after the limit is reached, no more.
+  assert.ok(s.hostInBytes() <= 2 * HOST_IN_BYTES, `${s.hostInBytes()} bytes held`);
+  assert.ok(s.usbStats.fromHost < n, 'every byte was taken in without waiting');
+  // The device takes what is held, a slice at a time: reading resumes, and every byte arrives
+  // once, in order.
+  const taken = [];
+  while (s.usbStats.fromHost < n || s.pendingFromHost?.length) {
+    if (s.pendingFromHost?.length) {
+      taken.push(Buffer.from(s.pendingFromHost));
+      s.pendingFromHost = null;
+    }
+    s.paceHostIn();
+    await new Promise((r) => setTimeout(r, 5));
+    assert.ok(s.hostInBytes() <= 2 * HOST_IN_BYTES, `${s.hostInBytes()} bytes held`);
+  }
+  assert.ok(Buffer.concat(taken).equals(sent), 'the bytes the device got differ from those sent');
+  assert.ok(s.usbStats.hostInPauses >= 2, `${s.usbStats.hostInPauses} pauses`);
+  h.destroy();
+  await s.close();
 });
