@@ -64,3 +64,41 @@ pub mod schedule;
 pub mod sensor;
 pub mod settings;
 pub mod tables;
+
+/// What the unit tests share: the generator, a clock-keyed one, and a sink that keeps every
+/// frame's bytes.
+#[cfg(test)]
+pub(crate) mod test_util {
+    /// A xorshift64 stream from `seed` (not 0).
+    pub fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        }
+    }
+
+    /// A xorshift64 stream keyed by the clock (a fresh realisation every run); the key is
+    /// printed, so that a failure can be replayed with [`xorshift`].
+    pub fn clock_keyed() -> impl FnMut() -> u64 {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1;
+        std::println!("generator key {key:#x}");
+        xorshift(key)
+    }
+
+    /// A [`crate::outbox::FrameSink`] with unlimited room that keeps every frame's bytes.
+    pub struct Sink(pub std::vec::Vec<u8>);
+
+    impl crate::outbox::FrameSink for Sink {
+        fn room(&self) -> usize {
+            usize::MAX
+        }
+        fn put(&mut self, frame: &[u8]) {
+            self.0.extend_from_slice(frame);
+        }
+    }
+}

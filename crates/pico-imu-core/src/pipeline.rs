@@ -485,16 +485,7 @@ mod tests {
     use super::*;
     use imu_proto::FrameReader;
 
-    struct Sink(std::vec::Vec<u8>);
-
-    impl FrameSink for Sink {
-        fn room(&self) -> usize {
-            usize::MAX
-        }
-        fn put(&mut self, frame: &[u8]) {
-            self.0.extend_from_slice(frame);
-        }
-    }
+    use crate::test_util::{clock_keyed, Sink};
 
     /// Ten FIFO frames without the temperature (12 bytes each, big-endian as the part sends
     /// them): at rest, `gyro_z` counts about z.
@@ -520,16 +511,8 @@ mod tests {
     /// the temperature only from the 14-byte layout, one slot per frame.
     #[test]
     fn raw_frames_reach_the_batch_decoded() {
-        let mut x = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(1, |d| d.as_nanos() as u64)
-            | 1;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x as i16
-        };
+        let mut rng = clock_keyed();
+        let mut next = move || rng() as i16;
         for layout in [FifoFrame::AccelTempGyro, FifoFrame::AccelGyro] {
             let mut p = Pipeline::new(crate::config::scales());
             p.mode = StreamMode::Raw;
@@ -665,15 +648,9 @@ mod tests {
     /// row hold four turns, and the bursts between two turns alternate between 2 and 3.
     #[test]
     fn batch_turns_hold_four_in_any_ten_bursts() {
-        let mut x = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(1, |d| d.as_nanos() as u64)
-            | 1;
+        let mut rng = clock_keyed();
         for _ in 0..50 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            let n = 20 + (x % 2000) as usize;
+            let n = 20 + (rng() % 2000) as usize;
             let mut t = BatchTurns::new();
             let turns: std::vec::Vec<bool> = (0..n).map(|_| t.after_burst()).collect();
             for (i, w) in turns.windows(10).enumerate() {
@@ -693,16 +670,8 @@ mod tests {
     /// it; a batch that would pass 32 samples goes out at once, 32 in it.
     #[test]
     fn batches_follow_the_burst_turns() {
-        let mut x = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(1, |d| d.as_nanos() as u64)
-            | 1;
-        let mut next = move |m: u64| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x % m
-        };
+        let mut rng = clock_keyed();
+        let mut next = move |m: u64| rng() % m;
         let mut p = Pipeline::new(crate::config::scales());
         let mut out = Outbox::new();
         let mut sink = Sink(std::vec::Vec::new());

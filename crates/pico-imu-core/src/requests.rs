@@ -295,16 +295,7 @@ mod tests {
     use crate::settings::DEFAULT_ORIENTATION;
     use imu_proto::FrameReader;
 
-    struct Sink(std::vec::Vec<u8>);
-
-    impl FrameSink for Sink {
-        fn room(&self) -> usize {
-            usize::MAX
-        }
-        fn put(&mut self, frame: &[u8]) {
-            self.0.extend_from_slice(frame);
-        }
-    }
+    use crate::test_util::Sink;
 
     impl Sink {
         /// The replies sent so far, emptied.

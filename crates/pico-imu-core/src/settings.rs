@@ -82,16 +82,8 @@ pub(crate) mod tests {
     /// Settings drawn from a generator seeded by the clock (a fresh realisation every run):
     /// every declination and reference `SetOrientation` accepts, and learnt references.
     pub(crate) fn settings(n: usize) -> std::vec::Vec<OrientationSetting> {
-        let mut x = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(1, |d| d.as_nanos() as u64)
-            | 1;
-        let mut next = move |lo: i64, hi: i64| {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            lo + (x % (hi - lo + 1) as u64) as i64
-        };
+        let mut rng = crate::test_util::clock_keyed();
+        let mut next = move |lo: i64, hi: i64| lo + (rng() % (hi - lo + 1) as u64) as i64;
         (0..n)
             .map(|_| {
                 let decl = next(-18_000, 18_000) as i16;

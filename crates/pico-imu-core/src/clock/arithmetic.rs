@@ -79,9 +79,9 @@ pub(super) fn floor_div(a: i64, p: u64) -> i64 {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_util::xorshift;
     use super::*;
     use crate::clock::{fine, US};
+    use crate::test_util::xorshift;
 
     #[test]
     fn products_by_halves_equal_multiplication() {

@@ -57,16 +57,3 @@ pub use fine::{fine, whole_us, Fine, FINE_BITS, US};
 pub use observation::{Fit, Seen};
 pub use sample_clock::{SampleClock, GUARD_EVERY, GUARD_MARGIN, JITTER, LOCKED_WIDTH, PROBE_WIDTH};
 pub use stamps::Stamps;
-
-#[cfg(test)]
-mod test_util {
-    /// A xorshift64 stream from `seed`.
-    pub fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
-        move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        }
-    }
-}

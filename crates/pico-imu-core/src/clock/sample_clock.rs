@@ -666,8 +666,8 @@ mod tests {
 #[cfg(test)]
 mod late_line_tests {
     use super::*;
-    use crate::clock::test_util::xorshift;
     use crate::clock::US;
+    use crate::test_util::xorshift;
 
     /// ns → [`Fine`].
     fn f(ns: f64) -> Fine {
