@@ -25,10 +25,8 @@ use pico_imu_core::clock::{fine, Fine};
 
 /// Half an SCL period of the recovery clock, µs (≈ 100 kHz, slow enough for any slave).
 const RECOVERY_HALF_PERIOD_US: u32 = 5;
-/// Longest a transaction may take before it is abandoned: the longest one (a FIFO chunk of
-/// 16 × 14 bytes) needs ≈ 5.7 ms at 400 kHz. A slave holding SDA low can otherwise stall a
-/// transfer for ever; after a timeout the controller is re-created before the next use.
-const TRANSACTION_TIMEOUT_US: u32 = 25_000;
+/// Longest a transaction may take before it is abandoned (`pico_imu_core::bus`).
+const TRANSACTION_TIMEOUT_US: u32 = pico_imu_core::bus::TRANSFER_TIMEOUT_US;
 
 pub type SharedBus = Mutex<NoopRawMutex, Bus>;
 
@@ -229,12 +227,58 @@ impl AsyncI2c for BusDevice {
                 self.write_read(address, w, r).await
             }
             [Operation::Read(r)] if I2cDma::fits(&[], r) => self.write_read(address, &[], r).await,
+            // Two register reads whose buffers lie end to end (a FIFO count and the frames
+            // after it): one DMA run receives both.
+            [Operation::Write(wa), Operation::Read(ra), Operation::Write(wb), Operation::Read(rb)]
+                if wa.len() == 1
+                    && wb.len() == 1
+                    && ra.as_ptr().wrapping_add(ra.len()) == rb.as_ptr()
+                    && I2cDma::fits_two(ra.len(), ra.len() + rb.len()) =>
+            {
+                let (n_first, n_rx) = (ra.len(), ra.len() + rb.len());
+                // SAFETY: `ra` and `rb` are one run of `n_rx` bytes, both borrowed until this
+                // transaction is over.
+                unsafe {
+                    self.read_two(address, [wa[0], wb[0]], n_first, ra.as_mut_ptr(), n_rx)
+                        .await
+                }
+            }
             _ => self.embassy_path(address, operations).await,
         }
     }
 }
 
 impl BusDevice {
+    /// [`I2cDma::read_two`] under the bus lock, as `write_read` does for one register.
+    ///
+    /// # Safety
+    ///
+    /// `rx` must be valid for `n_rx` bytes of writes until the returned future has completed or
+    /// been dropped; the future must not be leaked.
+    async unsafe fn read_two(
+        &mut self,
+        address: u8,
+        regs: [u8; 2],
+        n_first: usize,
+        rx: *mut u8,
+        n_rx: usize,
+    ) -> Result<(), BusError> {
+        let mut guard = match self.bus.try_lock() {
+            Ok(g) => g,
+            Err(_) => self.bus.lock().await,
+        };
+        let bus = &mut *guard;
+        bus.ready()?;
+        // SAFETY: under this function's contract; the transfer is driven to its end here.
+        let r = unsafe {
+            bus.dma
+                .read_two(address, regs, n_first, rx, n_rx, TRANSACTION_TIMEOUT_US)
+                .await
+        };
+        self.last_start_us = bus.dma.last_start_us();
+        bus.ended(r)
+    }
+
     /// Anything but a register read (the configuration's register writes): embassy-rp's
     /// interrupt-driven path, under the same deadline.
     async fn embassy_path(

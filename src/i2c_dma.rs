@@ -183,21 +183,22 @@ impl I2cDma {
             return Some(Err(Error::InvalidReadBufferLength));
         }
         let n = read.len();
-        // Restore the read slots the previous transfer marked, then mark this one's.
-        self.cmds[MAX_WRITE] = CMD_READ;
-        self.cmds[self.last_stop] = CMD_READ;
-        let start = MAX_WRITE - write.len();
-        for (slot, b) in self.cmds[start..MAX_WRITE].iter_mut().zip(write) {
+        let first = MAX_WRITE - write.len();
+        for (slot, b) in self.cmds[first..MAX_WRITE].iter_mut().zip(write) {
             *slot = u32::from(*b);
         }
-        let restart = if write.is_empty() { 0 } else { CMD_RESTART };
-        self.cmds[MAX_WRITE] |= restart;
-        self.last_stop = MAX_WRITE + n - 1;
-        self.cmds[self.last_stop] |= CMD_STOP;
-        let cmds = self.cmds[start..].as_ptr();
+        let cmds = self.mark_reads(n, !write.is_empty());
         // SAFETY: the command list lives in `self`, borrowed for the whole transfer; `read` is
         // the caller's, under this function's own contract.
-        let started = unsafe { self.start(address, cmds, write.len() + n, read.as_mut_ptr(), n) };
+        let started = unsafe {
+            self.start(
+                address,
+                cmds.add(first),
+                write.len() + n,
+                read.as_mut_ptr(),
+                n,
+            )
+        };
         let (waiting, running) = match started {
             Ok(guards) => guards,
             Err(e) => return Some(Err(e)),
@@ -207,6 +208,76 @@ impl I2cDma {
         alarm::DEADLINE.arm_deadline((self.last_start_us as u32).wrapping_add(timeout_us));
         let ending = wait_end(pac::DMA.ch(RX_CH)).await;
         self.finish(ending, waiting, running)
+    }
+
+    /// Whether [`Self::read_two`] takes `n_first` bytes of the first register and `n_rx` in all.
+    pub fn fits_two(n_first: usize, n_rx: usize) -> bool {
+        (1..=MAX_WRITE - 2).contains(&n_first) && n_rx > n_first && n_rx - n_first <= MAX_READ
+    }
+
+    /// Two register reads in one transfer: register `regs[0]`'s `n_first` bytes, then (after a
+    /// repeated START) register `regs[1]`'s, `n_rx` bytes in all received into one run at `rx`.
+    /// `fits_two(n_first, n_rx)` must hold (else `Err(InvalidReadBufferLength)`). `None` as for
+    /// [`Self::write_read`].
+    ///
+    /// # Safety
+    ///
+    /// `rx` must be valid for `n_rx` bytes of writes until the returned future has completed or
+    /// been dropped, and the future must not be leaked (as [`Self::write_read`]).
+    pub async unsafe fn read_two(
+        &mut self,
+        address: u8,
+        regs: [u8; 2],
+        n_first: usize,
+        rx: *mut u8,
+        n_rx: usize,
+        timeout_us: u32,
+    ) -> Option<Result<(), Error>> {
+        if !Self::fits_two(n_first, n_rx) {
+            return Some(Err(Error::InvalidReadBufferLength));
+        }
+        // The write slots hold the first read whole: its address, its reads (RESTART on the
+        // first), then the second address with a RESTART; the read slots take the second.
+        let begin = MAX_WRITE - 2 - n_first;
+        self.cmds[begin] = u32::from(regs[0]);
+        self.cmds[begin + 1] = CMD_READ | CMD_RESTART;
+        for slot in &mut self.cmds[begin + 2..MAX_WRITE - 1] {
+            *slot = CMD_READ;
+        }
+        self.cmds[MAX_WRITE - 1] = u32::from(regs[1]) | CMD_RESTART;
+        let n_second = n_rx - n_first;
+        let cmds = self.mark_reads(n_second, true);
+        // SAFETY: the command list lives in `self`, borrowed for the whole transfer; `rx` is
+        // the caller's, under this function's own contract.
+        let started = unsafe {
+            self.start(
+                address,
+                cmds.add(begin),
+                MAX_WRITE - begin + n_second,
+                rx,
+                n_rx,
+            )
+        };
+        let (waiting, running) = match started {
+            Ok(guards) => guards,
+            Err(e) => return Some(Err(e)),
+        };
+        alarm::DEADLINE.arm_deadline((self.last_start_us as u32).wrapping_add(timeout_us));
+        let ending = wait_end(pac::DMA.ch(RX_CH)).await;
+        self.finish(ending, waiting, running)
+    }
+
+    /// Mark the first (RESTART after a write) and last (STOP) of `n` read slots, restoring the
+    /// ones the previous transfer marked; the command list's start.
+    #[inline(always)]
+    fn mark_reads(&mut self, n: usize, after_write: bool) -> *const u32 {
+        self.cmds[MAX_WRITE] = CMD_READ;
+        self.cmds[self.last_stop] = CMD_READ;
+        let restart = if after_write { CMD_RESTART } else { 0 };
+        self.cmds[MAX_WRITE] |= restart;
+        self.last_stop = MAX_WRITE + n - 1;
+        self.cmds[self.last_stop] |= CMD_STOP;
+        self.cmds.as_ptr()
     }
 
     /// Start a transfer: `n_cmds` IC_DATA_CMD words from `cmds` through the TX channel, the

@@ -74,6 +74,8 @@ pub struct Mpu6050Model {
     pub samples: u64,
     /// FIFO bytes dropped by overflow.
     pub dropped_bytes: u64,
+    /// Transactions addressed to this chip (each `transaction` call counts once).
+    pub transactions: u64,
     next_sample_ns: Option<u64>,
     reset_until_ns: u64,
 }
@@ -117,6 +119,7 @@ impl Mpu6050Model {
             ptr: 0,
             samples: 0,
             dropped_bytes: 0,
+            transactions: 0,
             next_sample_ns: None,
             reset_until_ns: 0,
         };
@@ -323,6 +326,7 @@ impl Mpu6050Model {
 
     /// Execute one I²C transaction addressed to this chip.
     pub fn transaction(&mut self, now_ns: u64, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
+        self.transactions += 1;
         if !self.present || now_ns < self.reset_until_ns {
             return Err(SimError::Nack(NoAcknowledgeSource::Address));
         }

@@ -401,6 +401,51 @@ fn slots_and_stamps_follow_the_parts_own_clocks() {
     assert_eq!((st.samples_dropped, st.mag_dropped), (0, 0));
 }
 
+/// In the steady state each burst is one transfer (the FIFO count, then the frames the IMU's
+/// clock says have landed), whatever the part's clock error: about one transaction per 10 ms,
+/// where counting first and reading after takes two, and every sample still delivered once, in
+/// its own slot.
+#[test]
+fn a_steady_burst_reads_the_count_and_the_frames_in_one_transfer() {
+    let mut x = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(1, |d| d.as_nanos() as u64)
+        | 1;
+    println!("key {x}");
+    for _ in 0..4 {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        let error = ((x % 3001) as f64 - 1500.0) * 1e-5;
+        let mut mpu = noisy_mpu();
+        mpu.clock_error = error;
+        let mut rig = Rig::with(mpu, noisy_qmc());
+        rig.run(2000);
+        let (t0, n0) = (rig.bus.mpu(|m| m.transactions), rig.imu_out.len());
+        rig.run(1000);
+        let transfers = rig.bus.mpu(|m| m.transactions) - t0;
+        assert!(
+            (99..=103).contains(&transfers),
+            "clock error {error}: {transfers} transactions in 1 s"
+        );
+        let got = rig.imu_out.len() - n0;
+        let expected = 1000.0 * (1.0 + error);
+        assert!(
+            (got as f64 - expected).abs() <= 12.0,
+            "clock error {error}: {got} samples in 1 s"
+        );
+        let truth = rig.bus.mpu(|m| m.slots());
+        let log = rig.bus.mpu(|m| m.log.clone());
+        assert!(rig.imu_out.windows(2).all(|w| w[1].k == w[0].k + 1));
+        for d in &rig.imu_out {
+            assert_eq!(truth[d.k as usize].0, u64::from(d.k));
+            let raw = log[d.k as usize].1;
+            assert_eq!(d.raw.gyro, [raw[4], raw[5], raw[6]], "slot {}", d.k);
+        }
+        assert_eq!(rig.dev.status(0, 0).samples_dropped, 0);
+    }
+}
+
 /// The IMU engines take samples in pairs: the odd one out of a burst waits for the next burst,
 /// is left out of `pushed` meanwhile, and is pushed before a split (it came before the gap).
 #[test]

@@ -602,3 +602,51 @@ fn fifo_stop_start_and_interrupt_status_transactions() {
     );
     assert!(st.fifo_overflow && st.data_ready && !st.i2c_master);
 }
+
+/// The count and the frames in one transaction (RM 4.30, 4.31): FIFO_COUNT_H/L, then after a
+/// repeated START the frames asked for from FIFO_R_W; what the count covers is reported, and a
+/// full count is an overflow.
+#[test]
+fn counted_fifo_read_is_one_transaction_with_a_repeated_start() {
+    let frames: Vec<u8> = (0..3).flat_map(|k| frame12(10 * k)).collect();
+    let one = |count: [u8; 2], data: Vec<u8>| {
+        vec![
+            T::transaction_start(A),
+            T::write(A, vec![0x72]),
+            T::read(A, count.to_vec()),
+            T::write(A, vec![0x74]),
+            T::read(A, data),
+            T::transaction_end(A),
+        ]
+    };
+    let run = |tail: Vec<T>| {
+        let exp = inited(&tail);
+        both(
+            &exp,
+            |d| {
+                d.init(&mut NoopDelay, &Config::default()).unwrap();
+                let (mut head, mut out) = ([0u8; 2], [0u8; 64]);
+                let r = d.read_counted_fifo_raw(3, &mut head, &mut out);
+                (r, out[24..36].to_vec())
+            },
+            async |d| {
+                d.init(&mut NoopDelay, &Config::default()).await.unwrap();
+                let (mut head, mut out) = ([0u8; 2], [0u8; 64]);
+                let r = d.read_counted_fifo_raw(3, &mut head, &mut out).await;
+                (r, out[24..36].to_vec())
+            },
+        )
+    };
+    // 40 bytes: the three frames asked for and part of a fourth; all three covered.
+    let (r, third) = run(one([0, 40], frames.clone()));
+    let c = r.unwrap();
+    assert_eq!((c.count, c.read, c.covered, c.whole()), (40, 3, 3, true));
+    assert_eq!(third, frame12(20));
+    // 30 bytes: only two whole frames were there at the count; the third is not covered.
+    let (r, _) = run(one([0, 30], frames.clone()));
+    let c = r.unwrap();
+    assert_eq!((c.count, c.read, c.covered, c.whole()), (30, 3, 2, false));
+    // A full count: an overflow.
+    let (r, _) = run(one([0x04, 0x00], frames));
+    assert_eq!(r, Err(Error::FifoOverflow));
+}

@@ -570,6 +570,27 @@ pub fn decode_fifo_count(b: [u8; 2]) -> u16 {
     u16::from_be_bytes(b) & 0x1FFF
 }
 
+/// What one counted FIFO read moved (`read_counted_fifo_raw`): the FIFO count, latched at the
+/// start of the transfer; the frames read after it; and how many of those the count covers
+/// (whole frames the FIFO held at the count). Frames read beyond the count came from an
+/// empty FIFO, or in part from a sample that landed while they were read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CountedFrames {
+    /// FIFO_COUNT, bytes.
+    pub count: u16,
+    /// Frames read after the count.
+    pub read: usize,
+    /// Of those, the whole frames the count covers (the first `covered` are valid).
+    pub covered: usize,
+}
+
+impl CountedFrames {
+    /// Every frame read was in the FIFO at the count: the FIFO is still aligned.
+    pub fn whole(&self) -> bool {
+        self.covered == self.read
+    }
+}
+
 pub use registers::IntStatus;
 use registers::{AccelConfig, GyroConfig};
 

@@ -8,7 +8,7 @@
 
 macro_rules! drivers {
     ($($async:ident)?; $($await:ident)?; $I2c:path; $Delay:path) => {
-        use embedded_hal::i2c::ErrorType;
+        use embedded_hal::i2c::{ErrorType, Operation};
 
         use crate::mpu6050::{
             self as m, registers as mb, reg as mr, Address, ChipId, Config, Family, IntStatus,
@@ -311,6 +311,61 @@ macro_rules! drivers {
                     done += n;
                 }
                 Ok(done)
+            }
+
+            /// The FIFO count and `frames` whole frames in one transfer where
+            /// [`Self::fifo_count`] and [`Self::read_fifo_counted_raw`] take two: FIFO_COUNT_H/L,
+            /// then after a repeated START the frames from FIFO_R_W, raw into `out` (as
+            /// [`Self::read_fifo_counted_raw`]). `frames` is cut to what `out` holds and to a
+            /// chunk of 16. `head` receives the count's bytes; a bus that moves both reads with
+            /// one DMA run wants `head` directly before `out` in memory.
+            ///
+            /// The frames are read whatever the count says: ask only for frames known to have
+            /// landed before the transfer starts (a sample clock's prediction). Beyond the count
+            /// they come from an empty FIFO, or in part from a sample landing meanwhile, which
+            /// leaves the FIFO misaligned: when [`m::CountedFrames::whole`] is false, restart
+            /// the FIFO. [`m::Error::FifoOverflow`] for a full count (the frames are then not
+            /// aligned either).
+            pub $($async)? fn read_counted_fifo_raw(&mut self, frames: usize, head: &mut [u8; 2], out: &mut [u8]) -> Result<m::CountedFrames, MpuError<I2C>> {
+                let frame = self.config.fifo.ok_or(m::Error::NotConfigured)?;
+                let chip = self.chip.ok_or(m::Error::NotConfigured)?;
+                let fb = frame.bytes();
+                let mut read = frames.min(FIFO_CHUNK_FRAMES);
+                if read * fb > out.len() {
+                    // What `out` holds, by subtraction (no divide on the Cortex-M0+).
+                    let (mut fit, mut room) = (0, out.len());
+                    while room >= fb {
+                        room -= fb;
+                        fit += 1;
+                    }
+                    read = fit;
+                }
+                if read == 0 {
+                    let count = self.fifo_count() $(.$await)? ?;
+                    return Ok(m::CountedFrames { count, read: 0, covered: 0 });
+                }
+                let mut ops = [
+                    Operation::Write(&[mr::FIFO_COUNT_H]),
+                    Operation::Read(&mut head[..]),
+                    Operation::Write(&[mr::FIFO_R_W]),
+                    Operation::Read(&mut out[..read * fb]),
+                ];
+                self.i2c.transaction(self.address, &mut ops) $(.$await)? ?;
+                let count = m::decode_fifo_count(*head);
+                if count >= chip.fifo_capacity() {
+                    return Err(m::Error::FifoOverflow);
+                }
+                // min(count / frame size, read): all of them as a rule; else by subtraction.
+                let mut covered = read;
+                if (count as usize) < read * fb {
+                    let mut left = count as usize;
+                    covered = 0;
+                    while left >= fb {
+                        left -= fb;
+                        covered += 1;
+                    }
+                }
+                Ok(m::CountedFrames { count, read, covered })
             }
 
             /// The FIFO frame layout configured (`None` before `init`).

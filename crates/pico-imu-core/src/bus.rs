@@ -5,6 +5,12 @@ use embedded_hal::i2c::{Error, ErrorKind};
 
 use crate::clock::Fine;
 
+/// Longest a transfer may take before the bus abandons it (reported as [`Failure::Timeout`]):
+/// the longest one, a FIFO chunk of 16 × 14 bytes, needs ≈ 5.7 ms at 400 kHz, and a slave
+/// holding SDA low could otherwise stall a transfer for ever. A transfer that completed took
+/// at most this long on the bus, however late its task saw it end.
+pub const TRANSFER_TIMEOUT_US: u32 = 25_000;
+
 /// A bus that records when each transfer starts: the instant the first command of the transfer
 /// went to the controller, on the µs timer in [`Fine`] units, taken with interrupts off so that
 /// nothing comes between it and the start.

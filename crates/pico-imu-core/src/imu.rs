@@ -25,8 +25,8 @@ use imu_drivers::asynch::Mpu6050;
 use imu_drivers::mpu6050 as mpu;
 use imu_proto::{GapCause, Sensor, SensorState, IMU_PERIOD_US};
 
-use crate::bus::{Failure, TransferTime};
-use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
+use crate::bus::{Failure, TransferTime, TRANSFER_TIMEOUT_US};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen, Stamps};
 use crate::config::imu_config;
 use crate::cycle_marker::{self, Stage};
 use crate::msg::{FifoFrames, Out, SensorMsg, BURST_MAX};
@@ -41,12 +41,20 @@ const PROBE_WAIT: Fine = fine(1200);
 const REPORT_ROOM: usize = 3;
 /// Count reads of one tick that may be repeated because the bus held them.
 const HELD_REREADS: u32 = 3;
+/// How long before a burst's start a frame must have landed, by the clock, to be read in the
+/// same transfer as the count: the clock's phase may be this far wrong without a frame being
+/// read that the count does not cover.
+const COUNTED_MARGIN: Fine = fine(250);
+/// Most frames read with the count: (14 + 1) × 14 bytes stay under 256, so the count's two
+/// bytes cannot tear between its high and low byte.
+const COUNTED_MAX: u32 = 14;
 
 /// The IMU side.
 pub struct ImuService {
     core: Core,
-    /// A FIFO read was abandoned part-way: the frames in the FIFO are not aligned.
-    misaligned: bool,
+    /// The frames in the FIFO are not aligned (a read abandoned part-way: `BusFault`; frames
+    /// read with the count that it did not cover: `Stalled`): restart it, for this cause.
+    misaligned: Option<GapCause>,
     /// The last count read, with frames, found a sample later than the clock allowed.
     late_before: bool,
     capacity: u16,
@@ -60,7 +68,7 @@ impl ImuService {
     pub const fn new(timing: BusTiming) -> Self {
         Self {
             core: Core::new(Sensor::Imu, IMU_PERIOD_US as u32, timing),
-            misaligned: false,
+            misaligned: None,
             late_before: false,
             capacity: 1024,
             lead: Lead::new(),
@@ -115,8 +123,13 @@ impl ImuService {
                 self.core.phase = Phase::Stalled;
             }
             Phase::Running | Phase::Stalled => {
-                if self.misaligned {
-                    self.restart_fifo(cx, GapCause::BusFault).await;
+                if let Some(cause) = self.misaligned {
+                    // A stall is still timed from the part's last sample, not the restart.
+                    let growth = self.core.last_growth_us;
+                    self.restart_fifo(cx, cause).await;
+                    if cause == GapCause::Stalled {
+                        self.core.last_growth_us = growth;
+                    }
                 } else {
                     self.drain(cx).await;
                 }
@@ -146,7 +159,8 @@ impl ImuService {
         }
         self.core
             .started(cx.dev.bus().last_start(), cause, (cx.now)());
-        self.misaligned = false;
+        self.misaligned = None;
+        self.late_before = false;
     }
 
     /// A lost sensor's retry (the caller recovered the bus first): identity, then the
@@ -193,6 +207,11 @@ impl ImuService {
                 delay_until(cx.delay, cx.now, self.lead.begin(start)).await;
                 aimed = Some(start);
             }
+        }
+        let counted = self.counted_frames(fine((cx.now)()));
+        if counted > 0 && cx.out.len() + REPORT_ROOM <= cx.out.capacity() {
+            self.drain_counted(cx, counted, aimed).await;
+            return;
         }
         let mut held = 0;
         while cx.out.len() + REPORT_ROOM <= cx.out.capacity() {
@@ -264,12 +283,11 @@ impl ImuService {
             }
             let slot = cx.out.len();
             let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
-            // The message made whole before the read (the frames the count promises, the
-            // discontinuity before them), so that it is written in place: built with defaults
-            // and filled in after, it went through a copy on the stack (≈ 60 cycles per ms).
-            let expected = usize::from(frames).min(BURST_MAX);
+            // The message made before the read, so that it is written in place (built with
+            // defaults and moved in after, it went through a copy on the stack, ≈ 60 cycles per
+            // ms); its stamps only once the frames are in (`stamp`).
             let _ = cx.out.push(SensorMsg::Imu {
-                stamps: self.core.clock.stamps(self.core.next_k, expected as u32),
+                stamps: Stamps::default(),
                 frames: FifoFrames::new(layout),
                 after: self.core.after,
             });
@@ -292,20 +310,16 @@ impl ImuService {
                     cx.out.truncate(slot);
                     if let mpu::Error::Bus(b) = &e {
                         // Bytes may have moved: the FIFO is no longer aligned.
-                        self.misaligned |= Failure::of(b).partial();
+                        if Failure::of(b).partial() {
+                            self.misaligned = Some(GapCause::BusFault);
+                        }
                     }
                     self.failed(&e, (cx.now)(), cx.out);
                     return;
                 }
             };
             self.core.after = None;
-            if n != expected {
-                // Not what the count promised (another frame layout): the stamps of what came.
-                let stamps = self.core.clock.stamps(self.core.next_k, n as u32);
-                if let Some(SensorMsg::Imu { stamps: s, .. }) = cx.out.last_mut() {
-                    *s = stamps;
-                }
-            }
+            self.stamp(cx.out, slot, n);
             self.core.next_k = self.core.next_k.wrapping_add(n as u32);
             self.core.fresh = false;
             if let Some(e) = self.core.health.delivering(read_at) {
@@ -314,6 +328,150 @@ impl ImuService {
             if n < BURST_MAX {
                 return;
             }
+        }
+    }
+
+    /// How many frames to read together with the count at `now` (0: count first, then read
+    /// what it says): in the steady state (a located clock, frames flowing), those the clock
+    /// says landed [`COUNTED_MARGIN`] before `now` and so before the count is latched, up to
+    /// [`COUNTED_MAX`].
+    fn counted_frames(&self, now: Fine) -> u32 {
+        let clock = &self.core.clock;
+        if self.core.fresh
+            || self.core.phase != Phase::Running
+            || !clock.known()
+            || clock.width() > clock::LOCKED_WIDTH
+        {
+            return 0;
+        }
+        // Stepped along the clock's line from the next frame due (a few additions; the
+        // divisions of `newest_at` cost ≈ 470 cycles a burst on the M0+).
+        let by = now - COUNTED_MARGIN;
+        let period = clock.period();
+        let mut t = clock.time(self.core.next_k);
+        let mut n = 0;
+        while t <= by {
+            if n == COUNTED_MAX {
+                return 0;
+            }
+            n += 1;
+            t += period;
+        }
+        n
+    }
+
+    /// One transfer: the FIFO count, then the `n` frames the clock says it holds (one transfer,
+    /// one wake-up and one message fewer per burst than the count and then the frames). The
+    /// count feeds the clock as in [`Self::drain`]; frames it does not cover (the part produced
+    /// fewer than its clock says: a stall beginning, a reset) were read from an empty FIFO or
+    /// in part from a sample landing meanwhile, so the FIFO is restarted on the next tick.
+    async fn drain_counted<I: I2c + TransferTime, D: DelayNs>(
+        &mut self,
+        cx: &mut Tick<'_, Mpu6050<I>, D>,
+        n: u32,
+        aimed: Option<Fine>,
+    ) {
+        let slot = cx.out.len();
+        let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
+        let _ = cx.out.push(SensorMsg::Imu {
+            stamps: Stamps::default(),
+            frames: FifoFrames::new(layout),
+            after: self.core.after,
+        });
+        let Some(SensorMsg::Imu { frames, .. }) = cx.out.last_mut() else {
+            return;
+        };
+        cycle_marker::enter(Stage::I2c);
+        let r = cx
+            .dev
+            .read_counted_fifo_raw(
+                n as usize,
+                &mut frames.count,
+                &mut frames.bytes[..BURST_MAX * layout.bytes()],
+            )
+            .await;
+        if let Ok(c) = r {
+            frames.n = c.covered;
+        }
+        let read_at = (cx.now)();
+        cycle_marker::leave();
+        let c = match r {
+            Ok(c) => c,
+            Err(mpu::Error::FifoOverflow) => {
+                cx.out.truncate(slot);
+                self.core.overflows += 1;
+                self.restart_fifo(cx, GapCause::FifoOverflow).await;
+                return;
+            }
+            Err(e) => {
+                cx.out.truncate(slot);
+                if let mpu::Error::Bus(b) = &e {
+                    if Failure::of(b).partial() {
+                        self.misaligned = Some(GapCause::BusFault);
+                    }
+                }
+                self.failed(&e, read_at, cx.out);
+                return;
+            }
+        };
+        let start = cx.dev.bus().last_start();
+        if let Some(a) = aimed {
+            self.lead.learn(a, start);
+        }
+        let tau = self.core.answered(start, clock::READ_SECOND_BIT);
+        let bits = clock::read_bits(2) + clock::read_bits(u64::from(FRAME) * c.read as u64);
+        let held_read = self.core.held(start, bits, read_at);
+        // The frames followed the count on the bus, within the transfer's deadline however
+        // late the task saw its end: only that long can the FIFO have filled in between.
+        let on_bus = read_at
+            .saturating_sub(whole_us(tau))
+            .min(u64::from(TRANSFER_TIMEOUT_US));
+        if count_may_be_stale(c.count, on_bus, self.capacity) {
+            cx.out.truncate(slot);
+            self.core.overflows += 1;
+            self.restart_fifo(cx, GapCause::FifoOverflow).await;
+            return;
+        }
+        let frames = frames_in(c.count);
+        let newest = self
+            .core
+            .next_k
+            .wrapping_add(u32::from(frames))
+            .wrapping_sub(1);
+        if c.count < 256 && !held_read {
+            let trust = frames > 0 && self.late_before;
+            let seen = if trust {
+                Seen::NextNotYetTrusted
+            } else {
+                Seen::NextNotYet
+            };
+            let fit = self.core.clock.observe(tau, newest, seen);
+            self.late_before = frames > 0 && fit == Fit::Late;
+        }
+        if !c.whole() {
+            self.misaligned = Some(GapCause::Stalled);
+        }
+        if c.covered == 0 {
+            cx.out.truncate(slot);
+            self.core.no_data(read_at, cx.out);
+            return;
+        }
+        self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
+        self.core.after = None;
+        self.stamp(cx.out, slot, c.covered);
+        self.core.next_k = self.core.next_k.wrapping_add(c.covered as u32);
+        if let Some(e) = self.core.health.delivering(read_at) {
+            self.core.report(Some(e), cx.out);
+        }
+    }
+
+    /// Stamp the `n` frames of the burst in `out[slot]`, read: the clock issues stamps only for
+    /// frames delivered (it keeps them from going back behind the last it issued, so stamps
+    /// issued for a read that then failed would push every later one late).
+    fn stamp(&mut self, out: &mut Out, slot: usize, n: usize) {
+        let stamps = self.core.clock.stamps(self.core.next_k, n as u32);
+        if let Some(SensorMsg::Imu { stamps: s, .. }) = out.get_mut(slot) {
+            *s = stamps;
         }
     }
 
@@ -355,7 +513,8 @@ impl ImuService {
             self.core.health.answered();
             self.core.next_k = k;
             self.core.fresh = true;
-            self.misaligned = false;
+            self.misaligned = None;
+            self.late_before = false;
             self.core.after.get_or_insert(cause);
             self.core.last_growth_us = (cx.now)();
             if self.core.phase == Phase::Stalled {
@@ -370,7 +529,8 @@ impl ImuService {
             .latch(cx.dev.bus().last_start(), clock::WRITE_DATA_BIT);
         self.core.next_k = self.core.clock.nearest(tau + self.core.clock.period() / 2);
         self.core.fresh = true;
-        self.misaligned = false;
+        self.misaligned = None;
+        self.late_before = false;
         self.core.after.get_or_insert(cause);
         self.core.last_growth_us = (cx.now)();
     }

@@ -14,11 +14,17 @@ pub const FIFO_FRAME_MAX: usize = 14;
 /// One burst's FIFO frames as the part sent them (big-endian values in the configured
 /// `layout`), read straight into the message and decoded only where their values are used
 /// (the corrections; a decoded copy of each frame cost ≈ 130 cycles on the M0+).
+///
+/// `#[repr(C)]`: `count` lies directly before `bytes`, so that a FIFO count and the frames
+/// read after it in one transfer land in one run of memory (one DMA channel on the device).
 #[derive(Debug, Clone)]
+#[repr(C)]
 pub struct FifoFrames {
     pub layout: FifoFrame,
     /// Frames in `bytes` (at most [`BURST_MAX`]).
     pub n: usize,
+    /// The FIFO count's two bytes as read with the frames (when they were).
+    pub count: [u8; 2],
     pub bytes: [u8; BURST_MAX * FIFO_FRAME_MAX],
 }
 
@@ -28,6 +34,7 @@ impl FifoFrames {
         Self {
             layout,
             n: 0,
+            count: [0; 2],
             bytes: [0; BURST_MAX * FIFO_FRAME_MAX],
         }
     }

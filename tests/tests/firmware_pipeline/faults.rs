@@ -62,6 +62,46 @@ fn a_nack_burst_shorter_than_the_fifo_costs_nothing() {
     assert!(rig.imu_out.windows(2).all(|w| w[1].k == w[0].k + 1));
 }
 
+/// A failed FIFO read (a NACK burst at any phase, of any length under the FIFO's span) moves no
+/// stamp: the samples read after it are stamped as the part sampled them, as before it.
+#[test]
+fn a_failed_fifo_read_moves_no_stamp() {
+    let mut x = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(1, |d| d.as_nanos() as u64)
+        | 1;
+    println!("key {x}");
+    for _ in 0..6 {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        let (phase_us, length_us) = (x % 10_000, 2_000 + (x >> 20) % 38_000);
+        let mut rig = Rig::new();
+        rig.run(5000);
+        rig.bus.advance_us(phase_us);
+        let until = rig.bus.now_ns() + length_us * 1000;
+        rig.bus.with_world(|w| w.nack_until = Some((0x68, until)));
+        rig.run(1000);
+        let truth = rig.bus.mpu(|m| m.slots());
+        let st = rig.dev.status(0, 0);
+        assert!(
+            st.i2c_errors >= 1,
+            "a NACK of {length_us} µs at {phase_us} µs"
+        );
+        assert_eq!(st.samples_dropped, 0);
+        let worst = rig
+            .imu_out
+            .iter()
+            .filter(|d| truth[d.k as usize].1 > 4_500_000_000)
+            .map(|d| (d.t_us as f64 - truth[d.k as usize].1 as f64 * 1e-3).abs())
+            .fold(0.0f64, f64::max);
+        assert!(
+            worst < 10.0,
+            "a NACK of {length_us} µs at {phase_us} µs: stamps off by up to {worst} µs"
+        );
+    }
+}
+
 #[test]
 fn a_power_cycled_sensor_is_reinitialised_on_its_old_grid_and_the_loss_counted() {
     let mut rig = Rig::new();
