@@ -52,6 +52,8 @@ pub struct QmcModel {
     pub measurements: u64,
     /// Reads of the status register (each a DRDY poll).
     pub status_reads: u64,
+    /// Transactions addressed to this chip (each `transaction` call counts once).
+    pub transactions: u64,
 }
 
 impl QmcModel {
@@ -74,6 +76,7 @@ impl QmcModel {
             next_ns: None,
             measurements: 0,
             status_reads: 0,
+            transactions: 0,
         }
     }
 
@@ -249,6 +252,7 @@ impl QmcModel {
 
     /// Execute one I²C transaction addressed to this chip.
     pub fn transaction(&mut self, now_ns: u64, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
+        self.transactions += 1;
         if !self.present {
             return Err(SimError::Nack(NoAcknowledgeSource::Address));
         }

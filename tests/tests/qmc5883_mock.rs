@@ -379,3 +379,32 @@ fn status_and_data_alone() {
         assert_eq!(xyz, [0x0201, -1, i16::MIN], "{variant:?}");
     }
 }
+
+/// `status_and_data`: one transaction, the status register's byte, then after a repeated START
+/// the six data bytes (L: 0x06 then 0x00; P: 0x09 then 0x01); a clear DRDY is reported as read
+/// (the caller decides what the data mean).
+#[test]
+fn status_and_data_in_one_transaction() {
+    for (variant, addr, status_reg, data_reg, status, ready) in [
+        (Variant::L, L, 0x06, 0x00, 0b0000_0001, true),
+        (Variant::L, L, 0x06, 0x00, 0b0000_0000, false),
+        (Variant::P, P, 0x09, 0x01, 0b0000_0001, true),
+    ] {
+        let exp = [
+            T::transaction_start(addr),
+            T::write(addr, vec![status_reg]),
+            T::read(addr, vec![status]),
+            T::write(addr, vec![data_reg]),
+            T::read(addr, vec![0x01, 0x02, 0xFF, 0xFF, 0x00, 0x80]),
+            T::transaction_end(addr),
+        ];
+        let (st, xyz) = both(
+            variant,
+            &exp,
+            |d| d.status_and_data().unwrap(),
+            async |d| d.status_and_data().await.unwrap(),
+        );
+        assert_eq!(st.ready, ready, "{variant:?}");
+        assert_eq!(xyz, [0x0201, -1, i16::MIN], "{variant:?}");
+    }
+}

@@ -660,6 +660,26 @@ macro_rules! drivers {
                 })
             }
 
+            /// The status and then the 6 data bytes in one transaction, a repeated START between
+            /// them (no pointer roll-over needed, for either variant). Reading the data clears
+            /// DRDY: they are the newest measurement when the status shows DRDY, and a
+            /// measurement that completes after the status byte, during the transfer, is cleared
+            /// unseen. Use it where the measurement is known to have landed already (after the
+            /// late end of a sample clock's interval), [`Self::status`] elsewhere.
+            pub $($async)? fn status_and_data(&mut self) -> Result<(Status, [i16; 3]), MagError<I2C>> {
+                let mut b = [0u8; 7];
+                let (status, data) = b.split_at_mut(1);
+                let mut ops = [
+                    Operation::Write(&[self.variant.status_reg()]),
+                    Operation::Read(status),
+                    Operation::Write(&[self.variant.data_reg()]),
+                    Operation::Read(data),
+                ];
+                self.i2c.transaction(self.variant.addr(), &mut ops) $(.$await)? ?;
+                let d = [b[1], b[2], b[3], b[4], b[5], b[6]];
+                Ok((Status::from_bits(b[0], self.variant), q::decode_xyz(d)))
+            }
+
             /// The six data bytes alone (no status): the latest measurement, whether or not it
             /// is new (a caller that polled the status first knows). Reading them clears DRDY
             /// and DOR.
