@@ -54,6 +54,12 @@ pub struct QmcModel {
     pub status_reads: u64,
     /// Transactions addressed to this chip (each `transaction` call counts once).
     pub transactions: u64,
+    /// Bus time per byte moved, ns (0: a transaction is instantaneous). With it a measurement
+    /// can complete between the bytes of one transaction, as on a 400 kHz bus (22 500 ns).
+    pub byte_ns: u64,
+    /// An oscillator glitch: the first measurement due at or after `.0` ns comes `.1` ns late,
+    /// and the grid goes on from there.
+    pub glitch: Option<(u64, u64)>,
 }
 
 impl QmcModel {
@@ -77,6 +83,8 @@ impl QmcModel {
             measurements: 0,
             status_reads: 0,
             transactions: 0,
+            byte_ns: 0,
+            glitch: None,
         }
     }
 
@@ -152,6 +160,12 @@ impl QmcModel {
         }
         let period = self.period_ns();
         let mut next = self.next_ns.unwrap_or(now_ns + period);
+        if let Some((at, late)) = self.glitch {
+            if next >= at {
+                next += late;
+                self.glitch = None;
+            }
+        }
         while next <= now_ns {
             if !self.stall.is_some_and(|(a, b)| next >= a && next < b) {
                 self.measure(next);
@@ -256,18 +270,26 @@ impl QmcModel {
         if !self.present {
             return Err(SimError::Nack(NoAcknowledgeSource::Address));
         }
+        // The address byte of each operation, then its bytes, each `byte_ns` on the bus.
+        let mut t = now_ns;
         for op in ops {
+            t += self.byte_ns;
             match op {
                 Operation::Write(bytes) => {
                     if let Some((&r, data)) = bytes.split_first() {
+                        t += self.byte_ns;
                         self.ptr = r % 0x30;
                         for &v in data {
-                            self.write_byte(now_ns, v);
+                            t += self.byte_ns;
+                            self.advance_to(t);
+                            self.write_byte(t, v);
                         }
                     }
                 }
                 Operation::Read(buf) => {
                     for b in buf.iter_mut() {
+                        t += self.byte_ns;
+                        self.advance_to(t);
                         *b = self.read_byte();
                     }
                 }
