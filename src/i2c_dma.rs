@@ -197,15 +197,13 @@ impl I2cDma {
                 write.len() + n,
                 read.as_mut_ptr(),
                 n,
+                timeout_us,
             )
         };
         let (waiting, running) = match started {
             Ok(guards) => guards,
             Err(e) => return Some(Err(e)),
         };
-        // The deadline: the transfer's own TIMER alarm, whose interrupt wakes this transfer's
-        // waker (`alarm::DEADLINE`), so that arming it is two stores.
-        alarm::DEADLINE.arm_deadline((self.last_start_us as u32).wrapping_add(timeout_us));
         let ending = wait_end(pac::DMA.ch(RX_CH)).await;
         self.finish(ending, waiting, running)
     }
@@ -256,13 +254,13 @@ impl I2cDma {
                 MAX_WRITE - begin + n_second,
                 rx,
                 n_rx,
+                timeout_us,
             )
         };
         let (waiting, running) = match started {
             Ok(guards) => guards,
             Err(e) => return Some(Err(e)),
         };
-        alarm::DEADLINE.arm_deadline((self.last_start_us as u32).wrapping_add(timeout_us));
         let ending = wait_end(pac::DMA.ch(RX_CH)).await;
         self.finish(ending, waiting, running)
     }
@@ -281,7 +279,9 @@ impl I2cDma {
     }
 
     /// Start a transfer: `n_cmds` IC_DATA_CMD words from `cmds` through the TX channel, the
-    /// `n_rx` received bytes into `rx_buf` through the RX channel. The caller then waits for
+    /// `n_rx` received bytes into `rx_buf` through the RX channel, its deadline `timeout_us`
+    /// after its start (the transfer's own TIMER alarm, whose interrupt wakes this transfer's
+    /// waker, `alarm::DEADLINE`: arming it is two stores). The caller then waits for
     /// its end ([`wait_end`]) and hands it to [`Self::finish`], holding the two guards in
     /// between. Set-up and end are functions of their own so that none of their values
     /// (register blocks, pointers, lengths) is kept in the future across the wait: ≈ 20 cycles
@@ -299,6 +299,7 @@ impl I2cDma {
         n_cmds: usize,
         rx_buf: *mut u8,
         n_rx: usize,
+        timeout_us: u32,
     ) -> Result<(Waiting, Running), Error> {
         if address >= 0x80 {
             return Err(Error::AddressOutOfRange(address.into()));
@@ -353,7 +354,7 @@ impl I2cDma {
             });
             t
         });
-
+        alarm::DEADLINE.arm_deadline((self.last_start_us as u32).wrapping_add(timeout_us));
         Ok((waiting, running))
     }
 

@@ -17,6 +17,36 @@ use embedded_hal::i2c::{ErrorKind, ErrorType, NoAcknowledgeSource, Operation};
 pub use mpu6050_model::Mpu6050Model;
 pub use qmc5883_model::{QmcModel, QmcVariant};
 
+/// A xorshift generator keyed by the clock, so that every run of a randomized test draws a
+/// different realisation; the key is printed, so a failing run can be replayed with
+/// [`Keyed::new`].
+pub struct Keyed(u64);
+
+impl Keyed {
+    /// Keyed by the system clock (the key printed).
+    pub fn from_clock() -> Self {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64);
+        Self::new(key)
+    }
+
+    /// Keyed by `key` (printed).
+    pub fn new(key: u64) -> Self {
+        println!("key {}", key | 1);
+        Keyed(key | 1)
+    }
+
+    /// The next 64 random bits.
+    pub fn bits(&mut self) -> u64 {
+        let x = &mut self.0;
+        *x ^= *x << 13;
+        *x ^= *x >> 7;
+        *x ^= *x << 17;
+        *x
+    }
+}
+
 /// Bus error of the simulated bus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SimError {

@@ -246,28 +246,7 @@ impl ImuService {
                 return;
             }
             let frames = frames_in(count);
-            // Sample `next_k + frames − 1` was produced by the latch, `next_k + frames` not.
-            let newest = self
-                .core
-                .next_k
-                .wrapping_add(u32::from(frames))
-                .wrapping_sub(1);
-            // A count that crossed 255 between its two bytes, or one the bus held, is not
-            // trusted for timing.
-            if (frames > 0 || !self.core.fresh) && count < 256 && !held_read {
-                // A sample later than the clock allows, with frames flowing, is a phase to
-                // correct only if the read before saw the same: a stall that began right after
-                // the frames of this read looks the same once, and then the next read finds
-                // none.
-                let trust = frames > 0 && self.late_before;
-                let seen = if trust {
-                    Seen::NextNotYetTrusted
-                } else {
-                    Seen::NextNotYet
-                };
-                let fit = self.core.clock.observe(tau, newest, seen);
-                self.late_before = frames > 0 && fit == Fit::Late;
-            }
+            let newest = self.observe_count(tau, count, held_read);
             if frames == 0 {
                 self.core.no_data(read_at, cx.out);
                 return;
@@ -283,15 +262,7 @@ impl ImuService {
             }
             let slot = cx.out.len();
             let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
-            // The message made before the read, so that it is written in place (built with
-            // defaults and moved in after, it went through a copy on the stack, ≈ 60 cycles per
-            // ms); its stamps only once the frames are in (`stamp`).
-            let _ = cx.out.push(SensorMsg::Imu {
-                stamps: Stamps::default(),
-                frames: FifoFrames::new(layout),
-                after: self.core.after,
-            });
-            let Some(SensorMsg::Imu { frames, .. }) = cx.out.last_mut() else {
+            let Some(frames) = open_burst(cx.out, layout, self.core.after) else {
                 return;
             };
             cycle_marker::enter(Stage::I2c);
@@ -307,24 +278,11 @@ impl ImuService {
             let n = match r {
                 Ok(n) => n,
                 Err(e) => {
-                    cx.out.truncate(slot);
-                    if let mpu::Error::Bus(b) = &e {
-                        // Bytes may have moved: the FIFO is no longer aligned.
-                        if Failure::of(b).partial() {
-                            self.misaligned = Some(GapCause::BusFault);
-                        }
-                    }
-                    self.failed(&e, (cx.now)(), cx.out);
+                    self.read_failed(cx.out, slot, &e, (cx.now)());
                     return;
                 }
             };
-            self.core.after = None;
-            self.stamp(cx.out, slot, n);
-            self.core.next_k = self.core.next_k.wrapping_add(n as u32);
-            self.core.fresh = false;
-            if let Some(e) = self.core.health.delivering(read_at) {
-                self.core.report(Some(e), cx.out);
-            }
+            self.delivered(cx.out, slot, n, read_at);
             if n < BURST_MAX {
                 return;
             }
@@ -373,12 +331,7 @@ impl ImuService {
     ) {
         let slot = cx.out.len();
         let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
-        let _ = cx.out.push(SensorMsg::Imu {
-            stamps: Stamps::default(),
-            frames: FifoFrames::new(layout),
-            after: self.core.after,
-        });
-        let Some(SensorMsg::Imu { frames, .. }) = cx.out.last_mut() else {
+        let Some(frames) = open_burst(cx.out, layout, self.core.after) else {
             return;
         };
         cycle_marker::enter(Stage::I2c);
@@ -404,13 +357,7 @@ impl ImuService {
                 return;
             }
             Err(e) => {
-                cx.out.truncate(slot);
-                if let mpu::Error::Bus(b) = &e {
-                    if Failure::of(b).partial() {
-                        self.misaligned = Some(GapCause::BusFault);
-                    }
-                }
-                self.failed(&e, read_at, cx.out);
+                self.read_failed(cx.out, slot, &e, read_at);
                 return;
             }
         };
@@ -432,22 +379,7 @@ impl ImuService {
             self.restart_fifo(cx, GapCause::FifoOverflow).await;
             return;
         }
-        let frames = frames_in(c.count);
-        let newest = self
-            .core
-            .next_k
-            .wrapping_add(u32::from(frames))
-            .wrapping_sub(1);
-        if c.count < 256 && !held_read {
-            let trust = frames > 0 && self.late_before;
-            let seen = if trust {
-                Seen::NextNotYetTrusted
-            } else {
-                Seen::NextNotYet
-            };
-            let fit = self.core.clock.observe(tau, newest, seen);
-            self.late_before = frames > 0 && fit == Fit::Late;
-        }
+        let newest = self.observe_count(tau, c.count, held_read);
         if !c.whole() {
             self.misaligned = Some(GapCause::Stalled);
         }
@@ -457,21 +389,68 @@ impl ImuService {
             return;
         }
         self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
-        self.core.after = None;
-        self.stamp(cx.out, slot, c.covered);
-        self.core.next_k = self.core.next_k.wrapping_add(c.covered as u32);
-        if let Some(e) = self.core.health.delivering(read_at) {
-            self.core.report(Some(e), cx.out);
-        }
+        self.delivered(cx.out, slot, c.covered, read_at);
     }
 
-    /// Stamp the `n` frames of the burst in `out[slot]`, read: the clock issues stamps only for
-    /// frames delivered (it keeps them from going back behind the last it issued, so stamps
-    /// issued for a read that then failed would push every later one late).
-    fn stamp(&mut self, out: &mut Out, slot: usize, n: usize) {
+    /// A count of `count` bytes latched at `tau` (`held`: the bus held its transfer): the
+    /// clock's observation, unless the count cannot be trusted for timing (one that crossed 255
+    /// between its two bytes, or one the bus held; none while no frames have come since a
+    /// restart). Returns the newest sample it shows produced (`next_k + frames − 1`;
+    /// `next_k + frames` was not, by the latch).
+    fn observe_count(&mut self, tau: Fine, count: u16, held: bool) -> u32 {
+        let frames = frames_in(count);
+        let newest = self
+            .core
+            .next_k
+            .wrapping_add(u32::from(frames))
+            .wrapping_sub(1);
+        if (frames > 0 || !self.core.fresh) && count < 256 && !held {
+            // A sample later than the clock allows, with frames flowing, is a phase to correct
+            // only if the read before saw the same: a stall that began right after the frames
+            // of this read looks the same once, and then the next read finds none.
+            let seen = if frames > 0 && self.late_before {
+                Seen::NextNotYetTrusted
+            } else {
+                Seen::NextNotYet
+            };
+            let fit = self.core.clock.observe(tau, newest, seen);
+            self.late_before = frames > 0 && fit == Fit::Late;
+        }
+        newest
+    }
+
+    /// The burst opened in `out[slot]` was not read (`e` at `t`): dropped; a bus fault that
+    /// may have moved bytes leaves the FIFO misaligned.
+    fn read_failed<E: embedded_hal::i2c::Error>(
+        &mut self,
+        out: &mut Out,
+        slot: usize,
+        e: &mpu::Error<E>,
+        t: u64,
+    ) {
+        out.truncate(slot);
+        if let mpu::Error::Bus(b) = e {
+            if Failure::of(b).partial() {
+                self.misaligned = Some(GapCause::BusFault);
+            }
+        }
+        self.failed(e, t, out);
+    }
+
+    /// The `n` frames of the burst in `out[slot]` were read at `read_at`: stamped (the clock
+    /// issues stamps only for frames delivered: it keeps them from going back behind the last
+    /// it issued, so stamps issued for a read that then failed would push every later one
+    /// late), and the next slot due moves past them.
+    fn delivered(&mut self, out: &mut Out, slot: usize, n: usize, read_at: u64) {
         let stamps = self.core.clock.stamps(self.core.next_k, n as u32);
         if let Some(SensorMsg::Imu { stamps: s, .. }) = out.get_mut(slot) {
             *s = stamps;
+        }
+        self.core.after = None;
+        self.core.next_k = self.core.next_k.wrapping_add(n as u32);
+        self.core.fresh = false;
+        if let Some(e) = self.core.health.delivering(read_at) {
+            self.core.report(Some(e), out);
         }
     }
 
@@ -542,6 +521,27 @@ impl ImuService {
             _ => Failure::Other,
         };
         self.core.failed(failure, t, out);
+    }
+}
+
+/// Open a burst's message in `out`, before its read, so that the frames are read straight
+/// into it (built with defaults and moved in after, it went through a copy on the stack, ≈ 60
+/// cycles per ms); its stamps come once the frames are in. Its frame buffer, or `None` when
+/// `out` is full.
+fn open_burst(
+    out: &mut Out,
+    layout: mpu::FifoFrame,
+    after: Option<GapCause>,
+) -> Option<&mut FifoFrames> {
+    out.push(SensorMsg::Imu {
+        stamps: Stamps::default(),
+        frames: FifoFrames::new(layout),
+        after,
+    })
+    .ok()?;
+    match out.last_mut() {
+        Some(SensorMsg::Imu { frames, .. }) => Some(frames),
+        _ => None,
     }
 }
 

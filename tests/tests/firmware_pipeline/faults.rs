@@ -66,15 +66,9 @@ fn a_nack_burst_shorter_than_the_fifo_costs_nothing() {
 /// stamp: the samples read after it are stamped as the part sampled them, as before it.
 #[test]
 fn a_failed_fifo_read_moves_no_stamp() {
-    let mut x = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(1, |d| d.as_nanos() as u64)
-        | 1;
-    println!("key {x}");
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
     for _ in 0..6 {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
+        let x = keyed.bits();
         let (phase_us, length_us) = (x % 10_000, 2_000 + (x >> 20) % 38_000);
         let mut rig = Rig::new();
         rig.run(5000);
@@ -273,15 +267,9 @@ fn a_count_made_stale_by_a_hold_up_is_an_overflow() {
 /// and again, and the clock would run off).
 #[test]
 fn a_magnetometer_glitch_keeps_every_reading_in_its_slot_and_counts_every_loss() {
-    let mut x = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(1, |d| d.as_nanos() as u64)
-        | 1;
-    println!("key {x}");
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
     for _ in 0..12 {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
+        let x = keyed.bits();
         let late_ns = 60_000 + x % 140_000;
         let mut rig = Rig::new();
         // Bytes of 9 SCL periods at 400 kHz, and a service that knows it.
