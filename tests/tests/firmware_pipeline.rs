@@ -407,15 +407,9 @@ fn slots_and_stamps_follow_the_parts_own_clocks() {
 /// its own slot.
 #[test]
 fn a_steady_burst_reads_the_count_and_the_frames_in_one_transfer() {
-    let mut x = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(1, |d| d.as_nanos() as u64)
-        | 1;
-    println!("key {x}");
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
     for _ in 0..4 {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
+        let x = keyed.bits();
         let error = ((x % 3001) as f64 - 1500.0) * 1e-5;
         let mut mpu = noisy_mpu();
         mpu.clock_error = error;
@@ -775,43 +769,6 @@ fn the_magnetometer_is_polled_once_per_reading_once_settled() {
     let n = (rig.mag_out.len() - n0) as u64;
     assert!(n >= 398, "{n} readings in 2 s");
     assert!(polls <= n + n / 10, "{polls} status polls for {n} readings");
-}
-
-/// Once its clock is located, a magnetometer reading is one transfer (the status and, after a
-/// repeated START, the data) but for its guard looks and probes, whatever the part's clock error, and every reading is still the
-/// model's measurement of its slot, none lost.
-#[test]
-fn a_settled_magnetometer_reading_is_one_transfer() {
-    let mut x = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(1, |d| d.as_nanos() as u64)
-        | 1;
-    println!("key {x}");
-    for _ in 0..4 {
-        x ^= x << 13;
-        x ^= x >> 7;
-        x ^= x << 17;
-        let error = ((x % 3001) as f64 - 1500.0) * 1e-5;
-        let mut qmc = noisy_qmc();
-        qmc.clock_error = error;
-        let mut rig = Rig::with(noisy_mpu(), qmc);
-        rig.run(3000);
-        let (t0, n0) = (rig.bus.mag(|q| q.transactions), rig.mag_out.len());
-        rig.run(2000);
-        let transfers = rig.bus.mag(|q| q.transactions) - t0;
-        let n = (rig.mag_out.len() - n0) as u64;
-        assert!(n >= 390, "clock error {error}: {n} readings in 2 s");
-        // Two a reading before; a guard look (one in 16) and a probe still take more.
-        assert!(
-            transfers <= n + n / 3,
-            "clock error {error}: {transfers} transfers for {n} readings"
-        );
-        let mlog = rig.bus.mag(|q| q.log.clone());
-        for (k, xyz) in &rig.mag_out {
-            assert_eq!(mlog[*k as usize].1, *xyz, "clock error {error}: slot {k}");
-        }
-        assert_eq!(rig.dev.status(0, 0).mag_dropped, 0, "clock error {error}");
-    }
 }
 
 /// The tasks' fallback slots: the incremental step (one addition) gives exactly what the
