@@ -125,6 +125,8 @@ struct Rig {
     imu_out: Vec<Delivered>,
     /// Every magnetometer reading handed to the device: (slot, reading).
     mag_out: Vec<(u32, [i16; 3])>,
+    /// The next magnetometer tick begins this many µs after its instant (a CPU held up).
+    mag_hold_us: u64,
 }
 
 impl Rig {
@@ -146,6 +148,7 @@ impl Rig {
             sink: Sink::roomy(),
             imu_out: Vec::new(),
             mag_out: Vec::new(),
+            mag_hold_us: 0,
         }
     }
 
@@ -194,6 +197,7 @@ impl Rig {
             let clock = move || bus.now_ns() / 1000;
             let mut out = msg::Out::new();
             if t == t_mag {
+                self.bus.advance_us(std::mem::take(&mut self.mag_hold_us));
                 if self.mag_svc.wants_recovery(t) {
                     self.mag_svc.recovered();
                 }

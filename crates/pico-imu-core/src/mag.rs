@@ -3,11 +3,14 @@
 //!
 //! * **Timing**: each tick's status poll is latched just after the predicted landing of the next
 //!   sample (`t̂ + hi`, the late end of the clock's uncertainty, plus [`POLL_MARGIN`]), so it
-//!   finds DRDY set. While the clock's uncertainty is wide, the poll is latched at the predicted
-//!   instant instead: DRDY set or clear there halves the uncertainty (a clear one is polled again
-//!   at the late end). The reading's slot is the newest sample instant before its data read; when
-//!   that read came too close to an instant to tell, the status is polled once more after it
-//!   (DRDY set again: the read was the sample before).
+//!   finds DRDY set; once the clock is located it reads the data in the same transfer, after a
+//!   repeated START (one transfer and one wake-up per reading instead of two). While the
+//!   clock's uncertainty is wide, the poll is latched at the predicted instant instead (begun
+//!   early by the learnt latency, [`Lead`], so that it lands there): DRDY set or clear there
+//!   halves the uncertainty (a clear one is polled again at the late end). The reading's slot
+//!   is the newest sample instant before its data read; when that read came too close to an
+//!   instant to tell, the status is polled once more after it (DRDY set again: the read was the
+//!   sample before).
 //! * **Losses**: readings are slots of the grid; slots skipped (the part overwrote them before
 //!   they were read: DOR) are counted by the processing task from the slot numbers.
 //! * **Faults** as for the IMU ([`crate::imu`]): retries, loss after
@@ -25,10 +28,12 @@ use crate::bus::{Failure, TransferTime};
 use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::mag_config;
 use crate::msg::{Out, SensorMsg};
-use crate::sensor::{delay_until, Core, Phase, Tick, SETUP};
+use crate::sensor::{delay_until, Core, Lead, Phase, Tick, SETUP};
 
-/// How long after the late end of the clock's uncertainty a poll is latched.
-pub const POLL_MARGIN: Fine = fine(20);
+/// How long after the late end of the clock's uncertainty a poll is latched: beyond the
+/// interval's own error, so that a look that also reads the data does not meet the landing
+/// (which its data bytes would clear unseen).
+pub const POLL_MARGIN: Fine = fine(60);
 /// Margin around a sample instant within which a read's side is uncertain (beyond the clock's
 /// own interval).
 const READ_MARGIN: Fine = fine(10);
@@ -36,12 +41,30 @@ const READ_MARGIN: Fine = fine(10);
 const REPOLL_MIN: Fine = fine(100);
 /// Status polls in one tick (the first and its re-polls).
 const POLLS: u32 = 4;
+/// A look's bits, from its start: the status byte's latch, the first data byte's (after the
+/// repeated START and the data registers' address) and the last data byte's.
+const LOOK_STATUS_BIT: u64 = clock::READ_FIRST_BIT;
+const LOOK_DATA_BIT: u64 = clock::read_bits(1) + clock::READ_FIRST_BIT;
+const LOOK_LAST_BIT: u64 = LOOK_DATA_BIT + 9 * 5;
 
 /// The magnetometer side.
 pub struct MagService {
     core: Core,
     /// When the next tick should start, µs (`None`: the caller's own schedule).
     next_poll_us: Option<u64>,
+    /// The next tick's first look is placed after the late end of a located clock's interval,
+    /// where the sample has landed: it reads the data with the status, in one transfer.
+    late_look: bool,
+    /// Where the next tick's first status read should start (its latch placed by the clock).
+    aimed: Option<Fine>,
+    /// How much earlier than its target the first status read is begun.
+    lead: Lead,
+    /// The last reading's data while the part's data registers are known to hold them, DRDY
+    /// cleared by reading them (`None` after a failed transfer, a bus recovery or a restart:
+    /// a transfer that failed may have read data bytes too). Only then may a look read the data
+    /// with the status: one that finds no sample tells from them whether one landed between
+    /// the status byte and the data bytes.
+    last_xyz: Option<[i16; 3]>,
 }
 
 impl MagService {
@@ -49,6 +72,10 @@ impl MagService {
         Self {
             core: Core::new(Sensor::Mag, MAG_PERIOD_US as u32, timing),
             next_poll_us: None,
+            late_look: false,
+            aimed: None,
+            lead: Lead::new(),
+            last_xyz: None,
         }
     }
 
@@ -75,6 +102,7 @@ impl MagService {
     /// The caller recovered the bus.
     pub fn recovered(&mut self) {
         self.core.recovered();
+        self.last_xyz = None;
     }
 
     /// After a pause (flash write): the samples missed meanwhile are counted as lost to it.
@@ -91,6 +119,8 @@ impl MagService {
     ) {
         let t = (cx.now)();
         self.next_poll_us = None;
+        let late_look = core::mem::take(&mut self.late_look);
+        let aimed = self.aimed.take();
         match self.core.phase {
             Phase::Init => self.init(cx, GapCause::SensorFault).await,
             Phase::Lost if self.core.health.retry_due(t) => {
@@ -123,7 +153,7 @@ impl MagService {
                     self.core.phase = Phase::Stalled;
                 }
             }
-            Phase::Running | Phase::Stalled => self.read(cx).await,
+            Phase::Running | Phase::Stalled => self.read(cx, late_look, aimed).await,
         }
         self.core.flush_report(cx.out);
         if self.next_poll_us.is_none() && matches!(self.core.phase, Phase::Running | Phase::Stalled)
@@ -137,6 +167,7 @@ impl MagService {
         cx: &mut Tick<'_, Qmc5883<I>, D>,
         cause: GapCause,
     ) {
+        self.last_xyz = None;
         if let Err(e) = cx.dev.prepare(cx.delay, &mag_config()).await {
             self.failed(&e, (cx.now)(), cx.out);
             return;
@@ -171,17 +202,54 @@ impl MagService {
         } else {
             self.core.clock.instant_after(earliest, offset)
         };
-        self.next_poll_us = Some(whole_us(at - latch));
+        // A probe or a guard is begun early by the learnt latency between the tick's start and
+        // the read's first bit, so that the status is latched where the clock placed it (a
+        // probe latched late finds the sample past the late end and narrows nothing). A look
+        // after the late end is not: the latency varies with what else runs, and latched
+        // early it could meet the landing, which its data read would then clear unseen.
+        let start = at - latch;
+        let clock = &self.core.clock;
+        self.late_look = offset > 0
+            && clock.known()
+            && clock.width() <= clock::LOCKED_WIDTH
+            && self.last_xyz.is_some();
+        self.aimed = (offset <= 0).then_some(start);
+        let begin = if offset <= 0 {
+            self.lead.begin(start)
+        } else {
+            start
+        };
+        self.next_poll_us = Some(whole_us(begin));
     }
 
-    /// Poll the status (again, up to [`POLLS`] times) and read the sample when DRDY is set.
-    async fn read<I: I2c + TransferTime, D: DelayNs>(&mut self, cx: &mut Tick<'_, Qmc5883<I>, D>) {
+    /// Poll the status (again, up to [`POLLS`] times) and read the sample when DRDY is set. A
+    /// `late_look` reads the data with its first status, in one transfer (`status_and_data`):
+    /// the sample has landed by the clock, so the data are it when DRDY shows, and are
+    /// discarded otherwise (the clock was wrong; a sample that landed after the status byte was
+    /// then cleared unseen, and its slot is counted lost when the next reading's slot comes
+    /// from the clock).
+    async fn read<I: I2c + TransferTime, D: DelayNs>(
+        &mut self,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
+        late_look: bool,
+        mut aimed: Option<Fine>,
+    ) {
         let status_latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
         // A "not yet" seen this tick, kept to be trusted if a later poll finds the sample (the
         // part is producing, so the phase was late, not the part stalled).
         let mut not_yet: Option<Fine> = None;
         for poll in 0..POLLS {
-            let status = cx.dev.status().await;
+            // Checked again where the look starts: a tick begun late (the bus held by an IMU
+            // burst, the CPU stalled) may bring a landing among its bytes.
+            let clear = |s: &Self| s.look_clear(fine((cx.now)()) + SETUP);
+            let (status, with_status) = if poll == 0 && late_look && clear(self) {
+                match cx.dev.status_and_data().await {
+                    Ok((s, xyz)) => (Ok(s), Some(xyz)),
+                    Err(e) => (Err(e), None),
+                }
+            } else {
+                (cx.dev.status().await, None)
+            };
             let t = (cx.now)();
             let status = match status {
                 Ok(s) => s,
@@ -191,10 +259,40 @@ impl MagService {
                 }
             };
             let start = cx.dev.bus().last_start();
+            // Learnt only from looks that started within the largest lead of their aim: one
+            // the bus held back (an IMU burst in progress) says nothing about the latency.
+            if let Some(a) = aimed.take() {
+                if start.since(a).unsigned_abs() <= Lead::MAX.raw() {
+                    self.lead.learn(a, start);
+                }
+            }
             let tau = self.core.answered(start, clock::READ_FIRST_BIT);
             // A status read the bus held says nothing about when the sample landed.
-            let timely = !self.core.held(start, clock::read_bits(1), t);
+            let bits = if with_status.is_some() {
+                clock::read_bits(1) + clock::read_bits(6)
+            } else {
+                clock::read_bits(1)
+            };
+            let timely = !self.core.held(start, bits, t);
             if !status.ready {
+                if let Some(xyz) = with_status {
+                    if !self.core.fresh && self.last_xyz.is_some_and(|last| last != xyz) {
+                        // The data changed after the status said "not yet": a sample landed
+                        // after the status byte, before the last data byte, and reading them
+                        // cleared its DRDY unseen. Its slot is lost (counted from the next
+                        // reading's), its landing located between the two latches.
+                        if timely {
+                            let clock = &mut self.core.clock;
+                            clock.observe(tau, self.core.next_k.wrapping_sub(1), Seen::NextNotYet);
+                            let t_last = self.core.timing.latch(start, LOOK_LAST_BIT);
+                            clock.observe(t_last, self.core.next_k, Seen::Produced);
+                        }
+                        self.core.next_k = self.core.next_k.wrapping_add(1);
+                        self.last_xyz = Some(xyz);
+                        self.core.last_growth_us = t;
+                        return;
+                    }
+                }
                 if timely && !self.core.fresh {
                     // Sample `next_k` not yet landed: a lower bound, unless the part stalled.
                     self.core.clock.observe(
@@ -240,64 +338,74 @@ impl MagService {
                 // that carried it here is wrong by more than its bound. Measure it again.
                 self.core.clock.distrust_period();
             }
-            // A data read that a landing may fall inside would be torn (the part rewrites its
-            // data registers, the bytes already read belong to the sample before): wait for
-            // that landing, then read; the read takes the sample that landed. Only with a
-            // located clock (while it is wide, any read window may hold a landing).
-            let now = fine((cx.now)());
-            let window = SETUP + self.core.timing.duration(clock::read_bits(6));
-            let half = window / 2;
-            let clock = &self.core.clock;
-            if clock.known()
-                && clock.width() <= clock::LOCKED_WIDTH
-                && clock.newest_at(now + half, half + READ_MARGIN).is_none()
-            {
-                let late = clock.width() / 2 + POLL_MARGIN;
-                let after = clock.instant_after(now, late.raw() as i64);
-                delay_until(cx.delay, cx.now, after).await;
-            }
-            let xyz = match cx.dev.read_data().await {
-                Ok(xyz) => xyz,
-                Err(e) => {
-                    self.failed(&e, (cx.now)(), cx.out);
-                    return;
-                }
-            };
-            let end = (cx.now)();
-            let start = cx.dev.bus().last_start();
-            let t_data = if self.core.held(start, clock::read_bits(6), end) {
-                self.held_read(cx, start, end).await
-            } else {
-                self.core.timing.latch(start, clock::READ_FIRST_BIT)
-            };
-            // The slot read. DOR clear: one sample landed since the last read, the next one due,
-            // unless the clock says the grid has moved on past it (a part that produced nothing
-            // for a while). DOR set (samples overwritten unread): the newest landed before the
-            // data read, by the clock.
-            let by_clock = self.core.clock.newest_at(t_data, READ_MARGIN);
-            let later = |k: u32| k.wrapping_sub(self.core.next_k).wrapping_sub(1) < 1 << 31;
-            let k = if !status.skipped {
-                match by_clock {
-                    Some(k) if later(k) => k,
-                    Some(_) => self.core.next_k,
-                    // Too close to an instant `j` to tell `j − 1` from `j`: only if both are past
-                    // the one due does it matter.
-                    None if later(self.core.clock.nearest(t_data).wrapping_sub(1)) => {
-                        self.resolve(cx, t_data).await
+            // The data, their latch, and their slot when the clock alone tells it.
+            let (xyz, t_data, slot) = match with_status {
+                // Read with the status, just after it.
+                Some(xyz) => {
+                    let timing = self.core.timing;
+                    let t_data = if timely {
+                        timing.latch(start, LOOK_DATA_BIT)
+                    } else {
+                        self.held_read(cx, start, t, LOOK_DATA_BIT).await
+                    };
+                    let base = t_data - timing.duration(LOOK_DATA_BIT);
+                    if self.look_clear(base) {
+                        (xyz, t_data, Some(self.core.next_k))
+                    } else {
+                        match self.among_bytes(cx, base).await {
+                            Some(t_data) => (xyz, t_data, None),
+                            None => {
+                                // Torn, or not known to be whole: not delivered; its slot and
+                                // the one the status showed are counted lost from the next
+                                // reading's.
+                                let clock = &self.core.clock;
+                                let landing = clock.nearest(timing.latch(base, LOOK_DATA_BIT));
+                                self.core.next_k = landing.wrapping_add(1);
+                                self.last_xyz = None;
+                                self.core.last_growth_us = t;
+                                return;
+                            }
+                        }
                     }
-                    None => self.core.next_k,
                 }
-            } else {
-                let k = match by_clock {
-                    Some(k) => k,
-                    None => self.resolve(cx, t_data).await,
-                };
-                // Never an older slot than the next one due (the sample just read is new).
-                if self.core.fresh || k.wrapping_sub(self.core.next_k) < 1 << 31 {
-                    k
-                } else {
-                    self.core.next_k
+                None => {
+                    // A data read that a landing may fall inside would be torn (the part
+                    // rewrites its data registers, the bytes already read belong to the sample
+                    // before): wait for that landing, then read; the read takes the sample that
+                    // landed. Only with a located clock (while it is wide, any read window may
+                    // hold a landing).
+                    let now = fine((cx.now)());
+                    let window = SETUP + self.core.timing.duration(clock::read_bits(6));
+                    let half = window / 2;
+                    let clock = &self.core.clock;
+                    if clock.known()
+                        && clock.width() <= clock::LOCKED_WIDTH
+                        && clock.newest_at(now + half, half + READ_MARGIN).is_none()
+                    {
+                        let late = clock.width() / 2 + POLL_MARGIN;
+                        let after = clock.instant_after(now, late.raw() as i64);
+                        delay_until(cx.delay, cx.now, after).await;
+                    }
+                    let xyz = match cx.dev.read_data().await {
+                        Ok(xyz) => xyz,
+                        Err(e) => {
+                            self.failed(&e, (cx.now)(), cx.out);
+                            return;
+                        }
+                    };
+                    let end = (cx.now)();
+                    let start = cx.dev.bus().last_start();
+                    let t_data = if self.core.held(start, clock::read_bits(6), end) {
+                        self.held_read(cx, start, end, clock::READ_FIRST_BIT).await
+                    } else {
+                        self.core.timing.latch(start, clock::READ_FIRST_BIT)
+                    };
+                    (xyz, t_data, None)
                 }
+            };
+            let k = match slot {
+                Some(k) => k,
+                None => self.slot_of(cx, t_data, status.skipped).await,
             };
             let stamps = self.core.clock.stamps(k, 1);
             let _ = cx.out.push(SensorMsg::Mag {
@@ -305,6 +413,7 @@ impl MagService {
                 xyz,
                 after: self.core.after.take(),
             });
+            self.last_xyz = Some(xyz);
             self.core.next_k = k.wrapping_add(1);
             self.core.fresh = false;
             // A stall is timed from when the part last produced, not from this read.
@@ -319,21 +428,104 @@ impl MagService {
         }
     }
 
-    /// When a data read that took too long (started at `start`, seen done at `end_us`) moved
-    /// its bytes. Either the bus held it (a START that could not be sent, a slave stretching
-    /// SCL): its bytes moved at its end. Or the task was held after it (a CPU stall): they moved
-    /// at its start. A status poll tells the two apart: DRDY set again, with no landing
-    /// between the end and the poll, means a sample landed after the bytes moved, before the
-    /// end: they moved at the start.
+    /// The slot of data latched at `t_data` (`skipped`: the status showed DOR). DOR clear: one
+    /// sample landed since the last read, the next one due, unless the clock says the grid has
+    /// moved on past it (a part that produced nothing for a while). DOR set (samples
+    /// overwritten unread): the newest landed before the data read, by the clock.
+    async fn slot_of<I: I2c + TransferTime, D: DelayNs>(
+        &mut self,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
+        t_data: Fine,
+        skipped: bool,
+    ) -> u32 {
+        let by_clock = self.core.clock.newest_at(t_data, READ_MARGIN);
+        let later = |k: u32| k.wrapping_sub(self.core.next_k).wrapping_sub(1) < 1 << 31;
+        if !skipped {
+            match by_clock {
+                Some(k) if later(k) => k,
+                Some(_) => self.core.next_k,
+                // Too close to an instant `j` to tell `j − 1` from `j`: only if both are past
+                // the one due does it matter.
+                None if later(self.core.clock.nearest(t_data).wrapping_sub(1)) => {
+                    self.resolve(cx, t_data).await
+                }
+                None => self.core.next_k,
+            }
+        } else {
+            let k = match by_clock {
+                Some(k) => k,
+                None => self.resolve(cx, t_data).await,
+            };
+            // Never an older slot than the next one due (the sample just read is new).
+            if self.core.fresh || k.wrapping_sub(self.core.next_k) < 1 << 31 {
+                k
+            } else {
+                self.core.next_k
+            }
+        }
+    }
+
+    /// Whether a look started at `start` (status and data in one transfer) is clear of
+    /// landings: by the clock, the next sample due landed before its status byte's latch and
+    /// the one after lands after its last data byte's. Only while the part's data registers
+    /// hold the last reading.
+    fn look_clear(&self, start: Fine) -> bool {
+        let timing = &self.core.timing;
+        !self.core.fresh
+            && self.last_xyz.is_some()
+            && self.core.clock.alone(
+                self.core.next_k,
+                timing.latch(start, LOOK_STATUS_BIT),
+                timing.latch(start, LOOK_LAST_BIT),
+                READ_MARGIN,
+            )
+    }
+
+    /// A look (started at `start`) that showed a sample may have met the next landing among
+    /// its bytes. Landed before the first data byte: the data are that new sample, whole (their
+    /// latch returned). After it: they are the sample the status showed, unless the landing
+    /// tore them: a status poll tells (DRDY set again, the landing came after the last byte:
+    /// the status byte's latch returned). Torn, or too close to the first data byte to tell:
+    /// `None`.
+    async fn among_bytes<I: I2c + TransferTime, D: DelayNs>(
+        &mut self,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
+        start: Fine,
+    ) -> Option<Fine> {
+        let timing = self.core.timing;
+        let t_status = timing.latch(start, LOOK_STATUS_BIT);
+        let t_data = timing.latch(start, LOOK_DATA_BIT);
+        let clock = &self.core.clock;
+        let at_data = clock.newest_at(t_data, READ_MARGIN)?;
+        if clock.newest_at(timing.latch(start, LOOK_LAST_BIT), READ_MARGIN) == Some(at_data) {
+            return Some(t_data);
+        }
+        if clock.newest_at(t_status, READ_MARGIN) != Some(at_data) {
+            return None;
+        }
+        match cx.dev.status().await {
+            Ok(s) if s.ready => Some(t_status),
+            _ => None,
+        }
+    }
+
+    /// When a data read that took too long (started at `start`, seen done at `end_us`, its
+    /// first data byte `first_bit` in) moved its bytes. Either the bus held it (a START that
+    /// could not be sent, a slave stretching SCL): its bytes moved at its end. Or the task was
+    /// held after it (a CPU stall): they moved at its start. A status poll tells the two apart:
+    /// DRDY set again, with no landing between the end and the poll, means a sample landed
+    /// after the bytes moved, before the end: they moved at the start.
     async fn held_read<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
         cx: &mut Tick<'_, Qmc5883<I>, D>,
         start: Fine,
         end_us: u64,
+        first_bit: u64,
     ) -> Fine {
+        // The data bytes end the transfer either way (alone, or after the status).
         let after = clock::read_bits(6) - clock::READ_FIRST_BIT;
         let at_end = fine(end_us) - self.core.timing.duration(after);
-        let at_start = self.core.timing.latch(start, clock::READ_FIRST_BIT);
+        let at_start = self.core.timing.latch(start, first_bit);
         let Ok(status) = cx.dev.status().await else {
             return at_end;
         };
@@ -376,6 +568,7 @@ impl MagService {
 
     /// A transfer failed at `t`.
     fn failed<E: embedded_hal::i2c::Error>(&mut self, e: &qmc::Error<E>, t: u64, out: &mut Out) {
+        self.last_xyz = None;
         let failure = match e {
             qmc::Error::Bus(b) => Failure::of(b),
             _ => Failure::Other,

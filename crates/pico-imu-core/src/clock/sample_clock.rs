@@ -406,6 +406,18 @@ impl SampleClock {
         (early == late).then(|| self.k_at.wrapping_add(early as u32))
     }
 
+    /// Whether sample `k` is, by the clock, the newest produced all through `from..=to`: it
+    /// landed `margin` or more before `from` and `k + 1` lands `margin` or more after `to`
+    /// (given the interval's uncertainty). [`Self::newest_at`] at both ends, for a known `k`,
+    /// without its divisions.
+    pub fn alone(&self, k: u32, from: Fine, to: Fine, margin: Fine) -> bool {
+        let t = self.time(k);
+        let m = margin.raw() as i64;
+        self.known
+            && from.since(t) >= self.hi + m
+            && to.since(t) < self.period.raw() as i64 + self.lo - m
+    }
+
     /// The index of the first sample produced after `tau` (see [`Self::newest_at`]).
     pub fn first_after(&self, tau: Fine, margin: Fine) -> Option<u32> {
         self.newest_at(tau, margin).map(|k| k.wrapping_add(1))
@@ -463,6 +475,42 @@ mod tests {
 
     fn err_us(c: &SampleClock, part: &Part, k: u32) -> f64 {
         (c.time(k).raw() as f64 / US.raw() as f64) - part.t(k) / 1000.0
+    }
+
+    /// `alone` is `newest_at` at both ends of a span, for the sample asked about, over random
+    /// lines, intervals, spans and margins (including spans that meet an interval's edge).
+    #[test]
+    fn alone_agrees_with_newest_at_at_both_ends() {
+        let mut rng = crate::test_util::clock_keyed();
+        let mut agreed = (0, 0);
+        for _ in 0..20_000 {
+            let mut c = SampleClock::new(5000);
+            let t0 = fine(1_000 + rng() % 1_000_000);
+            c.start(0, t0, false, Fine::ZERO);
+            let k = (rng() % 4000) as u32;
+            // A located line: its interval a few µs to tens of µs wide, not centred.
+            c.rebase(k);
+            let us = fine(1).raw() as i64;
+            c.lo = -((rng() % 40) as i64 * us) + (rng() % 10) as i64 * us;
+            c.hi = c.lo + (rng() % 40) as i64 * us;
+            let j = k.wrapping_add((rng() % 3) as u32).wrapping_sub(1);
+            let from = c.time(k) + Fine::from_raw(rng() % fine(400).raw()) - fine(100);
+            let to = from + Fine::from_raw(rng() % fine(5_200).raw());
+            let m = Fine::from_raw(rng() % fine(30).raw());
+            let both = c.newest_at(from, m) == Some(j) && c.newest_at(to, m) == Some(j);
+            assert_eq!(
+                c.alone(j, from, to, m),
+                both,
+                "k {k} j {j} from {from:?} to {to:?}"
+            );
+            if both {
+                agreed.0 += 1;
+            } else {
+                agreed.1 += 1;
+            }
+        }
+        // Both answers drawn often.
+        assert!(agreed.0 > 1000 && agreed.1 > 1000, "{agreed:?}");
     }
 
     /// Reads every 10 ms at a fixed phase relative to a reader clock, with probes when the
