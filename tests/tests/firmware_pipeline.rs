@@ -775,6 +775,37 @@ fn the_magnetometer_is_polled_once_per_reading_once_settled() {
     assert!(polls <= n + n / 10, "{polls} status polls for {n} readings");
 }
 
+/// Once its clock is located, a magnetometer reading is one transfer (the status and, after a
+/// repeated START, the data) but for its guard looks and probes, whatever the part's clock
+/// error, and every reading is still the model's measurement of its slot, none lost.
+#[test]
+fn a_settled_magnetometer_reading_is_one_transfer() {
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
+    for _ in 0..4 {
+        let x = keyed.bits();
+        let error = ((x % 3001) as f64 - 1500.0) * 1e-5;
+        let mut qmc = noisy_qmc();
+        qmc.clock_error = error;
+        let mut rig = Rig::with(noisy_mpu(), qmc);
+        rig.run(3000);
+        let (t0, n0) = (rig.bus.mag(|q| q.transactions), rig.mag_out.len());
+        rig.run(2000);
+        let transfers = rig.bus.mag(|q| q.transactions) - t0;
+        let n = (rig.mag_out.len() - n0) as u64;
+        assert!(n >= 390, "clock error {error}: {n} readings in 2 s");
+        // Two a reading without it; a guard look (one in 16) and a probe still take more.
+        assert!(
+            transfers <= n + n / 3,
+            "clock error {error}: {transfers} transfers for {n} readings"
+        );
+        let mlog = rig.bus.mag(|q| q.log.clone());
+        for (k, xyz) in &rig.mag_out {
+            assert_eq!(mlog[*k as usize].1, *xyz, "clock error {error}: slot {k}");
+        }
+        assert_eq!(rig.dev.status(0, 0).mag_dropped, 0, "clock error {error}");
+    }
+}
+
 /// The tasks' fallback slots: the incremental step (one addition) gives exactly what the
 /// division gives, and missed slots are skipped, not caught up.
 #[test]
