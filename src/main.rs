@@ -590,7 +590,7 @@ async fn process_task(
                 if plan.status {
                     let load = cpu.sample();
                     let st = device.send_status(now, load, &mut sink);
-                    if status_log.due(&st) {
+                    if status_log.due(&st, device.tables_pending()) {
                         info!(
                             "status: {} samples, {} lost, {} overflows, {} I2C errors, cpu {}‰, imu {} ({} ns), mag {} ({} ns, {} lost)",
                             st.samples_taken, st.samples_dropped, st.fifo_overflows, st.i2c_errors, load, st.imu, st.imu_period_ns, st.mag, st.mag_period_ns, st.mag_dropped

@@ -203,18 +203,30 @@ fn status(dropped: u64, imu: SensorState) -> Status {
 fn status_log_throttle() {
     let mut log = StatusLog::default();
     let quiet = status(0, SensorState::Ok);
-    let logged: Vec<bool> = (0..25).map(|_| log.due(&quiet)).collect();
+    let logged: Vec<bool> = (0..25).map(|_| log.due(&quiet, false)).collect();
     let want: Vec<bool> = (1..=25).map(|i| i % STATUS_LOG_EVERY == 0).collect();
     assert_eq!(logged, want);
     // A loss: logged at once, then quiet again for STATUS_LOG_EVERY - 1 frames.
-    assert!(log.due(&status(3, SensorState::Ok)));
+    assert!(log.due(&status(3, SensorState::Ok), false));
     for _ in 1..STATUS_LOG_EVERY {
-        assert!(!log.due(&status(3, SensorState::Ok)));
+        assert!(!log.due(&status(3, SensorState::Ok), false));
     }
-    assert!(log.due(&status(3, SensorState::Ok)));
+    assert!(log.due(&status(3, SensorState::Ok), false));
     // A state change is a change too, and so is the way back.
-    assert!(log.due(&status(3, SensorState::Missing)));
-    assert!(log.due(&status(3, SensorState::Ok)));
+    assert!(log.due(&status(3, SensorState::Missing), false));
+    assert!(log.due(&status(3, SensorState::Ok), false));
     // Anything but healthy at the start is logged with the first frame.
-    assert!(StatusLog::default().due(&status(0, SensorState::Missing)));
+    assert!(StatusLog::default().due(&status(0, SensorState::Missing), false));
+    // A quiet line due while a table round is being sent waits for the first frame after it;
+    // a change does not wait.
+    let mut log = StatusLog::default();
+    for _ in 1..STATUS_LOG_EVERY {
+        assert!(!log.due(&quiet, false));
+    }
+    for _ in 0..7 {
+        assert!(!log.due(&quiet, true));
+    }
+    assert!(log.due(&quiet, false));
+    assert!(!log.due(&quiet, false));
+    assert!(log.due(&status(1, SensorState::Ok), true));
 }

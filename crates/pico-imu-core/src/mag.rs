@@ -46,15 +46,22 @@ const POLLS: u32 = 4;
 const LOOK_STATUS_BIT: u64 = clock::READ_FIRST_BIT;
 const LOOK_DATA_BIT: u64 = clock::read_bits(1) + clock::READ_FIRST_BIT;
 const LOOK_LAST_BIT: u64 = LOOK_DATA_BIT + 9 * 5;
+/// How much later than planned a look may start and still be taken as clear of landings
+/// without asking the clock ([`MagService::on_plan`]; a quarter period if that is less).
+const LOOK_SLACK: Fine = fine(1000);
+/// How much earlier than planned it may start ([`POLL_MARGIN`] is 60 µs past the interval's
+/// late end; [`READ_MARGIN`] must stay).
+const LOOK_EARLY: Fine = fine(20);
 
 /// The magnetometer side.
 pub struct MagService {
     core: Core,
     /// When the next tick should start, µs (`None`: the caller's own schedule).
     next_poll_us: Option<u64>,
-    /// The next tick's first look is placed after the late end of a located clock's interval,
-    /// where the sample has landed: it reads the data with the status, in one transfer.
-    late_look: bool,
+    /// Where the next tick's first transfer should start when it is a look placed after the late
+    /// end of a located clock's interval, where the next sample due has landed: it reads the
+    /// data with the status, in one transfer.
+    look: Option<Fine>,
     /// Where the next tick's first status read should start (its latch placed by the clock).
     aimed: Option<Fine>,
     /// How much earlier than its target the first status read is begun.
@@ -72,7 +79,7 @@ impl MagService {
         Self {
             core: Core::new(Sensor::Mag, MAG_PERIOD_US as u32, timing),
             next_poll_us: None,
-            late_look: false,
+            look: None,
             aimed: None,
             lead: Lead::new(),
             last_xyz: None,
@@ -119,7 +126,7 @@ impl MagService {
     ) {
         let t = (cx.now)();
         self.next_poll_us = None;
-        let late_look = core::mem::take(&mut self.late_look);
+        let look = self.look.take();
         let aimed = self.aimed.take();
         match self.core.phase {
             Phase::Init => self.init(cx, GapCause::SensorFault).await,
@@ -153,7 +160,7 @@ impl MagService {
                     self.core.phase = Phase::Stalled;
                 }
             }
-            Phase::Running | Phase::Stalled => self.read(cx, late_look, aimed).await,
+            Phase::Running | Phase::Stalled => self.read(cx, look, aimed).await,
         }
         self.core.flush_report(cx.out);
         if self.next_poll_us.is_none() && matches!(self.core.phase, Phase::Running | Phase::Stalled)
@@ -209,10 +216,10 @@ impl MagService {
         // early it could meet the landing, which its data read would then clear unseen.
         let start = at - latch;
         let clock = &self.core.clock;
-        self.late_look = offset > 0
-            && clock.known()
-            && clock.width() <= clock::LOCKED_WIDTH
-            && self.last_xyz.is_some();
+        let located = clock.known() && clock.width() <= clock::LOCKED_WIDTH;
+        self.look =
+            (offset > 0 && at == due && located && !self.core.fresh && self.last_xyz.is_some())
+                .then_some(start);
         self.aimed = (offset <= 0).then_some(start);
         let begin = if offset <= 0 {
             self.lead.begin(start)
@@ -223,15 +230,14 @@ impl MagService {
     }
 
     /// Poll the status (again, up to [`POLLS`] times) and read the sample when DRDY is set. A
-    /// `late_look` reads the data with its first status, in one transfer (`status_and_data`):
-    /// the sample has landed by the clock, so the data are it when DRDY shows, and are
-    /// discarded otherwise (the clock was wrong; a sample that landed after the status byte was
-    /// then cleared unseen, and its slot is counted lost when the next reading's slot comes
-    /// from the clock).
+    /// `look` (its planned start) reads the data with its first status, in one transfer
+    /// (`status_and_data`), if it starts where no landing can fall among its bytes: the sample
+    /// has landed by the clock, so the data are it when DRDY shows; otherwise they tell whether
+    /// a sample landed after the status byte (and was cleared unseen by their read).
     async fn read<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
         cx: &mut Tick<'_, Qmc5883<I>, D>,
-        late_look: bool,
+        look: Option<Fine>,
         mut aimed: Option<Fine>,
     ) {
         let status_latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
@@ -241,8 +247,11 @@ impl MagService {
         for poll in 0..POLLS {
             // Checked again where the look starts: a tick begun late (the bus held by an IMU
             // burst, the CPU stalled) may bring a landing among its bytes.
-            let clear = |s: &Self| s.look_clear(fine((cx.now)()) + SETUP);
-            let (status, with_status) = if poll == 0 && late_look && clear(self) {
+            let clear = |s: &Self, planned: Fine| {
+                let start = fine((cx.now)()) + SETUP;
+                s.on_plan(planned, start) || s.look_clear(start)
+            };
+            let (status, with_status) = if poll == 0 && look.is_some_and(|p| clear(self, p)) {
                 match cx.dev.status_and_data().await {
                     Ok((s, xyz)) => (Ok(s), Some(xyz)),
                     Err(e) => (Err(e), None),
@@ -349,7 +358,8 @@ impl MagService {
                         self.held_read(cx, start, t, LOOK_DATA_BIT).await
                     };
                     let base = t_data - timing.duration(LOOK_DATA_BIT);
-                    if self.look_clear(base) {
+                    let planned = timely && look.is_some_and(|p| self.on_plan(p, start));
+                    if planned || self.look_clear(base) {
                         (xyz, t_data, Some(self.core.next_k))
                     } else {
                         match self.among_bytes(cx, base).await {
@@ -463,6 +473,17 @@ impl MagService {
                 self.core.next_k
             }
         }
+    }
+
+    /// Whether a look planned to start at `planned` (after the late end of the next sample's
+    /// interval) that starts at `start` is still where the plan put it: no earlier than
+    /// [`LOOK_EARLY`] before, no later than a quarter period (at most [`LOOK_SLACK`]) after, so
+    /// the sample has landed and the next is still most of a period away (no need to ask the
+    /// clock again).
+    fn on_plan(&self, planned: Fine, start: Fine) -> bool {
+        let d = start.since(planned);
+        let slack = (self.core.clock.period() / 4).min(LOOK_SLACK);
+        d >= -(LOOK_EARLY.raw() as i64) && d <= slack.raw() as i64
     }
 
     /// Whether a look started at `start` (status and data in one transfer) is clear of

@@ -170,8 +170,10 @@ impl Housekeeping {
 
 /// When the status frame is also logged: at once when a count or state it reports changed (a
 /// loss, an overflow, a bus error, a sensor's state), otherwise every [`STATUS_LOG_EVERY`]
-/// frames. A defmt line with a dozen fields costs as much CPU as the status frame itself, so a
-/// quiet device logs it rarely; the host gets every frame. Before the first line the reference
+/// frames, and then not while a table round is being sent (its first frame after the round):
+/// a defmt line with a dozen fields costs as much CPU as the status frame itself (≈ 5,900
+/// cycles), so a quiet device logs it rarely and not in the windows that carry a round's
+/// snapshot and frames; the host gets every frame. Before the first line the reference
 /// is a device with nothing lost and both sensors delivering: a healthy start is logged with the
 /// tenth frame, anything else at once.
 pub struct StatusLog {
@@ -189,8 +191,9 @@ impl Default for StatusLog {
 }
 
 impl StatusLog {
-    /// Whether the status frame `st` (just sent) is logged.
-    pub fn due(&mut self, st: &Status) -> bool {
+    /// Whether the status frame `st` (just sent) is logged; `round`: a table round is being
+    /// sent.
+    pub fn due(&mut self, st: &Status, round: bool) -> bool {
         let key = (
             st.samples_dropped,
             st.mag_dropped,
@@ -201,7 +204,7 @@ impl StatusLog {
             st.mag,
         );
         self.quiet += 1;
-        if self.last == key && self.quiet < STATUS_LOG_EVERY {
+        if self.last == key && (self.quiet < STATUS_LOG_EVERY || round) {
             return false;
         }
         self.last = key;
