@@ -4,7 +4,7 @@
 use imu_proto::{CalSource, CalStatus, SensorState, Status, StreamMode, MAG_PERIOD_US};
 use pico_imu_core::schedule::{
     imu_fallback_at, Housekeeping, MagTicks, StatusLog, IMU_FALLBACK_US, MAG_MSGS_PER_TICK,
-    MAG_SLOT_OFFSET_US, MAG_TICKS_PER_SLOT, STATUS_LOG_EVERY, TICK_MS,
+    MAG_SLOT_OFFSET_US, MAG_TICKS_PER_SLOT, STATUS_LOG_EVERY, TICK_JITTER_US, TICK_MS,
 };
 use proptest::prelude::*;
 
@@ -118,7 +118,8 @@ proptest! {
 
     /// The housekeeping tick, its ticks late by up to `late_us` (a busy executor), with status
     /// and table intervals from the host, and table rounds that take `round_ticks` ticks to
-    /// send: a status frame every `status_ms` (never sooner, at most a tick later); a round
+    /// send: a status frame every `status_ms` (never more than [`TICK_JITTER_US`] sooner, at
+    /// most a tick later, and every `status_ms / TICK_MS` ticks exactly for whole ticks); a round
     /// never on a status frame's tick unless every tick has one, never while one is being sent,
     /// never sooner than `tables_ms` after the last, and at most two ticks after it is due.
     #[test]
@@ -132,6 +133,7 @@ proptest! {
         let start = 123_456u64;
         let mut h = Housekeeping::new(start);
         let (mut last_status, mut last_tables) = (start, start);
+        let mut last_status_tick = 0usize;
         let mut pending_until: Option<usize> = None;
         let mut due_since: Option<usize> = None;
         for (k, late) in late_us.iter().enumerate() {
@@ -139,21 +141,29 @@ proptest! {
             let pending = pending_until.is_some_and(|e| k < e);
             let plan = h.on_tick(now, status_ms, tables_ms, pending, mag_ok);
             prop_assert_eq!(plan.table_turn, !mag_ok);
-            let status_due = status_ms > 0 && now - last_status >= u64::from(status_ms) * 1000;
+            let status_due =
+                status_ms > 0 && now + TICK_JITTER_US - last_status >= u64::from(status_ms) * 1000;
             prop_assert_eq!(plan.status, status_due, "tick {}", k);
             if plan.status {
                 prop_assert!(now - last_status < u64::from(status_ms) * 1000 + TICK_MS * 1000 + 3_000);
+                // An interval of whole ticks spans exactly that many, however late each tick.
+                if u64::from(status_ms) % TICK_MS == 0 {
+                    let ticks = (u64::from(status_ms) / TICK_MS) as usize;
+                    prop_assert_eq!(k + 1 - last_status_tick, ticks, "tick {}", k);
+                }
                 last_status = now;
+                last_status_tick = k + 1;
             }
             let tables_due = tables_ms > 0 && !pending
-                && now - last_tables >= u64::from(tables_ms) * 1000;
+                && now + TICK_JITTER_US - last_tables >= u64::from(tables_ms) * 1000;
             if tables_due {
                 due_since.get_or_insert(k);
             }
             if plan.tables {
                 prop_assert!(tables_due, "tick {}: a round before it is due or while one is sent", k);
                 prop_assert!(
-                    !plan.status || u64::from(status_ms) <= TICK_MS + 3,
+                    !plan.status
+                        || u64::from(status_ms) * 1000 <= TICK_MS * 1000 + TICK_JITTER_US + 3_000,
                     "tick {}: a round on a status frame's tick", k
                 );
                 last_tables = now;

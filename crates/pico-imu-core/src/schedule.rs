@@ -35,6 +35,10 @@ pub const MAG_TICKS_PER_SLOT: u32 = 4;
 pub const MAG_MSGS_PER_TICK: usize = 3;
 /// Housekeeping period, ms.
 pub const TICK_MS: u64 = 100;
+/// How much earlier than its interval a status frame or a table round may come, µs: more than
+/// a tick's lateness varies (without it, a status frame due every ten ticks slipped to the
+/// eleventh whenever its tick was a few µs less late than the last one's).
+pub const TICK_JITTER_US: u64 = 5_000;
 /// Status frames between two status lines in the defmt log when nothing changed.
 pub const STATUS_LOG_EVERY: u32 = 10;
 
@@ -148,8 +152,12 @@ impl Housekeeping {
         tables_pending: bool,
         mag_ok: bool,
     ) -> TickPlan {
-        let elapsed =
-            |since: u64, ms: u32| ms > 0 && now_us.saturating_sub(since) >= u64::from(ms) * 1000;
+        // Ticks come a little late by varying amounts (a busy executor): an interval counts as
+        // elapsed up to TICK_JITTER_US early, so that it spans the same number of ticks each
+        // time instead of slipping a tick now and then.
+        let elapsed = |since: u64, ms: u32| {
+            ms > 0 && (now_us + TICK_JITTER_US).saturating_sub(since) >= u64::from(ms) * 1000
+        };
         let status = elapsed(self.last_status_us, status_ms);
         if status {
             self.last_status_us = now_us;
