@@ -137,7 +137,7 @@ impl Scenario {
     }
 }
 
-/// `cargo xtask e2e [--scenario faults|boot-stall|sine|orientation] [--seconds S] [--shift-ms MS] [--out DIR]`.
+/// `cargo xtask e2e [--scenario faults|boot-stall|sine|orientation] [--seconds S] [--shift-ms MS] [--out DIR] [--clock CLOCKS]`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct E2eArgs {
     /// Which scenario to run.
@@ -154,6 +154,10 @@ pub struct E2eArgs {
     /// Output folder under out/ (default: e2e-SCENARIO).
     #[arg(long, value_name = "DIR")]
     pub out: Option<String>,
+    /// The parts' clock errors instead of the scenario's own (faults: both 1.3 % slow), as the
+    /// emulator takes them, e.g. `mpu:+1.3%,qmc:+1.3%`.
+    #[arg(long, value_name = "CLOCKS")]
+    pub clock: Option<String>,
 }
 
 impl E2eArgs {
@@ -164,6 +168,7 @@ impl E2eArgs {
             seconds: None,
             shift_ms: 0.0,
             out: None,
+            clock: None,
         }
     }
 }
@@ -176,8 +181,16 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
             Scenario::Faults => (40.0, FAULTS, Some(SLOW_CLOCKS), None, false),
             Scenario::Sine => (20.0, &[], None, Some("3,3"), false),
             Scenario::BootStall => (3.0, &[], None, None, true),
-            Scenario::Orientation => return orientation::orientation(args),
+            Scenario::Orientation => {
+                if let Some(c) = &args.clock {
+                    bail!(
+                        "--clock {c}: the orientation scenario runs both parts at nominal clocks"
+                    );
+                }
+                return orientation::orientation(args);
+            }
         };
+    let clock = args.clock.as_deref().or(clock);
     let seconds: f64 = args.seconds.unwrap_or(default_s);
     let shift_ms = args.shift_ms;
     if !(0.0..=1000.0).contains(&shift_ms) {

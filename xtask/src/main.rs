@@ -372,6 +372,7 @@ mod tests {
             "test imu_drivers --nocapture",
             "e2e",
             "e2e --scenario faults --seconds 10 --shift-ms 3.3 --out e2e-x",
+            "e2e --scenario faults --clock mpu:+1.3%,qmc:+1.3% --shift-ms 8.9",
             "e2e --scenario boot-stall",
             "e2e --scenario sine",
             "bench-emu --seconds 3 --warmup 0.2 --seed 7 --clock mpu:-1.3%,qmc:+1.3%",
@@ -391,6 +392,7 @@ mod tests {
                 assert_eq!(a.scenario, e2e::Scenario::BootStall);
                 assert_eq!(a.shift_ms, 13.4);
                 assert_eq!(a.seconds, None);
+                assert_eq!(a.clock, None);
             }
             other => panic!("{other:?}"),
         }
