@@ -201,12 +201,16 @@ impl Core {
         let period = self.clock.period();
         let latch = self.timing.latch(Fine::ZERO, clock::WRITE_DATA_BIT);
         let earliest = fine(now()) + SETUP + latch + period;
-        let planned = self
+        let mut planned = self
             .clock
             .newest_at(earliest, Fine::ZERO)
             .unwrap_or(self.next_k)
             .wrapping_add(1);
-        delay_until(delay, now, self.clock.time(planned) - period - latch).await;
+        // Aimed at the part's first grid (the line may sit off it after a restart held up).
+        if self.clock.origin_time(planned) < earliest {
+            planned = planned.wrapping_add(1);
+        }
+        delay_until(delay, now, self.clock.origin_time(planned) - period - latch).await;
     }
 
     /// The waking write's transfer started at `start`: the part samples from one period after
@@ -215,7 +219,7 @@ impl Core {
     pub fn started(&mut self, start: Fine, cause: GapCause, now_us: u64) {
         let first = self.timing.latch(start, clock::WRITE_DATA_BIT) + self.clock.period();
         if self.clock.known() {
-            let k = self.clock.nearest(first);
+            let k = self.clock.origin_nearest(first);
             self.clock.start(k, first, true, WRITE_MARGIN);
             self.next_k = k;
             self.after.get_or_insert(cause);

@@ -77,6 +77,12 @@ pub struct SampleClock {
     unguarded: u32,
     /// Observations that contradicted the interval (replaced it).
     pub contradictions: u32,
+    /// An instant of the part's first grid (the run it started with), taken from the line at
+    /// the first restart: a restart that lands off the old grid (its waking write held up)
+    /// moves the line, and slots stay numbered on the first grid ([`Self::origin_nearest`]),
+    /// as the part's own count of periods since its first sample would. `None` until then
+    /// (the line is the first grid).
+    origin: Option<(u32, Fine)>,
 }
 
 impl SampleClock {
@@ -103,6 +109,7 @@ impl SampleClock {
             issued: None,
             unguarded: 0,
             contradictions: 0,
+            origin: None,
         }
     }
 
@@ -138,16 +145,27 @@ impl SampleClock {
 
     /// The part's sample clock (re)started so that its first sample, index `k`, comes at about
     /// `t_first` (it starts one period after the write that wakes it, docs/firmware.md). With
-    /// `keep` the grid is the old one, continued (the restart was timed onto it, `t_first` =
-    /// [`Self::time`]`(k)` within `err`): phase and period are kept and the interval widened by
-    /// `err`. Otherwise a new grid starts at `k`: its phase is known only to within half a
-    /// period, the period stays.
+    /// `keep` the grid is the old one, continued (the restart was timed onto it): when
+    /// `t_first` is [`Self::time`]`(k)` within `err`, phase and period are kept and the
+    /// interval widened by `err`; when it is further off (the waking write was held up), the
+    /// part's new phase is `t_first`'s, within `err`, and the line moves there while the slots
+    /// stay numbered on the first grid (`k` from [`Self::origin_nearest`]). Otherwise a new
+    /// grid starts at `k`: its phase is known only to within half a period, the period stays.
     pub fn start(&mut self, k: u32, t_first: Fine, keep: bool, err: Fine) {
         if keep && self.known {
+            self.origin.get_or_insert((self.k_at, self.t_at));
             let c = t_first.since(self.time(k));
-            self.rebase(k);
-            self.lo = self.lo.min(c) - err.raw() as i64;
-            self.hi = self.hi.max(c) + err.raw() as i64;
+            let e = err.raw() as i64;
+            if c.abs() <= e {
+                self.rebase(k);
+                self.lo = self.lo.min(c) - e;
+                self.hi = self.hi.max(c) + e;
+            } else {
+                self.k_at = k;
+                self.t_at = t_first;
+                self.lo = -e;
+                self.hi = e;
+            }
         } else {
             self.k_at = k;
             self.t_at = t_first;
@@ -421,6 +439,30 @@ impl SampleClock {
     /// The index of the first sample produced after `tau` (see [`Self::newest_at`]).
     pub fn first_after(&self, tau: Fine, margin: Fine) -> Option<u32> {
         self.newest_at(tau, margin).map(|k| k.wrapping_add(1))
+    }
+
+    /// The index of the instant of the part's first grid nearest to `t` (its slot there): what
+    /// a restarted part's first sample is numbered, whatever phase earlier restarts left the
+    /// line at.
+    pub fn origin_nearest(&self, t: Fine) -> u32 {
+        match self.origin {
+            Some((k0, t0)) => {
+                let rel = t.since(t0) + (self.period.raw() / 2) as i64;
+                k0.wrapping_add(floor_div(rel, self.period.raw()) as u32)
+            }
+            None => self.nearest(t),
+        }
+    }
+
+    /// Sample `k`'s instant on the part's first grid (a restart is aimed there).
+    pub fn origin_time(&self, k: u32) -> Fine {
+        match self.origin {
+            Some((k0, t0)) => {
+                let d = i64::from(k.wrapping_sub(k0) as i32);
+                t0.wrapping_add(Fine::from_raw(mul_signed(d, self.period.raw())))
+            }
+            None => self.time(k),
+        }
     }
 
     /// The index of the predicted sample instant nearest to `t`.
@@ -765,6 +807,52 @@ mod late_line_tests {
         if c.observe(f(tau), k, Seen::Produced) == Fit::Early {
             c.distrust_period();
         }
+    }
+
+    /// A part restarted again and again as `Core::started` does, each waking write held up by
+    /// up to 0.4 period (the bus busy, the task late), so that each run's phase lands
+    /// elsewhere: every restart's first sample is numbered with its slot on the part's first
+    /// grid (the emulator's models count slots so), and the restart after is aimed back there.
+    /// Numbered on the line instead (which follows the last run's phase), the phases added up
+    /// and a restart took the neighbouring slot.
+    #[test]
+    fn restarts_held_up_keep_the_slots_of_the_first_grid() {
+        let mut rnd = crate::test_util::clock_keyed();
+        let mut u = move || (rnd() >> 11) as f64 / (1u64 << 53) as f64;
+        let mut wrong = 0;
+        for _trial in 0..16 {
+            let p = 1e6 * (1.0 + 0.04 * (u() - 0.5));
+            let t0 = 3e6 + 1e6 * u();
+            // The run now: sample `base_k` at `base_t`, the others a period apart.
+            let (mut base_k, mut base_t) = (0u32, t0);
+            let mut c = SampleClock::new(1000);
+            c.start(0, f(t0 - p + 1e6), false, Fine::ZERO);
+            let mut k = 1;
+            for _restart in 0..8 {
+                let part = Part {
+                    t0: base_t - f64::from(base_k) * p,
+                    p,
+                };
+                for _ in 0..300 {
+                    look(&mut c, &part, k, 40_000.0 * u());
+                    k += 1;
+                }
+                // The part stops; the service aims its waking write one period before an
+                // instant of the first grid, and the write is held up.
+                let planned = k + 5 + (10.0 * u()) as u32;
+                let write = ns(c.origin_time(planned)) - ns(c.period()) + 0.4 * p * u();
+                let first = write + p;
+                let k_first = c.origin_nearest(f(write) + c.period());
+                let slot = ((first - t0) / p).round() as u32;
+                if k_first != slot {
+                    wrong += 1;
+                }
+                c.start(k_first, f(write) + c.period(), true, fine(120));
+                (base_k, base_t) = (slot, first);
+                k = slot + 1;
+            }
+        }
+        assert_eq!(wrong, 0, "restarts numbered off the part's first grid");
     }
 
     /// A magnetometer clock whose period goes wrong by 0.3–1.2 µs per sample, too long (the
