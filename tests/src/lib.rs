@@ -81,6 +81,9 @@ pub struct World {
     pub last_start_ns: u64,
     /// Every address phase to this address is NACKed until this time, ns.
     pub nack_until: Option<(u8, u64)>,
+    /// The next transaction starts this long after it is asked for, ns (the bus held by
+    /// another task's transfer meanwhile).
+    pub hold_next_ns: u64,
 }
 
 impl World {
@@ -134,6 +137,11 @@ impl SimBus {
         let t = w.now_ns + us * 1000;
         w.advance_to(t);
     }
+    /// Hold the next transaction back by `us` µs, as a transfer of another task holding the
+    /// bus would.
+    pub fn hold_next_us(&self, us: u64) {
+        self.world.borrow_mut().hold_next_ns = us * 1000;
+    }
     /// Current simulated time, ns.
     pub fn now_ns(&self) -> u64 {
         self.world.borrow().now_ns
@@ -164,7 +172,9 @@ impl SimBus {
     fn run(&mut self, address: u8, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
         let mut w = self.world.borrow_mut();
         w.transactions += 1;
-        let now = w.now_ns;
+        let held = std::mem::take(&mut w.hold_next_ns);
+        let now = w.now_ns + held;
+        w.advance_to(now);
         w.last_start_ns = now;
         w.advance_to(now);
         let moved: usize = ops

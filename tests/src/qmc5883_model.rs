@@ -60,6 +60,14 @@ pub struct QmcModel {
     /// An oscillator glitch: the first measurement due at or after `.0` ns comes `.1` ns late,
     /// and the grid goes on from there.
     pub glitch: Option<(u64, u64)>,
+    /// The measurements (indices into `log`) a reader was served, as the emulator's model
+    /// counts them: all six data bytes of the latest measurement read after a status read
+    /// that showed DRDY (a reader uses the data only after it has seen DRDY set).
+    pub served: Vec<usize>,
+    /// A status read showed DRDY since the last measurement was served.
+    ready_seen: bool,
+    /// Data registers read since the latest measurement (bit per register).
+    data_read: u8,
 }
 
 impl QmcModel {
@@ -85,6 +93,9 @@ impl QmcModel {
             transactions: 0,
             byte_ns: 0,
             glitch: None,
+            served: Vec::new(),
+            ready_seen: false,
+            data_read: 0,
         }
     }
 
@@ -201,6 +212,7 @@ impl QmcModel {
             self.regs[base + 2 * i + 1] = hi;
         }
         self.log.push((t_ns, xyz));
+        self.data_read = 0;
         let st = self.status_reg();
         let mut s = self.regs[st];
         if s & 0x01 != 0 && self.variant == QmcVariant::L {
@@ -229,9 +241,20 @@ impl QmcModel {
         if self.data_regs().contains(&r) {
             let st = self.status_reg();
             self.regs[st] &= !0x05;
+            self.data_read |= 1 << (r - *self.data_regs().start());
+            if self.data_read == 0x3f && !self.log.is_empty() {
+                let latest = self.log.len() - 1;
+                if self.ready_seen && self.served.last() != Some(&latest) {
+                    self.served.push(latest);
+                }
+                self.ready_seen = false;
+            }
         }
         if r as usize == self.status_reg() {
             self.status_reads += 1;
+            if v & 0x01 != 0 {
+                self.ready_seen = true;
+            }
         }
         // QMC5883L ROL_PNT (CONTROL2 bit 6): the pointer rolls over from 06H to 00H.
         self.ptr = if self.variant == QmcVariant::L && r == 0x06 && self.regs[0x0A] & 0x40 != 0 {

@@ -127,6 +127,9 @@ struct Rig {
     mag_out: Vec<(u32, [i16; 3])>,
     /// The next magnetometer tick begins this many µs after its instant (a CPU held up).
     mag_hold_us: u64,
+    /// The next magnetometer tick's first transfer starts this many µs after the tick asks
+    /// for it (the bus held by an IMU burst).
+    mag_bus_hold_us: u64,
 }
 
 impl Rig {
@@ -149,6 +152,7 @@ impl Rig {
             imu_out: Vec::new(),
             mag_out: Vec::new(),
             mag_hold_us: 0,
+            mag_bus_hold_us: 0,
         }
     }
 
@@ -198,6 +202,8 @@ impl Rig {
             let mut out = msg::Out::new();
             if t == t_mag {
                 self.bus.advance_us(std::mem::take(&mut self.mag_hold_us));
+                self.bus
+                    .hold_next_us(std::mem::take(&mut self.mag_bus_hold_us));
                 if self.mag_svc.wants_recovery(t) {
                     self.mag_svc.recovered();
                 }

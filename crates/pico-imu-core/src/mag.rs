@@ -361,54 +361,19 @@ impl MagService {
                     let planned = timely && look.is_some_and(|p| self.on_plan(p, start));
                     if planned || self.look_clear(base) {
                         (xyz, t_data, Some(self.core.next_k))
+                    } else if let Some(t_data) = self.among_bytes(cx, base).await {
+                        (xyz, t_data, None)
                     } else {
-                        match self.among_bytes(cx, base).await {
-                            Some(t_data) => (xyz, t_data, None),
-                            None => {
-                                // Torn, or not known to be whole: not delivered; its slot and
-                                // the one the status showed are counted lost from the next
-                                // reading's.
-                                let clock = &self.core.clock;
-                                let landing = clock.nearest(timing.latch(base, LOOK_DATA_BIT));
-                                self.core.next_k = landing.wrapping_add(1);
-                                self.last_xyz = None;
-                                self.core.last_growth_us = t;
-                                return;
-                            }
-                        }
+                        // The new sample, maybe torn: read whole, alone.
+                        let Some((xyz, t_data)) = self.read_alone(cx).await else {
+                            return;
+                        };
+                        (xyz, t_data, None)
                     }
                 }
                 None => {
-                    // A data read that a landing may fall inside would be torn (the part
-                    // rewrites its data registers, the bytes already read belong to the sample
-                    // before): wait for that landing, then read; the read takes the sample that
-                    // landed. Only with a located clock (while it is wide, any read window may
-                    // hold a landing).
-                    let now = fine((cx.now)());
-                    let window = SETUP + self.core.timing.duration(clock::read_bits(6));
-                    let half = window / 2;
-                    let clock = &self.core.clock;
-                    if clock.known()
-                        && clock.width() <= clock::LOCKED_WIDTH
-                        && clock.newest_at(now + half, half + READ_MARGIN).is_none()
-                    {
-                        let late = clock.width() / 2 + POLL_MARGIN;
-                        let after = clock.instant_after(now, late.raw() as i64);
-                        delay_until(cx.delay, cx.now, after).await;
-                    }
-                    let xyz = match cx.dev.read_data().await {
-                        Ok(xyz) => xyz,
-                        Err(e) => {
-                            self.failed(&e, (cx.now)(), cx.out);
-                            return;
-                        }
-                    };
-                    let end = (cx.now)();
-                    let start = cx.dev.bus().last_start();
-                    let t_data = if self.core.held(start, clock::read_bits(6), end) {
-                        self.held_read(cx, start, end, clock::READ_FIRST_BIT).await
-                    } else {
-                        self.core.timing.latch(start, clock::READ_FIRST_BIT)
+                    let Some((xyz, t_data)) = self.read_alone(cx).await else {
+                        return;
                     };
                     (xyz, t_data, None)
                 }
@@ -502,30 +467,72 @@ impl MagService {
             )
     }
 
+    /// The data alone, in a transfer of their own (after a status that showed the sample), and
+    /// their latch; `None` if the transfer failed.
+    async fn read_alone<I: I2c + TransferTime, D: DelayNs>(
+        &mut self,
+        cx: &mut Tick<'_, Qmc5883<I>, D>,
+    ) -> Option<([i16; 3], Fine)> {
+        // A data read that a landing may fall inside would be torn (the part rewrites its data
+        // registers, the bytes already read belong to the sample before): wait for that
+        // landing, then read; the read takes the sample that landed. Only with a located clock
+        // (while it is wide, any read window may hold a landing).
+        let now = fine((cx.now)());
+        let window = SETUP + self.core.timing.duration(clock::read_bits(6));
+        let half = window / 2;
+        let clock = &self.core.clock;
+        if clock.known()
+            && clock.width() <= clock::LOCKED_WIDTH
+            && clock.newest_at(now + half, half + READ_MARGIN).is_none()
+        {
+            let late = clock.width() / 2 + POLL_MARGIN;
+            let after = clock.instant_after(now, late.raw() as i64);
+            delay_until(cx.delay, cx.now, after).await;
+        }
+        let xyz = match cx.dev.read_data().await {
+            Ok(xyz) => xyz,
+            Err(e) => {
+                self.failed(&e, (cx.now)(), cx.out);
+                return None;
+            }
+        };
+        let end = (cx.now)();
+        let start = cx.dev.bus().last_start();
+        let t_data = if self.core.held(start, clock::read_bits(6), end) {
+            self.held_read(cx, start, end, clock::READ_FIRST_BIT).await
+        } else {
+            self.core.timing.latch(start, clock::READ_FIRST_BIT)
+        };
+        Some((xyz, t_data))
+    }
+
     /// A look (started at `start`) that showed a sample may have met the next landing among
-    /// its bytes. Landed before the first data byte: the data are that new sample, whole (their
-    /// latch returned). After it: they are the sample the status showed, unless the landing
-    /// tore them: a status poll tells (DRDY set again, the landing came after the last byte:
-    /// the status byte's latch returned). Torn, or too close to the first data byte to tell:
-    /// `None`.
+    /// or near its data bytes. By the clock, no landing among them: the data are whole, the
+    /// newest sample at their latch (returned). Otherwise a status poll after the late end of
+    /// that landing's interval tells: DRDY set, the landing came after the last data byte
+    /// (reading one clears DRDY), so the data are the sample the status showed (the status
+    /// byte's latch returned); DRDY clear, it came before or among them, and the data are the
+    /// new sample, whole or torn: `None`, to read them again (the next landing is a period
+    /// away).
     async fn among_bytes<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
         cx: &mut Tick<'_, Qmc5883<I>, D>,
         start: Fine,
     ) -> Option<Fine> {
         let timing = self.core.timing;
-        let t_status = timing.latch(start, LOOK_STATUS_BIT);
         let t_data = timing.latch(start, LOOK_DATA_BIT);
+        let t_last = timing.latch(start, LOOK_LAST_BIT);
         let clock = &self.core.clock;
-        let at_data = clock.newest_at(t_data, READ_MARGIN)?;
-        if clock.newest_at(timing.latch(start, LOOK_LAST_BIT), READ_MARGIN) == Some(at_data) {
+        let at_data = clock.newest_at(t_data, READ_MARGIN);
+        if at_data.is_some() && clock.newest_at(t_last, READ_MARGIN) == at_data {
             return Some(t_data);
         }
-        if clock.newest_at(t_status, READ_MARGIN) != Some(at_data) {
-            return None;
-        }
+        let landing = clock.time(clock.nearest(t_last));
+        let after = landing + clock.width() / 2 + POLL_MARGIN;
+        let latch = timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
+        delay_until(cx.delay, cx.now, after - latch).await;
         match cx.dev.status().await {
-            Ok(s) if s.ready => Some(t_status),
+            Ok(s) if s.ready => Some(timing.latch(start, LOOK_STATUS_BIT)),
             _ => None,
         }
     }
