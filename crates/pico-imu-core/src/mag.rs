@@ -347,8 +347,9 @@ impl MagService {
                 // that carried it here is wrong by more than its bound. Measure it again.
                 self.core.clock.distrust_period();
             }
-            // The data, their latch, and their slot when the clock alone tells it.
-            let (xyz, t_data, slot) = match with_status {
+            // The data, their latch, and their slot when the clock alone tells it; a look's
+            // data not known whole are read again, alone.
+            let combined = match with_status {
                 // Read with the status, just after it.
                 Some(xyz) => {
                     let timing = self.core.timing;
@@ -360,20 +361,48 @@ impl MagService {
                     let base = t_data - timing.duration(LOOK_DATA_BIT);
                     let planned = timely && look.is_some_and(|p| self.on_plan(p, start));
                     if planned || self.look_clear(base) {
-                        (xyz, t_data, Some(self.core.next_k))
-                    } else if let Some(t_data) = self.among_bytes(cx, base).await {
-                        (xyz, t_data, None)
+                        Some((xyz, t_data, Some(self.core.next_k)))
                     } else {
-                        // The new sample, maybe torn: read whole, alone.
-                        let Some((xyz, t_data)) = self.read_alone(cx).await else {
-                            return;
-                        };
-                        (xyz, t_data, None)
+                        self.among_bytes(cx, base)
+                            .await
+                            .map(|t_data| (xyz, t_data, None))
                     }
                 }
+                None => None,
+            };
+            let (xyz, t_data, slot) = match combined {
+                Some(c) => c,
                 None => {
-                    let Some((xyz, t_data)) = self.read_alone(cx).await else {
-                        return;
+                    // A data read that a landing may fall inside would be torn (the part
+                    // rewrites its data registers, the bytes already read belong to the sample
+                    // before): wait for that landing, then read; the read takes the sample that
+                    // landed. Only with a located clock (while it is wide, any read window may
+                    // hold a landing).
+                    let now = fine((cx.now)());
+                    let window = SETUP + self.core.timing.duration(clock::read_bits(6));
+                    let half = window / 2;
+                    let clock = &self.core.clock;
+                    if clock.known()
+                        && clock.width() <= clock::LOCKED_WIDTH
+                        && clock.newest_at(now + half, half + READ_MARGIN).is_none()
+                    {
+                        let late = clock.width() / 2 + POLL_MARGIN;
+                        let after = clock.instant_after(now, late.raw() as i64);
+                        delay_until(cx.delay, cx.now, after).await;
+                    }
+                    let xyz = match cx.dev.read_data().await {
+                        Ok(xyz) => xyz,
+                        Err(e) => {
+                            self.failed(&e, (cx.now)(), cx.out);
+                            return;
+                        }
+                    };
+                    let end = (cx.now)();
+                    let start = cx.dev.bus().last_start();
+                    let t_data = if self.core.held(start, clock::read_bits(6), end) {
+                        self.held_read(cx, start, end, clock::READ_FIRST_BIT).await
+                    } else {
+                        self.core.timing.latch(start, clock::READ_FIRST_BIT)
                     };
                     (xyz, t_data, None)
                 }
@@ -465,45 +494,6 @@ impl MagService {
                 timing.latch(start, LOOK_LAST_BIT),
                 READ_MARGIN,
             )
-    }
-
-    /// The data alone, in a transfer of their own (after a status that showed the sample), and
-    /// their latch; `None` if the transfer failed.
-    async fn read_alone<I: I2c + TransferTime, D: DelayNs>(
-        &mut self,
-        cx: &mut Tick<'_, Qmc5883<I>, D>,
-    ) -> Option<([i16; 3], Fine)> {
-        // A data read that a landing may fall inside would be torn (the part rewrites its data
-        // registers, the bytes already read belong to the sample before): wait for that
-        // landing, then read; the read takes the sample that landed. Only with a located clock
-        // (while it is wide, any read window may hold a landing).
-        let now = fine((cx.now)());
-        let window = SETUP + self.core.timing.duration(clock::read_bits(6));
-        let half = window / 2;
-        let clock = &self.core.clock;
-        if clock.known()
-            && clock.width() <= clock::LOCKED_WIDTH
-            && clock.newest_at(now + half, half + READ_MARGIN).is_none()
-        {
-            let late = clock.width() / 2 + POLL_MARGIN;
-            let after = clock.instant_after(now, late.raw() as i64);
-            delay_until(cx.delay, cx.now, after).await;
-        }
-        let xyz = match cx.dev.read_data().await {
-            Ok(xyz) => xyz,
-            Err(e) => {
-                self.failed(&e, (cx.now)(), cx.out);
-                return None;
-            }
-        };
-        let end = (cx.now)();
-        let start = cx.dev.bus().last_start();
-        let t_data = if self.core.held(start, clock::read_bits(6), end) {
-            self.held_read(cx, start, end, clock::READ_FIRST_BIT).await
-        } else {
-            self.core.timing.latch(start, clock::READ_FIRST_BIT)
-        };
-        Some((xyz, t_data))
     }
 
     /// A look (started at `start`) that showed a sample may have met the next landing among
