@@ -448,9 +448,16 @@ impl MagService {
             match by_clock {
                 Some(k) if later(k) => k,
                 Some(_) => self.core.next_k,
-                // Too close to an instant `j` to tell `j − 1` from `j`: only if both are past
-                // the one due does it matter.
-                None if later(self.core.clock.nearest(t_data).wrapping_sub(1)) => {
+                // Too close to an instant `j` to tell `j − 1` from `j`: it matters if both are
+                // past the one due, and also if `j − 1` is the one due: DOR clear does not
+                // settle that, the status may have been read before `j` landed and the data
+                // after (a clock just restarted has no guard against it), and then `j − 1` was
+                // overwritten unseen. Polled after `j`'s interval, which must be narrow enough
+                // to say where `j` is.
+                None if later(self.core.clock.nearest(t_data).wrapping_sub(1))
+                    || (later(self.core.clock.nearest(t_data))
+                        && self.core.clock.width() <= self.core.clock.period() / 4) =>
+                {
                     self.resolve(cx, t_data).await
                 }
                 None => self.core.next_k,
