@@ -258,6 +258,27 @@ fn a_count_made_stale_by_a_hold_up_is_an_overflow() {
     assert!(!count_may_be_stale(476, 0, 512));
 }
 
+/// Every magnetometer reading the rig delivered is the model's measurement of its slot, and the
+/// device counted exactly the slots between the first and the last reading that it did not
+/// deliver; returns (first slot, last slot, slots delivered, slots missed). `ctx` prefixes the
+/// messages.
+fn mag_readings_exact(rig: &mut Rig, ctx: &str) -> (u64, u64, BTreeSet<u64>, u64) {
+    let (log, slots) = rig.bus.mag(|q| (q.log.clone(), q.slots()));
+    for (k, xyz) in &rig.mag_out {
+        let i = slots
+            .iter()
+            .position(|(s, _)| *s == u64::from(*k))
+            .unwrap_or_else(|| panic!("{ctx}slot {k} was never measured"));
+        assert_eq!(log[i].1, *xyz, "{ctx}slot {k}");
+    }
+    let first = u64::from(rig.mag_out[0].0);
+    let last = u64::from(rig.mag_out.last().unwrap().0);
+    let delivered: BTreeSet<u64> = rig.mag_out.iter().map(|(k, _)| u64::from(*k)).collect();
+    let missed = (first..=last).filter(|k| !delivered.contains(k)).count() as u64;
+    assert_eq!(rig.dev.status(0, 0).mag_dropped, missed, "{ctx}lost");
+    (first, last, delivered, missed)
+}
+
 /// A magnetometer tick begun late by up to two periods (the CPU held up), or its first transfer
 /// held back as long (the bus held by an IMU burst), at any phase of the part's grid and often
 /// by about one period, on a bus whose bytes take time: a look may then meet a landing among or
@@ -290,21 +311,10 @@ fn a_magnetometer_tick_begun_late_keeps_every_reading_in_its_slot_and_counts_eve
             rig.run(37 + keyed.bits() % 40);
         }
         rig.run(300);
-        let (log, slots) = rig.bus.mag(|q| (q.log.clone(), q.slots()));
-        for (k, xyz) in &rig.mag_out {
-            let i = slots
-                .iter()
-                .position(|(s, _)| *s == u64::from(*k))
-                .unwrap_or_else(|| panic!("slot {k} was never measured"));
-            assert_eq!(log[i].1, *xyz, "slot {k}");
-        }
-        let first = u64::from(rig.mag_out[0].0);
-        let last = u64::from(rig.mag_out.last().unwrap().0);
-        let delivered: BTreeSet<u64> = rig.mag_out.iter().map(|(k, _)| u64::from(*k)).collect();
-        let missed = (first..=last).filter(|k| !delivered.contains(k)).count() as u64;
-        assert_eq!(rig.dev.status(0, 0).mag_dropped, missed, "lost");
+        let (first, last, delivered, missed) = mag_readings_exact(&mut rig, "");
         // A hold-up of up to two periods costs at most three slots.
         assert!(missed <= 3 * 120, "{missed} lost");
+        let slots = rig.bus.mag(|q| q.slots());
         // Every measurement the reader was served whole (its bytes read after DRDY was seen)
         // is delivered, also when a landing fell near a look's data bytes.
         let served: BTreeSet<u64> = rig
@@ -340,20 +350,7 @@ fn a_magnetometer_glitch_keeps_every_reading_in_its_slot_and_counts_every_loss()
         let at = rig.bus.now_ns() + (x >> 24) % 5_000_000;
         rig.bus.mag(|q| q.glitch = Some((at, late_ns)));
         rig.run(1500);
-        let (log, slots) = rig.bus.mag(|q| (q.log.clone(), q.slots()));
-        for (k, xyz) in &rig.mag_out {
-            let i = slots
-                .iter()
-                .position(|(s, _)| *s == u64::from(*k))
-                .unwrap_or_else(|| panic!("late {late_ns} ns: slot {k} was never measured"));
-            assert_eq!(log[i].1, *xyz, "late {late_ns} ns: slot {k}");
-        }
-        let first = u64::from(rig.mag_out[0].0);
-        let last = u64::from(rig.mag_out.last().unwrap().0);
-        let delivered: BTreeSet<u64> = rig.mag_out.iter().map(|(k, _)| u64::from(*k)).collect();
-        let missed = (first..=last).filter(|k| !delivered.contains(k)).count() as u64;
-        let st = rig.dev.status(0, 0);
-        assert_eq!(st.mag_dropped, missed, "late {late_ns} ns: lost");
+        let (.., missed) = mag_readings_exact(&mut rig, &format!("late {late_ns} ns: "));
         assert!(missed <= 2, "late {late_ns} ns: {missed} lost");
     }
 }
