@@ -53,17 +53,24 @@ const LOOK_SLACK: Fine = fine(1000);
 /// late end; [`READ_MARGIN`] must stay).
 const LOOK_EARLY: Fine = fine(20);
 
+/// How a tick's first transfer was planned ([`MagService::schedule`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FirstRead {
+    /// A look after the late end of a located clock's interval, where the sample due has
+    /// landed: the status and the data in one transfer, planned to start at this instant.
+    Look(Fine),
+    /// A probe or a guard: a status read whose start the clock placed (begun early by the
+    /// learnt lead, which this read then refines).
+    Aimed(Fine),
+}
+
 /// The magnetometer side.
 pub struct MagService {
     core: Core,
     /// When the next tick should start, µs (`None`: the caller's own schedule).
     next_poll_us: Option<u64>,
-    /// Where the next tick's first transfer should start when it is a look placed after the late
-    /// end of a located clock's interval, where the next sample due has landed: it reads the
-    /// data with the status, in one transfer.
-    look: Option<Fine>,
-    /// Where the next tick's first status read should start (its latch placed by the clock).
-    aimed: Option<Fine>,
+    /// How the next tick's first transfer was planned, and where it should start.
+    first: Option<FirstRead>,
     /// How much earlier than its target the first status read is begun.
     lead: Lead,
     /// The last reading's data while the part's data registers are known to hold them, DRDY
@@ -79,8 +86,7 @@ impl MagService {
         Self {
             core: Core::new(Sensor::Mag, MAG_PERIOD_US as u32, timing),
             next_poll_us: None,
-            look: None,
-            aimed: None,
+            first: None,
             lead: Lead::new(),
             last_xyz: None,
         }
@@ -126,8 +132,7 @@ impl MagService {
     ) {
         let t = (cx.now)();
         self.next_poll_us = None;
-        let look = self.look.take();
-        let aimed = self.aimed.take();
+        let first = self.first.take();
         match self.core.phase {
             Phase::Init => self.init(cx, GapCause::SensorFault).await,
             Phase::Lost if self.core.health.retry_due(t) => {
@@ -160,7 +165,7 @@ impl MagService {
                     self.core.phase = Phase::Stalled;
                 }
             }
-            Phase::Running | Phase::Stalled => self.read(cx, look, aimed).await,
+            Phase::Running | Phase::Stalled => self.read(cx, first).await,
         }
         self.core.flush_report(cx.out);
         if self.next_poll_us.is_none() && matches!(self.core.phase, Phase::Running | Phase::Stalled)
@@ -217,10 +222,13 @@ impl MagService {
         let start = at - latch;
         let clock = &self.core.clock;
         let located = clock.known() && clock.width() <= clock::LOCKED_WIDTH;
-        self.look =
-            (offset > 0 && at == due && located && !self.core.fresh && self.last_xyz.is_some())
-                .then_some(start);
-        self.aimed = (offset <= 0).then_some(start);
+        self.first = if offset <= 0 {
+            Some(FirstRead::Aimed(start))
+        } else if at == due && located && !self.core.fresh && self.last_xyz.is_some() {
+            Some(FirstRead::Look(start))
+        } else {
+            None
+        };
         let begin = if offset <= 0 {
             self.lead.begin(start)
         } else {
@@ -230,16 +238,23 @@ impl MagService {
     }
 
     /// Poll the status (again, up to [`POLLS`] times) and read the sample when DRDY is set. A
-    /// `look` (its planned start) reads the data with its first status, in one transfer
+    /// planned [`FirstRead::Look`] reads the data with its first status, in one transfer
     /// (`status_and_data`), if it starts where no landing can fall among its bytes: the sample
     /// has landed by the clock, so the data are it when DRDY shows; otherwise they tell whether
     /// a sample landed after the status byte (and was cleared unseen by their read).
     async fn read<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
         cx: &mut Tick<'_, Qmc5883<I>, D>,
-        look: Option<Fine>,
-        mut aimed: Option<Fine>,
+        first: Option<FirstRead>,
     ) {
+        let look = match first {
+            Some(FirstRead::Look(planned)) => Some(planned),
+            _ => None,
+        };
+        let mut aimed = match first {
+            Some(FirstRead::Aimed(start)) => Some(start),
+            _ => None,
+        };
         let status_latch = self.core.timing.latch(Fine::ZERO, clock::READ_FIRST_BIT);
         // A "not yet" seen this tick, kept to be trusted if a later poll finds the sample (the
         // part is producing, so the phase was late, not the part stalled).
