@@ -391,6 +391,55 @@ mod tests {
         }
     }
 
+    /// A frozen engine's levels with terms are the engine's, whatever the segments: random
+    /// lengths and gaps (so that closed segments reach deeper or shallower than the current
+    /// one), frozen at random moments, for both of the firmware's engines.
+    #[test]
+    fn frozen_levels_with_terms_are_the_engines_over_random_segments() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1;
+        std::println!("generator key {key:#x}");
+        let mut x = key;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for _ in 0..20 {
+            frozen_levels_match(&mut MagEngine::new(), &mut next);
+            frozen_levels_match(&mut DeviceEngine::new(), &mut next);
+        }
+    }
+
+    fn frozen_levels_match<const L: usize, const R: usize, const S: usize>(
+        e: &mut Engine<8, L, R, S>,
+        next: &mut impl FnMut() -> u64,
+    ) {
+        let mut wide = Frozen::<8, 24>::EMPTY;
+        let mut narrow = Frozen::<8, 5>::EMPTY;
+        for _ in 0..1 + next() % 4 {
+            // Segment lengths spread over the octaves: 0 to 32k samples.
+            let n = next() % (1 << (next() % 16));
+            for _ in 0..n {
+                e.push((next() % 2001) as i32 - 1000);
+            }
+            let with_terms = e.levels().take_while(|l| l.n2 > 0).count();
+            e.freeze(&mut wide);
+            e.freeze(&mut narrow);
+            assert_eq!(wide.levels_with_terms(), with_terms, "{n} samples");
+            assert_eq!(narrow.levels_with_terms(), with_terms.min(5), "{n} samples");
+            for (k, l) in e.levels().enumerate() {
+                assert_eq!(wide.level(k), Some(l), "level {k}");
+            }
+            if next().is_multiple_of(2) {
+                e.gap();
+            }
+        }
+    }
+
     #[test]
     fn constant_rate_gives_zero_sums_and_right_counts() {
         let mut e = Engine::<4, 8, 6, 5>::new();

@@ -135,9 +135,20 @@ impl<const P: usize, const L: usize, const R: usize, const S: usize> Engine<P, L
     /// [`Frozen::level`]).
     pub fn freeze<const N: usize>(&self, out: &mut Frozen<P, N>) {
         let depth = L.min(N);
-        let filled = (0..depth)
-            .take_while(|&k| self.counts[k][0] + self.segment_terms(k).0 > 0)
-            .count();
+        // Level k has second differences in the current segment once it spans 2^(k+1)
+        // samples: the first ⌊log2 t⌋ levels. Above them, those whose closed segments had
+        // some (a prefix too: a segment long enough for a level was long enough for every
+        // level below). Without a segment_terms per level: the snapshot runs in one
+        // millisecond of the device's budget.
+        let by_segment = if self.t >= 2 {
+            (63 - self.t.leading_zeros()) as usize
+        } else {
+            0
+        };
+        let mut filled = by_segment.min(depth);
+        while filled < depth && self.counts[filled][0] > 0 {
+            filled += 1;
+        }
         out.t = self.t;
         out.closed = self.closed;
         out.gaps = self.gaps;
