@@ -174,7 +174,6 @@ impl SimBus {
         w.transactions += 1;
         let held = std::mem::take(&mut w.hold_next_ns);
         let now = w.now_ns + held;
-        w.advance_to(now);
         w.last_start_ns = now;
         w.advance_to(now);
         let moved: usize = ops

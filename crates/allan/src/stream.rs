@@ -398,16 +398,11 @@ mod tests {
     fn frozen_levels_with_terms_are_the_engines_over_random_segments() {
         let key = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
-            .map_or(1, |d| d.as_nanos() as u64)
-            | 1;
+            .map_or(7, |d| d.subsec_nanos() | 1);
         std::println!("generator key {key:#x}");
-        let mut x = key;
-        let mut next = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut r = crate::test_rng::rng(key);
+        // Uniform in 0..n.
+        let mut next = move |n: u64| ((r() + 0.5) * n as f64) as u64;
         for _ in 0..20 {
             frozen_levels_match(&mut MagEngine::new(), &mut next);
             frozen_levels_match(&mut DeviceEngine::new(), &mut next);
@@ -416,15 +411,16 @@ mod tests {
 
     fn frozen_levels_match<const L: usize, const R: usize, const S: usize>(
         e: &mut Engine<8, L, R, S>,
-        next: &mut impl FnMut() -> u64,
+        next: &mut impl FnMut(u64) -> u64,
     ) {
         let mut wide = Frozen::<8, 24>::EMPTY;
         let mut narrow = Frozen::<8, 5>::EMPTY;
-        for _ in 0..1 + next() % 4 {
+        for _ in 0..1 + next(4) {
             // Segment lengths spread over the octaves: 0 to 32k samples.
-            let n = next() % (1 << (next() % 16));
+            let octave = next(16);
+            let n = next(1 << octave);
             for _ in 0..n {
-                e.push((next() % 2001) as i32 - 1000);
+                e.push(next(2001) as i32 - 1000);
             }
             let with_terms = e.levels().take_while(|l| l.n2 > 0).count();
             e.freeze(&mut wide);
@@ -434,7 +430,7 @@ mod tests {
             for (k, l) in e.levels().enumerate() {
                 assert_eq!(wide.level(k), Some(l), "level {k}");
             }
-            if next().is_multiple_of(2) {
+            if next(2) == 0 {
                 e.gap();
             }
         }

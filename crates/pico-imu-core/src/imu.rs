@@ -571,13 +571,11 @@ mod tests {
     use super::*;
 
     /// A part re-initialised while still stalled may skip its first samples after the waking
-    /// write: the FIFO count of a part coming back from a stall is not timing. Counted as
-    /// frames from that write on, one sample short, it bounded the sample clock a period off
-    /// the truth: in the e2e faults scenario with the MPU-6050 0.14 % and the magnetometer
-    /// 1.25 % slow, faults 17 ms later, the stamps ran 55–140 µs late for as long as it took a
-    /// contradiction to come (up to 6 s). Random grids, counts and latch instants: the same
-    /// count from a running part moves the clock (so the test can tell), from a stalled one
-    /// it leaves the clock as it was.
+    /// write: the FIFO count of a part coming back from a stall is not timing (counted as
+    /// frames from that write on, one sample short, it bounds the clock off the truth;
+    /// docs/firmware.md has the e2e run that showed it). Random grids, counts and latch
+    /// instants: the same count from a running part moves the clock (so the test can tell),
+    /// from a stalled one it leaves the clock as it was.
     #[test]
     fn a_stalled_parts_fifo_count_is_not_timing() {
         let mut rnd = crate::test_util::clock_keyed();
