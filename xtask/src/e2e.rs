@@ -9,6 +9,7 @@
 //! * `sine`: no faults, a sine on the x gyro (the device's 64-bit squares in the Allan engine);
 //! * `orientation`: the board turned through a known trajectory, the device's attitude and
 //!   heading against the truth, with the identity calibration and the part's (`orientation.rs`).
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -46,9 +47,10 @@ enum Kind {
     Cpu,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Fault {
-    spec: &'static str,
+    /// The emulator's `--fault` spec (its time is replaced by `at_s`).
+    spec: Cow<'static, str>,
     kind: Kind,
     sensor: Option<Sensor>,
     at_s: f64,
@@ -58,7 +60,7 @@ struct Fault {
 
 const fn f(spec: &'static str, kind: Kind, sensor: Option<Sensor>, at_s: f64, dur_s: f64) -> Fault {
     Fault {
-        spec,
+        spec: Cow::Borrowed(spec),
         kind,
         sensor,
         at_s,
@@ -89,6 +91,139 @@ const FAULTS: &[Fault] = &[
     f("vanish:mpu@30s:2s", Kind::Vanish, MPU, 30.0, 2.0),
     f("vanish:qmc@33s:2s", Kind::Vanish, QMC, 33.0, 2.0),
 ];
+
+/// A schedule of faults of every kind in [`FAULTS`] drawn from `seed`: random kinds, sensors,
+/// durations and counts, one at a time from 3 s on, each 1.2–2.5 s after the last one ended,
+/// up to 3 s before `seconds`. The listed schedule tests every kind where it was placed; this
+/// one tests them where nobody placed them (the fault handling must not depend on a fault's
+/// length, its order or its phase).
+fn random_faults(seed: u64, seconds: f64) -> Vec<Fault> {
+    // SplitMix64: a few hundred draws, reproducible from the seed alone.
+    let mut state = seed;
+    let mut next = move || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut out = Vec::new();
+    let mut at = 3.0 + next();
+    loop {
+        let (part, sensor) = if next() < 0.5 {
+            ("mpu", MPU)
+        } else {
+            ("qmc", QMC)
+        };
+        let which = (next() * 8.0) as u32;
+        let draw = next();
+        // A duration in whole ms between the bounds given in ms.
+        let ms = |lo: f64, hi: f64| (lo + (hi - lo) * draw).round();
+        let (spec, kind, sensor, dur_s) = match which {
+            0 => {
+                let d = ms(5.0, 80.0);
+                (format!("nack:{part}@0s:{d}ms"), Kind::Nack, sensor, d / 1e3)
+            }
+            1 => {
+                let n = 1 + (draw * 6.0) as u32;
+                (format!("nack:{part}@0s:{n}"), Kind::NackCount, sensor, 0.0)
+            }
+            2 => {
+                let d = ms(50.0, 2500.0);
+                (
+                    format!("vanish:{part}@0s:{d}ms"),
+                    Kind::Vanish,
+                    sensor,
+                    d / 1e3,
+                )
+            }
+            3 => {
+                let d = ms(60.0, 1500.0);
+                (
+                    format!("stall:{part}@0s:{d}ms"),
+                    Kind::Stall,
+                    sensor,
+                    d / 1e3,
+                )
+            }
+            4 => {
+                let d = ms(5.0, 60.0);
+                (format!("stuck@0s:{d}ms"), Kind::Stuck, None, d / 1e3)
+            }
+            5 => ("stuck@0s".to_string(), Kind::Stuck, None, 0.0),
+            6 => {
+                let d = ms(5.0, 60.0);
+                (format!("hang@0s:{d}ms"), Kind::Hang, None, d / 1e3)
+            }
+            _ => {
+                let d = ms(20.0, 600.0);
+                (format!("overflow@0s:{d}ms"), Kind::Cpu, None, d / 1e3)
+            }
+        };
+        if at + dur_s + 3.0 > seconds {
+            return out;
+        }
+        out.push(Fault {
+            spec: Cow::Owned(spec),
+            kind,
+            sensor,
+            at_s: (at * 1e4).round() / 1e4,
+            dur_s,
+        });
+        at += dur_s + 1.2 + 1.3 * next();
+    }
+}
+
+/// A fault from its emulator spec (`nack:mpu@5s:30ms`, `nack:qmc@5s:3`, `vanish:mpu@8s:200ms`,
+/// `stall:qmc@20s:1s`, `stuck@25s`, `stuck@12s:50ms`, `hang@14s:50ms`, `overflow@16s:150ms`).
+fn parse_fault(spec: &str) -> Result<Fault> {
+    let bad = || {
+        anyhow::anyhow!("--fault {spec}: not a fault the checks know (e.g. nack:mpu@5s:30ms, stall:qmc@20s:1s, stuck@25s, hang@14s:50ms, overflow@16s:150ms)")
+    };
+    let (head, rest) = spec.split_once('@').ok_or_else(bad)?;
+    let (at, arg) = match rest.split_once(':') {
+        Some((at, arg)) => (at, Some(arg)),
+        None => (rest, None),
+    };
+    let secs = |t: &str| -> Result<f64> {
+        let v = match t.strip_suffix("ms") {
+            Some(ms) => ms.parse::<f64>().map(|x| x / 1e3),
+            None => t.strip_suffix('s').ok_or_else(bad)?.parse::<f64>(),
+        };
+        v.ok()
+            .filter(|x| x.is_finite() && *x >= 0.0)
+            .ok_or_else(bad)
+    };
+    let at_s = secs(at)?;
+    let (name, sensor) = match head.split_once(':') {
+        Some((name, "mpu")) => (name, MPU),
+        Some((name, "qmc")) => (name, QMC),
+        Some(_) => return Err(bad()),
+        None => (head, None),
+    };
+    let count = arg.is_some_and(|a| a.bytes().all(|b| b.is_ascii_digit()));
+    let dur_s = match arg {
+        Some(a) if !count => secs(a)?,
+        _ => 0.0,
+    };
+    let kind = match (name, sensor.is_some(), count) {
+        ("nack", true, true) => Kind::NackCount,
+        ("nack", true, false) if arg.is_some() => Kind::Nack,
+        ("vanish", true, false) if arg.is_some() => Kind::Vanish,
+        ("stall", true, false) => Kind::Stall,
+        ("stuck", false, false) => Kind::Stuck,
+        ("hang", false, false) if arg.is_some() => Kind::Hang,
+        ("overflow", false, false) if arg.is_some() => Kind::Cpu,
+        _ => return Err(bad()),
+    };
+    Ok(Fault {
+        spec: Cow::Owned(spec.to_string()),
+        kind,
+        sensor,
+        at_s,
+        dur_s,
+    })
+}
 
 /// The parts' clocks in the default scenario: both 1.3 % slow.
 const SLOW_CLOCKS: &str = "mpu:-1.3%,qmc:-1.3%";
@@ -151,6 +286,15 @@ pub struct E2eArgs {
     /// fault begins.
     #[arg(long, value_name = "MS", default_value_t = 0.0)]
     pub shift_ms: f64,
+    /// With the faults scenario: a random schedule of its fault kinds drawn from SEED (kinds,
+    /// sensors, durations, counts, gaps) instead of the listed one; the report lists it.
+    #[arg(long, value_name = "SEED", conflicts_with = "fault")]
+    pub faults_seed: Option<u64>,
+    /// With the faults scenario: this fault instead of the listed ones (repeat for more), in
+    /// the emulator's form, e.g. `--fault stall:mpu@3.5s:1247ms --fault hang@6.1s:44ms`: to
+    /// run one fault alone, or again a schedule that failed.
+    #[arg(long, value_name = "SPEC")]
+    pub fault: Vec<String>,
     /// Output folder under out/ (default: e2e-SCENARIO).
     #[arg(long, value_name = "DIR")]
     pub out: Option<String>,
@@ -167,6 +311,8 @@ impl E2eArgs {
             scenario,
             seconds: None,
             shift_ms: 0.0,
+            faults_seed: None,
+            fault: Vec::new(),
             out: None,
             clock: None,
         }
@@ -196,9 +342,28 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
     if !(0.0..=1000.0).contains(&shift_ms) {
         bail!("--shift-ms {shift_ms}: from 0 to 1000 ms");
     }
+    let drawn;
+    if (args.faults_seed.is_some() || !args.fault.is_empty()) && args.scenario != Scenario::Faults {
+        bail!("--faults-seed, --fault: only the faults scenario has faults");
+    }
+    let faults = match args.faults_seed {
+        Some(seed) => {
+            drawn = random_faults(seed, seconds);
+            &drawn[..]
+        }
+        None if !args.fault.is_empty() => {
+            drawn = args
+                .fault
+                .iter()
+                .map(|s| parse_fault(s))
+                .collect::<Result<Vec<_>>>()?;
+            &drawn[..]
+        }
+        None => faults,
+    };
     let faults: Vec<Fault> = faults
         .iter()
-        .copied()
+        .cloned()
         .map(|mut x| {
             x.at_s += shift_ms / 1000.0;
             x
@@ -245,7 +410,7 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
     }
     for x in &faults {
         sim_args.push("--fault".into());
-        sim_args.push(spec_at(x.spec, x.at_s));
+        sim_args.push(spec_at(&x.spec, x.at_s));
     }
     if stall_from_boot {
         sim_args.push("--fault".into());
@@ -275,6 +440,20 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
             String::new()
         }
     )?;
+    if args.faults_seed.is_some() || !args.fault.is_empty() {
+        writeln!(
+            r.text,
+            "Faults{}: {}\n",
+            args.faults_seed
+                .map(|seed| format!(" drawn from seed {seed}"))
+                .unwrap_or_default(),
+            faults
+                .iter()
+                .map(|x| format!("`{}`", spec_at(&x.spec, x.at_s)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
+    }
     if stall_from_boot {
         check_boot_stall(&session, &mut r);
     } else {
