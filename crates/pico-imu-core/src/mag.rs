@@ -573,9 +573,13 @@ impl MagService {
             .core
             .timing
             .latch(cx.dev.bus().last_start(), clock::READ_FIRST_BIT);
+        // No landing between where the bytes moved if the bus held them (their latch at the
+        // end, not the transfer's end: a sample landing in between, a few µs after the data
+        // bytes, set DRDY and passed for one landed before the end, and a read the bus had held
+        // for 20 ms was taken as read at its start, three slots early) and the poll.
         let clock = &self.core.clock;
         let none_since_end = match (
-            clock.newest_at(fine(end_us), READ_MARGIN),
+            clock.newest_at(at_end, READ_MARGIN),
             clock.newest_at(poll, READ_MARGIN),
         ) {
             (Some(a), Some(b)) => a == b,
