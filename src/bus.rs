@@ -44,8 +44,6 @@ pub struct Bus {
     /// DMA-driven register reads (`crate::i2c_dma`), on the same controller.
     dma: I2cDma,
     config: i2c::Config,
-    /// A transaction was abandoned mid-way: the controller's state is unknown.
-    wedged: bool,
 }
 
 impl Bus {
@@ -57,7 +55,6 @@ impl Bus {
             make,
             dma,
             config,
-            wedged: false,
         }
     }
 
@@ -69,7 +66,6 @@ impl Bus {
         // other user out until the new controller is stored.
         self.i2c = Some(unsafe { (self.make)(self.config) });
         self.dma.forget();
-        self.wedged = false;
     }
 
     /// Clock a stuck slave free and re-create the controller; returns the SCL pulses clocked
@@ -158,7 +154,7 @@ impl Bus {
     /// Ready for a transaction: the previous DMA read's STOP over (or the controller
     /// re-created); the controller, if there is one.
     fn ready(&mut self) -> Result<&mut I2c<'static, I2C0, i2c::Async>, BusError> {
-        if self.wedged || self.i2c.is_none() || !self.dma.settle() {
+        if self.i2c.is_none() || !self.dma.settle() {
             self.reset_controller();
         }
         self.i2c
@@ -172,7 +168,10 @@ impl Bus {
         match result {
             Some(r) => r.map_err(BusError::Hal),
             None => {
-                self.wedged = true;
+                // Re-created at once, not at the next transaction: the abandoned commands
+                // still in its TX FIFO would go out as soon as the bus frees (a START held by
+                // a slave's SDA), reading a sample that is then never delivered.
+                self.reset_controller();
                 Err(BusError::Timeout)
             }
         }
