@@ -84,6 +84,10 @@ pub struct World {
     /// The next transaction starts this long after it is asked for, ns (the bus held by
     /// another task's transfer meanwhile).
     pub hold_next_ns: u64,
+    /// The next transaction's START is held this long (a slave holding SDA, the bus busy):
+    /// it starts where it is asked for, as the firmware's bus reports it, and its bytes move
+    /// after the hold, ns.
+    pub hang_next_ns: u64,
 }
 
 impl World {
@@ -142,6 +146,10 @@ impl SimBus {
     pub fn hold_next_us(&self, us: u64) {
         self.world.borrow_mut().hold_next_ns = us * 1000;
     }
+    /// Hold the next transaction's START for `us` µs after it is asked for ([`World::hang_next_ns`]).
+    pub fn hang_next_us(&self, us: u64) {
+        self.world.borrow_mut().hang_next_ns = us * 1000;
+    }
     /// Current simulated time, ns.
     pub fn now_ns(&self) -> u64 {
         self.world.borrow().now_ns
@@ -173,8 +181,9 @@ impl SimBus {
         let mut w = self.world.borrow_mut();
         w.transactions += 1;
         let held = std::mem::take(&mut w.hold_next_ns);
-        let now = w.now_ns + held;
-        w.last_start_ns = now;
+        let hung = std::mem::take(&mut w.hang_next_ns);
+        w.last_start_ns = w.now_ns + held;
+        let now = w.last_start_ns + hung;
         w.advance_to(now);
         let moved: usize = ops
             .iter()

@@ -130,6 +130,9 @@ struct Rig {
     /// The next magnetometer tick's first transfer starts this many µs after the tick asks
     /// for it (the bus held by an IMU burst).
     mag_bus_hold_us: u64,
+    /// The next IMU burst's first transfer has its START held this many µs (a slave holding
+    /// SDA): the bus reports it begun where it was asked for.
+    imu_start_hang_us: u64,
 }
 
 impl Rig {
@@ -153,6 +156,7 @@ impl Rig {
             mag_out: Vec::new(),
             mag_hold_us: 0,
             mag_bus_hold_us: 0,
+            imu_start_hang_us: 0,
         }
     }
 
@@ -215,6 +219,8 @@ impl Rig {
                 )));
             } else {
                 self.next_imu_us += 10_000;
+                self.bus
+                    .hang_next_us(std::mem::take(&mut self.imu_start_hang_us));
                 if self.imu_svc.wants_recovery(t) {
                     self.imu_svc.recovered();
                 }

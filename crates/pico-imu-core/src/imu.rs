@@ -369,10 +369,17 @@ impl ImuService {
         let bits = clock::read_bits(2) + clock::read_bits(u64::from(FRAME) * c.read as u64);
         let held_read = self.core.held(start, bits, read_at);
         // The frames followed the count on the bus, within the transfer's deadline however
-        // late the task saw its end: only that long can the FIFO have filled in between.
-        let on_bus = read_at
-            .saturating_sub(whole_us(tau))
-            .min(u64::from(TRANSFER_TIMEOUT_US));
+        // late the task saw its end: only that long can the FIFO have filled in between. But a
+        // transfer the bus held before its START (busy, a slave holding SDA) latched its count
+        // at its end and read the frames right after it: that count holds every sample up to
+        // the end by the clock, not only those up to the start. (Taken for stale, a START held
+        // for 21 ms cost a FIFO's frames that had been read whole.)
+        let on_bus = if held_read && self.latched_at_end(c.count, read_at, bits) {
+            whole_us(self.core.timing.duration(bits))
+        } else {
+            read_at.saturating_sub(whole_us(tau))
+        }
+        .min(u64::from(TRANSFER_TIMEOUT_US));
         if count_may_be_stale(c.count, on_bus, self.capacity) {
             cx.out.truncate(slot);
             self.core.overflows += 1;
@@ -390,6 +397,25 @@ impl ImuService {
         }
         self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
         self.delivered(cx.out, slot, c.covered, read_at);
+    }
+
+    /// Whether a FIFO count of `count` bytes, read in a transfer of `bits` seen done at
+    /// `read_at` µs, holds every frame the clock says the part had produced by the time the
+    /// count would have been latched had the transfer begun last (less one: the sample landing
+    /// about then): so it was latched there, not at the transfer's start.
+    fn latched_at_end(&self, count: u16, read_at: u64, bits: u64) -> bool {
+        let timing = &self.core.timing;
+        let at = timing.latch(
+            fine(read_at) - timing.duration(bits),
+            clock::READ_SECOND_BIT,
+        );
+        let due = self
+            .core
+            .clock
+            .nearest(at)
+            .wrapping_sub(self.core.next_k)
+            .wrapping_add(1);
+        due < 1 << 16 && u32::from(frames_in(count)) + 1 >= due
     }
 
     /// A count of `count` bytes latched at `tau` (`held`: the bus held its transfer): the
