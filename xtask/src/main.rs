@@ -256,6 +256,26 @@ fn test(extra: &[String]) -> Result<()> {
             out: Some("e2e-faults-fast-mpu".into()),
             ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
         })?;
+        // Schedules drawn by `--faults-seed` (other lengths, orders and phases of the same
+        // kinds) that each found a fault of their own: a 1.25 s MPU-6050 stall restarted on the
+        // neighbouring slot (1009), a magnetometer read the bus held for 22 ms taken as read at
+        // its start (1000), a read abandoned at its deadline that the controller still made
+        // when the bus freed, its sample never delivered (2014), an IMU burst whose START the
+        // bus held for 21 ms taken for a stale count, a FIFO's frames read whole dropped
+        // (3026).
+        for (seed, clock) in [
+            (1009, "mpu:-1.28%,qmc:-0.05%"),
+            (1000, "mpu:+1.11%,qmc:+0.68%"),
+            (2014, "mpu:-0.74%,qmc:-0.41%"),
+            (3026, "mpu:+0.15%,qmc:+1.59%"),
+        ] {
+            e2e::e2e(&e2e::E2eArgs {
+                faults_seed: Some(seed),
+                clock: Some(clock.into()),
+                out: Some(format!("e2e-faults-seed-{seed}")),
+                ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
+            })?;
+        }
         // The Thumb differential test's program, for sim/test/thumb-diff.test.js.
         run(cargo().args(["build", "--release", "-p", "allan-thumb-check"]))?;
         let thumb_check = target_dir()?.join("thumbv6m-none-eabi/release/allan-thumb-check");

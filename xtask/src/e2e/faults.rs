@@ -8,8 +8,9 @@ use super::*;
 use crate::emu_check::{ImuRaw, MagRaw};
 
 /// A held START the device notices: longer than a transfer's deadline (then abandoned as a
-/// timeout), s.
-const HANG_NOTICED_S: f64 = pico_imu_core::bus::TRANSFER_TIMEOUT_US as f64 * 1e-6 + 0.002;
+/// timeout) counted from that transfer's start, which may come up to a magnetometer tick
+/// (5 ms) after the hold began, s.
+const HANG_NOTICED_S: f64 = pico_imu_core::bus::TRANSFER_TIMEOUT_US as f64 * 1e-6 + 0.006;
 /// The longest IMU NACK whose samples the FIFO keeps (73 frames, less a burst interval of
 /// 10.2 ms and a margin), s.
 const NACK_NO_OVERFLOW_S: f64 = 0.060;
