@@ -165,11 +165,13 @@ impl SampleClock {
             // slot.)
             self.shift += c;
             if c.abs() <= e {
-                // The same interval as the old line's, widened by the write's, about the new
-                // line.
+                // About the new line: the write's interval, and the old line's (the part may
+                // have kept its phase). Their union only: widened on every restart, a part
+                // that stayed stalled through five re-initialisations had an interval wider
+                // than its period, and no restart of its FIFO could tell its slot.
                 self.rebase(k);
-                self.lo = self.lo.min(c) - e - c;
-                self.hi = self.hi.max(c) + e - c;
+                self.lo = (self.lo - c).min(-e);
+                self.hi = (self.hi - c).max(e);
                 self.t_at = t_first;
             } else {
                 self.k_at = k;
@@ -870,12 +872,14 @@ mod late_line_tests {
     /// extrapolates it the same way): a slot near the middle of two of its instants is numbered
     /// by it. With the line kept in place when a write came within the margin, the first grid
     /// moved by the last write's delay (up to the margin, 0.12 period here), and a 1.25 s stall
-    /// of the emulator's MPU-6050 was restarted on the neighbouring slot.
+    /// of the emulator's MPU-6050 was restarted on the neighbouring slot. Nor may the interval
+    /// grow with each restart: widened by the margin every time, after five it spanned more
+    /// than a period, and the part's return could not be numbered for another 1.5 s.
     #[test]
     fn reinitialisations_of_a_stalled_part_keep_the_first_grid() {
         let mut rnd = crate::test_util::clock_keyed();
         let mut u = move || (rnd() >> 11) as f64 / (1u64 << 53) as f64;
-        let mut worst = 0.0f64;
+        let (mut worst, mut wide) = (0.0f64, 0.0f64);
         for _trial in 0..64 {
             let p = 1e6 * (1.0 + 0.04 * (u() - 0.5));
             let part = Part {
@@ -900,8 +904,16 @@ mod late_line_tests {
                 c.start(k_first, f(write) + c.period(), true, fine(120));
                 let moved = ns(c.origin_time(planned)) - ns(before.origin_time(planned));
                 worst = worst.max(moved.abs() / p);
+                // Where the part is now: the write's interval, or the old line's too; not
+                // wider with every restart (a FIFO restart could then never tell its slot).
+                wide = wide.max(ns(c.width()) - ns(before.width()).max(240_000.0));
             }
         }
+        assert!(
+            wide <= 121_000.0,
+            "the interval grew by {:.0} µs over the restarts",
+            wide / 1000.0
+        );
         assert!(
             worst < 0.005,
             "fruitless restarts moved the first grid by {worst:.3} period"
