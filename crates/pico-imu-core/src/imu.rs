@@ -255,10 +255,16 @@ impl ImuService {
             // there, not from this read, which may come up to a burst later).
             self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
             if self.core.phase == Phase::Stalled {
-                // Data again after a stall: the frames' slots are not known by counting (the
-                // part produced nothing for a while); restart the FIFO to know them.
-                self.restart_fifo(cx, GapCause::Stalled).await;
-                return;
+                if self.core.clock.confirmed() || held_read {
+                    // Data again after a stall: the frames' slots are not known by counting
+                    // (the part produced nothing for a while); restart the FIFO to know them.
+                    self.restart_fifo(cx, GapCause::Stalled).await;
+                    return;
+                }
+                // The part's first samples ever (it stalled before its first): the FIFO,
+                // emptied when the part was started, holds them from its first, slot
+                // `next_k`, and the clock's grid starts there.
+                self.anchor(tau, frames);
             }
             let slot = cx.out.len();
             let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
@@ -397,6 +403,25 @@ impl ImuService {
         }
         self.core.last_growth_us = whole_us(self.core.clock.time(newest)).min(read_at);
         self.delivered(cx.out, slot, c.covered, read_at);
+    }
+
+    /// A part that stalled before its first sample (its grid only implied by the waking
+    /// write) produced at last: its first `frames` samples, slots `next_k…`, are in the FIFO,
+    /// the newest landed before `tau` and the next not yet. The grid starts on them (a phase
+    /// known to a period, then narrowed by this count), and the part runs again. (Numbered on
+    /// the waking write's grid, the emulator's MPU-6050 stalled from 0.1 s to 0.6 s had every
+    /// sample a few hundred slots off; restarting its FIFO instead needs a phase known better
+    /// than that, and the part stayed stalled.)
+    fn anchor(&mut self, tau: Fine, frames: u16) {
+        let period = self.core.clock.period();
+        let first = self.core.next_k;
+        let newest = first.wrapping_add(u32::from(frames)).wrapping_sub(1);
+        let t_first = tau - period * u64::from(frames) + period / 2;
+        self.core.clock.start(first, t_first, false, Fine::ZERO);
+        self.core.clock.observe(tau, newest, Seen::NextNotYet);
+        self.core.phase = Phase::Running;
+        self.core.fresh = false;
+        self.misaligned = None;
     }
 
     /// Whether a FIFO count of `count` bytes, read in a transfer of `bits` seen done at

@@ -214,18 +214,21 @@ impl Core {
     }
 
     /// The waking write's transfer started at `start`: the part samples from one period after
-    /// its latch. A part that had a grid continues it (the slots since the last delivered
-    /// sample are lost to `cause`); otherwise a new grid starts at slot 0.
+    /// its latch. A part that had a grid, and was seen producing on it, continues it (the
+    /// slots since the last delivered sample are lost to `cause`); otherwise a new grid starts
+    /// at the next slot due (0 at the first start). (A grid only implied by a waking write,
+    /// the part stalled or gone before its first sample, is not the part's: continued, the
+    /// emulator's magnetometer, gone from 10 ms after boot to 0.79 s, had every reading
+    /// numbered 154 slots on.)
     pub fn started(&mut self, start: Fine, cause: GapCause, now_us: u64) {
         let first = self.timing.latch(start, clock::WRITE_DATA_BIT) + self.clock.period();
-        if self.clock.known() {
+        if self.clock.known() && self.clock.confirmed() {
             let k = self.clock.origin_nearest(first);
             self.clock.start(k, first, true, WRITE_MARGIN);
             self.next_k = k;
             self.after.get_or_insert(cause);
         } else {
-            self.clock.start(0, first, false, Fine::ZERO);
-            self.next_k = 0;
+            self.clock.start(self.next_k, first, false, Fine::ZERO);
         }
         self.fresh = true;
         self.last_growth_us = now_us;

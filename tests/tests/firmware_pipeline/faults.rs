@@ -274,17 +274,69 @@ fn an_imu_burst_held_before_its_start_loses_nothing() {
     }
 }
 
+/// A magnetometer missing at boot, or gone right after its first waking write (before its
+/// first sample), found 0.2–1 s later: reported, and its readings numbered from its first
+/// sample (the models count slots from a part's first sample; the grid that write implied
+/// was never the part's).
 #[test]
 fn a_missing_magnetometer_at_boot_is_reported_and_found_later() {
-    let mut rig = Rig::new();
-    rig.bus.mag(|q| q.present = false);
-    rig.run(300);
-    assert_eq!(rig.dev.status(0, 0).mag, SensorState::Missing);
-    assert_eq!(rig.dev.status(0, 0).imu, SensorState::Ok);
-    rig.bus.mag(|q| q.present = true);
-    rig.run(800);
-    assert_eq!(rig.dev.status(0, 0).mag, SensorState::Ok);
-    assert!(rig.dev.status(0, 0).mag_samples > 50);
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
+    for i in 0..6 {
+        let mut rig = Rig::new();
+        if i % 2 == 1 {
+            // Started by 8 ms (its first tick, a reset), its first sample due at 13 ms.
+            rig.run(10);
+            assert!(rig.mag_svc.clock().known(), "not started by 10 ms");
+        }
+        rig.bus.mag(|q| q.present = false);
+        rig.run(200 + keyed.bits() % 800);
+        assert_eq!(rig.dev.status(0, 0).mag, SensorState::Missing);
+        assert_eq!(rig.dev.status(0, 0).imu, SensorState::Ok);
+        // Power comes back: the chip from its power-on state.
+        rig.bus.with_world(|w| w.mag = Some(noisy_qmc()));
+        rig.run(800);
+        assert_eq!(rig.dev.status(0, 0).mag, SensorState::Ok);
+        assert!(rig.dev.status(0, 0).mag_samples > 50);
+        let (first, ..) = mag_readings_exact(&mut rig, "");
+        assert!(first <= 2, "the first reading numbered {first}");
+    }
+}
+
+/// An MPU-6050 that stalls before its first sample, for 0.2–1.2 s: named, and once it
+/// produces, its samples are numbered from its first (the models count slots so), each the
+/// model's sample, none counted lost. (Numbered on the grid its waking write implied, they
+/// were hundreds of slots off; restarting its FIFO instead needed a phase known better than a
+/// period, and the part stayed stalled.)
+#[test]
+fn an_imu_stalled_from_its_start_is_numbered_from_its_first_sample() {
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
+    for _ in 0..4 {
+        let mut rig = Rig::new();
+        let until = 200_000_000 + (keyed.bits() % 1000) * 1_000_000;
+        rig.bus.mpu(|m| m.stall = Some((0, until)));
+        rig.run(until / 1_000_000 + 1500);
+        let ev = rig.events();
+        assert!(stalled_at(&ev, Sensor::Imu).is_some(), "no SensorStalled");
+        let st = rig.dev.status(0, 0);
+        assert_eq!(st.imu, SensorState::Ok);
+        assert!(!rig.imu_out.is_empty(), "nothing delivered after the stall");
+        let truth = rig.bus.mpu(|m| m.slots());
+        let log = rig.bus.mpu(|m| m.log.clone());
+        for d in &rig.imu_out {
+            let i = truth
+                .iter()
+                .position(|(s, _)| *s == u64::from(d.k))
+                .unwrap_or_else(|| panic!("slot {} was never produced", d.k));
+            assert_eq!(
+                d.raw.gyro,
+                [log[i].1[4], log[i].1[5], log[i].1[6]],
+                "slot {} is not the model's sample",
+                d.k
+            );
+        }
+        let times: Vec<u64> = rig.imu_out.iter().map(|d| truth[d.k as usize].1).collect();
+        assert_eq!(st.samples_dropped, truth_lost(&truth, &times), "lost");
+    }
 }
 
 #[test]

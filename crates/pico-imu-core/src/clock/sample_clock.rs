@@ -57,6 +57,12 @@ pub struct SampleClock {
     hi: i64,
     /// A grid exists (the part was started).
     known: bool,
+    /// The part has been seen producing on this grid: an observation of a sample from
+    /// `origin_k` on. A grid only implied by its waking write (the part stalled or gone before
+    /// its first sample) is not the part's: a restart does not continue it.
+    confirmed: bool,
+    /// The first sample index of the grid (its last start that did not continue an old one).
+    origin_k: u32,
     /// The first observation of the run (newest sample index, τ), for the coarse period.
     first: Option<(u32, Fine)>,
     /// Samples between the observations behind the current coarse period (0: none yet).
@@ -102,6 +108,8 @@ impl SampleClock {
             lo: 0,
             hi: 0,
             known: false,
+            confirmed: false,
+            origin_k: 0,
             first: None,
             coarse_span: 0,
             edge: None,
@@ -118,6 +126,11 @@ impl SampleClock {
     /// Whether the part has a grid (started at least once).
     pub fn known(&self) -> bool {
         self.known
+    }
+
+    /// Whether the part has been seen producing on this grid (see [`Self::start`]).
+    pub fn confirmed(&self) -> bool {
+        self.confirmed
     }
 
     /// T̂.
@@ -181,6 +194,8 @@ impl SampleClock {
             }
         } else {
             self.shift = 0;
+            self.confirmed = false;
+            self.origin_k = k;
             self.k_at = k;
             self.t_at = t_first;
             let half = (self.period.raw() / 2) as i64;
@@ -216,6 +231,9 @@ impl SampleClock {
         let trust_late = seen.trust_late();
         if !self.known {
             return Fit::Fits;
+        }
+        if newest.wrapping_sub(self.origin_k) < 1 << 31 {
+            self.confirmed = true;
         }
         // The drift the period's uncertainty allows since the last observation.
         let gap = u64::from((newest.wrapping_sub(self.last_k) as i32).unsigned_abs()).min(1 << 20);
