@@ -276,6 +276,20 @@ fn test(extra: &[String]) -> Result<()> {
                 ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
             })?;
         }
+        // Faults from boot, before a part's first sample: its grid is then the one its first
+        // samples set, not the one its waking write implied (numbered on that one, every
+        // sample was hundreds of slots off, and the MPU-6050 restarted its FIFO in vain).
+        for (i, fault) in ["stall:mpu@0.1s:500ms", "vanish:qmc@0.01s:400ms"]
+            .into_iter()
+            .enumerate()
+        {
+            e2e::e2e(&e2e::E2eArgs {
+                fault: vec![fault.into()],
+                seconds: Some(14.0),
+                out: Some(format!("e2e-faults-boot-{i}")),
+                ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
+            })?;
+        }
         // The Thumb differential test's program, for sim/test/thumb-diff.test.js.
         run(cargo().args(["build", "--release", "-p", "allan-thumb-check"]))?;
         let thumb_check = target_dir()?.join("thumbv6m-none-eabi/release/allan-thumb-check");

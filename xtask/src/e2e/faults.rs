@@ -135,12 +135,15 @@ pub(super) fn check_faults(
             show(&lost[1])
         );
         if x.kind == Kind::Stall {
+            // Timed from the stall's start, or from when the device started the part if that
+            // came later (a stall from before its first sample: the device cannot know sooner).
+            let named_after = |t: u64, since: u64| t as f64 * 1e-6 - from.max(since as f64 * 1e-6);
             match stalled_at {
-                Some((t, _)) if (t as f64 * 1e-6 - from) <= STALL_REPORT_S => {}
-                Some((t, _)) => r.fail(format!(
+                Some((t, since)) if named_after(t, since) <= STALL_REPORT_S => {}
+                Some((t, since)) => r.fail(format!(
                     "`{}`: stall named {:.1} ms after it began (goal ≤ {:.0} ms)",
                     spec_at(&x.spec, x.at_s),
-                    (t as f64 * 1e-6 - from) * 1e3,
+                    named_after(t, since) * 1e3,
                     STALL_REPORT_S * 1e3
                 )),
                 None => r.fail(format!(
