@@ -368,6 +368,20 @@ pub fn e2e(args: &E2eArgs) -> Result<()> {
             x.at_s += shift_ms / 1000.0;
             x
         })
+        .collect();
+    // A fault asked for by name must fit the run (the listed ones are cut to a shorter one).
+    if let Some(x) = faults
+        .iter()
+        .find(|x| !args.fault.is_empty() && x.at_s + x.dur_s + 1.0 >= seconds)
+    {
+        bail!(
+            "--fault {}: ends at {:.3} s, not 1 s before the run's end ({seconds} s; --seconds)",
+            x.spec,
+            x.at_s + x.dur_s
+        );
+    }
+    let faults: Vec<Fault> = faults
+        .into_iter()
         .filter(|x| x.at_s + x.dur_s + 1.0 < seconds)
         .collect();
     let wall = Instant::now();
