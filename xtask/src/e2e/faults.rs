@@ -61,7 +61,10 @@ pub(super) fn check_faults(
                     t_us,
                     since_us,
                 } => {
-                    if Some(*sensor) == x.sensor && in_window(*t_us) && stalled_at.is_none() {
+                    // Its own window: another fault that begins meanwhile does not end it.
+                    let t = *t_us as f64 * 1e-6;
+                    let own = t >= from && t < from + x.dur_s + 3.0;
+                    if Some(*sensor) == x.sensor && own && stalled_at.is_none() {
                         stalled_at = Some((*t_us, *since_us));
                     }
                     (*t_us, format!("SensorStalled({sensor:?})"))
@@ -156,8 +159,12 @@ pub(super) fn check_faults(
         // magnetometer the samples it overwrote meanwhile, never the IMU's FIFO. A START held
         // for less than a transfer's deadline only delays that transfer: the device cannot
         // tell it from a slow one.
+        // (Unless a CPU stall overlaps it: the overflow is then that one's.)
+        let cpu_meanwhile = faults
+            .iter()
+            .any(|y| y.kind == Kind::Cpu && y.at_s < until && y.at_s + y.dur_s.max(0.1) > from);
         if matches!(x.kind, Kind::Stuck | Kind::Hang) && x.dur_s < 0.07 {
-            if let Some(n) = lost[0].get("FifoOverflow") {
+            if let Some(n) = lost[0].get("FifoOverflow").filter(|_| !cpu_meanwhile) {
                 r.fail(format!(
                     "`{}`: a held bus cost {n} IMU samples as a FIFO overflow (its FIFO holds 73 ms)",
                     spec_at(&x.spec, x.at_s)
