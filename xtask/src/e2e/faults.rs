@@ -156,14 +156,15 @@ pub(super) fn check_faults(
             }
         }
         // A held bus is a bus fault: reported as one, with its recovery; it may cost the
-        // magnetometer the samples it overwrote meanwhile, never the IMU's FIFO. A START held
+        // magnetometer the samples it overwrote meanwhile, never the IMU's FIFO while the hold,
+        // a burst interval (10 ms) and the recovery's ticks fit in its 73 ms. A START held
         // for less than a transfer's deadline only delays that transfer: the device cannot
         // tell it from a slow one.
         // (Unless a CPU stall overlaps it: the overflow is then that one's.)
         let cpu_meanwhile = faults
             .iter()
             .any(|y| y.kind == Kind::Cpu && y.at_s < until && y.at_s + y.dur_s.max(0.1) > from);
-        if matches!(x.kind, Kind::Stuck | Kind::Hang) && x.dur_s < 0.07 {
+        if matches!(x.kind, Kind::Stuck | Kind::Hang) && x.dur_s <= 0.05 {
             if let Some(n) = lost[0].get("FifoOverflow").filter(|_| !cpu_meanwhile) {
                 r.fail(format!(
                     "`{}`: a held bus cost {n} IMU samples as a FIFO overflow (its FIFO holds 73 ms)",
