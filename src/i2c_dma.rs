@@ -46,6 +46,9 @@ const TX_DMA_LEVEL: u8 = 8;
 /// Longest wait for the STOP of the previous DMA transfer (one SCL period, 2.5 µs at 400 kHz,
 /// unless a slave stretches SCL).
 const STOP_WAIT_US: u64 = 200;
+/// More time for a transfer whose bytes were arriving when its deadline passed ([`wait_end`]),
+/// µs: the longest read, 256 bytes of 9 SCL periods at 400 kHz (5.8 ms), with a margin.
+const LATE_BYTES_US: u32 = 7_000;
 
 const TX_CH: usize = 0;
 const RX_CH: usize = 1;
@@ -204,7 +207,7 @@ impl I2cDma {
             Ok(guards) => guards,
             Err(e) => return Some(Err(e)),
         };
-        let ending = wait_end(pac::DMA.ch(RX_CH)).await;
+        let ending = wait_end(pac::DMA.ch(RX_CH), n).await;
         self.finish(ending, waiting, running)
     }
 
@@ -261,7 +264,7 @@ impl I2cDma {
             Ok(guards) => guards,
             Err(e) => return Some(Err(e)),
         };
-        let ending = wait_end(pac::DMA.ch(RX_CH)).await;
+        let ending = wait_end(pac::DMA.ch(RX_CH), n_rx).await;
         self.finish(ending, waiting, running)
     }
 
@@ -444,10 +447,14 @@ impl Drop for Running {
 }
 
 /// Sleep until the RX channel has copied its last byte, TX_ABRT is raised, or the transfer's
-/// deadline passes; an abort is read and cleared (which also ends its hold on the TX FIFO).
-async fn wait_end(rx: pac::dma::Channel) -> Ending {
+/// deadline passes; an abort is read and cleared (which also ends its hold on the TX FIFO). A
+/// transfer whose bytes have begun to arrive (`n_rx` expected) when its deadline passes gets
+/// [`LATE_BYTES_US`] more, once: a START held by the bus until just before the deadline
+/// otherwise had its read cut off while the part's bytes moved, a sample read and lost.
+async fn wait_end(rx: pac::dma::Channel, n_rx: usize) -> Ending {
     let i2c = pac::I2C0;
-    let ended = || {
+    let mut extended = false;
+    let mut ended = || {
         if i2c.ic_raw_intr_stat().read().tx_abrt() {
             let source = i2c.ic_tx_abrt_source().read().0;
             i2c.ic_clr_tx_abrt().read();
@@ -456,7 +463,16 @@ async fn wait_end(rx: pac::dma::Channel) -> Ending {
         if !rx.ctrl_trig().read().busy() {
             return Some(Ending::Done);
         }
-        alarm::DEADLINE.fired().then_some(Ending::Timeout)
+        if !alarm::DEADLINE.fired() {
+            return None;
+        }
+        if !extended && (rx.trans_count().read() as usize) < n_rx {
+            extended = true;
+            let now = Instant::now().as_micros() as u32;
+            alarm::DEADLINE.arm_deadline(now.wrapping_add(LATE_BYTES_US));
+            return None;
+        }
+        Some(Ending::Timeout)
     };
     poll_fn(|cx| {
         if let Some(e) = ended() {
