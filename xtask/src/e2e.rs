@@ -98,7 +98,8 @@ const FAULTS: &[Fault] = &[
 /// one tests them where nobody placed them (the fault handling must not depend on a fault's
 /// length, its order or its phase).
 fn random_faults(seed: u64, seconds: f64) -> Vec<Fault> {
-    // SplitMix64: a few hundred draws, reproducible from the seed alone.
+    // SplitMix64 (the same draws for the same SEED: the CI runs and docs/firmware.md name
+    // schedules by it, so swapping the generator, e.g. for imu_sim::Rng, would re-draw them).
     let mut state = seed;
     let mut next = move || {
         state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);

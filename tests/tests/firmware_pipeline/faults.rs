@@ -203,16 +203,7 @@ fn an_imu_stall_at_any_phase_is_named_in_time_counted_exactly_and_keeps_the_grid
             "phase {step}: named {} µs after the stall began",
             named.saturating_sub(from) / 1000
         );
-        let truth = rig.bus.mpu(|m| m.slots());
-        let times: Vec<u64> = rig
-            .imu_out
-            .iter()
-            .map(|d| {
-                let at = truth.iter().find(|(s, _)| *s == u64::from(d.k));
-                at.unwrap_or_else(|| panic!("phase {step}: slot {} was never produced", d.k))
-                    .1
-            })
-            .collect();
+        let (truth, times) = imu_samples_exact(&mut rig, 0, &format!("phase {step}: "));
         let st = rig.dev.status(0, 0);
         assert_eq!(st.imu, SensorState::Ok, "phase {step}");
         assert_eq!(
@@ -220,20 +211,32 @@ fn an_imu_stall_at_any_phase_is_named_in_time_counted_exactly_and_keeps_the_grid
             truth_lost(&truth, &times),
             "phase {step}: lost"
         );
-        let log = rig.bus.mpu(|m| m.log.clone());
-        for d in rig.imu_out.iter() {
+    }
+}
+
+/// Every IMU sample the rig delivered from the `from`th on is the model's sample of its slot;
+/// returns the model's slots and when it sampled each one delivered (for [`truth_lost`]).
+/// `ctx` prefixes the messages.
+fn imu_samples_exact(rig: &mut Rig, from: usize, ctx: &str) -> (Vec<(u64, u64)>, Vec<u64>) {
+    let truth = rig.bus.mpu(|m| m.slots());
+    let log = rig.bus.mpu(|m| m.log.clone());
+    let times = rig.imu_out[from..]
+        .iter()
+        .map(|d| {
             let i = truth
                 .iter()
                 .position(|(s, _)| *s == u64::from(d.k))
-                .unwrap();
+                .unwrap_or_else(|| panic!("{ctx}slot {} was never produced", d.k));
             assert_eq!(
                 d.raw.gyro,
                 [log[i].1[4], log[i].1[5], log[i].1[6]],
-                "phase {step}: slot {} is not the model's sample",
+                "{ctx}slot {} is not the model's sample",
                 d.k
             );
-        }
-    }
+            truth[i].1
+        })
+        .collect();
+    (truth, times)
 }
 
 /// IMU bursts whose first transfer has its START held 2–24 ms (a slave holding SDA; within
@@ -257,20 +260,7 @@ fn an_imu_burst_held_before_its_start_loses_nothing() {
         let st = rig.dev.status(0, 0);
         assert_eq!(st.fifo_overflows, 0, "a held START taken for an overflow");
         assert_eq!(st.samples_dropped, 0, "samples lost to held STARTs");
-        let truth = rig.bus.mpu(|m| m.slots());
-        let log = rig.bus.mpu(|m| m.log.clone());
-        for d in &rig.imu_out[from..] {
-            let i = truth
-                .iter()
-                .position(|(s, _)| *s == u64::from(d.k))
-                .unwrap_or_else(|| panic!("slot {} was never produced", d.k));
-            assert_eq!(
-                d.raw.gyro,
-                [log[i].1[4], log[i].1[5], log[i].1[6]],
-                "slot {} is not the model's sample",
-                d.k
-            );
-        }
+        imu_samples_exact(&mut rig, from, "");
     }
 }
 
@@ -337,21 +327,7 @@ fn an_imu_stalled_from_its_start_is_numbered_from_its_first_sample() {
         let st = rig.dev.status(0, 0);
         assert_eq!(st.imu, SensorState::Ok);
         assert!(!rig.imu_out.is_empty(), "nothing delivered after the stall");
-        let truth = rig.bus.mpu(|m| m.slots());
-        let log = rig.bus.mpu(|m| m.log.clone());
-        for d in &rig.imu_out {
-            let i = truth
-                .iter()
-                .position(|(s, _)| *s == u64::from(d.k))
-                .unwrap_or_else(|| panic!("slot {} was never produced", d.k));
-            assert_eq!(
-                d.raw.gyro,
-                [log[i].1[4], log[i].1[5], log[i].1[6]],
-                "slot {} is not the model's sample",
-                d.k
-            );
-        }
-        let times: Vec<u64> = rig.imu_out.iter().map(|d| truth[d.k as usize].1).collect();
+        let (truth, times) = imu_samples_exact(&mut rig, 0, "");
         assert_eq!(st.samples_dropped, truth_lost(&truth, &times), "lost");
     }
 }
