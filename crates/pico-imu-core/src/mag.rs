@@ -342,21 +342,6 @@ impl MagService {
                 delay_until(cx.delay, cx.now, at - status_latch).await;
                 continue;
             }
-            let period = self.core.clock.period();
-            if !self.core.clock.confirmed()
-                && !status.skipped
-                && tau.since(self.core.clock.time(self.core.next_k)) > 2 * period.raw() as i64
-            {
-                // A part never seen producing on its grid, producing at last, long after that
-                // grid's first instant (stalled from its start): this sample is its first,
-                // slot `next_k` (nothing overwritten), landed within a period before the
-                // status latch, and the grid starts there. (Numbered on the grid its waking
-                // write implied, every reading of a magnetometer stalled from boot for 1 s was
-                // two hundred slots on.)
-                self.core
-                    .clock
-                    .start(self.core.next_k, tau - period / 2, false, Fine::ZERO);
-            }
             if let Some(before) = not_yet {
                 if !self.core.fresh {
                     self.core.clock.observe(

@@ -292,23 +292,6 @@ fn a_missing_magnetometer_at_boot_is_reported_and_found_later() {
     }
 }
 
-/// A magnetometer that stalls before its first sample, for 0.2–1.5 s: once it produces, its
-/// readings are numbered from its first, each the model's measurement of its slot. (Numbered
-/// on the grid its waking write implied, every reading was hundreds of slots on.)
-#[test]
-fn a_magnetometer_stalled_from_its_start_is_numbered_from_its_first_sample() {
-    let mut keyed = pico_imu_tests::Keyed::from_clock();
-    for _ in 0..4 {
-        let mut rig = Rig::new();
-        let until = 200_000_000 + (keyed.bits() % 1300) * 1_000_000;
-        rig.bus.mag(|q| q.stall = Some((0, until)));
-        rig.run(until / 1_000_000 + 1000);
-        assert_eq!(rig.dev.status(0, 0).mag, SensorState::Ok);
-        let (first, ..) = mag_readings_exact(&mut rig, "");
-        assert!(first <= 2, "the first reading numbered {first}");
-    }
-}
-
 /// An MPU-6050 that stalls before its first sample, for 0.2–1.2 s: named, and once it
 /// produces, its samples are numbered from its first (the models count slots so), each the
 /// model's sample, none counted lost. (Numbered on the grid its waking write implied, they
