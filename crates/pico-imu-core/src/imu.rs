@@ -115,6 +115,14 @@ impl ImuService {
             Phase::Lost if self.core.health.retry_due(t) => self.retry_lost(cx).await,
             Phase::Lost => {}
             Phase::Stalled if self.core.health.retry_due(t) => {
+                // A look at the FIFO first: a part that came back since the last tick has its
+                // first samples there, which a re-initialisation would empty (and the grid
+                // started on what remained, a slot or more off).
+                self.drain(cx).await;
+                if self.core.phase != Phase::Stalled {
+                    self.core.flush_report(cx.out);
+                    return;
+                }
                 self.init(cx, GapCause::Stalled).await;
                 // The back-off counts from the end of the re-initialisation (its reset alone
                 // takes 100 ms): the next tick drains what the restarted part produced.
