@@ -88,6 +88,9 @@ pub struct World {
     /// it starts where it is asked for, as the firmware's bus reports it, and its bytes move
     /// after the hold, ns.
     pub hang_next_ns: u64,
+    /// After this many more transactions, one starts this long after it is asked for, ns (as
+    /// [`World::hold_next_ns`], for a later transfer of a task's turn).
+    pub hold_later: Option<(u32, u64)>,
 }
 
 impl World {
@@ -146,6 +149,10 @@ impl SimBus {
     pub fn hold_next_us(&self, us: u64) {
         self.world.borrow_mut().hold_next_ns = us * 1000;
     }
+    /// Hold the transaction after the next `skip` ones back by `us` µs ([`World::hold_later`]).
+    pub fn hold_later_us(&self, skip: u32, us: u64) {
+        self.world.borrow_mut().hold_later = Some((skip, us * 1000));
+    }
     /// Hold the next transaction's START for `us` µs after it is asked for ([`World::hang_next_ns`]).
     pub fn hang_next_us(&self, us: u64) {
         self.world.borrow_mut().hang_next_ns = us * 1000;
@@ -180,7 +187,15 @@ impl SimBus {
     fn run(&mut self, address: u8, ops: &mut [Operation<'_>]) -> Result<(), SimError> {
         let mut w = self.world.borrow_mut();
         w.transactions += 1;
-        let held = std::mem::take(&mut w.hold_next_ns);
+        let mut held = std::mem::take(&mut w.hold_next_ns);
+        match w.hold_later {
+            Some((0, ns)) => {
+                held += ns;
+                w.hold_later = None;
+            }
+            Some((n, ns)) => w.hold_later = Some((n - 1, ns)),
+            None => {}
+        }
         let hung = std::mem::take(&mut w.hang_next_ns);
         w.last_start_ns = w.now_ns + held;
         let now = w.last_start_ns + hung;

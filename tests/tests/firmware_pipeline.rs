@@ -133,6 +133,9 @@ struct Rig {
     /// The next IMU burst's first transfer has its START held this many µs (a slave holding
     /// SDA): the bus reports it begun where it was asked for.
     imu_start_hang_us: u64,
+    /// In the next magnetometer tick, the transfer after the first `.0` starts `.1` µs after
+    /// it is asked for (the bus held by an IMU burst, the CPU by other work).
+    mag_later_hold: Option<(u32, u64)>,
 }
 
 impl Rig {
@@ -157,6 +160,7 @@ impl Rig {
             mag_hold_us: 0,
             mag_bus_hold_us: 0,
             imu_start_hang_us: 0,
+            mag_later_hold: None,
         }
     }
 
@@ -211,12 +215,17 @@ impl Rig {
                 if self.mag_svc.wants_recovery(t) {
                     self.mag_svc.recovered();
                 }
+                if let Some((skip, us)) = self.mag_later_hold.take() {
+                    self.bus.hold_later_us(skip, us);
+                }
                 block_on(self.mag_svc.tick(&mut Tick::new(
                     &mut self.mag,
                     &mut self.bus.delay(),
                     &clock,
                     &mut out,
                 )));
+                // A tick with fewer transfers does not pass its hold on.
+                self.bus.with_world(|w| w.hold_later = None);
             } else {
                 self.next_imu_us += 10_000;
                 self.bus

@@ -391,35 +391,54 @@ impl MagService {
                     // A data read that a landing may fall inside would be torn (the part
                     // rewrites its data registers, the bytes already read belong to the sample
                     // before): wait for that landing, then read; the read takes the sample that
-                    // landed. Only with a located clock (while it is wide, any read window may
-                    // hold a landing).
+                    // landed. Only with a clock that knows its landings to a quarter period
+                    // (while it is wider, any read window may hold a landing).
                     let now = fine((cx.now)());
                     let window = SETUP + self.core.timing.duration(clock::read_bits(6));
                     let half = window / 2;
                     let clock = &self.core.clock;
-                    if clock.known()
-                        && clock.width() <= clock::LOCKED_WIDTH
+                    if self.guards_reads()
                         && clock.newest_at(now + half, half + READ_MARGIN).is_none()
                     {
                         let late = clock.width() / 2 + POLL_MARGIN;
                         let after = clock.instant_after(now, late.raw() as i64);
                         delay_until(cx.delay, cx.now, after).await;
                     }
-                    let xyz = match cx.dev.read_data().await {
-                        Ok(xyz) => xyz,
-                        Err(e) => {
-                            self.failed(&e, (cx.now)(), cx.out);
+                    let mut again = false;
+                    loop {
+                        let xyz = match cx.dev.read_data().await {
+                            Ok(xyz) => xyz,
+                            Err(e) => {
+                                self.failed(&e, (cx.now)(), cx.out);
+                                return;
+                            }
+                        };
+                        let end = (cx.now)();
+                        let start = cx.dev.bus().last_start();
+                        if self.core.held(start, clock::read_bits(6), end) {
+                            let t_data =
+                                self.held_read(cx, start, end, clock::READ_FIRST_BIT).await;
+                            break (xyz, t_data, None);
+                        }
+                        let t_data = self.core.timing.latch(start, clock::READ_FIRST_BIT);
+                        if !self.may_be_torn(start) {
+                            break (xyz, t_data, None);
+                        }
+                        if again {
+                            // Held up twice: not delivered (its slot is counted lost with the
+                            // next reading's).
+                            self.last_xyz = Some(xyz);
                             return;
                         }
-                    };
-                    let end = (cx.now)();
-                    let start = cx.dev.bus().last_start();
-                    let t_data = if self.core.held(start, clock::read_bits(6), end) {
-                        self.held_read(cx, start, end, clock::READ_FIRST_BIT).await
-                    } else {
-                        self.core.timing.latch(start, clock::READ_FIRST_BIT)
-                    };
-                    (xyz, t_data, None)
+                        // Begun later than the wait above placed it (the bus held by another
+                        // transfer, the CPU by other work), a landing may have fallen among its
+                        // bytes: read again after it.
+                        let clock = &self.core.clock;
+                        let late = clock.width() / 2 + POLL_MARGIN;
+                        let after = clock.instant_after(fine((cx.now)()), late.raw() as i64);
+                        delay_until(cx.delay, cx.now, after).await;
+                        again = true;
+                    }
                 }
             };
             let k = match slot {
@@ -489,6 +508,30 @@ impl MagService {
                 self.core.next_k
             }
         }
+    }
+
+    /// Whether the clock knows the landings well enough (to a quarter period) to keep data
+    /// reads clear of them. (Only while it was located, ≤ 64 µs: after a restart, at 70 µs, a
+    /// read held up met a landing among its bytes, and the poll that was to tell which sample
+    /// it took found DRDY cleared by its last bytes and took it for the new one.)
+    fn guards_reads(&self) -> bool {
+        let clock = &self.core.clock;
+        clock.known() && clock.width() <= clock.period() / 4
+    }
+
+    /// Whether a data read (six bytes) started at `start` may have met a landing among its
+    /// bytes, by a clock that [guards reads](Self::guards_reads) (the part rewrites its data
+    /// registers at a landing: the bytes before it are the old sample's, the ones after the new
+    /// one's). With a wider clock, any read may: not asked.
+    fn may_be_torn(&self, start: Fine) -> bool {
+        if !self.guards_reads() {
+            return false;
+        }
+        let clock = &self.core.clock;
+        let timing = &self.core.timing;
+        let first = clock.newest_at(timing.latch(start, clock::READ_FIRST_BIT), READ_MARGIN);
+        let last = clock.newest_at(timing.latch(start, clock::read_bits(5)), READ_MARGIN);
+        first.is_none() || first != last
     }
 
     /// Whether a look planned to start at `planned` (after the late end of the next sample's
