@@ -397,9 +397,9 @@ fn a_magnetometer_tick_begun_late_keeps_every_reading_in_its_slot_and_counts_eve
 
 /// A magnetometer tick's later transfers held back (the bus held by an IMU burst, the CPU by
 /// other work), up to one and a half periods, after a first transfer begun late at any phase
-/// of the part's grid: the poll that tells which of two samples a read near a landing took
-/// may then come after the next landing too. Every reading is still the model's measurement of
-/// its slot, and every measurement not delivered is counted lost, once.
+/// of the part's grid: a data read placed clear of a landing may then meet one among its bytes
+/// (delivered torn before it was read again after the landing). Every reading is still the
+/// model's measurement of its slot, and every measurement not delivered is counted lost, once.
 #[test]
 fn a_magnetometer_poll_held_past_the_next_landing_keeps_every_reading_in_its_slot() {
     let mut keyed = pico_imu_tests::Keyed::from_clock();
@@ -422,9 +422,11 @@ fn a_magnetometer_poll_held_past_the_next_landing_keeps_every_reading_in_its_slo
 
 /// A magnetometer power-cycled (gone 60–260 ms), then re-initialised on its old grid with a
 /// clock that knows its phase only roughly, its ticks and their later transfers held up at
-/// random (up to two periods) while that clock narrows: a read near a landing is then told by
-/// one more status poll, which may itself come after the next landing. Every reading is still
-/// the model's measurement of its slot, and every measurement not delivered is counted lost.
+/// random (up to two periods) while that clock narrows: a data read held up may meet a landing
+/// among its bytes while the clock is still wider than "located" (64 µs), where reads were not
+/// kept clear of landings, and the poll after it then finds DRDY cleared by its last bytes.
+/// Every reading is still the model's measurement of its slot, and every measurement not
+/// delivered is counted lost.
 #[test]
 fn a_restarted_magnetometer_held_up_keeps_every_reading_in_its_slot() {
     let mut keyed = pico_imu_tests::Keyed::from_clock();
