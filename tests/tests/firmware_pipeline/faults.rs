@@ -345,6 +345,18 @@ fn mag_readings_exact(rig: &mut Rig, ctx: &str) -> (u64, u64, BTreeSet<u64>, u64
     (first, last, delivered, missed)
 }
 
+/// A magnetometer byte on the bus: 9 SCL periods at 400 kHz, ns.
+const MAG_BYTE_NS: u64 = 22_500;
+
+/// The rig with the magnetometer's bytes taking [`MAG_BYTE_NS`] each, and a service that knows
+/// it.
+fn rig_with_timed_bytes() -> Rig {
+    let mut rig = Rig::new();
+    rig.bus.mag(|q| q.byte_ns = MAG_BYTE_NS);
+    rig.mag_svc = MagService::new(BusTiming::from_hz(400_000));
+    rig
+}
+
 /// A magnetometer tick begun late by up to two periods (the CPU held up), or its first transfer
 /// held back as long (the bus held by an IMU burst), at any phase of the part's grid and often
 /// by about one period, on a bus whose bytes take time: a look may then meet a landing among or
@@ -356,9 +368,7 @@ fn mag_readings_exact(rig: &mut Rig, ctx: &str) -> (u64, u64, BTreeSet<u64>, u64
 fn a_magnetometer_tick_begun_late_keeps_every_reading_in_its_slot_and_counts_every_loss() {
     let mut keyed = pico_imu_tests::Keyed::from_clock();
     for _ in 0..4 {
-        let mut rig = Rig::new();
-        rig.bus.mag(|q| q.byte_ns = 22_500);
-        rig.mag_svc = MagService::new(BusTiming::from_hz(400_000));
+        let mut rig = rig_with_timed_bytes();
         rig.run(3000);
         for i in 0..120 {
             // Half of them around one period, where the look meets the next landing; every
@@ -404,9 +414,7 @@ fn a_magnetometer_tick_begun_late_keeps_every_reading_in_its_slot_and_counts_eve
 fn a_magnetometer_poll_held_past_the_next_landing_keeps_every_reading_in_its_slot() {
     let mut keyed = pico_imu_tests::Keyed::from_clock();
     for _ in 0..4 {
-        let mut rig = Rig::new();
-        rig.bus.mag(|q| q.byte_ns = 22_500);
-        rig.mag_svc = MagService::new(BusTiming::from_hz(400_000));
+        let mut rig = rig_with_timed_bytes();
         rig.run(3000);
         for _ in 0..150 {
             let x = keyed.bits();
@@ -431,9 +439,7 @@ fn a_magnetometer_poll_held_past_the_next_landing_keeps_every_reading_in_its_slo
 fn a_restarted_magnetometer_held_up_keeps_every_reading_in_its_slot() {
     let mut keyed = pico_imu_tests::Keyed::from_clock();
     for _ in 0..3 {
-        let mut rig = Rig::new();
-        rig.bus.mag(|q| q.byte_ns = 22_500);
-        rig.mag_svc = MagService::new(BusTiming::from_hz(400_000));
+        let mut rig = rig_with_timed_bytes();
         rig.run(1500);
         for _ in 0..8 {
             rig.bus.mag(|q| q.present = false);
@@ -441,7 +447,7 @@ fn a_restarted_magnetometer_held_up_keeps_every_reading_in_its_slot() {
             // Power comes back: the chip from its power-on state; its measurements logged on.
             let log = rig.bus.mag(|q| std::mem::take(&mut q.log));
             let mut fresh = noisy_qmc();
-            fresh.byte_ns = 22_500;
+            fresh.byte_ns = MAG_BYTE_NS;
             fresh.log = log;
             rig.bus.with_world(|w| w.mag = Some(fresh));
             for _ in 0..40 {
@@ -469,10 +475,7 @@ fn a_magnetometer_glitch_keeps_every_reading_in_its_slot_and_counts_every_loss()
     for _ in 0..12 {
         let x = keyed.bits();
         let late_ns = 60_000 + x % 140_000;
-        let mut rig = Rig::new();
-        // Bytes of 9 SCL periods at 400 kHz, and a service that knows it.
-        rig.bus.mag(|q| q.byte_ns = 22_500);
-        rig.mag_svc = MagService::new(BusTiming::from_hz(400_000));
+        let mut rig = rig_with_timed_bytes();
         rig.run(3000);
         let at = rig.bus.now_ns() + (x >> 24) % 5_000_000;
         rig.bus.mag(|q| q.glitch = Some((at, late_ns)));
