@@ -1,6 +1,7 @@
 // Statistical profile of the firmware: after each executed instruction batch the PC is sampled
 // every `periodCycles` executed cycles and attributed to the function symbol containing it.
 
+import { writeFileSync } from 'node:fs';
 import { Session } from './session.js';
 import { generateStream } from './stream.js';
 
@@ -114,7 +115,7 @@ function symbolFinder(elf) {
  * (memcpy, division, 64-bit multiply, …) are also charged inclusively to their call sites.
  * Deterministic: the same ELF gives the same table.
  */
-export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, tasks = false }) {
+export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, tasks = false, polls = false }) {
   const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: from + seconds + 2 }), echoLog: false });
   await s.run(from * 1e9);
   const core = s.emu.core;
@@ -140,6 +141,8 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, 
   }
   const byTask = new Map();
   const pollsByTask = new Map();
+  // --polls: every task poll, when it began (emulated ns) and the cycles it ran, in order.
+  const pollLog = [];
   let task = null;
   const exec = core.executeInstruction.bind(core);
   core.executeInstruction = () => {
@@ -147,9 +150,12 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, 
     let taskKey = null;
     if (tasks) {
       if (core.IPSR === 0) {
-        if (task && pc === task.ret) task = null;
+        if (task && pc === task.ret) {
+          if (polls) pollLog.push({ task: task.name, nanos: task.nanos, cycles: task.own });
+          task = null;
+        }
         if (!task && taskEntries.has(pc)) {
-          task = { name: taskEntries.get(pc), ret: (core.LR >>> 0) & ~1 };
+          task = { name: taskEntries.get(pc), ret: (core.LR >>> 0) & ~1, nanos: s.emu.clock.nanos, own: 0 };
           pollsByTask.set(task.name, (pollsByTask.get(task.name) ?? 0) + 1);
         }
       }
@@ -174,6 +180,8 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, 
       t.cycles += core.cycles - c0;
       t.pcs.set(pc, (t.pcs.get(pc) ?? 0) + (core.cycles - c0));
       byTask.set(taskKey, t);
+      // A poll's own cycles: interrupts taken during it are charged to their exception.
+      if (task && taskKey === task.name) task.own += core.cycles - c0;
     }
     return r;
   };
@@ -188,12 +196,18 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, 
     byFn.set(f, (byFn.get(f) ?? 0) + c);
     total += c;
   }
-  return { seconds, sets, total, byFn, calls, perPc, find, byTask, pollsByTask };
+  return { seconds, sets, total, byFn, calls, perPc, find, byTask, pollsByTask, pollLog };
 }
 
 async function exactProfile(v) {
-  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1), tasks: Boolean(v.tasks) });
+  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1), tasks: Boolean(v.tasks || v.polls), polls: Boolean(v.polls) });
   const { sets, total, byFn, calls, seconds } = r;
+  if (v.polls) {
+    // --polls F: one line per task poll (its start in emulated seconds, the task as in --tasks,
+    // its own cycles, without the interrupts taken meanwhile): where in each 10 ms the processing runs, and what moved it.
+    const lines = ['start_s\ttask\tcycles', ...r.pollLog.map((p) => `${(p.nanos / 1e9).toFixed(7)}\t${p.task}\t${p.cycles}`)];
+    writeFileSync(v.polls, lines.join('\n') + '\n');
+  }
   const top = Number(v.top ?? 25);
   const out = [`# executed cycles per sample set, by function (exclusive): ${(total / sets).toFixed(0)} in all, ${sets} sample sets in ${seconds} s`];
   for (const [n, c] of [...byFn.entries()].sort((a, b) => b[1] - a[1]).slice(0, top)) {

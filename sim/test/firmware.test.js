@@ -27,7 +27,7 @@ test('the firmware boots, enumerates USB and reads both sensors at their rates',
 
 test('profile --exact charges every executed cycle to a function, per sample set', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
   const { exactCycles } = await import('../src/profile.js');
-  const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem', tasks: true });
+  const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem', tasks: true, polls: true });
   // 0.2 s after the 1 s warm-up: 200 IMU sample sets (± one burst of slack).
   assert.ok(r.sets >= 180 && r.sets <= 220, `sets ${r.sets}`);
   const sum = [...r.byFn.values()].reduce((a, b) => a + b, 0);
@@ -51,4 +51,17 @@ test('profile --exact charges every executed cycle to a function, per sample set
   // The processing task holds the Allan push.
   const processing = byTask.find(([, t]) => [...t.pcs.keys()].some((pc) => r.find(pc & ~1) === push[0]));
   assert.ok(processing && processing[1].cycles > push[1], 'the Allan push is inside a task poll');
+  // What `--polls` writes: every poll, in time order within the 0.2 s, its cycles adding up to
+  // the task's; the processing task polled at least once per 10 ms IMU burst.
+  const log = r.pollLog;
+  assert.equal(log.length, [...r.pollsByTask.values()].reduce((a, b) => a + b, 0), 'one line per poll');
+  for (let i = 1; i < log.length; i++) assert.ok(log[i].nanos >= log[i - 1].nanos, `poll ${i} in time order`);
+  assert.ok(log[0].nanos >= 1e9 && log.at(-1).nanos <= 1.2e9, 'within the measured 0.2 s');
+  for (const [name, t] of polled) {
+    // A poll still running when the measurement ends is charged but not logged.
+    const logged = log.filter((p) => p.task === name).reduce((a, p) => a + p.cycles, 0);
+    assert.ok(logged <= t.cycles && logged > 0.9 * t.cycles, `${name}: ${logged} logged of ${t.cycles}`);
+  }
+  const processingPolls = log.filter((p) => p.task === processing[0]).length;
+  assert.ok(processingPolls >= 20, `processing task polled ${processingPolls} times in 0.2 s`);
 });
