@@ -98,7 +98,12 @@ impl Core {
     pub const fn new(sensor: Sensor, nominal_us: u32, timing: BusTiming) -> Self {
         Core {
             sensor,
-            clock: SampleClock::new(nominal_us),
+            // The IMU counts its samples in its FIFO; the magnetometer's are numbered by the
+            // clock.
+            clock: match sensor {
+                Sensor::Imu => SampleClock::new(nominal_us).counted(),
+                Sensor::Mag => SampleClock::new(nominal_us),
+            },
             health: Health::new(sensor),
             timing,
             phase: Phase::Init,

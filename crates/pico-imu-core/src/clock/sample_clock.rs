@@ -55,6 +55,9 @@ pub struct SampleClock {
     /// in [`Fine`] units.
     lo: i64,
     hi: i64,
+    /// The reader counts the part's samples (a FIFO): the sample an observation is about is
+    /// known by counting, not taken from the line ([`Self::counted`]).
+    counted: bool,
     /// A grid exists (the part was started).
     known: bool,
     /// The part has been seen producing on this grid: an observation of a sample from
@@ -94,6 +97,15 @@ pub struct SampleClock {
 }
 
 impl SampleClock {
+    /// The same clock for a reader that counts the part's samples (the MPU-6050's FIFO): an
+    /// observation's "not yet" then bounds the newest sample to within a period of its latch
+    /// wherever the line had it, the true period's own error included. (A magnetometer's
+    /// readings are numbered by the line, and its interval stays cut to a period about it.)
+    pub const fn counted(mut self) -> Self {
+        self.counted = true;
+        self
+    }
+
     /// A clock for a part whose nominal period is `nominal_us` µs; no grid until [`Self::start`].
     pub const fn new(nominal_us: u32) -> Self {
         let nominal = fine(nominal_us as u64);
@@ -107,6 +119,7 @@ impl SampleClock {
             t_at: Fine::ZERO,
             lo: 0,
             hi: 0,
+            counted: false,
             known: false,
             confirmed: false,
             origin_k: 0,
@@ -241,17 +254,37 @@ impl SampleClock {
         self.rebase(newest);
         let mut lo = self.lo - relax;
         let mut hi = self.hi + relax;
-        // Never wider than a period: one period of uncertainty is every phase there is.
         let p = self.period.raw() as i64;
+        // Never wider than a period: one period of uncertainty is every phase there is. But a
+        // counted sample's "not yet" bounds it to its own period, which holds the truth wherever
+        // it falls in an interval grown wider than that. (Cut to a period about its middle
+        // first, such an interval could lose the truth at its edge: the emulator's MPU-6050
+        // 0.01 % slow, counted every 10.12 ms, had its line 40–330 µs off from 0.15 s on, the
+        // probes only ever looking inside the wrong interval, and a period 700 ppm off by 2 s
+        // that numbered the samples after a 1.3 s stall a slot off.)
+        let mut uncut = false;
         if hi - lo > p {
-            let mid = (hi + lo) / 2;
-            lo = mid - p / 2;
-            hi = mid + p / 2;
+            if self.counted && next_not_yet {
+                uncut = true;
+            } else {
+                let mid = (hi + lo) / 2;
+                lo = mid - p / 2;
+                hi = mid + p / 2;
+            }
         }
-        // The observation's own bounds, loosened by the latch jitter.
+        // The observation's own bounds, loosened by the latch jitter; with "not yet", sample
+        // `newest` landed after τ less the true period, which for a counted sample is allowed
+        // its error too.
         let j = JITTER.raw() as i64;
         let upper = tau.since(self.t_at) + j;
-        let lower = next_not_yet.then(|| upper - p - 2 * j);
+        let lower = next_not_yet.then(|| {
+            let l = upper - p - 2 * j;
+            if self.counted {
+                l - self.period_err.raw() as i64
+            } else {
+                l
+            }
+        });
         // Latched before the early end of the sample it is about (`newest`, or with "not yet"
         // the next one, a period on): a guard, whether it found the sample there or not.
         if upper <= lo || lower.is_some_and(|l| l + 2 * j <= lo) {
@@ -293,6 +326,12 @@ impl SampleClock {
             fit = Fit::Fits;
             hi = hi.min(upper);
             lo = lower.map_or(lo, |l| lo.max(l));
+        }
+        // A late observation only bounding an interval it did not cut.
+        if uncut && hi - lo > p + self.period_err.raw() as i64 + 2 * j {
+            let mid = (hi + lo) / 2;
+            lo = mid - p / 2;
+            hi = mid + p / 2;
         }
         self.lo = lo;
         self.hi = hi;
@@ -535,6 +574,9 @@ mod tests {
         Fine::from_raw((ns * US.raw() as f64 / 1000.0).round() as u64)
     }
 
+    /// How far outside its interval an instant may lie: the latch jitter each observation allows.
+    const JITTER_US: f64 = 3.0;
+
     fn err_us(c: &SampleClock, part: &Part, k: u32) -> f64 {
         (c.time(k).raw() as f64 / US.raw() as f64) - part.t(k) / 1000.0
     }
@@ -652,6 +694,152 @@ mod tests {
         let p_err = (c.period().raw() as f64 / US.raw() as f64) - part.p_ns / 1000.0;
         assert!(p_err.abs() < 0.05, "period error {p_err} µs");
         assert!(p_err.abs() < c.period_err.raw() as f64 / US.raw() as f64);
+    }
+
+    /// Correct observations keep the truth inside the interval, from the part's start on. A
+    /// part up to 2 % off its nominal 1 kHz (half the draws within 0.05 %), started at the
+    /// nominal assumption, counted every 9.8–10.4 ms (the IMU's bursts, which follow a
+    /// magnetometer up to 2 % off) or at a probe when the clock asks for one, each count
+    /// telling the newest sample and that the next had not landed: after every observation the
+    /// newest sample's true instant lies within the interval (to the latch jitter), and from
+    /// 2 s on the stamps are within 10 µs. (Cut to a period about its middle before the
+    /// observation, an interval that the nominal period's allowance had widened past a period
+    /// lost the truth at its edge, and every probe after it looked inside the wrong interval:
+    /// the emulator's MPU-6050 0.01 % slow, counted every 10.12 ms, had its line 330 µs off.)
+    #[test]
+    fn correct_observations_keep_the_truth_inside_the_interval() {
+        let mut rng = crate::test_util::clock_keyed();
+        let mut u = move || (rng() >> 11) as f64 / (1u64 << 53) as f64;
+        for case in 0..300 {
+            let err = if case % 2 == 0 {
+                (u() - 0.5) * 0.001
+            } else {
+                (u() - 0.5) * 0.04
+            };
+            // Its first sample a period after the waking write, latched up to 50 µs late.
+            let p_ns = 1e6 / (1.0 + err);
+            let part = Part {
+                t0_ns: 1_000_000.0 + p_ns + u() * 50e3,
+                p_ns,
+            };
+            let burst_ns = 9.8e6 + u() * 0.6e6;
+            let mut c = SampleClock::new(1000).counted();
+            // The waking write at 1 ms: its first sample assumed a nominal period later.
+            c.start(0, fine(2000), false, Fine::ZERO);
+            let mut ready = 2.5e6 + u() * burst_ns;
+            while ready < 4e9 {
+                let tau_ns = match c.probe_after(f(ready)) {
+                    Some(t) if t.raw() as f64 * 1000.0 / (US.raw() as f64) < ready + 1.2e6 => {
+                        t.raw() as f64 * 1000.0 / US.raw() as f64
+                    }
+                    _ => ready,
+                };
+                let n = part.newest(tau_ns);
+                c.observe(f(tau_ns), n, Seen::NextNotYet);
+                let off = part.t(n) / 1000.0 - c.t_at.raw() as f64 / US.raw() as f64;
+                let (lo, hi) = (
+                    c.lo as f64 / US.raw() as f64 - JITTER_US,
+                    c.hi as f64 / US.raw() as f64 + JITTER_US,
+                );
+                assert!(
+                    c.k_at == n && off >= lo && off <= hi,
+                    "case {case} (part {err:+.5}, counts {:.3} ms): at {:.4} s sample {n} \
+                     is {off:.1} µs from the line, outside [{lo:.1}, {hi:.1}]",
+                    burst_ns / 1e6,
+                    tau_ns / 1e9
+                );
+                if tau_ns > 2e9 {
+                    assert!(
+                        err_us(&c, &part, n).abs() < 10.0,
+                        "case {case}: stamp at {tau_ns}"
+                    );
+                }
+                ready += burst_ns;
+            }
+        }
+    }
+
+    /// The IMU's first counts in the emulator (an MPU-6050 0.01 % slow, bursts following a
+    /// magnetometer 1.23 % slow), replayed: (latch µs, newest sample counted, "not yet" trusted
+    /// or not). The nominal period's allowance widened the interval past a period by the
+    /// fourth count; cut to a period about its middle, it lost the part's phase (37 µs outside,
+    /// then up to 330 µs) and the clock never found it again within 0.6 s.
+    #[test]
+    fn the_emulators_first_counts_keep_the_truth_inside_the_interval() {
+        const COUNTS: [(u32, u32, bool); 48] = [
+            (118848, 0, false),
+            (126599, 7, false),
+            (136835, 17, false),
+            (147399, 28, false),
+            (157430, 38, false),
+            (167326, 48, false),
+            (177284, 58, false),
+            (187270, 68, false),
+            (197272, 78, false),
+            (208204, 89, false),
+            (218172, 99, false),
+            (228164, 109, false),
+            (238169, 119, false),
+            (248180, 129, false),
+            (258194, 139, false),
+            (268209, 149, false),
+            (278226, 159, false),
+            (288188, 169, false),
+            (299165, 180, false),
+            (309145, 190, false),
+            (319128, 200, false),
+            (329095, 210, false),
+            (339079, 220, false),
+            (349061, 230, false),
+            (359045, 240, false),
+            (370028, 251, false),
+            (380011, 261, false),
+            (389996, 271, false),
+            (399982, 281, false),
+            (409969, 291, false),
+            (419955, 301, false),
+            (430942, 312, false),
+            (440928, 322, false),
+            (450903, 332, false),
+            (460879, 342, false),
+            (470857, 351, false),
+            (480851, 361, false),
+            (490845, 371, false),
+            (501839, 382, false),
+            (511832, 392, false),
+            (520840, 401, false),
+            (531811, 412, true),
+            (541148, 422, false),
+            (551790, 432, false),
+            (561400, 442, false),
+            (571769, 452, false),
+            (582760, 463, false),
+            (591848, 472, false),
+        ];
+        let part = Part {
+            t0_ns: 118_842_900.0,
+            p_ns: 1_000_100.0,
+        };
+        let mut c = SampleClock::new(1000).counted();
+        // The waking write latched at 117,839.5 µs: its first sample a nominal period later.
+        c.start(0, f(118_839_500.0), false, Fine::ZERO);
+        for (tau_us, n, trusted) in COUNTS {
+            let seen = if trusted {
+                Seen::NextNotYetTrusted
+            } else {
+                Seen::NextNotYet
+            };
+            c.observe(fine(u64::from(tau_us)), n, seen);
+            let off = part.t(n) / 1000.0 - c.t_at.raw() as f64 / US.raw() as f64;
+            let (lo, hi) = (
+                c.lo as f64 / US.raw() as f64 - JITTER_US,
+                c.hi as f64 / US.raw() as f64 + JITTER_US,
+            );
+            assert!(
+                off >= lo && off <= hi,
+                "at {tau_us} µs sample {n} is {off:.1} µs from the line, outside [{lo:.1}, {hi:.1}]"
+            );
+        }
     }
 
     /// Without probes (observations at whatever phase they fall), a part whose phase relative to
