@@ -398,7 +398,7 @@ async fn imu_task(
     let mut last_us = now_us();
     let mut was = svc.state();
     loop {
-        let fallback = Instant::from_micros(schedule::imu_fallback_at(last_us));
+        let fallback = Instant::from_micros(schedule::imu_fallback_at(last_us, svc.retrying()));
         // Either result starts a burst.
         let _ = select(mag_read.wait(), alarm::IMU_FALLBACK.wait_until(fallback)).await;
         last_us = now_us();

@@ -3,8 +3,9 @@
 //! frames and table rounds; the status log's throttle.
 use imu_proto::{CalSource, CalStatus, SensorState, Status, StreamMode, MAG_PERIOD_US};
 use pico_imu_core::schedule::{
-    imu_fallback_at, Housekeeping, MagTicks, StatusLog, IMU_FALLBACK_US, MAG_MSGS_PER_TICK,
-    MAG_SLOT_OFFSET_US, MAG_TICKS_PER_SLOT, STATUS_LOG_EVERY, TICK_JITTER_US, TICK_MS,
+    imu_fallback_at, Housekeeping, MagTicks, StatusLog, IMU_FALLBACK_US, IMU_RETRY_US,
+    MAG_MSGS_PER_TICK, MAG_SLOT_OFFSET_US, MAG_TICKS_PER_SLOT, STATUS_LOG_EVERY, TICK_JITTER_US,
+    TICK_MS,
 };
 use proptest::prelude::*;
 
@@ -108,12 +109,13 @@ proptest! {
     }
 
     /// The fallback burst: odd (never on a whole millisecond), the fallback interval after the
-    /// last burst to the µs.
+    /// last burst to the µs, or the retry interval after a failed one.
     #[test]
-    fn imu_fallback(last in 0u64..(1 << 50)) {
-        let at = imu_fallback_at(last);
+    fn imu_fallback(last in 0u64..(1 << 50), retrying: bool) {
+        let at = imu_fallback_at(last, retrying);
+        let wait = if retrying { IMU_RETRY_US } else { IMU_FALLBACK_US };
         prop_assert_eq!(at % 2, 1);
-        prop_assert!(at - last == IMU_FALLBACK_US || at - last == IMU_FALLBACK_US + 1);
+        prop_assert!(at - last == wait || at - last == wait + 1);
     }
 
     /// The housekeeping tick, its ticks late by up to `late_us` (a busy executor), with status

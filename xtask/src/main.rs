@@ -263,13 +263,15 @@ fn test(extra: &[String]) -> Result<()> {
         // when the bus freed, its sample never delivered (2014), an IMU burst whose START the
         // bus held for 21 ms taken for a stale count, a FIFO's frames read whole dropped
         // (3026), an IMU burst whose START was freed just before its deadline cut off while its
-        // frames were moving (30063).
+        // frames were moving (30063), a 52 ms NACK of a fast MPU-6050 whose retry waited for the
+        // next burst's tick, its FIFO overflowing (43017).
         for (seed, clock) in [
             (1009, "mpu:-1.28%,qmc:-0.05%"),
             (1000, "mpu:+1.11%,qmc:+0.68%"),
             (2014, "mpu:-0.74%,qmc:-0.41%"),
             (3026, "mpu:+0.15%,qmc:+1.59%"),
             (30063, "mpu:+1.87%,qmc:+1.81%"),
+            (43017, "mpu:+0.81%,qmc:-1.69%"),
         ] {
             e2e::e2e(&e2e::E2eArgs {
                 faults_seed: Some(seed),

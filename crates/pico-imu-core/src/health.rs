@@ -53,6 +53,11 @@ impl Health {
         self.state
     }
 
+    /// A transfer failed since the sensor last answered (and it is not lost yet).
+    pub fn failing(&self) -> bool {
+        self.failing_since.is_some()
+    }
+
     /// A transfer succeeded: the run of failures is over (the state does not change until
     /// samples are delivered).
     pub fn answered(&mut self) {

@@ -79,6 +79,12 @@ impl ImuService {
         self.core.health.state()
     }
 
+    /// The last burst's transfer failed and the part is not lost: the next burst is a retry,
+    /// best soon (the FIFO keeps filling; [`crate::schedule::IMU_RETRY_US`]).
+    pub fn retrying(&self) -> bool {
+        self.core.phase == Phase::Running && self.core.health.failing()
+    }
+
     /// The IMU's sample clock.
     pub fn clock(&self) -> &SampleClock {
         &self.core.clock

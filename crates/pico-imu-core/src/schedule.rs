@@ -6,7 +6,8 @@
 //!   (the bus is then free for ≈ 4.5 ms), and its messages are handed to the processing task
 //!   every [`MAG_TICKS_PER_SLOT`] ticks ([`MagTicks::done`]);
 //! * the IMU task starts a burst on that signal, or at [`imu_fallback_at`] when the
-//!   magnetometer task stops ticking (a flash-write pause, a transfer running into its deadline);
+//!   magnetometer task stops ticking (a flash-write pause, a transfer running into its deadline)
+//!   or a failed transfer is to be retried;
 //! * the 100 ms housekeeping tick decides the status frame, its log line, and the start of a
 //!   table round ([`Housekeeping::on_tick`]); the round's steps are spaced by
 //!   [`crate::tables`].
@@ -42,10 +43,24 @@ pub const TICK_JITTER_US: u64 = 5_000;
 /// Status frames between two status lines in the defmt log when nothing changed.
 pub const STATUS_LOG_EVERY: u32 = 10;
 
-/// The instant of the IMU task's fallback burst after the burst at `last_burst_us`: odd, so
-/// never on a whole millisecond (see [`IMU_SLOT_OFFSET_US`]), with no 64-bit division.
-pub fn imu_fallback_at(last_burst_us: u64) -> u64 {
-    (last_burst_us + IMU_FALLBACK_US) | 1
+/// After a burst whose transfer failed (a NACK, a held or stuck bus), the IMU is tried again
+/// this soon, µs, if no magnetometer tick starts a burst first: not only a tick later, up to
+/// 10 ms on. The FIFO's 73 ms (72 with the part's clock 1 % fast) then hold the samples left
+/// from before the fault (up to a burst's 10 ms), the fault, and the wait for the retry: a
+/// 52 ms NACK with the MPU-6050 0.81 % fast overflowed it (73 samples lost) when the retry
+/// waited for the next burst's tick.
+pub const IMU_RETRY_US: u64 = 4_000;
+
+/// The instant of the IMU task's fallback burst after the burst at `last_burst_us`, `retrying`
+/// a failed transfer or not: odd, so never on a whole millisecond (see
+/// [`IMU_SLOT_OFFSET_US`]), with no 64-bit division.
+pub fn imu_fallback_at(last_burst_us: u64, retrying: bool) -> u64 {
+    let wait = if retrying {
+        IMU_RETRY_US
+    } else {
+        IMU_FALLBACK_US
+    };
+    (last_burst_us + wait) | 1
 }
 
 /// What follows a magnetometer tick.
