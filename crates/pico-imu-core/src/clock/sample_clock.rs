@@ -99,8 +99,8 @@ pub struct SampleClock {
 impl SampleClock {
     /// The same clock for a reader that counts the part's samples (the MPU-6050's FIFO): an
     /// observation's "not yet" then bounds the newest sample to within a period of its latch
-    /// wherever the line had it, the true period's own error included. (A magnetometer's
-    /// readings are numbered by the line, and its interval stays cut to a period about it.)
+    /// wherever the line had it. (A magnetometer's readings are numbered by the line, and its
+    /// interval stays cut to a period about it.)
     pub const fn counted(mut self) -> Self {
         self.counted = true;
         self
@@ -272,19 +272,13 @@ impl SampleClock {
                 hi = mid + p / 2;
             }
         }
-        // The observation's own bounds, loosened by the latch jitter; with "not yet", sample
-        // `newest` landed after τ less the true period, which for a counted sample is allowed
-        // its error too.
+        // The observation's own bounds, loosened by the latch jitter. (With "not yet", sample
+        // `newest` landed after τ less the true period, not the estimate: allowing the
+        // estimate's error there too kept start-up intervals wider than the FIFO restart after
+        // an early CPU stall could number, and its samples were numbered off.)
         let j = JITTER.raw() as i64;
         let upper = tau.since(self.t_at) + j;
-        let lower = next_not_yet.then(|| {
-            let l = upper - p - 2 * j;
-            if self.counted {
-                l - self.period_err.raw() as i64
-            } else {
-                l
-            }
-        });
+        let lower = next_not_yet.then(|| upper - p - 2 * j);
         // Latched before the early end of the sample it is about (`newest`, or with "not yet"
         // the next one, a period on): a guard, whether it found the sample there or not.
         if upper <= lo || lower.is_some_and(|l| l + 2 * j <= lo) {
@@ -328,7 +322,7 @@ impl SampleClock {
             lo = lower.map_or(lo, |l| lo.max(l));
         }
         // A late observation only bounding an interval it did not cut.
-        if uncut && hi - lo > p + self.period_err.raw() as i64 + 2 * j {
+        if uncut && hi - lo > p + 2 * j {
             let mid = (hi + lo) / 2;
             lo = mid - p / 2;
             hi = mid + p / 2;
@@ -701,11 +695,9 @@ mod tests {
     /// nominal assumption, counted every 9.8–10.4 ms (the IMU's bursts, which follow a
     /// magnetometer up to 2 % off) or at a probe when the clock asks for one, each count
     /// telling the newest sample and that the next had not landed: after every observation the
-    /// newest sample's true instant lies within the interval (to the latch jitter), and from
-    /// 2 s on the stamps are within 10 µs. (Cut to a period about its middle before the
-    /// observation, an interval that the nominal period's allowance had widened past a period
-    /// lost the truth at its edge, and every probe after it looked inside the wrong interval:
-    /// the emulator's MPU-6050 0.01 % slow, counted every 10.12 ms, had its line 330 µs off.)
+    /// newest sample's true instant lies within the interval (to the latch jitter and the
+    /// period's error: the "not yet" bound takes the estimated period), and from 2 s on the
+    /// stamps are within 10 µs.
     #[test]
     fn correct_observations_keep_the_truth_inside_the_interval() {
         let mut rng = crate::test_util::clock_keyed();
@@ -737,9 +729,12 @@ mod tests {
                 let n = part.newest(tau_ns);
                 c.observe(f(tau_ns), n, Seen::NextNotYet);
                 let off = part.t(n) / 1000.0 - c.t_at.raw() as f64 / US.raw() as f64;
+                // The "not yet" bound uses the estimated period: the truth may lie outside by
+                // that estimate's error too.
+                let slack = JITTER_US + c.period_err.raw() as f64 / US.raw() as f64;
                 let (lo, hi) = (
-                    c.lo as f64 / US.raw() as f64 - JITTER_US,
-                    c.hi as f64 / US.raw() as f64 + JITTER_US,
+                    c.lo as f64 / US.raw() as f64 - slack,
+                    c.hi as f64 / US.raw() as f64 + slack,
                 );
                 assert!(
                     c.k_at == n && off >= lo && off <= hi,
