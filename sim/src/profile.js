@@ -141,7 +141,7 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, 
   }
   const byTask = new Map();
   const pollsByTask = new Map();
-  // --polls: every task poll, when it began (emulated ns) and the cycles it ran, in order.
+  // --polls: every task poll, when it began (emulated ns) and its own cycles, in order.
   const pollLog = [];
   let task = null;
   const exec = core.executeInstruction.bind(core);
@@ -204,7 +204,8 @@ async function exactProfile(v) {
   const { sets, total, byFn, calls, seconds } = r;
   if (v.polls) {
     // --polls F: one line per task poll (its start in emulated seconds, the task as in --tasks,
-    // its own cycles, without the interrupts taken meanwhile): where in each 10 ms the processing runs, and what moved it.
+    // its own cycles, without the interrupts taken meanwhile): where in each 10 ms the
+    // processing runs, and what moved it.
     const lines = ['start_s\ttask\tcycles', ...r.pollLog.map((p) => `${(p.nanos / 1e9).toFixed(7)}\t${p.task}\t${p.cycles}`)];
     writeFileSync(v.polls, lines.join('\n') + '\n');
   }
