@@ -393,19 +393,22 @@ impl MagService {
                     // before): wait for that landing, then read; the read takes the sample that
                     // landed. Only with a clock that knows its landings to a quarter period
                     // (while it is wider, any read window may hold a landing).
-                    let now = fine((cx.now)());
                     let window = SETUP + self.core.timing.duration(clock::read_bits(6));
                     let half = window / 2;
-                    let clock = &self.core.clock;
-                    if self.guards_reads()
-                        && clock.newest_at(now + half, half + READ_MARGIN).is_none()
-                    {
-                        let late = clock.width() / 2 + POLL_MARGIN;
-                        let after = clock.instant_after(now, late.raw() as i64);
-                        delay_until(cx.delay, cx.now, after).await;
-                    }
+                    // Read again after the landing once a read may have met one: begun later
+                    // than the wait placed it (the bus held by another transfer, the CPU by
+                    // other work), a landing may have fallen among its bytes.
                     let mut again = false;
                     loop {
+                        let now = fine((cx.now)());
+                        let clock = &self.core.clock;
+                        if self.guards_reads()
+                            && (again || clock.newest_at(now + half, half + READ_MARGIN).is_none())
+                        {
+                            let late = clock.width() / 2 + POLL_MARGIN;
+                            let after = clock.instant_after(now, late.raw() as i64);
+                            delay_until(cx.delay, cx.now, after).await;
+                        }
                         let xyz = match cx.dev.read_data().await {
                             Ok(xyz) => xyz,
                             Err(e) => {
@@ -430,13 +433,6 @@ impl MagService {
                             self.last_xyz = Some(xyz);
                             return;
                         }
-                        // Begun later than the wait above placed it (the bus held by another
-                        // transfer, the CPU by other work), a landing may have fallen among its
-                        // bytes: read again after it.
-                        let clock = &self.core.clock;
-                        let late = clock.width() / 2 + POLL_MARGIN;
-                        let after = clock.instant_after(fine((cx.now)()), late.raw() as i64);
-                        delay_until(cx.delay, cx.now, after).await;
                         again = true;
                     }
                 }

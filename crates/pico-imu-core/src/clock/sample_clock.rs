@@ -96,6 +96,13 @@ pub struct SampleClock {
     shift: i64,
 }
 
+/// The interval `[lo, hi]` cut to one period `p` about its middle.
+#[inline(always)]
+fn period_about_middle(lo: i64, hi: i64, p: i64) -> (i64, i64) {
+    let mid = (hi + lo) / 2;
+    (mid - p / 2, mid + p / 2)
+}
+
 impl SampleClock {
     /// The same clock for a reader that counts the part's samples (the MPU-6050's FIFO): an
     /// observation's "not yet" then bounds the newest sample to within a period of its latch
@@ -259,7 +266,7 @@ impl SampleClock {
         // counted sample's "not yet" bounds it to its own period, which holds the truth wherever
         // it falls in an interval grown wider than that. (Cut to a period about its middle
         // first, such an interval could lose the truth at its edge: the emulator's MPU-6050
-        // 0.01 % slow, counted every 10.12 ms, had its line 40–330 µs off from 0.15 s on, the
+        // 0.01 % slow, counted every 10.12 ms, had its line up to 330 µs off from 0.15 s on, the
         // probes only ever looking inside the wrong interval, and a period 700 ppm off by 2 s
         // that numbered the samples after a 1.3 s stall a slot off.)
         let mut uncut = false;
@@ -267,9 +274,7 @@ impl SampleClock {
             if self.counted && next_not_yet {
                 uncut = true;
             } else {
-                let mid = (hi + lo) / 2;
-                lo = mid - p / 2;
-                hi = mid + p / 2;
+                (lo, hi) = period_about_middle(lo, hi, p);
             }
         }
         // The observation's own bounds, loosened by the latch jitter. (With "not yet", sample
@@ -323,9 +328,7 @@ impl SampleClock {
         }
         // A late observation only bounding an interval it did not cut.
         if uncut && hi - lo > p + 2 * j {
-            let mid = (hi + lo) / 2;
-            lo = mid - p / 2;
-            hi = mid + p / 2;
+            (lo, hi) = period_about_middle(lo, hi, p);
         }
         self.lo = lo;
         self.hi = hi;
