@@ -292,6 +292,16 @@ fn test(extra: &[String]) -> Result<()> {
             out: Some("e2e-faults-still-phase".into()),
             ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
         })?;
+        // A magnetometer NACKing long enough to be lost (393 ms, its clock 1.26 % fast): looked
+        // for on the back-off's retries alone, it came back 76 ms after the NACKs ended, 15
+        // readings more than the burst spanned (a drawn early fault, 5012, found it).
+        e2e::e2e(&e2e::E2eArgs {
+            fault: vec!["nack:qmc@0.3321s:393ms".into()],
+            clock: Some("mpu:-1.74%,qmc:+1.26%".into()),
+            seconds: Some(14.0),
+            out: Some("e2e-faults-long-nack".into()),
+            ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
+        })?;
         // Faults from boot, before a part's first sample: its grid is then the one its first
         // samples set, not the one its waking write implied (numbered on that one, every
         // sample was hundreds of slots off, and the MPU-6050 restarted its FIFO in vain).

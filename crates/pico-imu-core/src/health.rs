@@ -10,7 +10,9 @@
 //!   (`SensorStalled`), so a stall is reported within 50 ms of its start;
 //! * while missing or stalled, a retry (identity and configuration read back, re-initialisation
 //!   if the configuration is gone; for a stall, re-initialisation) is due every
-//!   [`RETRY_FIRST_MS`], doubling up to [`RETRY_MAX_MS`];
+//!   [`RETRY_FIRST_MS`], doubling up to [`RETRY_MAX_MS`]; a missing part is also looked for
+//!   (its identity read) on every tick in between, which counts only a bus fault, so that one
+//!   back from a NACK burst loses no more than the burst spanned (the services decide that);
 //! * the first sample delivered after a loss or a stall reports how long the sensor was out
 //!   (`SensorBack`). Nothing here resets the device.
 use imu_proto::{Event, Sensor, SensorState};

@@ -118,8 +118,7 @@ impl ImuService {
         let t = (cx.now)();
         match self.core.phase {
             Phase::Init => self.init(cx, GapCause::SensorFault).await,
-            Phase::Lost if self.core.health.retry_due(t) => self.retry_lost(cx).await,
-            Phase::Lost => {}
+            Phase::Lost => self.retry_lost(cx).await,
             Phase::Stalled if self.core.health.retry_due(t) => {
                 // A look at the FIFO first: a part that came back since the last tick has its
                 // first samples there, which a re-initialisation would empty (and the grid
@@ -177,14 +176,19 @@ impl ImuService {
         self.late_before = false;
     }
 
-    /// A lost sensor's retry (the caller recovered the bus first): identity, then the
-    /// configuration read back; re-initialise only if that is gone.
+    /// A lost sensor is looked for on every tick: identity, then the configuration read back;
+    /// re-initialise only if that is gone. The retries the back-off times (the caller recovered
+    /// the bus first) count their failures, the looks in between a bus fault only (see
+    /// `MagService::tick`).
     async fn retry_lost<I: I2c + TransferTime, D: DelayNs>(
         &mut self,
         cx: &mut Tick<'_, Mpu6050<I>, D>,
     ) {
         let t = (cx.now)();
-        self.core.health.retried(t);
+        let due = self.core.health.retry_due(t);
+        if due {
+            self.core.health.retried(t);
+        }
         let intact = match cx.dev.probe().await {
             Ok(_) => cx.dev.config_intact().await,
             Err(e) => Err(e),
@@ -203,7 +207,7 @@ impl ImuService {
                 self.core.health.answered();
                 self.init(cx, GapCause::SensorFault).await;
             }
-            Err(e) => self.failed(&e, t, cx.out),
+            Err(e) => self.core.look_failed(failure(&e), due, t, cx.out),
         }
     }
 
@@ -588,11 +592,15 @@ impl ImuService {
 
     /// A transfer failed at `t`.
     fn failed<E: embedded_hal::i2c::Error>(&mut self, e: &mpu::Error<E>, t: u64, out: &mut Out) {
-        let failure = match e {
-            mpu::Error::Bus(b) => Failure::of(b),
-            _ => Failure::Other,
-        };
-        self.core.failed(failure, t, out);
+        self.core.failed(failure(e), t, out);
+    }
+}
+
+/// What a driver error says of the bus.
+fn failure<E: embedded_hal::i2c::Error>(e: &mpu::Error<E>) -> Failure {
+    match e {
+        mpu::Error::Bus(b) => Failure::of(b),
+        _ => Failure::Other,
     }
 }
 

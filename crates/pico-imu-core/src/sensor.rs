@@ -159,6 +159,15 @@ impl Core {
         }
     }
 
+    /// A look for a lost part failed at `t`: counted like any failure when it was a retry the
+    /// back-off timed (`due`) or the bus's fault, not when the part just did not answer (it is
+    /// known lost; looked for on every tick, each such look would be an error and a report).
+    pub fn look_failed(&mut self, failure: Failure, due: bool, t: u64, out: &mut Out) {
+        if due || failure.bus_fault().is_some() {
+            self.failed(failure, t, out);
+        }
+    }
+
     /// No data at `t`: after [`STALL_AFTER_US`] without any the part is stalled (reported the
     /// first time). Returns whether it is.
     pub fn no_data(&mut self, t: u64, out: &mut Out) -> bool {

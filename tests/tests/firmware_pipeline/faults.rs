@@ -62,6 +62,76 @@ fn a_nack_burst_shorter_than_the_fifo_costs_nothing() {
     assert!(rig.imu_out.windows(2).all(|w| w[1].k == w[0].k + 1));
 }
 
+/// A NACK burst long enough to lose the part (150–900 ms, at any phase): once it ends the
+/// part is found on its next tick, so each sensor loses only what the burst spanned (the
+/// magnetometer the readings within it, + 2, the bound the emulator's e2e holds; the IMU
+/// those plus what its FIFO overflowed with meanwhile, 73 ms), every one counted at its slot,
+/// and the failed looks between the back-off's retries are neither errors nor reports.
+/// (Looked for on the back-off alone, 50 ms doubling to 400 ms, a part came back up to 400 ms
+/// after the burst ended: a 393 ms NACK cost 95 readings where 80 spanned it.)
+#[test]
+fn a_long_nack_burst_costs_only_what_it_spans() {
+    let mut keyed = pico_imu_tests::Keyed::from_clock();
+    for i in 0..6 {
+        let x = keyed.bits();
+        let (phase_us, length_us) = (x % 10_000, 150_000 + (x >> 16) % 750_000);
+        let (address, sensor) = if i % 2 == 0 {
+            (imu_drivers::qmc5883::QMC5883L_ADDR, Sensor::Mag)
+        } else {
+            (0x68, Sensor::Imu)
+        };
+        let ctx = format!("{sensor:?} NACKing {length_us} µs from {phase_us} µs: ");
+        let mut rig = Rig::new();
+        rig.run(1500);
+        rig.bus.advance_us(phase_us);
+        let errors_before = rig.dev.status(0, 0).i2c_errors;
+        let from = rig.bus.now_ns();
+        let until = from + length_us * 1000;
+        rig.bus
+            .with_world(|w| w.nack_until = Some((address, until)));
+        rig.run(1500);
+        let ev = rig.events();
+        assert!(
+            ev.iter()
+                .any(|e| matches!(e, Event::SensorLost { sensor: s, .. } if *s == sensor)),
+            "{ctx}never lost: {ev:?}"
+        );
+        let st = rig.dev.status(0, 0);
+        assert_eq!(
+            (st.imu, st.mag),
+            (SensorState::Ok, SensorState::Ok),
+            "{ctx}"
+        );
+        // Failures: one a tick until it is lost (100 ms), then the back-off's retries only.
+        let errors = st.i2c_errors - errors_before;
+        assert!(errors <= 40, "{ctx}{errors} I2C errors counted");
+        let (lost, spanned) = if sensor == Sensor::Mag {
+            let (.., missed) = mag_readings_exact(&mut rig, &ctx);
+            let slots = rig.bus.mag(|q| q.slots());
+            let within = slots
+                .iter()
+                .filter(|(_, t)| *t >= from && *t < until)
+                .count();
+            (missed, within as u64 + 2)
+        } else {
+            let truth = rig.bus.mpu(|m| m.slots());
+            let times: Vec<u64> = rig
+                .imu_out
+                .iter()
+                .map(|d| truth.iter().find(|(s, _)| *s == u64::from(d.k)).unwrap().1)
+                .collect();
+            let lost = truth_lost(&truth, &times);
+            assert_eq!(st.samples_dropped, lost, "{ctx}IMU samples lost");
+            let within = truth
+                .iter()
+                .filter(|(_, t)| *t >= from && *t < until + 73_000_000)
+                .count();
+            (lost, within as u64 + 2)
+        };
+        assert!(lost <= spanned, "{ctx}{lost} lost, {spanned} spanned");
+    }
+}
+
 /// A failed FIFO read (a NACK burst at any phase, of any length under the FIFO's span) moves no
 /// stamp: the samples read after it are stamped as the part sampled them, as before it.
 #[test]
