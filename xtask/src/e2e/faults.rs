@@ -179,12 +179,19 @@ pub(super) fn check_faults(
                 ));
             }
         }
-        // Without an overflow of the IMU's FIFO (73 frames), a NACK costs its own length.
+        // Without an overflow of the IMU's FIFO (73 frames), a NACK costs its own length: the
+        // part's samples within it (its period from the samples served), + 2.
         if x.kind == Kind::Nack && (x.sensor == Some(Sensor::Mag) || x.dur_s <= NACK_NO_OVERFLOW_S)
         {
             let (sensor_lost, period) = match x.sensor {
-                Some(Sensor::Mag) => (mm, 1.0 / 200.0 / 0.987),
-                _ => (mi, 1.0 / 1000.0 / 0.987),
+                Some(Sensor::Mag) => (
+                    mm,
+                    served_period_s(mag.iter().map(|m| (m.slot, m.t_ns)), 5e-3),
+                ),
+                _ => (
+                    mi,
+                    served_period_s(imu.iter().map(|m| (m.slot, m.t_ns)), 1e-3),
+                ),
             };
             let bound = (x.dur_s / period).ceil() as u64 + 2;
             if sensor_lost > bound {
@@ -195,6 +202,20 @@ pub(super) fn check_faults(
                 ));
             }
         }
+    }
+}
+
+/// The part's sample period, s, from its first and last samples served (slot, instant in ns);
+/// `nominal` without two.
+fn served_period_s(served: impl Iterator<Item = (u64, f64)>, nominal: f64) -> f64 {
+    let mut ends = None;
+    for (slot, t) in served {
+        let (first, _) = *ends.get_or_insert(((slot, t), (slot, t)));
+        ends = Some((first, (slot, t)));
+    }
+    match ends {
+        Some(((k0, t0), (k1, t1))) if k1 > k0 => (t1 - t0) * 1e-9 / (k1 - k0) as f64,
+        _ => nominal,
     }
 }
 
