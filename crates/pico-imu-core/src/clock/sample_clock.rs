@@ -504,6 +504,15 @@ impl SampleClock {
             && to.since(t) < self.period.raw() as i64 + self.lo - m
     }
 
+    /// How far the part's samples near `t` may have drifted from the interval since the last
+    /// observation, by the period's error: the allowance the next observation there will widen
+    /// the interval by. ([`Self::newest_at`] leaves it out: between observations a few
+    /// samples apart it is a few ns.)
+    pub fn drift_at(&self, t: Fine) -> Fine {
+        let gap = u64::from((self.nearest(t).wrapping_sub(self.last_k) as i32).unsigned_abs());
+        Fine::from_raw(mul(gap.min(1 << 20), self.period_err.raw()))
+    }
+
     /// The index of the first sample produced after `tau` (see [`Self::newest_at`]).
     pub fn first_after(&self, tau: Fine, margin: Fine) -> Option<u32> {
         self.newest_at(tau, margin).map(|k| k.wrapping_add(1))
