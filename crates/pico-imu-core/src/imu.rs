@@ -538,6 +538,7 @@ impl ImuService {
         cause: GapCause,
     ) {
         let latch = self.core.timing.latch(Fine::ZERO, clock::WRITE_DATA_BIT);
+        let mut known = None;
         for _ in 0..3 {
             if let Err(e) = cx.dev.stop_fifo().await {
                 self.failed(&e, (cx.now)(), cx.out);
@@ -565,47 +566,42 @@ impl ImuService {
             // uncertainty about the slots here (after an outage early on, the period still
             // the nominal's ±3 %, hundreds of µs or more).
             let drift = self.core.clock.drift_at(tau);
-            let Some(k) = self.core.clock.first_after(tau, margin + drift) else {
-                if drift + drift >= self.core.clock.period() {
-                    // Not a delayed write: the slot cannot be told anywhere.
-                    break;
-                }
-                // Too close to a sample instant to tell its side (a delayed write): again.
-                continue;
-            };
-            self.core.health.answered();
-            self.core.next_k = k;
-            self.core.fresh = true;
-            self.misaligned = None;
-            self.late_before = false;
-            self.core.after.get_or_insert(cause);
-            self.core.last_growth_us = (cx.now)();
-            if self.core.phase == Phase::Stalled {
-                self.core.phase = Phase::Running;
+            known = self.core.clock.first_after(tau, margin + drift);
+            if known.is_some() || drift + drift >= self.core.clock.period() {
+                // Told, or not a delayed write: the slot cannot be told anywhere.
+                break;
             }
-            return;
+            // Too close to a sample instant to tell its side (a delayed write): again.
         }
-        // The slot after the write unknown (the clock has no phase yet, or its uncertainty has
-        // grown past a period since the last observation): the midline's guess, on a grid of
-        // its own. (Continued, the instants located before and after a 375 ms outage early on
-        // gave a period 1.6 % short with a bound of 0.17 %, the guess 9 slots off spanning
-        // them: the line then ran early, and the FIFO was restarted every 0.35 s for seconds,
-        // 10 samples lost each time; drawn early fault 5008.)
-        let tau = self
-            .core
-            .timing
-            .latch(cx.dev.bus().last_start(), clock::WRITE_DATA_BIT);
-        let period = self.core.clock.period();
-        let k = self.core.clock.nearest(tau + period / 2);
-        self.core
-            .clock
-            .start(k, self.core.clock.time(k), false, Fine::ZERO);
-        self.core.next_k = k;
+        self.core.next_k = match known {
+            Some(k) => k,
+            None => {
+                // The slot after the write unknown (the clock has no phase yet, or its
+                // uncertainty has grown past a period since the last observation): the
+                // midline's guess, on a grid of its own. (Continued, the instants located
+                // before and after a 375 ms outage early on gave a period 1.6 % short with a
+                // bound of 0.17 %, the guess 9 slots off spanning them: the line then ran
+                // early, and the FIFO was restarted every 0.35 s for seconds, 10 samples lost
+                // each time; drawn early fault 5008.)
+                let tau = self
+                    .core
+                    .timing
+                    .latch(cx.dev.bus().last_start(), clock::WRITE_DATA_BIT);
+                let k = self.core.clock.nearest(tau + self.core.clock.period() / 2);
+                let t = self.core.clock.time(k);
+                self.core.clock.start(k, t, false, Fine::ZERO);
+                k
+            }
+        };
+        self.core.health.answered();
         self.core.fresh = true;
         self.misaligned = None;
         self.late_before = false;
         self.core.after.get_or_insert(cause);
         self.core.last_growth_us = (cx.now)();
+        if self.core.phase == Phase::Stalled {
+            self.core.phase = Phase::Running;
+        }
     }
 
     /// A transfer failed at `t`.

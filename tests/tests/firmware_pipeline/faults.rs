@@ -132,30 +132,36 @@ fn a_long_nack_burst_costs_only_what_it_spans() {
     }
 }
 
-/// An MPU-6050 up to 2.5 % off nominal that NACKs for 300–600 ms right after its first
-/// samples, before its period is known: the slot after the outage is a guess (the clock can
-/// only tell the outage's length to the nominal's ±3 %), so the run after it is a grid of its
-/// own. Its period is then measured on that run alone, to the part's, and nothing is lost
+/// An MPU-6050 up to 2.5 % off nominal that NACKs, or stalls, for 300–600 ms right after its
+/// first samples, before its period is known: the slot after the outage is a guess (the clock
+/// can only tell the outage's length to the nominal's ±3 %), so the run after it is a grid of
+/// its own. Its period is then measured on that run alone, to the part's, and nothing is lost
 /// after the restart. (Continued on the old grid, the instants located before and after the
 /// outage gave a period 1.6 % short with a bound of 0.17 %; the line then ran early, and the
 /// FIFO was restarted every 0.35 s for seconds, 10 samples lost each time.)
 #[test]
 fn an_outage_before_the_period_is_known_starts_a_grid_of_its_own() {
     let mut keyed = pico_imu_tests::Keyed::from_clock();
-    for _ in 0..6 {
+    for _ in 0..10 {
         let x = keyed.bits();
         let off = (0.015 + (x % 1000) as f64 * 1e-5) * if x & 1 << 20 == 0 { 1.0 } else { -1.0 };
         let (start_ms, length_us) = (20 + (x >> 24) % 20, 300_000 + (x >> 32) % 300_000);
+        let stall = x & 1 << 21 != 0;
         let ctx = format!(
-            "MPU {:+.2} % NACKing {length_us} µs from {start_ms} ms: ",
-            off * 100.0
+            "MPU {:+.2} % {} {length_us} µs from {start_ms} ms: ",
+            off * 100.0,
+            if stall { "stalled" } else { "NACKing" }
         );
         let mut mpu = noisy_mpu();
         mpu.clock_error = off;
         let mut rig = Rig::with(mpu, noisy_qmc());
         rig.run(start_ms);
-        let until = rig.bus.now_ns() + length_us * 1000;
-        rig.bus.with_world(|w| w.nack_until = Some((0x68, until)));
+        let (from, until) = (rig.bus.now_ns(), rig.bus.now_ns() + length_us * 1000);
+        if stall {
+            rig.bus.mpu(|m| m.stall = Some((from, until)));
+        } else {
+            rig.bus.with_world(|w| w.nack_until = Some((0x68, until)));
+        }
         rig.run(length_us / 1000 + 200);
         let dropped = rig.dev.status(0, 0).samples_dropped;
         let delivered = rig.imu_out.len();
