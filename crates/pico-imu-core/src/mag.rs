@@ -156,6 +156,9 @@ impl MagService {
                         self.core.after.get_or_insert(GapCause::SensorFault);
                         self.core.phase = Phase::Running;
                         self.core.last_growth_us = t;
+                        // Its newest reading at once: left for the next tick, a part back
+                        // between two ticks lost one more.
+                        self.read(cx, None).await;
                     }
                     Ok(false) => {
                         self.core.health.answered();
