@@ -57,6 +57,13 @@ pub struct ImuService {
     misaligned: Option<GapCause>,
     /// The last count read, with frames, found a sample later than the clock allowed.
     late_before: bool,
+    /// The last count read found no frame where the clock had one landed (a stall going on).
+    waited: bool,
+    /// The last count read found frames behind the clock's slots whose slots the clock could
+    /// not tell there: they stay in the FIFO, and the count is read again between two instants.
+    hold: bool,
+    /// The count was so read again (it is not read a third time).
+    held_back: bool,
     capacity: u16,
     /// How much earlier than its target a probe's count read is begun.
     lead: Lead,
@@ -70,6 +77,9 @@ impl ImuService {
             core: Core::new(Sensor::Imu, IMU_PERIOD_US as u32, timing),
             misaligned: None,
             late_before: false,
+            waited: false,
+            hold: false,
+            held_back: false,
             capacity: 1024,
             lead: Lead::new(),
         }
@@ -174,6 +184,7 @@ impl ImuService {
             .started(cx.dev.bus().last_start(), cause, (cx.now)());
         self.misaligned = None;
         self.late_before = false;
+        self.waited = false;
     }
 
     /// A lost sensor is looked for on every tick: identity, then the configuration read back;
@@ -216,6 +227,7 @@ impl ImuService {
         // A probe instant shortly ahead: wait for it, so the count read halves the clock's
         // uncertainty about where the samples fall.
         let count_latch = self.core.timing.latch(Fine::ZERO, clock::READ_SECOND_BIT);
+        self.held_back = false;
         let t0 = fine((cx.now)());
         // The count read's start if it is placed (begun early by the learnt lead).
         let mut aimed = None;
@@ -265,6 +277,15 @@ impl ImuService {
             }
             let frames = frames_in(count);
             let newest = self.observe_count(tau, count, held_read);
+            if core::mem::take(&mut self.hold) {
+                // Read again between two instants, where the clock tells its newest slot (once:
+                // a count there is never ambiguous unless the clock is a period wide).
+                let t = fine((cx.now)()) + SETUP + count_latch;
+                let mid = self.core.clock.mid_slot_after(t);
+                delay_until(cx.delay, cx.now, mid - count_latch).await;
+                self.held_back = true;
+                continue;
+            }
             if frames == 0 {
                 self.core.no_data(read_at, cx.out);
                 return;
@@ -411,6 +432,8 @@ impl ImuService {
             return;
         }
         let newest = self.observe_count(tau, c.count, held_read);
+        // Read already: delivered as counted.
+        self.hold = false;
         if !c.whole() {
             self.misaligned = Some(GapCause::Stalled);
         }
@@ -471,7 +494,7 @@ impl ImuService {
     /// frames − 1`; `next_k + frames` was not, by the latch).
     fn observe_count(&mut self, tau: Fine, count: u16, held: bool) -> u32 {
         let frames = frames_in(count);
-        let newest = self
+        let mut newest = self
             .core
             .next_k
             .wrapping_add(u32::from(frames))
@@ -490,7 +513,42 @@ impl ImuService {
                 Seen::NextNotYet
             };
             let fit = self.core.clock.observe(tau, newest, seen);
+            // Frames after a read that found none where the clock had one landed (or after a
+            // restart for a stall), or late after a read that was late too, may follow slots
+            // the part skipped (a stall too short to name): its later samples sit right behind
+            // its earlier ones in the FIFO, where counting frames cannot see the skip. These
+            // frames all came after it, so they are the part's newest: when they are a whole
+            // slot or more behind the clock's newest, they are numbered back from it, the
+            // slots before them lost to the stall. (Counted as contiguous, a 45 ms stall left
+            // every later sample 45 slots off and the clock's interval a period wide for the
+            // rest of the run: drawn early fault 5040.) Where the clock cannot tell its newest
+            // slot at τ (an instant within its uncertainty of τ: count reads are aimed at
+            // instants), the frames stay in the FIFO and the count is read again between two
+            // instants ([`Self::hold`]). The first late read with frames is not enough: a
+            // stall that began right after them looks the same (the next read finds none), and
+            // so does a skip among them, which no count can place.
+            if frames > 0 && (self.waited || fit == Fit::Late && self.late_before) {
+                match self.core.clock.newest_at(tau, Fine::ZERO) {
+                    Some(line) if line.wrapping_sub(newest) as i32 > 0 => {
+                        let behind = line.wrapping_sub(newest);
+                        self.core.next_k = self.core.next_k.wrapping_add(behind);
+                        self.core.after.get_or_insert(GapCause::Stalled);
+                        newest = line;
+                        self.core.clock.observe(tau, newest, Seen::NextNotYet);
+                        self.late_before = false;
+                        self.waited = false;
+                        return newest;
+                    }
+                    Some(_) => {}
+                    None if !self.held_back => {
+                        self.hold = true;
+                        return newest;
+                    }
+                    None => {}
+                }
+            }
             self.late_before = frames > 0 && fit == Fit::Late;
+            self.waited = frames == 0 && fit == Fit::Late;
         }
         newest
     }
@@ -597,6 +655,9 @@ impl ImuService {
         self.core.fresh = true;
         self.misaligned = None;
         self.late_before = false;
+        // Restarted for a stall (its count short of the clock's): the part may still be
+        // stalled, its first frames then later than the first slots after the write.
+        self.waited = cause == GapCause::Stalled;
         self.core.after.get_or_insert(cause);
         self.core.last_growth_us = (cx.now)();
         if self.core.phase == Phase::Stalled {
