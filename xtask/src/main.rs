@@ -294,7 +294,7 @@ fn test(extra: &[String]) -> Result<()> {
         })?;
         // A magnetometer NACKing long enough to be lost (393 ms, its clock 1.26 % fast): looked
         // for on the back-off's retries alone, it came back 76 ms after the NACKs ended, 15
-        // readings more than the burst spanned (a drawn early fault, 5012, found it).
+        // readings more than the burst spanned (a fault drawn at random in the first 0.6 s found it).
         e2e::e2e(&e2e::E2eArgs {
             fault: vec!["nack:qmc@0.3321s:393ms".into()],
             clock: Some("mpu:-1.74%,qmc:+1.26%".into()),

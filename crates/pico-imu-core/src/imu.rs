@@ -521,7 +521,7 @@ impl ImuService {
             // slot or more behind the clock's newest, they are numbered back from it, the
             // slots before them lost to the stall. (Counted as contiguous, a 45 ms stall left
             // every later sample 45 slots off and the clock's interval a period wide for the
-            // rest of the run: drawn early fault 5040.) Where the clock cannot tell its newest
+            // rest of the run: `--fault stall:mpu@0.253s:45ms --clock mpu:+1.71%,qmc:+1.70%`.) Where the clock cannot tell its newest
             // slot at τ (an instant within its uncertainty of τ: count reads are aimed at
             // instants), the frames stay in the FIFO and the count is read again between two
             // instants ([`Self::hold`]). The first late read with frames is not enough: a
@@ -651,7 +651,7 @@ impl ImuService {
                 // before and after a 375 ms outage early on gave a period 1.6 % short with a
                 // bound of 0.17 %, the guess 9 slots off spanning them: the line then ran
                 // early, and the FIFO was restarted every 0.35 s for seconds, 10 samples lost
-                // each time; drawn early fault 5008.)
+                // each time: `--fault nack:mpu@0.1438s:351ms --clock mpu:-1.95%,qmc:-1.37%`.)
                 let tau = self
                     .core
                     .timing

@@ -344,7 +344,8 @@ fn an_imu_stall_at_any_phase_is_named_in_time_counted_exactly_and_keeps_the_grid
 /// behind its newest slot after a read that found none or was late too. They are numbered
 /// back from that slot and the skipped ones counted exactly, every delivered slot the model's.
 /// (Counted as contiguous, a 45 ms stall at 0.25 s left every later sample 45 slots off and the
-/// clock's interval a period wide for the rest of the run; drawn early fault 5040.) A stall
+/// clock's interval a period wide for the rest of the run: `cargo xtask e2e --scenario faults
+/// --fault stall:mpu@0.253s:45ms --clock mpu:+1.71%,qmc:+1.70%`.) A stall
 /// between two reads leaves the burst holding the skip misnumbered: no count can place it.
 #[test]
 fn an_imu_stall_too_short_to_name_is_counted_exactly() {
