@@ -280,39 +280,42 @@ fn test(extra: &[String]) -> Result<()> {
                 ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
             })?;
         }
-        // A part whose clock the bursts' cadence leaves nearly still (the MPU-6050 0.01 % slow,
-        // counted every 10.12 ms after a magnetometer 1.23 % slow): its clock's interval, cut
-        // to a period about its middle before a count bounded it, lost the part's phase at
-        // start-up, its period came out 700 ppm off, and the samples after this 1.3 s stall
-        // were numbered a slot off (a drawn schedule, seed 42022, found it).
-        e2e::e2e(&e2e::E2eArgs {
-            fault: vec!["stall:mpu@3.9799s:1310ms".into()],
-            clock: Some("mpu:-0.01%,qmc:-1.23%".into()),
-            seconds: Some(8.0),
-            out: Some("e2e-faults-still-phase".into()),
-            ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
-        })?;
-        // A magnetometer NACKing long enough to be lost (393 ms, its clock 1.26 % fast): looked
-        // for on the back-off's retries alone, it came back 76 ms after the NACKs ended, 15
-        // readings more than the burst spanned (a fault drawn at random in the first 0.6 s found it).
-        e2e::e2e(&e2e::E2eArgs {
-            fault: vec!["nack:qmc@0.3321s:393ms".into()],
-            clock: Some("mpu:-1.74%,qmc:+1.26%".into()),
-            seconds: Some(14.0),
-            out: Some("e2e-faults-long-nack".into()),
-            ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
-        })?;
-        // Faults from boot, before a part's first sample: its grid is then the one its first
-        // samples set, not the one its waking write implied (numbered on that one, every
-        // sample was hundreds of slots off, and the MPU-6050 restarted its FIFO in vain).
-        for (i, fault) in ["stall:mpu@0.1s:500ms", "vanish:qmc@0.01s:400ms"]
-            .into_iter()
-            .enumerate()
-        {
+        // Single faults, each (its run's name, the fault, the part clocks, the seconds) once
+        // found to do harm:
+        for (out, fault, clock, seconds) in [
+            // A part whose clock the bursts' cadence leaves nearly still (the MPU-6050 0.01 %
+            // slow, counted every 10.12 ms after a magnetometer 1.23 % slow): its clock's
+            // interval, cut to a period about its middle before a count bounded it, lost the
+            // part's phase at start-up, its period came out 700 ppm off, and the samples after
+            // this 1.3 s stall were numbered a slot off (a drawn schedule, seed 42022).
+            (
+                "e2e-faults-still-phase",
+                "stall:mpu@3.9799s:1310ms",
+                Some("mpu:-0.01%,qmc:-1.23%"),
+                8.0,
+            ),
+            // A magnetometer NACKing long enough to be lost (393 ms, its clock 1.26 % fast):
+            // looked for on the back-off's retries alone, it came back 76 ms after the NACKs
+            // ended, 15 readings more than the burst spanned (a fault drawn at random in the
+            // first 0.6 s).
+            (
+                "e2e-faults-long-nack",
+                "nack:qmc@0.3321s:393ms",
+                Some("mpu:-1.74%,qmc:+1.26%"),
+                14.0,
+            ),
+            // Faults from boot, before a part's first sample: its grid is then the one its
+            // first samples set, not the one its waking write implied (numbered on that one,
+            // every sample was hundreds of slots off, and the MPU-6050 restarted its FIFO in
+            // vain).
+            ("e2e-faults-boot-0", "stall:mpu@0.1s:500ms", None, 14.0),
+            ("e2e-faults-boot-1", "vanish:qmc@0.01s:400ms", None, 14.0),
+        ] {
             e2e::e2e(&e2e::E2eArgs {
                 fault: vec![fault.into()],
-                seconds: Some(14.0),
-                out: Some(format!("e2e-faults-boot-{i}")),
+                clock: clock.map(Into::into),
+                seconds: Some(seconds),
+                out: Some(out.into()),
                 ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
             })?;
         }

@@ -196,10 +196,7 @@ impl ImuService {
         cx: &mut Tick<'_, Mpu6050<I>, D>,
     ) {
         let t = (cx.now)();
-        let due = self.core.health.retry_due(t);
-        if due {
-            self.core.health.retried(t);
-        }
+        let due = self.core.look_due(t);
         let intact = match cx.dev.probe().await {
             Ok(_) => cx.dev.config_intact().await,
             Err(e) => Err(e),
@@ -208,10 +205,7 @@ impl ImuService {
             Ok(true) => {
                 // It kept sampling: what the FIFO holds now is judged by its count (an overflow
                 // restarts it, counting the slots exactly).
-                self.core.health.answered();
-                self.core.after.get_or_insert(GapCause::SensorFault);
-                self.core.phase = Phase::Running;
-                self.core.last_growth_us = t;
+                self.core.found_intact(t);
                 self.drain(cx).await;
             }
             Ok(false) => {

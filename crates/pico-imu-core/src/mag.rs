@@ -174,10 +174,7 @@ impl MagService {
         cx: &mut Tick<'_, Qmc5883<I>, D>,
         t: u64,
     ) -> bool {
-        let due = self.core.health.retry_due(t);
-        if due {
-            self.core.health.retried(t);
-        }
+        let due = self.core.look_due(t);
         let intact = match cx.dev.chip_id().await {
             Ok(id) if id == cx.dev.variant().chip_id().1 => cx.dev.config_intact().await,
             Ok(found) => Err(qmc::Error::WrongChip { found }),
@@ -185,10 +182,7 @@ impl MagService {
         };
         match intact {
             Ok(true) => {
-                self.core.health.answered();
-                self.core.after.get_or_insert(GapCause::SensorFault);
-                self.core.phase = Phase::Running;
-                self.core.last_growth_us = t;
+                self.core.found_intact(t);
                 true
             }
             Ok(false) => {

@@ -159,6 +159,25 @@ impl Core {
         }
     }
 
+    /// A look for a lost part at `t`: whether it is a retry the back-off timed (then counted
+    /// as one, and the next backed off).
+    pub fn look_due(&mut self, t: u64) -> bool {
+        let due = self.health.retry_due(t);
+        if due {
+            self.health.retried(t);
+        }
+        due
+    }
+
+    /// A lost part looked for at `t` answered with its configuration intact: it runs again,
+    /// the slots since its last sample lost to the fault.
+    pub fn found_intact(&mut self, t: u64) {
+        self.health.answered();
+        self.after.get_or_insert(GapCause::SensorFault);
+        self.phase = Phase::Running;
+        self.last_growth_us = t;
+    }
+
     /// A look for a lost part failed at `t`: counted like any failure when it was a retry the
     /// back-off timed (`due`) or the bus's fault, not when the part just did not answer (it is
     /// known lost; looked for on every tick, each such look would be an error and a report).

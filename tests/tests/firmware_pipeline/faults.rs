@@ -114,12 +114,7 @@ fn a_long_nack_burst_costs_only_what_it_spans() {
                 .count();
             (missed, within as u64 + 2)
         } else {
-            let truth = rig.bus.mpu(|m| m.slots());
-            let times: Vec<u64> = rig
-                .imu_out
-                .iter()
-                .map(|d| truth.iter().find(|(s, _)| *s == u64::from(d.k)).unwrap().1)
-                .collect();
+            let (truth, times) = imu_samples_exact(&mut rig, 0, &ctx);
             let lost = truth_lost(&truth, &times);
             assert_eq!(st.samples_dropped, lost, "{ctx}IMU samples lost");
             let within = truth

@@ -213,10 +213,14 @@ fn served_period_s(served: impl Iterator<Item = (u64, f64)>, nominal: f64) -> f6
         let (first, _) = *ends.get_or_insert(((slot, t), (slot, t)));
         ends = Some((first, (slot, t)));
     }
+    // A period that is not a positive number (instants out of order) would make the bound
+    // infinite, which every loss passes: the nominal then.
     match ends {
-        Some(((k0, t0), (k1, t1))) if k1 > k0 => (t1 - t0) * 1e-9 / (k1 - k0) as f64,
-        _ => nominal,
+        Some(((k0, t0), (k1, t1))) if k1 > k0 => Some((t1 - t0) * 1e-9 / (k1 - k0) as f64),
+        _ => None,
     }
+    .filter(|p| p.is_finite() && *p > 0.0)
+    .unwrap_or(nominal)
 }
 
 /// A magnetometer that never produces: named within 50 ms of its start, status not "Ok".
