@@ -286,12 +286,13 @@ impl Pipeline {
         outbox: &mut Outbox,
         sink: &mut impl FrameSink,
     ) {
-        let bytes = frames.as_bytes();
         match frames.layout {
             FifoFrame::AccelTempGyro => {
-                self.imu_frames(bytes.as_chunks::<14>().0, true, stamps, after, outbox, sink)
+                self.imu_frames(frames.frames_14(), true, stamps, after, outbox, sink)
             }
-            FifoFrame::AccelGyro => self.imu_frames_12(bytes, stamps, after, outbox, sink),
+            FifoFrame::AccelGyro => {
+                self.imu_frames_12(frames.as_bytes(), stamps, after, outbox, sink)
+            }
         }
     }
 
