@@ -24,13 +24,13 @@ const usage = `usage:
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]
                    [--report F.md] [--json F.json]
-  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact [--from S] [--pcs RE] [--tasks] [--polls F.tsv]]
+  pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact [--from S] [--pcs RE] [--tasks] [--polls F.tsv] [--clock mpu:+1.3%,qmc:+1.3%]]
                    (PC samples by function; callers of leaf functions matching RE; memcpy/memset
                    calls by caller; --exact: every instruction's cycles by function per sample set;
                    --pcs: the cycles of each instruction address in the functions matching RE;
                    --tasks: the cycles of each task's polls, of the interrupts and of the run loop,
                    with each task's costliest functions; --polls: every task poll, its start
-                   and cycles, into F.tsv)
+                   and cycles, into F.tsv; --clock: the parts' oscillator errors, as for run)
 fault SPEC: nack:mpu@5s:3 | nack:mpu@5s:30ms | vanish:qmc@10s:2s | stall:qmc@3s:1s | stall:qmc@0s
             | stuck@20s | stuck@20s:50ms | hang@20s:50ms | overflow@30s:120ms
 --clock: each part's oscillator error (a clock 1.3 % slow: mpu:-1.3%)

@@ -2,7 +2,7 @@
 // every `periodCycles` executed cycles and attributed to the function symbol containing it.
 
 import { writeFileSync } from 'node:fs';
-import { Session } from './session.js';
+import { Session, parseClock } from './session.js';
 import { generateStream } from './stream.js';
 
 /** Strips a Rust legacy-mangled name to its path (`_ZN3foo3bar17h…E` → `foo::bar`). */
@@ -115,8 +115,8 @@ function symbolFinder(elf) {
  * (memcpy, division, 64-bit multiply, …) are also charged inclusively to their call sites.
  * Deterministic: the same ELF gives the same table.
  */
-export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, tasks = false, polls = false }) {
-  const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: from + seconds + 2 }), echoLog: false });
+export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, tasks = false, polls = false, clock = null }) {
+  const s = new Session({ elf, stream: generateStream({ seed: 1, seconds: from + seconds + 2 }), echoLog: false, clock: parseClock(clock) });
   await s.run(from * 1e9);
   const core = s.emu.core;
   const find = symbolFinder(s.emu.elf);
@@ -200,7 +200,7 @@ export async function exactCycles({ elf, seconds = 1, callers = null, from = 1, 
 }
 
 async function exactProfile(v) {
-  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1), tasks: Boolean(v.tasks || v.polls), polls: Boolean(v.polls) });
+  const r = await exactCycles({ elf: v.elf, seconds: Number(v.seconds ?? 1), callers: v.callers, from: Number(v.from ?? 1), tasks: Boolean(v.tasks || v.polls), polls: Boolean(v.polls), clock: v.clock });
   const { sets, total, byFn, calls, seconds } = r;
   if (v.polls) {
     // --polls F: one line per task poll (its start in emulated seconds, the task as in --tasks,

@@ -25,6 +25,16 @@ test('the firmware boots, enumerates USB and reads both sensors at their rates',
   assert.ok(s.qmc.stats.served >= 180, `QMC served ${s.qmc.stats.served}`);
 });
 
+test('profile --exact --clock runs the parts at their oscillator errors', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
+  const { exactCycles } = await import('../src/profile.js');
+  // 0.5 s after the 1 s warm-up, the MPU-6050 3 % fast or 3 % slow: 515 or 485 sample sets
+  // (± one burst), where nominal parts give 500.
+  for (const [clock, want] of [['mpu:+3%', 515], ['mpu:-3%,qmc:+1%', 485]]) {
+    const r = await exactCycles({ elf, seconds: 0.5, clock });
+    assert.ok(Math.abs(r.sets - want) <= 11, `${clock}: sets ${r.sets}, want ${want}`);
+  }
+});
+
 test('profile --exact charges every executed cycle to a function, per sample set', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
   const { exactCycles } = await import('../src/profile.js');
   const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem', tasks: true, polls: true });
