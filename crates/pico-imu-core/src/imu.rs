@@ -515,12 +515,13 @@ impl ImuService {
             // slot or more behind the clock's newest, they are numbered back from it, the
             // slots before them lost to the stall. (Counted as contiguous, a 45 ms stall left
             // every later sample 45 slots off and the clock's interval a period wide for the
-            // rest of the run: `--fault stall:mpu@0.253s:45ms --clock mpu:+1.71%,qmc:+1.70%`.) Where the clock cannot tell its newest
-            // slot at τ (an instant within its uncertainty of τ: count reads are aimed at
-            // instants), the frames stay in the FIFO and the count is read again between two
-            // instants ([`Self::hold`]). The first late read with frames is not enough: a
-            // stall that began right after them looks the same (the next read finds none), and
-            // so does a skip among them, which no count can place.
+            // rest of the run: `--fault stall:mpu@0.253s:45ms --clock mpu:+1.71%,qmc:+1.70%`.)
+            // Where the clock cannot tell its newest slot at τ (an instant within its
+            // uncertainty of τ: count reads are aimed at instants), the frames stay in the FIFO
+            // and the count is read again between two instants ([`Self::hold`]). The first late
+            // read with frames is not enough: a stall that began right after them looks the
+            // same (the next read finds none), and so does a skip among them, which no count
+            // can place.
             if frames > 0 && (self.waited || fit == Fit::Late && self.late_before) {
                 if let Some(k) = self.after_skip(tau, newest) {
                     return k;
