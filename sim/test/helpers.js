@@ -1,5 +1,7 @@
-import { writeFileSync } from 'node:fs';
+import { existsSync, writeFileSync } from 'node:fs';
 import { join } from 'node:path';
+import { spawnSync } from 'node:child_process';
+import { fileURLToPath } from 'node:url';
 import { Stream, COLUMNS } from '../src/stream.js';
 
 /** A constant stream (every row the same physical values), `seconds` long at `rate`. */
@@ -140,4 +142,28 @@ export async function until(what, cond, ms = 3000) {
     if (Date.now() - t0 > ms) throw new Error(`timed out waiting for ${what}`);
     await new Promise((r) => setTimeout(r, 5));
   }
+}
+
+/**
+ * A bare-metal test program's ELF: the path in `envVar` (`cargo xtask test` builds it and sets
+ * it), else built now with cargo for the device (a no-op when it is up to date). `{ elf }`, or
+ * `{ why }` when neither works (the test is then skipped, saying why).
+ */
+export function locateCheckElf(pkg, envVar) {
+  const given = process.env[envVar];
+  if (given) return existsSync(given) ? { elf: given } : { why: `${envVar}=${given} does not exist` };
+  const repo = fileURLToPath(new URL('../..', import.meta.url));
+  const r = spawnSync('cargo', ['build', '--release', '--package', pkg, '--target', 'thumbv6m-none-eabi', '--message-format', 'json-render-diagnostics'], {
+    cwd: repo,
+    encoding: 'utf8',
+    stdio: ['ignore', 'pipe', 'inherit'],
+    maxBuffer: 64 << 20,
+  });
+  if (r.error || r.status !== 0) return { why: `cargo build of ${pkg} failed (${r.error?.message ?? `exit ${r.status}`})` };
+  for (const line of r.stdout.split('\n')) {
+    if (!line.startsWith('{')) continue;
+    const m = JSON.parse(line);
+    if (m.reason === 'compiler-artifact' && m.target?.name === pkg && m.executable) return { elf: m.executable };
+  }
+  return { why: `cargo built ${pkg} but named no executable` };
 }

@@ -8,12 +8,8 @@
 // with cargo (a no-op when it is up to date); skipped when neither is possible.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { spawnSync } from 'node:child_process';
-import { existsSync } from 'node:fs';
-import { fileURLToPath } from 'node:url';
 import { Emulator } from '../src/emulator.js';
-
-const repo = fileURLToPath(new URL('../..', import.meta.url));
+import { locateCheckElf } from './helpers.js';
 
 /** The layout of `allan_thumb_check::Report` (repr(C), u32 words; crates/allan/thumb-check). */
 const REPORT = {
@@ -29,25 +25,6 @@ const DONE = 0x444f4e45;
 const RUNNING = 0x52554e21;
 /** Emulated cycles the run may take (it needs about a quarter of this); a hang ends here. */
 const CYCLE_CAP = 1.2e9;
-
-/** The test ELF: given, or built now; null (with why) when neither works. */
-function locateElf() {
-  const given = process.env.PICO_IMU_THUMB_CHECK_ELF;
-  if (given) return existsSync(given) ? { elf: given } : { why: `PICO_IMU_THUMB_CHECK_ELF=${given} does not exist` };
-  const r = spawnSync('cargo', ['build', '--release', '--package', 'allan-thumb-check', '--target', 'thumbv6m-none-eabi', '--message-format', 'json-render-diagnostics'], {
-    cwd: repo,
-    encoding: 'utf8',
-    stdio: ['ignore', 'pipe', 'inherit'],
-    maxBuffer: 64 << 20,
-  });
-  if (r.error || r.status !== 0) return { why: `cargo build of allan-thumb-check failed (${r.error?.message ?? `exit ${r.status}`})` };
-  for (const line of r.stdout.split('\n')) {
-    if (!line.startsWith('{')) continue;
-    const m = JSON.parse(line);
-    if (m.reason === 'compiler-artifact' && m.target?.name === 'allan-thumb-check' && m.executable) return { elf: m.executable };
-  }
-  return { why: 'cargo built allan-thumb-check but named no executable' };
-}
 
 function readReport(emu, address) {
   const mcu = emu.mcu;
@@ -71,7 +48,7 @@ function describeMismatch(r) {
   return `${r.mismatches} call(s) left the Thumb path's engine differing from the Rust path's; the first: case ${r.firstCase}, ${call} at segment count ${r.firstT} (${thumb}), field \`${r.firstField}\` differs`;
 }
 
-const found = locateElf();
+const found = locateCheckElf('allan-thumb-check', 'PICO_IMU_THUMB_CHECK_ELF');
 
 /** The program run once (it runs both checks); the emulator, the stop and the wall time. */
 let ran = null;

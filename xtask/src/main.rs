@@ -319,10 +319,18 @@ fn test(extra: &[String]) -> Result<()> {
                 ..e2e::E2eArgs::scenario(e2e::Scenario::Faults)
             })?;
         }
-        // The Thumb differential test's program, for sim/test/thumb-diff.test.js.
-        run(cargo().args(["build", "--release", "-p", "allan-thumb-check"]))?;
-        let thumb_check = target_dir()?.join("thumbv6m-none-eabi/release/allan-thumb-check");
-        std::env::set_var("PICO_IMU_THUMB_CHECK_ELF", thumb_check);
+        // The Thumb differential tests' programs, for sim/test/thumb-diff.test.js and
+        // sim/test/frame-thumb.test.js.
+        for (package, var) in [
+            ("allan-thumb-check", "PICO_IMU_THUMB_CHECK_ELF"),
+            ("imu-proto-thumb-check", "PICO_IMU_FRAME_CHECK_ELF"),
+        ] {
+            run(cargo().args(["build", "--release", "-p", package]))?;
+            let elf = target_dir()?
+                .join("thumbv6m-none-eabi/release")
+                .join(package);
+            std::env::set_var(var, elf);
+        }
         emu::harness_tests()?;
         serve_live_test()
     } else {
