@@ -26,7 +26,7 @@ use imu_drivers::mpu6050 as mpu;
 use imu_proto::{GapCause, Sensor, SensorState, IMU_PERIOD_US};
 
 use crate::bus::{Failure, TransferTime, TRANSFER_TIMEOUT_US};
-use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen, Stamps};
+use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::imu_config;
 use crate::cycle_marker::{self, Stage};
 use crate::msg::{FifoFrames, Out, SensorMsg, BURST_MAX};
@@ -694,16 +694,7 @@ fn open_burst(
     layout: mpu::FifoFrame,
     after: Option<GapCause>,
 ) -> Option<&mut FifoFrames> {
-    out.push(SensorMsg::Imu {
-        stamps: Stamps::default(),
-        frames: FifoFrames::new(layout),
-        after,
-    })
-    .ok()?;
-    match out.last_mut() {
-        Some(SensorMsg::Imu { frames, .. }) => Some(frames),
-        _ => None,
-    }
+    out.open_burst(layout, after)
 }
 
 /// Whole frames in `count` FIFO bytes: `count / 14` by multiplication (the M0+ has no divide
