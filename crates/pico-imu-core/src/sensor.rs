@@ -66,10 +66,11 @@ pub struct Core {
 ///
 /// A transfer that starts later than aimed is latency not learnt yet, or a wait that ended
 /// while another task held the CPU (a processing poll of up to ≈ 0.5 ms): only up to
-/// [`Lead::STEP`] of the lateness is learnt from one transfer. (Learnt whole, one probe begun
-/// 197 µs late set the lead to 108 µs; the magnetometer's next probes then latched up to 100 µs
-/// before its interval, narrowing nothing, and took six samples and five extra status reads to
-/// come back.) A transfer that starts early always means a lead too long, and is learnt whole.
+/// [`Lead::STEP`] of the lateness is learnt from one transfer. (Learnt whole, one wait held up
+/// by a processing poll made the lead ≈ 100 µs too long, and the magnetometer's next probes
+/// latched before its interval, narrowing nothing, until the lead came back by halves:
+/// docs/benchmarks.md, "The frame scan a word at a time, a burst's buffer kept, and the lead's
+/// step".) A transfer that starts early always means a lead too long, and is learnt whole.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Lead(Fine);
 
