@@ -84,19 +84,55 @@ export function stageTable(report, sets) {
   return rows;
 }
 
-export async function benchReport(v) {
-  if (!v.elf) throw new Error('bench: --elf is required');
+/** `--seconds` and `--warmup` of `bench`, checked. */
+function benchTimes(v) {
   // 12 s: the device's periodic table round (every 10 s) falls inside the measurement.
   const seconds = Number(v.seconds ?? 12);
+  if (!(seconds > 0 && seconds <= 3600)) throw new Error(`bench: --seconds ${v.seconds}: from above 0 to 3600`);
   // s: boot, enumeration and sensor set-up are not part of the steady state (the goal is
   // checked after 1 s; a shorter warm-up shows the start-up's windows).
   const warmup = v.warmup === undefined ? 1 : parseDuration(v.warmup) / 1e9;
   if (!(warmup > 0 && warmup <= 60)) throw new Error(`bench: --warmup ${v.warmup}: from above 0 to 60 s`);
+  return { seconds, warmup };
+}
+
+/** A 32-bit generator (mulberry32) for the drawn part clocks: the same seed, the same draws. */
+function mulberry32(seed) {
+  let a = seed >>> 0;
+  return () => {
+    a = (a + 0x6d2b79f5) >>> 0;
+    let t = a;
+    t = Math.imul(t ^ (t >>> 15), t | 1);
+    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
+    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
+  };
+}
+
+/**
+ * `n` pairs of part clocks (`--clock` specs), each part's error uniform within ±`span` %,
+ * rounded to 0.01 %, drawn from `seed`: the parts' phases against the device's, which decide
+ * where probes and bursts fall in the windows (one fixed clock is one phase).
+ */
+export function drawClocks(n, seed, span) {
+  const next = mulberry32(seed);
+  const pct = () => {
+    const x = Math.round((2 * next() - 1) * span * 100) / 100;
+    return `${x < 0 ? '-' : '+'}${Math.abs(x).toFixed(2)}%`;
+  };
+  return Array.from({ length: n }, () => `mpu:${pct()},qmc:${pct()}`);
+}
+
+/**
+ * Runs the firmware for `--warmup` then `--seconds` with part clocks `clockSpec` and measures
+ * every executed cycle: the mean, the stages, the aligned and sliding windows.
+ */
+export async function measure(v, clockSpec) {
+  const { seconds, warmup } = benchTimes(v);
   const stream = v.stream ? loadStreamCsv(v.stream) : generateStream({ seed: Number(v.seed ?? 1), seconds: warmup + seconds + 1 });
   // `--clock`: the parts' oscillator errors (as for `run`). A magnetometer faster than nominal
   // moves the IMU bursts (every second magnetometer tick) through the aligned windows, so a
   // window can hold 11 of them; the goal is stated for the nominal parts.
-  const clock = parseClock(v.clock);
+  const clock = parseClock(clockSpec);
   const s = new Session({ elf: v.elf, stream, clock, echoLog: !v.quiet });
   // Per window, the magnetometer's status reads that found no sample yet: each costs the
   // firmware a second poll (a probe of its sample clock that came early, or a late landing).
@@ -155,6 +191,80 @@ export async function benchReport(v) {
     window_sample_sets: meter.windows.map((w) => w.served),
     window_stages: meter.windows.map((w) => w.stages),
   };
+  return { result, meter, sliding, worst, table, sets, executed, over };
+}
+
+/**
+ * `bench --draw N`: the bench at `N` drawn pairs of part clocks (`drawClocks`, `--draw-seed`,
+ * `--span`), a row each and what they add up to: the mean, the worst windows' spread, the
+ * aligned windows over budget, the runs with none over and the runs within the goal in every
+ * window, sliding ones included.
+ */
+async function drawReport(v) {
+  const n = Number(v.draw);
+  if (!(Number.isInteger(n) && n >= 1 && n <= 1000)) throw new Error(`bench: --draw ${v.draw}: a whole number of clock pairs from 1 to 1000`);
+  const seed = Number(v['draw-seed'] ?? 1);
+  if (!Number.isInteger(seed) || seed < 0) throw new Error(`bench: --draw-seed ${v['draw-seed']}: a whole number from 0`);
+  const span = Number(v.span ?? 1.3);
+  if (!(span >= 0 && span <= 10)) throw new Error(`bench: --span ${v.span}: a part clock's error in %, from 0 to 10`);
+  if (v.clock) throw new Error('bench: --clock and --draw exclude each other (--draw draws the clocks)');
+  const budgetWindow = (BUDGET_CYCLES_PER_SET * WINDOW_NS) / 1e6;
+  const rows = [];
+  for (const clock of drawClocks(n, seed, span)) {
+    const { result } = await measure({ ...v, quiet: true }, clock);
+    rows.push({
+      clock,
+      cycles_per_ms: result.executed_cycles / (result.emulated_s * 1000),
+      worst_aligned_cycles_per_ms: result.worst_window.cycles_per_set,
+      worst_sliding_cycles_per_ms: result.worst_sliding_window.cycles_per_ms,
+      aligned_windows: result.windows,
+      aligned_windows_over: result.window_cycles.filter((c) => c > budgetWindow).length,
+    });
+  }
+  const median = (xs) => {
+    const a = [...xs].sort((p, q) => p - q);
+    return a.length % 2 ? a[(a.length - 1) / 2] : (a[a.length / 2 - 1] + a[a.length / 2]) / 2;
+  };
+  const col = (k) => rows.map((r) => r[k]);
+  const summary = {
+    draws: n,
+    draw_seed: seed,
+    span_percent: span,
+    mean_cycles_per_ms: col('cycles_per_ms').reduce((a, b) => a + b, 0) / n,
+    worst_aligned_median: median(col('worst_aligned_cycles_per_ms')),
+    worst_aligned_max: Math.max(...col('worst_aligned_cycles_per_ms')),
+    worst_sliding_median: median(col('worst_sliding_cycles_per_ms')),
+    worst_sliding_max: Math.max(...col('worst_sliding_cycles_per_ms')),
+    aligned_windows: col('aligned_windows').reduce((a, b) => a + b, 0),
+    aligned_windows_over: col('aligned_windows_over').reduce((a, b) => a + b, 0),
+    runs_none_over: rows.filter((r) => r.aligned_windows_over === 0).length,
+    runs_within_goal: rows.filter((r) => r.aligned_windows_over === 0 && r.worst_sliding_cycles_per_ms <= BUDGET_CYCLES_PER_SET).length,
+  };
+  const f = (x) => Math.round(x).toLocaleString('en-US');
+  const { seconds, warmup } = benchTimes(v);
+  const md = [];
+  md.push('# Emulated cycle budget at drawn part clocks');
+  md.push('');
+  md.push(`Firmware \`${v.elf}\`, ${n} pairs of part clocks drawn within ±${span} % (seed ${seed}), each run ${seconds} s after a ${warmup} s warm-up. Command: \`node sim/src/cli.js bench --elf ${v.elf} --draw ${n} --draw-seed ${seed} --span ${span}${v.seconds ? ` --seconds ${seconds}` : ''}${v.warmup !== undefined ? ` --warmup ${v.warmup}` : ''}\`. Cycles per ms; goal ${f(BUDGET_CYCLES_PER_SET)} in every 100 ms window.`);
+  md.push('');
+  md.push('| part clocks | mean | worst aligned | worst sliding (1 ms steps) | aligned windows over |');
+  md.push('|---|---:|---:|---:|---:|');
+  for (const r of rows) md.push(`| ${r.clock} | ${f(r.cycles_per_ms)} | ${f(r.worst_aligned_cycles_per_ms)} | ${f(r.worst_sliding_cycles_per_ms)} | ${r.aligned_windows_over} of ${r.aligned_windows} |`);
+  md.push('');
+  md.push(`- mean over the runs: **${f(summary.mean_cycles_per_ms)} cycles per ms**`);
+  md.push(`- worst aligned window: median ${f(summary.worst_aligned_median)}, max ${f(summary.worst_aligned_max)}; worst sliding window: median ${f(summary.worst_sliding_median)}, max ${f(summary.worst_sliding_max)}`);
+  md.push(`- aligned windows over budget: **${summary.aligned_windows_over} of ${summary.aligned_windows}**; runs with none over: ${summary.runs_none_over} of ${n}; runs within the goal in every window, sliding ones included: **${summary.runs_within_goal} of ${n}**`);
+  const text = md.join('\n') + '\n';
+  if (v.report) writeFileSync(v.report, text);
+  if (v.json) writeFileSync(v.json, JSON.stringify({ elf: v.elf, summary, rows }, null, 2));
+  process.stdout.write(text);
+}
+
+export async function benchReport(v) {
+  if (!v.elf) throw new Error('bench: --elf is required');
+  if (v.draw !== undefined) return drawReport(v);
+  const { seconds, warmup } = benchTimes(v);
+  const { result, meter, sliding, worst, table, sets, executed, over } = await measure(v, v.clock);
   const md = [];
   md.push('# Emulated cycle budget');
   md.push('');

@@ -23,7 +23,9 @@ const usage = `usage:
                    [--log F.txt] [--quiet] [--mem-log S]
   pico-imu-sim gen-stream --out S.csv [--seconds S] [--seed N] [--sine AMP_DPS,FREQ_HZ]
   pico-imu-sim bench --elf FW.elf [--seconds S] [--warmup S] [--seed N] [--clock mpu:+1.3%,qmc:+1.3%]
-                   [--report F.md] [--json F.json]
+                   [--draw N [--draw-seed S] [--span 1.3]] [--report F.md] [--json F.json]
+                   (--draw: the bench at N pairs of part clocks drawn within ±span %, a row each
+                   and their sum: windows over budget, runs within the goal in every window)
   pico-imu-sim profile --elf FW.elf [--seconds S] [--top N] [--callers RE] [--copies] [--exact [--from S] [--pcs RE] [--tasks] [--polls F.tsv] [--clock mpu:+1.3%,qmc:+1.3%]]
                    (PC samples by function; callers of leaf functions matching RE; memcpy/memset
                    calls by caller; --exact: every instruction's cycles by function per sample set;
@@ -172,6 +174,7 @@ async function cmdGen(v) {
 const STRING_OPTIONS = [
   'elf', 'seconds', 'stream', 'seed', 'sine', 'port', 'port-file', 'warmup', 'clock',
   'served', 'summary', 'log', 'mem-log', 'out', 'report', 'json', 'top', 'callers', 'pcs', 'polls', 'from',
+  'draw', 'draw-seed', 'span',
 ];
 const BOOLEAN_OPTIONS = ['instant-i2c', 'exit-on-disconnect', 'quiet', 'copies', 'exact', 'tasks'];
 

@@ -35,6 +35,29 @@ test('profile --exact --clock runs the parts at their oscillator errors', { skip
   }
 });
 
+test('bench --draw runs the drawn clocks and sums their windows', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
+  const { benchReport, drawClocks } = await import('../src/bench.js');
+  const { mkdtempSync, readFileSync } = await import('node:fs');
+  const { tmpdir } = await import('node:os');
+  const json = resolve(mkdtempSync(resolve(tmpdir(), 'draw-')), 'draw.json');
+  const seed = 1 + Math.floor(Math.random() * 1e6);
+  await benchReport({ elf, draw: '2', 'draw-seed': String(seed), span: '2', seconds: '0.5', warmup: '0.4', json, quiet: true });
+  const { summary, rows } = JSON.parse(readFileSync(json, 'utf8'));
+  assert.deepEqual(rows.map((r) => r.clock), drawClocks(2, seed, 2), `seed ${seed}`);
+  for (const r of rows) {
+    assert.equal(r.aligned_windows, 5, `${r.clock}: 0.5 s, five aligned windows`);
+    assert.ok(r.cycles_per_ms > 4000 && r.cycles_per_ms < 9000, `${r.clock}: ${r.cycles_per_ms} cycles per ms`);
+    assert.ok(r.worst_sliding_cycles_per_ms >= r.worst_aligned_cycles_per_ms, `${r.clock}: the sliding windows include the aligned ones`);
+  }
+  assert.equal(summary.aligned_windows_over, rows.reduce((a, r) => a + r.aligned_windows_over, 0));
+  assert.equal(summary.runs_none_over, rows.filter((r) => r.aligned_windows_over === 0).length);
+  assert.ok(summary.runs_within_goal <= summary.runs_none_over);
+  assert.equal(summary.worst_sliding_max, Math.max(...rows.map((r) => r.worst_sliding_cycles_per_ms)));
+  await assert.rejects(benchReport({ elf, draw: '2', clock: 'mpu:+1%' }), /exclude each other/);
+  await assert.rejects(benchReport({ elf, draw: '0' }), /--draw 0/);
+  await assert.rejects(benchReport({ elf, draw: '2', span: '40' }), /--span 40/);
+});
+
 test('profile --exact charges every executed cycle to a function, per sample set', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {
   const { exactCycles } = await import('../src/profile.js');
   const r = await exactCycles({ elf, seconds: 0.2, callers: '^__aeabi_mem', tasks: true, polls: true });
