@@ -10,7 +10,7 @@
 
 import { writeFileSync } from 'node:fs';
 import { Session, parseClock, parseDuration } from './session.js';
-import { generateStream, loadStreamCsv } from './stream.js';
+import { generateStream, loadStreamCsv, mulberry32 } from './stream.js';
 import { EXC_ENTRY_CYCLES, EXC_RETURN_CYCLES } from './emulator.js';
 
 export const STAGES = { 0: 'other (executor, sensor tasks, USB class, defmt, CPU meter)', 1: 'I2C service', 2: 'corrections', 3: 'Allan update', 4: 'framing (postcard, CRC, COBS)', 5: 'attitude filter (AHRS, 200 Hz)', 9: 'interrupt handlers (I2C, timer, USB)' };
@@ -96,22 +96,11 @@ function benchTimes(v) {
   return { seconds, warmup };
 }
 
-/** A 32-bit generator (mulberry32) for the drawn part clocks: the same seed, the same draws. */
-function mulberry32(seed) {
-  let a = seed >>> 0;
-  return () => {
-    a = (a + 0x6d2b79f5) >>> 0;
-    let t = a;
-    t = Math.imul(t ^ (t >>> 15), t | 1);
-    t ^= t + Math.imul(t ^ (t >>> 7), t | 61);
-    return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
-  };
-}
-
 /**
  * `n` pairs of part clocks (`--clock` specs), each part's error uniform within ±`span` %,
- * rounded to 0.01 %, drawn from `seed`: the parts' phases against the device's, which decide
- * where probes and bursts fall in the windows (one fixed clock is one phase).
+ * rounded to 0.01 %, drawn from `seed` (`mulberry32`: the same seed, the same clocks): the
+ * parts' phases against the device's, which decide where probes and bursts fall in the windows
+ * (one fixed clock is one phase).
  */
 export function drawClocks(n, seed, span) {
   const next = mulberry32(seed);
