@@ -56,6 +56,9 @@ test('bench --draw runs the drawn clocks and sums their windows', { skip: exists
   await assert.rejects(benchReport({ elf, draw: '2', clock: 'mpu:+1%' }), /exclude each other/);
   await assert.rejects(benchReport({ elf, draw: '0' }), /--draw 0/);
   await assert.rejects(benchReport({ elf, draw: '2', span: '40' }), /--span 40/);
+  // Shorter than a window, a run has no window to be over budget in: refused, not passed.
+  await assert.rejects(benchReport({ elf, draw: '2', seconds: '0.05' }), /--seconds 0.05: from 0.1/);
+  await assert.rejects(benchReport({ elf, seconds: 'NaN' }), /--seconds NaN/);
 });
 
 test('profile --exact charges every executed cycle to a function, per sample set', { skip: existsSync(elf) ? false : `no firmware at ${elf}` }, async () => {

@@ -29,7 +29,7 @@ use crate::bus::{Failure, TransferTime, TRANSFER_TIMEOUT_US};
 use crate::clock::{self, fine, whole_us, BusTiming, Fine, Fit, SampleClock, Seen};
 use crate::config::imu_config;
 use crate::cycle_marker::{self, Stage};
-use crate::msg::{FifoFrames, Out, SensorMsg, BURST_MAX};
+use crate::msg::{Out, SensorMsg, BURST_MAX};
 use crate::sensor::{delay_until, Core, Lead, Phase, Tick, SETUP, WRITE_MARGIN};
 
 /// Bytes of one FIFO frame (accel, temperature, gyro).
@@ -301,7 +301,7 @@ impl ImuService {
             }
             let slot = cx.out.len();
             let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
-            let Some(frames) = open_burst(cx.out, layout, self.core.after) else {
+            let Some(frames) = cx.out.open_burst(layout, self.core.after) else {
                 return;
             };
             cycle_marker::enter(Stage::I2c);
@@ -370,7 +370,7 @@ impl ImuService {
     ) {
         let slot = cx.out.len();
         let layout = cx.dev.fifo_frame().unwrap_or(mpu::FifoFrame::AccelTempGyro);
-        let Some(frames) = open_burst(cx.out, layout, self.core.after) else {
+        let Some(frames) = cx.out.open_burst(layout, self.core.after) else {
             return;
         };
         cycle_marker::enter(Stage::I2c);
@@ -683,18 +683,6 @@ fn failure<E: embedded_hal::i2c::Error>(e: &mpu::Error<E>) -> Failure {
         mpu::Error::Bus(b) => Failure::of(b),
         _ => Failure::Other,
     }
-}
-
-/// Open a burst's message in `out`, before its read, so that the frames are read straight
-/// into it (built with defaults and moved in after, it went through a copy on the stack, ≈ 60
-/// cycles per ms); its stamps come once the frames are in. Its frame buffer, or `None` when
-/// `out` is full.
-fn open_burst(
-    out: &mut Out,
-    layout: mpu::FifoFrame,
-    after: Option<GapCause>,
-) -> Option<&mut FifoFrames> {
-    out.open_burst(layout, after)
 }
 
 /// Whole frames in `count` FIFO bytes: `count / 14` by multiplication (the M0+ has no divide

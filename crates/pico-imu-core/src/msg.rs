@@ -174,9 +174,10 @@ impl Out {
     }
 
     /// Append an IMU burst's message with default stamps, no frames in `layout` and `after`,
-    /// for its frames to be read into; its frame buffer, or `None` when the slots are all
-    /// taken. The buffer's bytes are what the slot held before (only the first `n` frames
-    /// count).
+    /// before its read, so that the frames are read straight into it (built with defaults and
+    /// moved in after, it went through a copy on the stack); its stamps come once the frames
+    /// are in. Its frame buffer, or `None` when the slots are all taken. The buffer's bytes are
+    /// what the slot held before (only the first `n` frames count).
     pub fn open_burst(
         &mut self,
         layout: FifoFrame,
