@@ -926,10 +926,17 @@ mod tests {
     }
 
     /// A word through the sliced table is its four bytes one at a time, for every value of
-    /// each byte against a spread of running CRCs (an xorshift's, seeded per run of the loop).
+    /// each byte against a spread of running CRCs and other bytes (an xorshift's, keyed by the
+    /// clock each run; the key is printed).
     #[test]
     fn crc_word_is_four_crc_steps() {
-        let mut r = 0x9E37_79B9_7F4A_7C15u64;
+        extern crate std;
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.as_nanos() as u64)
+            | 1;
+        std::println!("generator key {key:#x}");
+        let mut r = key;
         let mut next = || {
             r ^= r << 13;
             r ^= r >> 7;

@@ -358,17 +358,13 @@ mod tests {
     }
 
     /// A placed transfer whose wait ended while the CPU was held (drawn: 50–450 µs late, at a
-    /// drawn latency and a drawn moment of a run) leaves the next transfers within half a step
-    /// of their aim, and the one after that closer still.
+    /// drawn latency and a drawn moment of a run; a fresh draw each run, its key printed)
+    /// leaves the next transfers within half a step of their aim, and the one after that closer
+    /// still.
     #[test]
     fn a_wait_held_up_by_other_work_barely_moves_the_lead() {
-        let mut r = 0x2545_f491u32;
-        let mut next = |n: u32| {
-            r ^= r << 13;
-            r ^= r >> 17;
-            r ^= r << 5;
-            r % n
-        };
+        let mut draw = crate::test_util::clock_keyed();
+        let mut next = |n: u32| (draw() % u64::from(n)) as u32;
         for _ in 0..200 {
             let latency = fine(u64::from(5 + next(40)));
             let mut lead = Lead::default();
