@@ -29,6 +29,7 @@
 #![no_std]
 
 use allan::{DeviceEngine, Engine, MagEngine};
+use thumb_check_rt::Rng;
 
 /// Calls compared in a run (each `push` or `push_pair` on both engines).
 pub const CASES: u32 = 22_000;
@@ -42,10 +43,7 @@ pub const MAG_CASES: u32 = 10_000;
 /// Its generator's seed.
 pub const MAG_SEED: u32 = 0x6d61_6721;
 
-/// [`Report::state`] while the run goes on.
-pub const RUNNING: u32 = 0x5255_4e21;
-/// [`Report::state`] once the run is complete.
-pub const DONE: u32 = 0x444f_4e45;
+pub use thumb_check_rt::{DONE, RUNNING};
 
 /// [`Report::first_routine`] of a mismatch in a `push_pair` call.
 pub const ROUTINE_PAIR: u32 = 1;
@@ -200,35 +198,6 @@ impl Report {
 impl Default for Report {
     fn default() -> Self {
         Self::new()
-    }
-}
-
-/// xorshift32 (Marsaglia, "Xorshift RNGs", J. Stat. Softw. 8(14), 2003; shifts 13, 17, 5).
-struct Rng(u32);
-
-impl Rng {
-    fn next(&mut self) -> u32 {
-        let mut s = self.0;
-        s ^= s << 13;
-        s ^= s >> 17;
-        s ^= s << 5;
-        self.0 = s;
-        s
-    }
-
-    /// Uniform in 0..n (n ≥ 1).
-    fn below(&mut self, n: u32) -> u32 {
-        ((self.next() as u64 * n as u64) >> 32) as u32
-    }
-
-    /// Uniform in −a..=a.
-    fn within(&mut self, a: u32) -> i64 {
-        let a = a as i64;
-        (self.below((2 * a + 1).min(u32::MAX as i64) as u32) as i64) - a
-    }
-
-    fn coin(&mut self) -> bool {
-        self.next() & 0x8000_0000 != 0
     }
 }
 
@@ -413,7 +382,7 @@ pub fn run(report: &mut Report, a: &mut DeviceEngine, b: &mut DeviceEngine, case
     report.state = RUNNING;
     a.reset();
     b.reset();
-    let mut rng = Rng(seed | 1);
+    let mut rng = Rng::new(seed);
     let mut mirror = Mirror::default();
     report.segments = 1;
     let mut episode = 0u32;
@@ -544,7 +513,7 @@ pub fn run_mag(report: &mut Report, a: &mut MagEngine, b: &mut MagEngine, cases:
     report.state = RUNNING;
     a.reset();
     b.reset();
-    let mut rng = Rng(seed | 1);
+    let mut rng = Rng::new(seed);
     let mut mirror = Mirror::default();
     report.segments = 1;
     let mut episode = 0u32;

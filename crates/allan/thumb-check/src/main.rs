@@ -35,12 +35,7 @@ mod device {
         // SAFETY: as above; `report` is not used from here on.
         let report = unsafe { &mut *addr_of_mut!(THUMB_CHECK_MAG) };
         run_mag(report, &mut a, &mut b, MAG_CASES, MAG_SEED);
-        loop {
-            // The emulator stops here: `bkpt #1` = done (the asm block is a compiler barrier,
-            // so the report is in RAM by then).
-            // SAFETY: a breakpoint; the emulator ends the run on it.
-            unsafe { core::arch::asm!("bkpt #1") };
-        }
+        thumb_check_rt::done()
     }
 
     #[panic_handler]
@@ -50,10 +45,7 @@ mod device {
         unsafe { (*addr_of_mut!(THUMB_CHECK)).panic_line = line };
         // SAFETY: as above (either run may be the one that panicked).
         unsafe { (*addr_of_mut!(THUMB_CHECK_MAG)).panic_line = line };
-        loop {
-            // SAFETY: `bkpt #2` = panicked; the emulator ends the run on it.
-            unsafe { core::arch::asm!("bkpt #2") };
-        }
+        thumb_check_rt::panicked()
     }
 }
 

@@ -21,12 +21,7 @@ mod device {
         // writes through a raw pointer, after this one's last use).
         let report = unsafe { &mut *addr_of_mut!(FRAME_CHECK) };
         run(report, CASES, SEED);
-        loop {
-            // The emulator stops here: `bkpt #1` = done (the asm block is a compiler barrier,
-            // so the report is in RAM by then).
-            // SAFETY: a breakpoint; the emulator ends the run on it.
-            unsafe { core::arch::asm!("bkpt #1") };
-        }
+        thumb_check_rt::done()
     }
 
     #[panic_handler]
@@ -34,10 +29,7 @@ mod device {
         let line = info.location().map_or(u32::MAX, |l| l.line());
         // SAFETY: the run is over; a plain store through the static's address.
         unsafe { (*addr_of_mut!(FRAME_CHECK)).panic_line = line };
-        loop {
-            // SAFETY: `bkpt #2` = panicked; the emulator ends the run on it.
-            unsafe { core::arch::asm!("bkpt #2") };
-        }
+        thumb_check_rt::panicked()
     }
 }
 
