@@ -1,6 +1,6 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { worstSliding, drawClocks, BUCKET_NS, WINDOW_NS } from '../src/bench.js';
+import { worstSliding, drawClocks, windowsOver, BUCKET_NS, WINDOW_NS } from '../src/bench.js';
 import { parseClock } from '../src/session.js';
 
 test('the worst sliding window sums the heaviest run of whole buckets, wherever it starts', () => {
@@ -40,4 +40,11 @@ test('drawn part clocks are the same for a seed, within the span, and spread ove
     assert.ok(xs.filter((x) => Math.abs(x) > span / 2).length > 150, `${part}: too few beyond half the span`);
   }
   assert.deepEqual(new Set(drawClocks(10, seed, 0)), new Set(['mpu:+0.00%,qmc:+0.00%']), 'span 0: nominal parts');
+});
+
+test('a window over budget, or with no number for its cycles, counts as over', () => {
+  const budget = 1000 + Math.floor(Math.random() * 1e6);
+  assert.equal(windowsOver([budget - 1, budget, budget + 1], budget), 1, `budget ${budget}: only the one above`);
+  assert.equal(windowsOver([NaN, undefined, Infinity, 0], budget), 3, 'NaN, undefined and Infinity count as over');
+  assert.equal(windowsOver([], budget), 0);
 });
