@@ -42,8 +42,9 @@
 //! costs ≈ 30,000 cycles; [`Ahrs`] is the same filter in integers (docs/benchmarks.md has the
 //! cycles). Formats (`Qn`: value · 2^n):
 //! * the quaternion in Q30; the rotation's rows in Q29, from the quaternion rounded to Q15
-//!   (16 × 16-bit products, entries within ≈ 6·10⁻⁵; with [`fixed::atan2`], the angles within
-//!   0.013° of their exact values from the quaternion, tested);
+//!   (16 × 16-bit products, entries within ≈ 6·10⁻⁵, the diagonal's also off by the norm's
+//!   drift between renormalisations; with [`fixed::atan2`], the angles within
+//!   0.004° + 0.011°/cos(pitch) of their exact values from the quaternion, tested);
 //! * the half rotation `v` in Q30 rad: the gyro sums times the step per count (Q46, from the
 //!   IMU's measured period), by [`fixed::mul_shr`], the sums clamped so that it stays below
 //!   0.5 rad whatever they hold (a longer step is renormalised at once);
@@ -61,9 +62,11 @@
 //!
 //! The output is `f32` for the wire ([`Attitude`]): seven integer-to-float conversions an
 //! update, the scale put into the exponent ([`fixed::to_f32`]). `f32` and `libm` stay where they
-//! run once: the initial attitude, the field reference (set or learnt), the declination. The
+//! run once and off the filter's path: the initial attitude, the host's field reference, the
+//! declination (a learnt reference is made in integers, in the update that completes it). The
 //! integer filter agrees with the `f32` one within 0.05° in roll, pitch and heading on random
-//! trajectories, with the same states (`tests/ahrs.rs`).
+//! trajectories, with the same states but where an error crossing a threshold slowly is decided
+//! a few updates apart (`tests/ahrs.rs`).
 pub use imu_proto::AhrsState;
 
 pub mod fixed;
@@ -82,10 +85,28 @@ pub const FIELD_BAND: f32 = 0.10;
 pub const DIP_BAND_DEG: f32 = 5.0;
 /// Updates averaged to learn the expected field when the host has not set it (1 s at 200 Hz).
 pub const LEARN_UPDATES: u32 = 200;
-/// Converged: the smoothed squared error (sine of the angle between measured and estimated
-/// directions, squared) below sin²(2°), and at least this many updates since the start.
-const CONVERGED_ERR2: f32 = 1.2e-3;
+/// Converged: the correction's error (sines of the angles between measured and estimated
+/// directions), smoothed over ≈ 16 updates and then squared, below sin²(2°), and at least this
+/// many updates since the start. Smoothed before squaring, the sensors' noise is averaged down
+/// (a noisy heading where the field is nearly vertical would otherwise never converge).
+pub const CONVERGED_ERR2: f32 = 1.2e-3;
 const MIN_CONVERGE_UPDATES: u32 = 50;
+/// Updates with both sensors' readings averaged for the first attitude (40 ms): one
+/// magnetometer reading's noise (0.2 µT against a horizontal field of 10 µT: ≈ 1° of heading)
+/// would otherwise start the filter up to 3–4° off, a second of pulling in at k_P.
+pub const START_UPDATES: u32 = 8;
+/// Converging again: within [`SETTLE_UPDATES`] of converging or while the expected field is
+/// being learnt, the smoothed error's tilt part (across the body's down axis) squared above
+/// twice [`CONVERGED_ERR2`] (≈ 2.8°; the factor two keeps an error at the threshold from
+/// flapping). The tilt, because it is what a learnt dip is made of and what a gyro bias's
+/// horizontal part builds; the heading's error also grows with a magnetometer not calibrated
+/// yet or a disturbance, which the field's bands report.
+pub const REDIVERGED_ERR2: f32 = 2.0 * CONVERGED_ERR2;
+/// Updates after converging that the tilt is still watched (3 s). From an exact start a gyro
+/// bias's error builds over seconds: with k_P and k_I it peaks ≈ 2.7 s after the start, at
+/// ≈ 0.83 bias/k_P. Later, a growing tilt is the vehicle's acceleration, not a filter still
+/// pulling in.
+pub const SETTLE_UPDATES: u32 = 600;
 /// IMU samples summed at most before an update without the magnetometer (100 ms at 1 kHz;
 /// full-scale counts × this stay far inside i32).
 pub const MAX_SUM: u32 = 100;
@@ -219,6 +240,8 @@ impl GyroStep {
 const ONE_Q30: i32 = 1 << 30;
 /// [`CONVERGED_ERR2`] in Q30.
 const CONVERGED_ERR2_Q30: u32 = (CONVERGED_ERR2 as f64 * (1u64 << 30) as f64) as u32;
+/// [`REDIVERGED_ERR2`] in Q30.
+const REDIVERGED_ERR2_Q30: u32 = (REDIVERGED_ERR2 as f64 * (1u64 << 30) as f64) as u32;
 /// The bias estimate's bound, Q40 rad per half magnetometer period (2^30: 0.39 rad/s, 22°/s).
 const BIAS_MAX_Q40: i32 = 1 << 30;
 
@@ -236,12 +259,15 @@ struct Gains {
 impl Gains {
     /// `dt_us` is taken as at most 200 ms (the firmware's updates without the magnetometer
     /// come every [`MAX_SUM`] IMU samples, 100 ms): the half rotation, the correction and the
-    /// bias term then stay below 2^30 in Q30 ([`Ahrs::rotate`]).
+    /// bias term then stay below 2^30 in Q30 ([`Ahrs::rotate`]). The bias's increment takes it
+    /// as at most 110 ms: `kI e Δt²/2` in Q40 stays below 9.4·10⁸ for |e_i| ≤ √2 (the sum
+    /// saturates whatever absurd inputs make of the error).
     const fn new(dt_us: u32) -> Gains {
         let dt = (if dt_us > 200_000 { 200_000 } else { dt_us }) as f64 * 1e-6;
+        let dt_b = if dt > 0.11 { 0.11 } else { dt };
         Gains {
             kph_q32: (0.5 * KP as f64 * dt * (1u64 << 32) as f64) as i32,
-            kb_q34: ((KI / KP) as f64 * dt * (1u64 << 34) as f64) as i32,
+            kb_q34: ((KI / KP) as f64 * dt_b * (1u64 << 34) as f64) as i32,
             ratio_q16: (dt / (imu_proto::MAG_PERIOD_US as f64 * 1e-6) * 65536.0) as i32,
         }
     }
@@ -267,15 +293,47 @@ struct Bands {
     sin_dip: [i32; 2],
 }
 
+/// 1 ∓ [`FIELD_BAND`], Q16.
+const FIELD_EDGES_Q16: [u64; 2] = [
+    ((1.0 - FIELD_BAND as f64) * 65536.0) as u64,
+    ((1.0 + FIELD_BAND as f64) * 65536.0) as u64,
+];
+/// sin and cos of [`DIP_BAND_DEG`] (5°), Q30 (`tests`: equal to libm's).
+const SIN_DIP_BAND_Q30: i64 = 93_582_766;
+const COS_DIP_BAND_Q30: i64 = 1_069_655_912;
+
 impl Bands {
-    fn new(field: f32, dip_deg: f32) -> Bands {
-        let lo = field * (1.0 - FIELD_BAND);
-        let hi = field * (1.0 + FIELD_BAND);
-        let s = |x: f32| (libm::sinf(x.clamp(-90.0, 90.0).to_radians()) * ONE_Q30 as f32) as i32;
+    /// The bands around a field of `field_q8` (input units, Q8) and a dip of sine `sin` and
+    /// cosine `cos` (Q30, `cos` ≥ 0), in integers: a learnt reference is made on the
+    /// filter's path, where `f64` and libm would cost ≈ 30,000 cycles in one update.
+    /// `sin(δ ± 5°) = sin δ cos 5° ± cos δ sin 5°`, ±1 past the poles.
+    fn new(field_q8: u64, sin: i32, cos: i32) -> Bands {
+        let f2 = |k: u64| {
+            let f = (field_q8 * k) >> 16;
+            (f * f) >> 16
+        };
+        let (s, c) = (i64::from(sin), i64::from(cos));
+        let lo = if s < -COS_DIP_BAND_Q30 {
+            -ONE_Q30
+        } else {
+            ((s * COS_DIP_BAND_Q30 - c * SIN_DIP_BAND_Q30) >> 30) as i32
+        };
+        let hi = if s > COS_DIP_BAND_Q30 {
+            ONE_Q30
+        } else {
+            ((s * COS_DIP_BAND_Q30 + c * SIN_DIP_BAND_Q30) >> 30) as i32
+        };
         Bands {
-            field2: [(lo * lo) as u64, (hi * hi) as u64],
-            sin_dip: [s(dip_deg - DIP_BAND_DEG), s(dip_deg + DIP_BAND_DEG)],
+            field2: FIELD_EDGES_Q16.map(f2),
+            sin_dip: [lo, hi],
         }
+    }
+
+    /// The bands around the host's field (input units) and dip (degrees), by libm (once).
+    fn set(field: f32, dip_deg: f32) -> Bands {
+        let (s, c) = libm::sincosf(dip_deg.clamp(-90.0, 90.0).to_radians());
+        let q30 = |x: f32| (x * ONE_Q30 as f32) as i32;
+        Bands::new((field.max(0.0) * 256.0) as u64, q30(s), q30(c.max(0.0)))
     }
 }
 
@@ -311,10 +369,15 @@ pub struct Ahrs {
     /// Gyro bias estimate times half the magnetometer's period, rad (body), Q40.
     bias: [i32; 3],
     started: bool,
+    /// Before the start: the accelerometer sums and the magnetometer readings of the updates
+    /// so far (body axes), and how many.
+    start_sums: ([i32; 3], [i32; 3], u32),
     converging: bool,
+    /// Updates left of the watch after converging ([`SETTLE_UPDATES`]).
+    settle: u32,
     updates: u32,
-    /// The smoothed squared error, Q30.
-    err2: u32,
+    /// The correction's error, smoothed over ≈ 16 updates, Q30.
+    err: [i32; 3],
     /// The latest accelerometer sum (body), for updates with no new IMU sample.
     accel: [i32; 3],
     declination_deg: f32,
@@ -352,9 +415,11 @@ impl Ahrs {
             rows: [[1 << 29, 0, 0], [0, 1 << 29, 0], [0, 0, 1 << 29]],
             bias: [0; 3],
             started: false,
+            start_sums: ([0; 3], [0; 3], 0),
             converging: true,
+            settle: 0,
             updates: 0,
-            err2: 0,
+            err: [0; 3],
             accel: [0; 3],
             declination_deg: 0.0,
             declination_q20: 0,
@@ -393,7 +458,7 @@ impl Ahrs {
             Some((field, dip_deg)) => Reference::Known {
                 field,
                 dip_deg,
-                bands: Bands::new(field, dip_deg),
+                bands: Bands::set(field, dip_deg),
                 learnt: false,
             },
             None => LEARNING,
@@ -416,6 +481,18 @@ impl Ahrs {
     /// The attitude now.
     pub fn quaternion(&self) -> [f32; 4] {
         self.q.map(|c| to_f32(c, 30))
+    }
+
+    /// The correction's error, smoothed, squared, and its tilt part squared (across the
+    /// body's down axis): what `Converging` is decided on (against [`CONVERGED_ERR2`] and
+    /// [`REDIVERGED_ERR2`]); updated while converging, settling or learning the expected field,
+    /// held after.
+    pub fn convergence_errors2(&self) -> (f32, f32) {
+        let e = self.err.map(|x| to_f32(x, 30));
+        let d = self.rows[2].map(|x| to_f32(x, 29));
+        let e2: f32 = e.iter().map(|x| x * x).sum();
+        let along = e[0] * d[0] + e[1] * d[1] + e[2] * d[2];
+        (e2, e2 - along * along)
     }
 
     /// One update. `acc`: the IMU sums since the last update (emptied); `step`: the gyro's
@@ -451,7 +528,17 @@ impl Ahrs {
         let m = mag.map(|m| [m[0], m[1].wrapping_neg(), m[2].wrapping_neg()]);
         if !self.started {
             if let (Some(m), true) = (m, self.accel != [0; 3]) {
-                self.start(&self.accel.clone(), &m);
+                let (a_sum, m_sum, n) = &mut self.start_sums;
+                for i in 0..3 {
+                    a_sum[i] = a_sum[i].saturating_add(self.accel[i]);
+                    m_sum[i] = m_sum[i].saturating_add(m[i]);
+                }
+                *n += 1;
+                if *n >= START_UPDATES {
+                    let (a, m, _) = self.start_sums;
+                    self.start_sums = ([0; 3], [0; 3], 0);
+                    self.start(&a, &m);
+                }
             }
             return None;
         }
@@ -510,23 +597,49 @@ impl Ahrs {
         }
         // The correction, k_P e Δt/2, per axis, Q30.
         let c = e.map(|x| mul_shr(x, gains.kph_q32, 32));
-        if self.converging {
-            // The squared error, smoothed; from the first update's on (|e|² ≤ 2: < 2^31 in Q30).
-            let e15 = e.map(|x| (x >> 15).unsigned_abs());
-            let e2 = e15[0] * e15[0] + e15[1] * e15[1] + e15[2] * e15[2];
+        let learning = matches!(self.reference, Reference::Learning { .. });
+        if self.converging || self.settle > 0 || learning {
+            // The error smoothed (from the first update's on), then squared: the systematic
+            // error, with the sensors' noise averaged down (|e|² ≤ 2: < 2^31 in Q30).
             if self.updates == 0 {
-                self.err2 = e2;
+                self.err = e;
             }
-            self.err2 = self.err2 - (self.err2 >> 4) + (e2 >> 4);
+            for (s, x) in self.err.iter_mut().zip(e) {
+                *s = *s - (*s >> 4) + (x >> 4);
+            }
+            let e15 = self.err.map(|x| x >> 15);
+            let [a, b, c] = e15.map(i32::unsigned_abs);
+            let err2 = a * a + b * b + c * c;
             self.updates = self.updates.saturating_add(1);
-            if self.updates >= MIN_CONVERGE_UPDATES && self.err2 < CONVERGED_ERR2_Q30 {
-                self.converging = false;
+            if self.converging {
+                if self.updates >= MIN_CONVERGE_UPDATES && err2 < CONVERGED_ERR2_Q30 {
+                    self.converging = false;
+                    self.settle = SETTLE_UPDATES;
+                }
+            } else {
+                // Settling: the tilt (the error across the body's down axis; |err·d| ≤ |err|).
+                let along =
+                    ((e15[0] * d15[0] + e15[1] * d15[1] + e15[2] * d15[2]) >> 15).unsigned_abs();
+                if err2.saturating_sub(along * along) > REDIVERGED_ERR2_Q30 {
+                    // Tilted again (a gyro bias's error building): converging again, and a
+                    // learnt reference learnt afresh once converged, not from a tilted estimate.
+                    self.converging = true;
+                    self.settle = 0;
+                    if self.reference_learnt() {
+                        self.reference = LEARNING;
+                    }
+                } else {
+                    self.settle = self.settle.saturating_sub(1);
+                }
             }
-        } else {
-            // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2); Q30 · Q34 >> 24 is Q40.
-            for (b, c) in self.bias.iter_mut().zip(c) {
-                *b = (*b + mul_shr(c, gains.kb_q34, 24)).clamp(-BIAS_MAX_Q40, BIAS_MAX_Q40);
-            }
+        }
+        // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2); Q30 · Q34 >> 24 is Q40. Also
+        // while converging: a bias leaves a steady error of b/kP that only the bias estimate
+        // takes out, so a part with more than ≈ 2°/s left would otherwise never converge.
+        for (b, c) in self.bias.iter_mut().zip(c) {
+            *b = b
+                .saturating_add(mul_shr(c, gains.kb_q34, 24))
+                .clamp(-BIAS_MAX_Q40, BIAS_MAX_Q40);
         }
         // The bias is kept per magnetometer period: scaled only for an update without it.
         for i in 0..3 {
@@ -630,14 +743,15 @@ impl Ahrs {
         *s += i64::from(sin_dip);
         *n += 1;
         if *n >= LEARN_UPDATES {
-            let k = 1.0 / *n as f64;
-            let field = (*field as f64 * k / 256.0) as f32;
-            let sin = (*s as f64 * k / ONE_Q30 as f64).clamp(-1.0, 1.0);
-            let dip_deg = libm::asin(sin).to_degrees() as f32;
+            // The means, the dip's cosine from its sine, the dip by atan2: integers only.
+            let field_q8 = *field / u64::from(*n);
+            let sin = (*s / i64::from(*n)).clamp(-(ONE_Q30 as i64), ONE_Q30 as i64) as i32;
+            let c2 = (ONE_Q30 as i64 - ((i64::from(sin) * i64::from(sin)) >> 30)) as u64;
+            let cos = (c2 << 30).isqrt() as i32;
             self.reference = Reference::Known {
-                field,
-                dip_deg,
-                bands: Bands::new(field, dip_deg),
+                field: to_f32(field_q8.min(i32::MAX as u64) as i32, 8),
+                dip_deg: to_f32(atan2(sin, cos), 20),
+                bands: Bands::new(field_q8, sin, cos),
                 learnt: true,
             };
         }
@@ -698,4 +812,105 @@ fn sum_sq(v: &[i32; 3]) -> u32 {
 #[inline(always)]
 fn dot15(r: &[i32; 3], v: &[i32; 3]) -> i32 {
     (r[0] >> 14) * v[0] + (r[1] >> 14) * v[1] + (r[2] >> 14) * v[2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_dip_band_constants_are_its_sine_and_cosine() {
+        let r = f64::from(DIP_BAND_DEG).to_radians();
+        let q30 = |x: f64| libm::round(x * f64::from(ONE_Q30)) as i64;
+        assert_eq!(SIN_DIP_BAND_Q30, q30(libm::sin(r)));
+        assert_eq!(COS_DIP_BAND_Q30, q30(libm::cos(r)));
+    }
+
+    /// A learnt reference from its means in integers (square root, atan2, the bands) against
+    /// libm: random |m|² and sines of the dip, the poles included.
+    #[test]
+    fn a_learnt_reference_is_libms() {
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        for k in 0..2_000 {
+            // |m|² as the update has it: [2^28, 3·2^30), shifted by `sh` from the input units.
+            let m2 = (1u32 << 28) + (next() % (3 * (1u64 << 30) - (1 << 28))) as u32;
+            let sh = (next() % 5) as i32 - 2;
+            let sin = match k {
+                0 => ONE_Q30,
+                1 => -ONE_Q30,
+                _ => (next() % (2 * ONE_Q30 as u64 + 1)) as i32 - ONE_Q30,
+            };
+            let (im, is) = fixed::rsqrt(m2);
+            let mut a = Ahrs::new();
+            a.converging = false;
+            for _ in 0..LEARN_UPDATES {
+                a.learn(m2, sh, im, is, sin);
+            }
+            let (field, dip) = a.reference().expect("learnt");
+            let want_field = f64::from(m2).sqrt() * 2f64.powi(-sh);
+            let want_dip = libm::asin(f64::from(sin) / f64::from(ONE_Q30)).to_degrees();
+            assert!(
+                (f64::from(field) / want_field - 1.0).abs() < 3e-4,
+                "m2 {m2}, sh {sh}: {field} against {want_field}"
+            );
+            assert!(
+                (f64::from(dip) - want_dip).abs() < 0.005,
+                "sin {sin}: {dip}° against {want_dip}°"
+            );
+            let Reference::Known { bands, .. } = a.reference else {
+                panic!("not learnt");
+            };
+            let edges = [1.0 - FIELD_BAND as f64, 1.0 + FIELD_BAND as f64];
+            for (i, d) in [-1.0, 1.0].into_iter().enumerate() {
+                let want = libm::sin((want_dip + d * 5.0).clamp(-90.0, 90.0).to_radians());
+                let got = f64::from(bands.sin_dip[i]) / f64::from(ONE_Q30);
+                assert!((got - want).abs() < 5e-7, "sin {sin}: {got} against {want}");
+                let want = (want_field * edges[i]).powi(2);
+                let r = bands.field2[i] as f64 / want;
+                assert!((r - 1.0).abs() < 6e-4, "m2 {m2}, sh {sh}: {r}");
+            }
+        }
+    }
+
+    /// The integer bands against the same bands from libm, for random fields and dips, the
+    /// poles included.
+    #[test]
+    fn the_integer_bands_are_libms() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..10_000 {
+            let field = 100.0 + 20_000.0 * next();
+            let dip = -90.0 + 180.0 * next();
+            let b = Bands::set(field as f32, dip as f32);
+            let f = field as f32 as f64;
+            for (k, edge) in [(0, 1.0 - FIELD_BAND as f64), (1, 1.0 + FIELD_BAND as f64)] {
+                let want = (f * edge) * (f * edge);
+                assert!(
+                    (b.field2[k] as f64 - want).abs() <= 1e-4 * want + 2.0,
+                    "field {field}, edge {k}: {} against {want}",
+                    b.field2[k]
+                );
+            }
+            let dip = dip as f32 as f64;
+            for (k, d) in [(0, dip - 5.0), (1, dip + 5.0)] {
+                let want = libm::sin(d.clamp(-90.0, 90.0).to_radians());
+                let got = f64::from(b.sin_dip[k]) / f64::from(ONE_Q30);
+                assert!(
+                    (got - want).abs() < 2e-7,
+                    "dip {dip}, edge {k}: {got} against {want}"
+                );
+            }
+        }
+    }
 }

@@ -507,6 +507,21 @@ mod tests {
         (v, stamps)
     }
 
+    /// A pipeline whose filter has had all but the last of the updates its start averages (at
+    /// rest, z up, the tests' field): its next update starts it, without an estimate.
+    fn primed() -> Pipeline {
+        let mut p = Pipeline::new(crate::config::scales());
+        for _ in 1..ahrs::START_UPDATES {
+            let mut acc = Accum::default();
+            acc.add_sums(&[0, 0, 5 * 8192], &[0, 0, 0], 5);
+            let att = p
+                .ahrs
+                .update(&mut acc, GyroStep(0), Some(&[3000, 0, -5000]), 5000);
+            assert!(att.is_none());
+        }
+        p
+    }
+
     /// FIFO frames go into the batch as the part sent them (raw mode): every value of both
     /// layouts decoded from its big-endian bytes (random values, a fresh realisation each run),
     /// the temperature only from the 14-byte layout, one slot per frame.
@@ -564,7 +579,7 @@ mod tests {
     /// lost).
     #[test]
     fn updates_queue_run_and_fold_when_full() {
-        let mut p = Pipeline::new(crate::config::scales());
+        let mut p = primed();
         let mut out = Outbox::new();
         let mut sink = Sink(std::vec::Vec::new());
         let (b, st) = burst(0, 0);
@@ -617,7 +632,7 @@ mod tests {
     /// frame's worth waits.
     #[test]
     fn estimates_go_out_without_turns_when_a_frame_is_full() {
-        let mut p = Pipeline::new(crate::config::scales());
+        let mut p = primed();
         let mut out = Outbox::new();
         let mut sink = Sink(std::vec::Vec::new());
         let mut frames = 0;
@@ -673,7 +688,7 @@ mod tests {
     fn batches_follow_the_burst_turns() {
         let mut rng = clock_keyed();
         let mut next = move |m: u64| rng() % m;
-        let mut p = Pipeline::new(crate::config::scales());
+        let mut p = primed();
         let mut out = Outbox::new();
         let mut sink = Sink(std::vec::Vec::new());
         let mut turns = BatchTurns::new();

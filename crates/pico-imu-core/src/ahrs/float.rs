@@ -19,7 +19,8 @@
 //!   of pitch, so pitch is `atan2(−r₃₁, √(r₃₂² + r₃₃²))` instead.
 use super::{
     initial_quaternion, Accum, AhrsState, Attitude, CONVERGED_ERR2, DIP_BAND_DEG, FIELD_BAND, KI,
-    KP, LEARN_UPDATES, MIN_CONVERGE_UPDATES, RENORM_EVERY,
+    KP, LEARN_UPDATES, MIN_CONVERGE_UPDATES, REDIVERGED_ERR2, RENORM_EVERY, SETTLE_UPDATES,
+    START_UPDATES,
 };
 use micromath::{Quaternion, F32};
 
@@ -73,9 +74,14 @@ pub struct Ahrs {
     /// Gyro bias estimate times half the magnetometer's period, rad (body).
     bias_h: [f32; 3],
     started: bool,
+    /// Before the start: the sums of the updates' readings so far, and how many.
+    start_sums: ([f32; 3], [f32; 3], u32),
     converging: bool,
+    /// Updates left of the watch after converging.
+    settle: u32,
     updates: u32,
-    err2: f32,
+    /// The correction's error, smoothed over ≈ 16 updates.
+    err: [f32; 3],
     /// Mean accelerometer of the latest update (body), for updates with no new IMU sample.
     accel: [f32; 3],
     have_accel: bool,
@@ -89,6 +95,8 @@ impl Default for Ahrs {
     }
 }
 
+/// The bias estimate's bound, rad per half magnetometer period (the integer filter's: 22°/s).
+const BIAS_MAX: f32 = 1.0 / 1024.0;
 /// The magnetometer's period, s: the step the bias estimate is kept in.
 const MAG_DT: f32 = imu_proto::MAG_PERIOD_US as f32 * 1e-6;
 
@@ -127,9 +135,11 @@ impl Ahrs {
             rows: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
             bias_h: [0.0; 3],
             started: false,
+            start_sums: ([0.0; 3], [0.0; 3], 0),
             converging: true,
+            settle: 0,
             updates: 0,
-            err2: 1.0,
+            err: [0.0; 3],
             accel: [0.0; 3],
             have_accel: false,
             declination_deg: 0.0,
@@ -202,6 +212,14 @@ impl Ahrs {
         self.q.to_array()
     }
 
+    /// As [`super::Ahrs::convergence_errors2`].
+    pub fn convergence_errors2(&self) -> (f32, f32) {
+        let d = self.rows[2];
+        let e2: f32 = self.err.iter().map(|x| x * x).sum();
+        let along = self.err[0] * d[0] + self.err[1] * d[1] + self.err[2] * d[2];
+        (e2, e2 - along * along)
+    }
+
     /// One update. `acc`: the IMU sums since the last update (emptied); `rad_per_count`: gyro
     /// count × sample period → rad; `mag`: corrected magnetometer counts (sensor axes), `None`
     /// for an update without it; `dt`: the time since the last update, s (the correction's
@@ -239,7 +257,17 @@ impl Ahrs {
         let m = mag.map(|m| [m[0] as f32, -(m[1] as f32), -(m[2] as f32)]);
         if !self.started {
             if let (Some(m), true) = (m, self.have_accel) {
-                self.start(&self.accel.clone(), &m);
+                let (a_sum, m_sum, n) = &mut self.start_sums;
+                for i in 0..3 {
+                    a_sum[i] += self.accel[i];
+                    m_sum[i] += m[i];
+                }
+                *n += 1;
+                if *n >= START_UPDATES {
+                    let (a, m, _) = self.start_sums;
+                    self.start_sums = ([0.0; 3], [0.0; 3], 0);
+                    self.start(&a, &m);
+                }
             }
             return None;
         }
@@ -269,23 +297,47 @@ impl Ahrs {
         }
         // The correction, kP e Δt/2, per axis.
         let c = [0, 1, 2].map(|i| ca * da[i] + cm * d[i]);
-        if self.converging {
-            // The squared error, smoothed; from the first update's on.
-            let e2 = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) * (1.0 / (kph * kph));
+        let learning = matches!(self.reference, Reference::Learning { .. });
+        if self.converging || self.settle > 0 || learning {
+            // The error smoothed (from the first update's on), then squared.
+            let e = c.map(|x| x * (1.0 / kph));
             if self.updates == 0 {
-                self.err2 = e2;
+                self.err = e;
             }
-            self.err2 += (e2 - self.err2) * (1.0 / 16.0);
+            for (s, x) in self.err.iter_mut().zip(e) {
+                *s += (x - *s) * (1.0 / 16.0);
+            }
+            let err2 = self.err.iter().map(|x| x * x).sum::<f32>();
             self.updates = self.updates.saturating_add(1);
-            if self.updates >= MIN_CONVERGE_UPDATES && self.err2 < CONVERGED_ERR2 {
-                self.converging = false;
+            if self.converging {
+                if self.updates >= MIN_CONVERGE_UPDATES && err2 < CONVERGED_ERR2 {
+                    self.converging = false;
+                    self.settle = SETTLE_UPDATES;
+                }
+            } else {
+                // As [`super::Ahrs::update`]: the tilt past its threshold while settling,
+                // converging again, a learnt reference learnt afresh.
+                let along = self.err[0] * d[0] + self.err[1] * d[1] + self.err[2] * d[2];
+                if err2 - along * along > REDIVERGED_ERR2 {
+                    self.converging = true;
+                    self.settle = 0;
+                    if self.reference_learnt() {
+                        self.reference = Reference::Learning {
+                            field: 0.0,
+                            sin_dip: 0.0,
+                            n: 0,
+                        };
+                    }
+                } else {
+                    self.settle = self.settle.saturating_sub(1);
+                }
             }
-        } else {
-            // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2).
-            let kb = (KI / KP) * dt;
-            for (b, c) in self.bias_h.iter_mut().zip(c) {
-                *b += kb * c;
-            }
+        }
+        // b̂ Δt/2 += kI e Δt · Δt/2 = (kI/kP) Δt · (kP e Δt/2), while converging too, with the
+        // integer filter's bounds (its step taken as at most 110 ms, |b̂ Δt/2| ≤ 2⁻¹⁰ rad).
+        let kb = (KI / KP) * dt.min(0.11);
+        for (b, c) in self.bias_h.iter_mut().zip(c) {
+            *b = (*b + kb * c).clamp(-BIAS_MAX, BIAS_MAX);
         }
         // The bias is kept per magnetometer period: scaled only for an update without it.
         let bias = if mag.is_some() {
