@@ -163,12 +163,15 @@ pub fn orientation(args: &super::E2eArgs) -> Result<()> {
     let mut r = Report::default();
     let before = compare(&traj, &got, SETTLE_S, upload_s);
     // After the upload the filter starts again: judged from its first estimate after it
-    // converged (plus the settling time), up to the end of the second pass.
+    // converged (plus the settling time), up to the end of the second pass. The estimates
+    // queued before the upload took effect still come from the old filter: the restart is the
+    // first `Converging` one after the upload.
+    let secs = |o: &Orientation| o.t_us as f64 * 1e-6;
     let restart_s = got
         .iter()
-        .filter(|o| o.t_us as f64 * 1e-6 > upload_s && o.state != AhrsState::Converging)
-        .map(|o| o.t_us as f64 * 1e-6)
-        .next()
+        .skip_while(|o| secs(o) <= upload_s || o.state != AhrsState::Converging)
+        .find(|o| o.state != AhrsState::Converging)
+        .map(secs)
         .unwrap_or(f64::INFINITY);
     let after = compare(&traj, &got, restart_s + SETTLE_S, 2.0 * period);
     writeln!(
@@ -186,8 +189,9 @@ pub fn orientation(args: &super::E2eArgs) -> Result<()> {
     writeln!(
         r.text,
         "Pass 1: identity calibration (as booted), {SETTLE_S} s to {upload_s:.1} s. Pass 2: the \
-         part's calibration uploaded at {upload_s:.1} s, converged at {restart_s:.2} s, judged \
-         from {:.1} s to {:.0} s.\n",
+         part's calibration uploaded at {upload_s:.2} s, converged at {restart_s:.2} s ({:.2} s \
+         later), judged from {:.1} s to {:.0} s.\n",
+        restart_s - upload_s,
         restart_s + SETTLE_S,
         2.0 * period
     )?;
