@@ -44,7 +44,7 @@
 //! * the quaternion in Q30; the rotation's rows in Q29, from the quaternion rounded to Q15
 //!   (16 × 16-bit products, entries within ≈ 6·10⁻⁵, the diagonal's also off by the norm's
 //!   drift between renormalisations; with [`fixed::atan2`], the angles within
-//!   0.004° + 0.011°/cos(pitch) of their exact values from the quaternion, tested);
+//!   0.004° + 0.014°/cos(pitch) of their exact values from the quaternion, tested);
 //! * the half rotation `v` in Q30 rad: the gyro sums times the step per count (Q46, from the
 //!   IMU's measured period), by [`fixed::mul_shr`], the sums clamped so that it stays below
 //!   0.5 rad whatever they hold (a longer step is renormalised at once);
@@ -818,6 +818,16 @@ fn dot15(r: &[i32; 3], v: &[i32; 3]) -> i32 {
 mod tests {
     use super::*;
 
+    /// xorshift64 from a fixed seed: the draws of one test.
+    fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        }
+    }
+
     #[test]
     fn the_dip_band_constants_are_its_sine_and_cosine() {
         let r = f64::from(DIP_BAND_DEG).to_radians();
@@ -830,13 +840,7 @@ mod tests {
     /// libm: random |m|² and sines of the dip, the poles included.
     #[test]
     fn a_learnt_reference_is_libms() {
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         for k in 0..2_000 {
             // |m|² as the update has it: [2^28, 3·2^30), shifted by `sh` from the input units.
             let m2 = (1u32 << 28) + (next() % (3 * (1u64 << 30) - (1 << 28))) as u32;
@@ -882,13 +886,8 @@ mod tests {
     /// poles included.
     #[test]
     fn the_integer_bands_are_libms() {
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut draw = xorshift(0x2545_f491_4f6c_dd1d);
+        let mut next = || (draw() >> 11) as f64 / (1u64 << 53) as f64;
         for _ in 0..10_000 {
             let field = 100.0 + 20_000.0 * next();
             let dip = -90.0 + 180.0 * next();
