@@ -486,7 +486,8 @@ impl Ahrs {
     /// The correction's error, smoothed, squared, and its tilt part squared (across the
     /// body's down axis): what `Converging` is decided on (against [`CONVERGED_ERR2`] and
     /// [`REDIVERGED_ERR2`]); updated while converging, settling or learning the expected field,
-    /// held after.
+    /// held after. The tilt is taken about the down axis as it is after the update, which
+    /// judged it about the axis before (one step apart: tests compare with a margin).
     pub fn convergence_errors2(&self) -> (f32, f32) {
         let e = self.err.map(|x| to_f32(x, 30));
         let d = self.rows[2].map(|x| to_f32(x, 29));
@@ -817,16 +818,7 @@ fn dot15(r: &[i32; 3], v: &[i32; 3]) -> i32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// xorshift64 from a fixed seed: the draws of one test.
-    fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
-        move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            x
-        }
-    }
+    use crate::test_util::clock_keyed;
 
     #[test]
     fn the_dip_band_constants_are_its_sine_and_cosine() {
@@ -837,10 +829,10 @@ mod tests {
     }
 
     /// A learnt reference from its means in integers (square root, atan2, the bands) against
-    /// libm: random |m|² and sines of the dip, the poles included.
+    /// libm: random |m|² and sines of the dip (drawn anew every run), the poles included.
     #[test]
     fn a_learnt_reference_is_libms() {
-        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
+        let mut next = clock_keyed();
         for k in 0..2_000 {
             // |m|² as the update has it: [2^28, 3·2^30), shifted by `sh` from the input units.
             let m2 = (1u32 << 28) + (next() % (3 * (1u64 << 30) - (1 << 28))) as u32;
@@ -882,11 +874,11 @@ mod tests {
         }
     }
 
-    /// The integer bands against the same bands from libm, for random fields and dips, the
-    /// poles included.
+    /// The integer bands against the same bands from libm, for random fields and dips (drawn
+    /// anew every run), the poles included.
     #[test]
     fn the_integer_bands_are_libms() {
-        let mut draw = xorshift(0x2545_f491_4f6c_dd1d);
+        let mut draw = clock_keyed();
         let mut next = || (draw() >> 11) as f64 / (1u64 << 53) as f64;
         for _ in 0..10_000 {
             let field = 100.0 + 20_000.0 * next();

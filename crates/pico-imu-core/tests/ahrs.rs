@@ -522,6 +522,16 @@ struct Agreement {
     updates: usize,
 }
 
+/// The larger of a running worst and a new value, NaN if either is (`f64::max` drops a NaN,
+/// and a filter's NaN output would then pass every bound).
+fn worst(acc: f64, x: f64) -> f64 {
+    if acc.is_nan() || x.is_nan() {
+        f64::NAN
+    } else {
+        acc.max(x)
+    }
+}
+
 /// What the integer filter's outputs may differ from its quaternion's exact angles at a pitch
 /// of `pitch_deg`, degrees: (roll and heading, pitch). Its rows come from the quaternion in Q15
 /// (components within 2⁻¹⁶: an off-diagonal entry `2(xy − wz)` within 6·10⁻⁵, a diagonal one
@@ -602,7 +612,7 @@ fn agreement(
                     _ => true,
                 };
                 if margin <= NEAR_THRESHOLD {
-                    out.margin = out.margin.max(margin);
+                    out.margin = worst(out.margin, margin);
                 } else if !fields_differ {
                     out.unexplained += 1;
                 }
@@ -614,17 +624,17 @@ fn agreement(
             // micromath's atan2 error, up to 0.16°).
             let (ex, ey) = (euler(&x.q), euler(&y.q));
             let d = |p: f64, q: f64| angle_diff(p, q).abs();
-            out.pitch = out.pitch.max(d(ex[1], ey[1]));
+            out.pitch = worst(out.pitch, d(ex[1], ey[1]));
             // Roll and heading are undefined at ±90° of pitch and ill-conditioned near it.
             if ey[1].abs() < 80.0 {
-                out.roll = out.roll.max(d(ex[0], ey[0]));
-                out.heading = out.heading.max(d(ex[2], ey[2]));
+                out.roll = worst(out.roll, d(ex[0], ey[0]));
+                out.heading = worst(out.heading, d(ex[2], ey[2]));
                 // The integer filter's outputs against its own quaternion's exact angles.
                 let (wide, narrow) = output_bound(ex[1]);
                 for (k, bound) in [(0, wide), (1, narrow), (2, wide)] {
                     let got = [x.roll_deg, x.pitch_deg, x.heading_deg][k] as f64;
-                    out.outputs = out.outputs.max(d(got, ex[k]));
-                    out.outputs_share = out.outputs_share.max(d(got, ex[k]) / bound);
+                    out.outputs = worst(out.outputs, d(got, ex[k]));
+                    out.outputs_share = worst(out.outputs_share, d(got, ex[k]) / bound);
                 }
             }
             // The rotation between the two estimates, degrees: conj(y) ⊗ x (q and −q are the
@@ -638,7 +648,7 @@ fn agreement(
                 a0 * b3 - a1 * b2 + a2 * b1 - a3 * b0,
             ];
             let vn = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-            out.angle = out.angle.max(2.0 * libm::atan2(vn, w.abs()).to_degrees());
+            out.angle = worst(out.angle, 2.0 * libm::atan2(vn, w.abs()).to_degrees());
             if std::env::var("AHRS_TRACE").is_ok() {
                 let tr = traj.at(t).0;
                 println!(
