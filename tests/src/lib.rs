@@ -19,12 +19,19 @@ pub use qmc5883_model::{QmcModel, QmcVariant};
 
 /// A xorshift generator keyed by the clock, so that every run of a randomized test draws a
 /// different realisation; the key is printed, so a failing run can be replayed with
-/// [`Keyed::new`].
+/// [`Keyed::new`], or without editing the test by `PICO_IMU_TEST_KEY=<key> cargo test <name>`.
 pub struct Keyed(u64);
 
 impl Keyed {
-    /// Keyed by the system clock (the key printed).
+    /// Keyed by the system clock (the key printed), or by `PICO_IMU_TEST_KEY` when it is set
+    /// (a printed key, to replay a run).
     pub fn from_clock() -> Self {
+        if let Some(key) = std::env::var("PICO_IMU_TEST_KEY")
+            .ok()
+            .and_then(|k| k.trim().parse().ok())
+        {
+            return Self::new(key);
+        }
         let key = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(1, |d| d.as_nanos() as u64);
