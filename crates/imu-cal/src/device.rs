@@ -143,10 +143,24 @@ pub enum Quantity {
     MatrixRow,
     /// A folded offset `c_i` (|c_i| ≥ 2¹⁶ LSB).
     Offset,
-    /// A temperature coefficient `κ_i` (|κ_i| ≥ 2).
+    /// A temperature coefficient `κ_i` (|κ_i| ≥ 2, or not finite).
     TempCoef,
     /// A non-finite float parameter.
     NotFinite,
+    /// The gyro's reference temperature in raw counts (`temp_ref − temp_offset_c` times the
+    /// sensitivity: outside i16).
+    TempRef,
+}
+
+impl Sensor {
+    /// The calibration file's keys for the matrix and for the offset of this sensor.
+    pub const fn keys(self) -> (&'static str, &'static str) {
+        match self {
+            Sensor::Accel => ("accel.scale and accel.misalignment_deg", "accel.offset"),
+            Sensor::Gyro => ("gyro.scale and gyro.misalignment_deg", "gyro.bias"),
+            Sensor::Mag => ("mag.soft_iron", "mag.hard_iron"),
+        }
+    }
 }
 
 impl core::fmt::Display for BlobError {
@@ -167,10 +181,31 @@ impl core::fmt::Display for BlobError {
                 "calibration blob corrupt: CRC stored {stored:#010x}, computed {computed:#010x}"
             ),
             BlobError::Malformed => write!(f, "calibration blob payload is not a valid calibration"),
-            BlobError::OutOfRange { sensor, what, axis } => write!(
-                f,
-                "calibration {sensor:?} {what:?} on axis {axis} outside the fixed-point range"
-            ),
+            BlobError::OutOfRange { sensor, what, axis } => {
+                let (matrix, offset) = sensor.keys();
+                match what {
+                    Quantity::MatrixRow => write!(
+                        f,
+                        "{matrix}: row {axis} of the matrix sums to 4 or more in magnitude, beyond the device's fixed point"
+                    ),
+                    Quantity::Offset => write!(
+                        f,
+                        "{offset}[{axis}]: the offset through the matrix is 2¹⁶ LSB or more, beyond the device's fixed point"
+                    ),
+                    Quantity::TempCoef => write!(
+                        f,
+                        "gyro.temp_coeff[{axis}]: not a finite number, or 2 LSB per LSB of temperature or more through the matrix, beyond the device's fixed point"
+                    ),
+                    Quantity::NotFinite => write!(
+                        f,
+                        "{matrix} or {offset}: a value on axis {axis} is not a finite number"
+                    ),
+                    Quantity::TempRef => write!(
+                        f,
+                        "gyro.temp_ref − gyro.temp_offset_c is beyond the ±32767 LSB of the device's raw reference temperature"
+                    ),
+                }
+            }
             BlobError::BufferTooSmall { len } => {
                 write!(f, "buffer of {len} bytes too small for a calibration blob")
             }
@@ -374,7 +409,7 @@ impl GyroCorrection {
                 if !k[j].is_finite() {
                     return Err(BlobError::OutOfRange {
                         sensor: Sensor::Gyro,
-                        what: Quantity::NotFinite,
+                        what: Quantity::TempCoef,
                         axis: j as u8,
                     });
                 }

@@ -238,6 +238,10 @@ impl CalFile {
             gyro_bias: self.gyro.bias,
             gyro_temp_coeff: self.gyro.temp_coeff,
             gyro_misalignment_deg: self.gyro.misalignment_deg,
+            gyro_temp_c: Some(plausible::TempScale {
+                reference: self.gyro.temp_ref,
+                offset: self.gyro.temp_offset_c,
+            }),
             soft_iron: self.mag.soft_iron,
             hard_iron: self.mag.hard_iron,
         }
@@ -312,7 +316,7 @@ impl CalFile {
         if !(t_ref_raw.abs() <= i16::MAX as f64) {
             return Err(BlobError::OutOfRange {
                 sensor: Sensor::Gyro,
-                what: crate::device::Quantity::Offset,
+                what: crate::device::Quantity::TempRef,
                 axis: 0,
             });
         }

@@ -514,6 +514,14 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                     notes.push(format!("{missing} temperature readings are missing"));
                 }
             }
+            if o.blocks < 4 {
+                // The blocks' scatter is the bias's uncertainty: fewer than 4 cannot give one.
+                return Err(format!(
+                    "{} {}: at least 4 blocks",
+                    o.flag("--blocks", "blocks"),
+                    o.blocks
+                ));
+            }
             let g = [0, 1, 2].map(|k| keep(&c[k], &s.flagged));
             Loaded {
                 data: Data::Gyro(

@@ -137,6 +137,136 @@ proptest! {
             }
         }
     }
+
+    /// A soft iron turned by any rotation, its gains and conditioning inside their bounds, is
+    /// accepted by both (a board may turn the magnetometer against the MPU-6050); the same
+    /// matrix with one axis flipped (a mirrored frame) is refused by both, naming the
+    /// determinant.
+    #[test]
+    fn a_turned_soft_iron_passes_and_a_mirrored_one_is_refused(
+        q in prop::array::uniform4(-1.0f64..1.0), g in prop::array::uniform3(0.6f64..1.7),
+        flip in 0usize..3,
+    ) {
+        let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        prop_assume!(n > 0.1);
+        let [w, x, y, z] = q.map(|v| v / n);
+        let r = [
+            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
+        ];
+        let s = [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[i][j] * g[j]));
+        let mut f = CalFile::default();
+        f.mag.soft_iron = s;
+        let (host, device) = refusals(&f);
+        prop_assert!(host.is_ok() && device.is_ok(), "{s:?}: {host:?} / {device:?}");
+
+        let mut m = s;
+        for row in &mut m {
+            row[flip] = -row[flip];
+        }
+        let det = -(g[0] * g[1] * g[2]);
+        let mut f = CalFile::default();
+        f.mag.soft_iron = m;
+        let (host, device) = refusals(&f);
+        for (who, r) in [("host", host), ("device", device)] {
+            match r {
+                Err(BlobError::Implausible(x)) => {
+                    prop_assert_eq!((x.key, x.axis), (Key::MagSoftIronDeterminant, None), "{}", who);
+                    prop_assert!((x.value - det).abs() < 1e-5, "{who}: {} vs {det}", x.value);
+                    prop_assert!(x.lo > 0.0, "{who}: {}", x.lo);
+                }
+                other => prop_assert!(false, "{who}: {m:?}: {other:?}"),
+            }
+        }
+    }
+
+    /// A soft-iron entry that is not a number is refused by its place (NaN passes through the
+    /// singular values as a number); the device cannot even hold it (no blob is made).
+    #[test]
+    fn a_soft_iron_entry_not_a_number_is_refused_by_its_place(
+        at in 0usize..9, which in 0usize..3,
+    ) {
+        let v = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][which];
+        let mut f = CalFile::default();
+        f.mag.soft_iron[at / 3][at % 3] = v;
+        let (host, device) = refusals(&f);
+        match host {
+            Err(BlobError::Implausible(x)) => {
+                prop_assert_eq!((x.key, x.axis), (Key::MagSoftIron, Some(at as u8)));
+                prop_assert!(!x.value.is_finite());
+                prop_assert_eq!((x.lo, x.hi), (-3.0, 3.0));
+            }
+            other => prop_assert!(false, "[{at}] = {v}: {other:?}"),
+        }
+        prop_assert!(device.is_err(), "[{at}] = {v}: the device held it");
+    }
+
+    /// The gyro's temperature reference within the sensor's range and the offset within 10 °C
+    /// of 36.53 °C are accepted; beyond either, refused naming it (by the host: the blob holds
+    /// the reference in raw counts only).
+    #[test]
+    fn the_temperature_reference_and_offset_are_bounded(
+        inside in -0.98f64..0.98, beyond in 0.005f64..1.0, above in any::<bool>(), offset in any::<bool>(),
+    ) {
+        let (key, lo, hi) = if offset {
+            (Key::GyroTempOffset, 26.53, 46.53)
+        } else {
+            (Key::GyroTempRef, -40.0, 85.0)
+        };
+        let set = |f: &mut CalFile, v: f64| {
+            if offset {
+                f.gyro.temp_offset_c = v
+            } else {
+                f.gyro.temp_ref = v
+            }
+        };
+        let (mid, half) = ((lo + hi) / 2.0, (hi - lo) / 2.0);
+        let mut f = CalFile::default();
+        set(&mut f, mid + inside * half);
+        prop_assert!(f.to_device().is_ok(), "{key:?} = {}", mid + inside * half);
+        let value = mid + if above { 1.0 } else { -1.0 } * (1.0 + beyond) * half;
+        let mut f = CalFile::default();
+        set(&mut f, value);
+        match f.to_device() {
+            Err(BlobError::Implausible(x)) => {
+                prop_assert_eq!((x.key, x.axis, x.value), (key, None, value));
+                prop_assert!((x.lo - lo).abs() < 1e-9 && (x.hi - hi).abs() < 1e-9);
+            }
+            other => prop_assert!(false, "{key:?} = {value}: {other:?}"),
+        }
+    }
+}
+
+/// The messages of the checks that are the host's alone or that the fixed point cannot carry:
+/// a NaN soft-iron entry, a mirrored soft iron, a temperature reference out of range, and a
+/// huge value in short form.
+#[test]
+fn the_host_only_refusals_read_as_quoted() {
+    type Edit = fn(&mut CalFile);
+    let cases: [(Edit, &str); 4] = [
+        (
+            |f| f.mag.soft_iron[0][1] = f64::NAN,
+            "mag.soft_iron[0][1] = NaN is outside ±3",
+        ),
+        (
+            |f| f.mag.soft_iron[2][2] = -1.0,
+            "mag.soft_iron determinant = −1 is outside 0.04287–27",
+        ),
+        (
+            |f| f.gyro.temp_ref = 120.0,
+            "gyro.temp_ref = 120 °C is outside −40–85 °C",
+        ),
+        (
+            |f| f.mag.hard_iron[0] = 1e30,
+            "mag.hard_iron[0] = 1e30 µT is outside ±130 µT",
+        ),
+    ];
+    for (edit, want) in cases {
+        let mut f = CalFile::default();
+        edit(&mut f);
+        assert_eq!(f.to_device().unwrap_err().to_string(), want);
+    }
 }
 
 /// The refusals the users quoted, word for word: a 1.9 accelerometer scale, a zero scale, a

@@ -194,3 +194,75 @@ fn rates_that_once_hung() {
         run_bounded(&a).unwrap();
     }
 }
+
+/// `imu-lab` with `args`: its exit code and standard error (within [`BOUND`]).
+fn refusal(args: &[&str]) -> (Option<i32>, String) {
+    let out = Command::new(assert_cmd::cargo::cargo_bin("imu-lab"))
+        .args(args)
+        .stdout(Stdio::null())
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+/// What the lab cannot do honestly is refused with exit code 1 and a message naming the option
+/// or key and the value: a record too long to build in memory (was an allocation failure and
+/// an abort), fewer blocks than an uncertainty needs (was silently raised to 4), a heading
+/// evaluated with a calibration the device would refuse (was evaluated), and a theory file
+/// that cannot be written (was found only after the record was written).
+#[test]
+fn the_refusals_name_what_and_where() {
+    let dir = tempfile::tempdir().unwrap();
+    let rest = files().rest.display().to_string();
+    let bad = dir.path().join("scale19.toml");
+    let mut f = imu_cal::file::CalFile::default();
+    f.accel.scale[1] = 1.9;
+    std::fs::write(&bad, f.to_toml()).unwrap();
+    let out = dir.path().join("o.csv").display().to_string();
+    let cases: [(Vec<&str>, &str); 4] = [
+        (
+            vec![
+                "simulate",
+                "--samples",
+                "100000000000000",
+                "--white",
+                "1",
+                "-o",
+                &out,
+            ],
+            "--samples 100000000000000: at most 268435456",
+        ),
+        (
+            vec!["calibrate", "gyro", &rest, "--blocks", "2"],
+            "--blocks 2: at least 4 blocks",
+        ),
+        (
+            vec!["heading", &rest, "--cal", bad.to_str().unwrap()],
+            "refused: accel.scale[1] = 1.9 is outside 0.91–1.09",
+        ),
+        (
+            vec![
+                "simulate",
+                "--samples",
+                "100",
+                "--white",
+                "1",
+                "-o",
+                &out,
+                "--theory",
+                "/",
+            ],
+            "creating /",
+        ),
+    ];
+    for (args, want) in cases {
+        let (code, err) = refusal(&args);
+        assert_eq!(code, Some(1), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    // The theory's failure came before the record: nothing written.
+    assert!(!std::path::Path::new(&out).exists());
+}

@@ -152,11 +152,19 @@ pub enum Key {
     /// A singular value of the soft-iron matrix (its gain along a principal axis).
     MagSoftIronGain = 13,
     MagHardIron = 14,
+    /// An entry of the soft-iron matrix (the axis is the row-major index, shown as `[i][j]`).
+    MagSoftIron = 15,
+    /// The determinant of the soft-iron matrix: negative for a mirrored frame.
+    MagSoftIronDeterminant = 16,
+    /// The temperature the gyro's bias was fitted at.
+    GyroTempRef = 17,
+    /// The temperature the MPU-6050's sensor reads as 0 LSB.
+    GyroTempOffset = 18,
 }
 
 impl Key {
     /// Every key, by discriminant.
-    pub const ALL: [Key; 15] = [
+    pub const ALL: [Key; 19] = [
         Key::AccelLsbPerUnit,
         Key::GyroLsbPerUnit,
         Key::MagLsbPerUnit,
@@ -172,6 +180,10 @@ impl Key {
         Key::MagSoftIronCondition,
         Key::MagSoftIronGain,
         Key::MagHardIron,
+        Key::MagSoftIron,
+        Key::MagSoftIronDeterminant,
+        Key::GyroTempRef,
+        Key::GyroTempOffset,
     ];
 
     /// The key of a wire discriminant.
@@ -198,6 +210,10 @@ impl Key {
             Key::MagSoftIronCondition => "mag.soft_iron condition number",
             Key::MagSoftIronGain => "mag.soft_iron singular value",
             Key::MagHardIron => "mag.hard_iron",
+            Key::MagSoftIron => "mag.soft_iron",
+            Key::MagSoftIronDeterminant => "mag.soft_iron determinant",
+            Key::GyroTempRef => "gyro.temp_ref",
+            Key::GyroTempOffset => "gyro.temp_offset_c",
         }
     }
 
@@ -213,11 +229,14 @@ impl Key {
             Key::GyroTempCoeff => " deg/s per °C",
             Key::GyroTempLsbPerC => " LSB/°C",
             Key::MagHardIron => " µT",
+            Key::GyroTempRef | Key::GyroTempOffset => " °C",
             Key::AccelScale
             | Key::AccelUpper
             | Key::GyroScale
             | Key::MagSoftIronCondition
-            | Key::MagSoftIronGain => "",
+            | Key::MagSoftIronGain
+            | Key::MagSoftIron
+            | Key::MagSoftIronDeterminant => "",
         }
     }
 }
@@ -237,8 +256,10 @@ impl core::fmt::Display for Refusal {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let u = self.key.unit();
         f.write_str(self.key.name())?;
-        if let Some(a) = self.axis {
-            write!(f, "[{a}]")?;
+        match self.axis {
+            Some(a) if self.key == Key::MagSoftIron => write!(f, "[{}][{}]", a / 3, a % 3)?,
+            Some(a) => write!(f, "[{a}]")?,
+            None => {}
         }
         write!(f, " = {}{u} is outside ", Num(self.value))?;
         if self.lo == -self.hi {
@@ -263,6 +284,16 @@ impl core::fmt::Display for Num {
             return f.write_str(if x > 0.0 { "∞" } else { "−∞" });
         }
         let a = if x < 0.0 { -x } else { x };
+        if a >= 1e6 || (a != 0.0 && a < 1e-6) {
+            // Four significant digits in scientific form (`1e30`, `−2.5e-9`).
+            let mut buf = Buf([0; 48], 0);
+            core::fmt::write(&mut buf, format_args!("{a:.3e}"))?;
+            let s = buf.as_str();
+            let (mantissa, exp) = s.split_once('e').unwrap_or((s, "0"));
+            let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+            let sign = if x < 0.0 { "−" } else { "" };
+            return write!(f, "{sign}{mantissa}e{exp}");
+        }
         let decimals = if a == 0.0 || a >= 1000.0 {
             0
         } else if a >= 100.0 {
@@ -346,14 +377,23 @@ pub const SOFT_IRON_GAIN_MAX: f64 = 3.0;
 
 const PS_MPU_ACCEL: &str = "PS-MPU-6000A-00 rev 3.4, §6.2";
 const PS_MPU_GYRO: &str = "PS-MPU-6000A-00 rev 3.4, §6.1";
+const PS_MPU_TEMP: &str = "PS-MPU-6000A-00 rev 3.4, §6.3";
+/// The temperature the MPU-6050's sensor reads as 0 LSB, °C: −521 LSB at 35 °C at 340 LSB/°C
+/// (PS-MPU-6000A-00 rev 3.4, §6.3), 36.53 °C as the register map states it.
+pub const TEMP_OFFSET_C: f64 = 36.53;
+/// The margin on the temperature sensor's offset, °C: the datasheet states none; 10 °C is
+/// 3,400 LSB, far beyond a trim and well short of a wrong unit or sign.
+const TEMP_OFFSET_MARGIN_C: f64 = 10.0;
 /// 2 % cross-axis sensitivity as an angle, degrees (2 % = 0.02 rad = 1.146°).
 const CROSS_AXIS_DEG: f64 = 0.02 * 180.0 / core::f64::consts::PI;
 const XYZ: [bool; 3] = [true; 3];
+/// A single value (no axis).
+const SCALAR: [bool; 3] = [true, false, false];
 
 /// The bounds with a fixed value, one row per key and axes. The magnetometer's depend on its
 /// range and are computed in [`mag_bounds`] from [`F_MAX_UT`], [`SOFT_IRON_CONDITION`] and
 /// [`SOFT_IRON_GAIN_MAX`].
-pub const BOUNDS: [Bound; 9] = [
+pub const BOUNDS: [Bound; 11] = [
     Bound {
         key: Key::AccelScale,
         axes: XYZ,
@@ -427,6 +467,25 @@ pub const BOUNDS: [Bound; 9] = [
         hi: MPU_MARGIN * CROSS_AXIS_DEG,
     },
     Bound {
+        key: Key::GyroTempRef,
+        axes: SCALAR,
+        datasheet: "temperature sensor range −40…+85 °C",
+        source: PS_MPU_TEMP,
+        margin: "none",
+        lo: -40.0,
+        hi: 85.0,
+    },
+    Bound {
+        key: Key::GyroTempOffset,
+        axes: SCALAR,
+        datasheet:
+            "room-temperature offset −521 LSB at 35 °C (36.53 °C at 0 LSB; no tolerance stated)",
+        source: PS_MPU_TEMP,
+        margin: "±10 °C",
+        lo: TEMP_OFFSET_C - TEMP_OFFSET_MARGIN_C,
+        hi: TEMP_OFFSET_C + TEMP_OFFSET_MARGIN_C,
+    },
+    Bound {
         key: Key::AccelUpper,
         axes: XYZ,
         datasheet: "— (the file's accelerometer model is lower-triangular)",
@@ -475,10 +534,22 @@ pub struct Physical {
     pub gyro_temp_coeff: [f64; 3],
     /// Degrees, the file's six γ₁…γ₆.
     pub gyro_misalignment_deg: [f64; 6],
+    /// °C: the temperature the bias was fitted at, and the temperature the sensor reads as
+    /// 0 LSB: the file's (checked on the host). `None` from a blob, which holds the reference
+    /// in raw counts (an i16 by construction) and not the offset the file read it with.
+    pub gyro_temp_c: Option<TempScale>,
     /// Dimensionless.
     pub soft_iron: [[f64; 3]; 3],
     /// µT.
     pub hard_iron: [f64; 3],
+}
+
+/// The gyro's temperature reference and the sensor's offset, °C (the file's `gyro.temp_ref`
+/// and `gyro.temp_offset_c`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TempScale {
+    pub reference: f64,
+    pub offset: f64,
 }
 
 /// Matrix positions of the gyro's γ₁…γ₆ (`gyro_rot::correction_matrix`: entry (i, j) is
@@ -512,6 +583,7 @@ impl Physical {
             gyro_bias: solve(&g, cal.gyro().affine().folded_offset()).map(|b| b / lg),
             gyro_temp_coeff: solve(&g, cal.gyro().kappa()).map(|k| k * t_lsb / lg),
             gyro_misalignment_deg: GYRO_ANGLE_AT.map(|p| ratio(&g, p)),
+            gyro_temp_c: None,
             soft_iron: s,
             hard_iron: solve(&s, cal.mag().folded_offset()).map(|h| h / lm),
         }
@@ -519,9 +591,10 @@ impl Physical {
 }
 
 /// `Err` naming the first parameter outside its bound, in this order: accelerometer scale,
-/// angles, offset; gyro scale, angles, bias, temperature coefficient; soft-iron condition and
-/// gains, hard iron (scales and conditioning first: the others are only meaningful, and only
-/// finite, for a well-conditioned matrix). NaN is outside every bound.
+/// angles, offset; gyro scale, angles, temperature offset and reference (the file's only),
+/// bias, temperature coefficient; soft-iron entries (finite), condition, gains and determinant, hard iron
+/// (scales and conditioning first: the others are only meaningful, and only finite, for a
+/// well-conditioned matrix). NaN is outside every bound.
 pub fn check(p: &Physical, fitted: &Fitted) -> Result<(), Refusal> {
     let within = |key: Key, axis: Option<usize>, value: f64, (lo, hi): (f64, f64)| {
         if lo <= value && value <= hi {
@@ -548,11 +621,24 @@ pub fn check(p: &Physical, fitted: &Fitted) -> Result<(), Refusal> {
     each(Key::AccelOffset, &p.accel_offset)?;
     each(Key::GyroScale, &p.gyro_scale)?;
     each(Key::GyroMisalignment, &p.gyro_misalignment_deg)?;
+    if let Some(t) = p.gyro_temp_c {
+        let scalar = |key: Key, value: f64| within(key, None, value, fixed(key, 0));
+        scalar(Key::GyroTempOffset, t.offset)?;
+        scalar(Key::GyroTempRef, t.reference)?;
+    }
     each(Key::GyroBias, &p.gyro_bias)?;
     each(Key::GyroTempCoeff, &p.gyro_temp_coeff)?;
 
     let range = fitted.mag_range_ut();
     let (gain, condition) = mag_bounds(range);
+    // A non-finite entry first: the singular values of such a matrix mean nothing (NaN passes
+    // through `min`, `max` and the square root as a number). Every entry of a matrix lies
+    // within ± its largest singular value, so the gain bound is the entries' too.
+    for (i, &v) in p.soft_iron.iter().flatten().enumerate() {
+        if !v.is_finite() {
+            within(Key::MagSoftIron, Some(i), v, (-gain.1, gain.1))?;
+        }
+    }
     let (smin2, smax2) = singular_values_squared(&p.soft_iron);
     let (smin, smax) = (sqrt(smin2), sqrt(smax2));
     let cond = if smin > 0.0 {
@@ -563,6 +649,15 @@ pub fn check(p: &Physical, fitted: &Fitted) -> Result<(), Refusal> {
     within(Key::MagSoftIronCondition, None, cond, condition)?;
     within(Key::MagSoftIronGain, None, smin, gain)?;
     within(Key::MagSoftIronGain, None, smax, gain)?;
+    // Gains within their bound still allow a mirrored frame (a negative determinant: an axis
+    // flipped or two swapped), which no distortion of a right-handed part's field produces.
+    let det = determinant(&p.soft_iron);
+    within(
+        Key::MagSoftIronDeterminant,
+        None,
+        det,
+        (gain.0 * gain.0 * gain.0, gain.1 * gain.1 * gain.1),
+    )?;
     // The raw reading of the strongest geomagnetic field on axis i is at most
     // |h_i| + F_max·‖row i of S⁻¹‖: it must stay within the range.
     let inv = inverse(&p.soft_iron);
@@ -578,6 +673,13 @@ pub fn check(p: &Physical, fitted: &Fitted) -> Result<(), Refusal> {
 fn solve(m: &[[f64; 3]; 3], b: [f64; 3]) -> [f64; 3] {
     let inv = inverse(m);
     [0, 1, 2].map(|i| (0..3).map(|j| inv[i][j] * b[j]).sum())
+}
+
+/// `det m`.
+fn determinant(m: &[[f64; 3]; 3]) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
 /// `m⁻¹` by the adjugate (non-finite entries for a singular `m`).
@@ -667,6 +769,7 @@ pub fn bounds_table() -> std::string::String {
     );
     let axes = |k: Key, a: [bool; 3]| match a {
         _ if k == Key::GyroMisalignment => "[0]–[5]",
+        _ if matches!(k, Key::GyroTempRef | Key::GyroTempOffset) => "—",
         [true, true, true] => "[0]–[2]",
         [true, true, false] => "[0], [1]",
         [false, false, true] => "[2]",
@@ -707,6 +810,14 @@ pub fn bounds_table() -> std::string::String {
         bound(g2.0, g2.1, ""),
         bound(g8.0, g8.1, "")
     );
+    let cube = |g: (f64, f64)| (g.0 * g.0 * g.0, g.1 * g.1 * g.1);
+    let (d2, d8) = (cube(g2), cube(g8));
+    let _ = writeln!(
+        s,
+        "| `mag.soft_iron` (determinant) | — | — (a right-handed frame: no axis flipped or swapped) | — | the gains' bounds cubed | {} at ±{r2} G, {} at ±{r8} G |",
+        bound(d2.0, d2.1, ""),
+        bound(d8.0, d8.1, "")
+    );
     let _ = writeln!(
         s,
         "| `mag.hard_iron` | [0]–[2] | field range ±{r2} G / ±{r8} G | QMC5883L datasheet rev C, specifications | range − F_max·‖row of S⁻¹‖ | {} at ±{r2} G, {} at ±{r8} G (S = I) |",
@@ -735,6 +846,10 @@ mod tests {
         assert_eq!(f(f64::INFINITY), "∞");
         assert_eq!(f(0.0), "0");
         assert_eq!(f(-0.000_01), "−0.00001");
+        assert_eq!(f(1e30), "1e30");
+        assert_eq!(f(-2.5e-9), "−2.5e-9");
+        assert_eq!(f(123_456.0), "123456");
+        assert_eq!(f(1_234_567.0), "1.235e6");
     }
 
     #[test]

@@ -164,8 +164,10 @@ pub fn run(a: Args) -> Result<()> {
     }
     let text = std::fs::read_to_string(&a.cal)
         .with_context(|| format!("cannot read {}", a.cal.display()))?;
-    let cal =
-        CalFile::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e:?}", a.cal.display()))?;
+    let cal = CalFile::from_toml(&text).map_err(|e| anyhow::anyhow!("{}: {e}", a.cal.display()))?;
+    // The same checks as an upload: a correction the device would refuse is not evaluated.
+    cal.to_device()
+        .map_err(|e| anyhow::anyhow!("{}: refused: {e}", a.cal.display()))?;
     let corr = Correction::of(&cal);
     let truth = a.truth.as_ref().map(Truth::read).transpose()?;
     let mut rows_in = input::open_with(&a.input, &COLUMNS, &[])?;

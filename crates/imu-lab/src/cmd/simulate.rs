@@ -163,6 +163,12 @@ fn trajectory(args: &Args) -> Result<()> {
     if let [x, y, z] = args.accel_scale[..] {
         part.accel_scale = [x, y, z];
     }
+    if args.rate > 1e6 {
+        bail!(
+            "--rate {} Hz with --trajectory: the stream's stamps are whole µs, so at most 1e6 Hz",
+            args.rate
+        );
+    }
     let seconds = args.samples as f64 / args.rate;
     let result = match &args.output {
         Some(p) => {
@@ -207,12 +213,23 @@ fn write_rows<W: Write>(w: W, rate: f64, names: &[String], data: &[Vec<f64>]) ->
     Ok(())
 }
 
+/// Most samples per column: every column is generated in memory (8 bytes a sample, and the
+/// generators' own buffers) before it is written; 2²⁸ is 3.1 days at 1 kHz, 2 GiB a column.
+const MAX_SAMPLES: usize = 1 << 28;
+
 pub fn run(args: Args) -> Result<()> {
-    if !(args.rate > 0.0 && args.rate.is_finite()) {
-        bail!("--rate {}: must be a positive number of Hz", args.rate);
-    }
+    crate::input::check_rate(args.rate, "--rate")?;
     if args.samples < 3 {
         bail!("--samples {}: at least 3 needed", args.samples);
+    }
+    if args.samples > MAX_SAMPLES {
+        bail!(
+            "--samples {}: at most {MAX_SAMPLES} ({} s at --rate {} Hz); each column is built in \
+             memory, 8 bytes a sample: simulate a longer record in parts (--seed)",
+            args.samples,
+            MAX_SAMPLES as f64 / args.rate,
+            args.rate
+        );
     }
     if args.trajectory.is_some() {
         return trajectory(&args);
@@ -378,6 +395,12 @@ pub fn run(args: Args) -> Result<()> {
             .ok_or_else(|| anyhow!("--columns {c:?}: not a contract data column"))?;
         units.push(u);
     }
+    // The theory's file is created before the samples are made, so that a path that cannot be
+    // written fails before the record is written.
+    let theory_file = match &args.theory {
+        Some(p) => Some(File::create(p).with_context(|| format!("creating {}", p.display()))?),
+        None => None,
+    };
     let mut data = Vec::new();
     let mut cfg0 = None;
     let mut temp = None;
@@ -411,7 +434,7 @@ pub fn run(args: Args) -> Result<()> {
                 .context("writing stdout")?;
         }
     }
-    if let (Some(p), Some(cfg)) = (&args.theory, cfg0) {
+    if let (Some(p), Some(mut f), Some(cfg)) = (&args.theory, theory_file, cfg0) {
         let mut ms = Vec::new();
         let mut m = 1usize;
         while 2 * m <= args.samples / 2 {
@@ -432,7 +455,6 @@ pub fn run(args: Args) -> Result<()> {
                 })
                 .collect(),
         };
-        let mut f = File::create(p).with_context(|| format!("creating {}", p.display()))?;
         writeln!(f, "{}", serde_json::to_string_pretty(&th)?)
             .with_context(|| format!("writing {}", p.display()))?;
     }
