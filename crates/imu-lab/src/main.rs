@@ -1,6 +1,6 @@
 //! `imu-lab`: the pico-imu host lab. Each subcommand lives in `cmd/<name>.rs` and stays thin
 //! over the library crates.
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 mod calibration;
 mod cmd;
@@ -44,9 +44,22 @@ enum Command {
     Serve(cmd::serve::Args),
 }
 
+/// The command line, with negative numbers taken as values everywhere (`--rate -100` is then
+/// refused as a rate, not as an unknown flag `-1`).
+fn command_line() -> clap::Command {
+    fn negatives(c: clap::Command) -> clap::Command {
+        c.mut_args(|a| {
+            let values = a.get_action().takes_values();
+            a.allow_negative_numbers(values)
+        })
+        .mut_subcommands(negatives)
+    }
+    negatives(Cli::command())
+}
+
 fn main() {
     quiet_on_closed_pipe();
-    let cli = Cli::parse();
+    let cli = Cli::from_arg_matches(&command_line().get_matches()).unwrap_or_else(|e| e.exit());
     let result = match cli.command {
         Command::Adev(a) => cmd::adev::run(a),
         Command::Record(a) => cmd::record::run(a),

@@ -209,7 +209,7 @@ fn refusal(args: &[&str]) -> (Option<i32>, String) {
 }
 
 /// What the lab cannot do honestly is refused with exit code 1 and a message naming the option
-/// or key and the value: a record too long to build in memory (was an allocation failure and
+/// or key and the value: a negative rate (was "unexpected argument '-1'"), a record too long to build in memory (was an allocation failure and
 /// an abort), fewer blocks than an uncertainty needs (was silently raised to 4), a heading
 /// evaluated with a calibration the device would refuse (was evaluated), and a theory file
 /// that cannot be written (was found only after the record was written).
@@ -222,7 +222,20 @@ fn the_refusals_name_what_and_where() {
     f.accel.scale[1] = 1.9;
     std::fs::write(&bad, f.to_toml()).unwrap();
     let out = dir.path().join("o.csv").display().to_string();
-    let cases: [(Vec<&str>, &str); 4] = [
+    let cases: [(Vec<&str>, &str); 5] = [
+        // A negative number after a space is the option's value (clap took it for a flag).
+        (
+            vec![
+                "simulate",
+                "--samples",
+                "100",
+                "--white",
+                "1",
+                "--rate",
+                "-100",
+            ],
+            "--rate -100 Hz: a sample rate must be between",
+        ),
         (
             vec![
                 "simulate",
