@@ -254,3 +254,71 @@ fn the_temperature_coefficient_is_the_calibration_labs() {
         "calibration lab {k} vs noise lab {c} ± {s}"
     );
 }
+
+/// `export kalibr` on simulated white noise of a drawn density: every axis's N carries its 1σ
+/// and lies within 4σ of the truth, each density line is the noisiest axis's N in Kalibr's
+/// units, and the rate reads back as the record's (not 100.0000000000199).
+#[test]
+fn kalibr_export_gives_each_density_with_its_uncertainty() {
+    let key = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(1, |d| d.subsec_nanos());
+    let n_true = 0.005 + f64::from(key % 1000) * 1e-5;
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("six.csv");
+    let csv = csv.to_str().unwrap();
+    let white = format!("{n_true}");
+    let seed = format!("{key}");
+    run_ok([
+        "simulate",
+        "--samples",
+        "30000",
+        "--rate",
+        "100",
+        "--white",
+        &white,
+        "--seed",
+        &seed,
+        "--columns",
+        "gx,gy,gz,ax,ay,az",
+        "-o",
+        csv,
+    ]);
+    let out = run_ok(["export", "kalibr", csv]);
+    let text = String::from_utf8_lossy(&out.stdout).to_string();
+    let mut n_max: [f64; 2] = [0.0, 0.0];
+    for (i, axis) in ["gx", "gy", "gz", "ax", "ay", "az"].iter().enumerate() {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("#   {axis}: N = ")))
+            .unwrap_or_else(|| panic!("no line for {axis} in\n{text}"));
+        let rest = &line[format!("#   {axis}: N = ").len()..];
+        let mut it = rest.split_whitespace();
+        let n: f64 = it.next().unwrap().parse().unwrap();
+        assert_eq!(it.next(), Some("±"), "{line}");
+        let s: f64 = it.next().unwrap().parse().unwrap();
+        assert!(s > 0.0 && s < 0.1 * n, "{line}");
+        assert!(
+            (n - n_true).abs() < 4.0 * s,
+            "key {key}: {line} against N = {n_true}"
+        );
+        n_max[i / 3] = n_max[i / 3].max(n);
+    }
+    let value = |k: &str| -> f64 {
+        let l = text.lines().find(|l| l.starts_with(k)).unwrap();
+        l[k.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    // The per-axis lines have four significant digits.
+    let g = value("gyroscope_noise_density:") / n_max[0].to_radians();
+    let a = value("accelerometer_noise_density:") / n_max[1];
+    assert!(
+        (g - 1.0).abs() < 1e-3 && (a - 1.0).abs() < 1e-3,
+        "{g} {a}\n{text}"
+    );
+    assert_eq!(value("update_rate:"), 100.0, "{text}");
+}

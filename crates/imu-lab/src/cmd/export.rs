@@ -54,7 +54,11 @@ struct Axis {
     name: String,
     unit: String,
     n: f64,
+    /// 1σ of `n`.
+    n_sigma: f64,
     k: f64,
+    /// 1σ of `k` (when detected).
+    k_sigma: f64,
     k_is_bound: bool,
     adequate: bool,
 }
@@ -84,10 +88,10 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
         .fit(&lab.default_specs())
         .map_err(|e| anyhow!("{column}: {e}"))?;
     let f = &m.fit;
-    let n = f
+    let (n, n_sigma) = f
         .term(&Effect::White)
         .filter(|t| t.detected)
-        .map(|t| t.amplitude())
+        .map(|t| (t.amplitude(), t.amplitude_sigma()))
         .ok_or_else(|| anyhow!("{column}: no white noise detected; cannot give a noise density"))?;
     let kt = f.term(&Effect::RateRandomWalk).expect("default terms");
     let (k, k_is_bound) = if kt.detected {
@@ -99,7 +103,9 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
         name: column.into(),
         unit,
         n,
+        n_sigma,
         k,
+        k_sigma: kt.amplitude_sigma(),
         k_is_bound,
         adequate: m.adequate,
     })
@@ -152,12 +158,16 @@ pub fn run(args: Args) -> Result<()> {
     let describe = |v: &[Axis]| {
         v.iter()
             .map(|x| {
+                let k = if x.k_is_bound {
+                    format!("K < {}", sig(x.k, 3))
+                } else {
+                    format!("K = {} ± {}", sig(x.k, 3), sig(x.k_sigma, 2))
+                };
                 format!(
-                    "#   {}: N = {} {u}·√s, K {} {} {u}/√s{}",
+                    "#   {}: N = {} ± {} {u}·√s, {k} {u}/√s{}",
                     x.name,
                     sig(x.n, 4),
-                    if x.k_is_bound { "<" } else { "=" },
-                    sig(x.k, 3),
+                    sig(x.n_sigma, 2),
                     if x.adequate {
                         ""
                     } else {
@@ -177,7 +187,7 @@ pub fn run(args: Args) -> Result<()> {
          #   gyroscope_random_walk   [rad/s²/√Hz]  = K [deg/s/√s] × π/180\n\
          #   accelerometer_noise_density [m/s²/√Hz] = N [m/s²·√s]  (same number)\n\
          #   accelerometer_random_walk   [m/s³/√Hz] = K [m/s²/√s]  (same number)\n\
-         # The discrete per-sample σ would be density × √update_rate. K given as \"<\" is a 2σ upper\n\
+         # The discrete per-sample σ would be density × √update_rate. ± is 1σ; K given as \"<\" is a 2σ upper\n\
          # bound (not detected in this record). Many users inflate these values (×2–10) for\n\
          # unmodelled effects; that choice is left to you.\n\
          # Per axis:\n{g}\n{acc}\n\
@@ -186,7 +196,7 @@ pub fn run(args: Args) -> Result<()> {
          gyroscope_noise_density: {gn:.6e}\n\
          gyroscope_random_walk: {gk:.6e}\n\
          rostopic: {topic}\n\
-         update_rate: {rate}\n",
+         update_rate: {rate}  # Hz\n",
         file = a.input.file.display(),
         g = describe(&gyro),
         acc = describe(&accel),
@@ -195,7 +205,8 @@ pub fn run(args: Args) -> Result<()> {
         gn = imu.gyroscope_noise_density,
         gk = imu.gyroscope_random_walk,
         topic = a.rostopic,
-        rate = imu.update_rate,
+        // The rate read from the stamps to 9 significant digits (not 100.0000000000199).
+        rate = sig(imu.update_rate, 9),
     );
     match &a.output {
         Some(p) => std::fs::write(p, yaml).with_context(|| format!("writing {}", p.display()))?,
