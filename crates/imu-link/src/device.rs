@@ -136,6 +136,7 @@ pub fn calibration(link: &mut Link) -> Result<(Vec<u8>, CalStatus)> {
 /// `imu_cal::device::decode_blob` for a blob file) and waits for the device's answer; with
 /// `persist` the device also writes it to flash. A refusal is a [`CalibrationRefused`].
 pub fn upload_calibration(link: &mut Link, blob: &[u8], persist: bool) -> Result<()> {
+    let blob_bytes = blob;
     let blob = HVec::<u8, MAX_CAL_BLOB>::from_slice(blob).map_err(|_| {
         anyhow::anyhow!(
             "calibration blob of {} B exceeds {MAX_CAL_BLOB} B",
@@ -149,10 +150,38 @@ pub fn upload_calibration(link: &mut Link, blob: &[u8], persist: bool) -> Result
     )? {
         Reply::Ok => Ok(()),
         Reply::Error(ErrorCode::BadCalibration(p)) => {
-            Err(CalibrationRefused(cal_problem(&p)).into())
+            Err(CalibrationRefused(refusal_of(&p, blob_bytes)).into())
         }
         Reply::Error(e) => bail!("the device refused the calibration: {e:?}"),
         other => bail!("unexpected reply to SetCalibration: {other:?}"),
+    }
+}
+
+/// The device's refusal of `blob`, in words: for other ranges or parts, what the blob was
+/// fitted for (the wire carries only the reason), in the calibration file's keys.
+fn refusal_of(p: &CalProblem, blob: &[u8]) -> String {
+    use imu_cal::device::plausible::Num;
+    let why = cal_problem(p);
+    let fitted = imu_cal::device::decode_blob(blob)
+        .ok()
+        .and_then(|c| c.fitted_for().copied());
+    match (p, fitted) {
+        (CalProblem::OtherRanges, Some(f)) => format!(
+            "{why}: the file's accel.lsb_per_unit, gyro.lsb_per_unit and mag.lsb_per_unit \
+             ({}, {}, {} LSB per m/s², deg/s, µT) are the ranges ±{} g, ±{} deg/s, ±{} G",
+            Num(f64::from(f.lsb_per_unit[0])),
+            Num(f64::from(f.lsb_per_unit[1])),
+            Num(f64::from(f.lsb_per_unit[2])),
+            f.ranges.accel_g,
+            f.ranges.gyro_dps,
+            f.ranges.mag_gauss
+        ),
+        (CalProblem::OtherPart, Some(f)) => format!(
+            "{why}: the file's accel.part and mag.part are {} and {}",
+            f.imu.name(),
+            f.mag.name()
+        ),
+        _ => why,
     }
 }
 
@@ -384,6 +413,43 @@ mod tests {
         assert!(
             s.contains("200") && s.contains('5') && s.contains("unknown"),
             "{s}"
+        );
+    }
+
+    /// A refusal for other ranges or parts says what the blob was fitted for, in the file's
+    /// keys (the wire carries only the reason); the mirrored soft iron reads in the file's words.
+    #[test]
+    fn a_refusal_for_other_ranges_names_what_the_file_was_fitted_for() {
+        let mut f = imu_cal::file::CalFile::default();
+        f.accel.lsb_per_unit = 4096.0 / 9.80665;
+        f.gyro.lsb_per_unit = 65.5;
+        let blob = f.to_blob().unwrap();
+        let s = refusal_of(&imu_proto::CalProblem::OtherRanges, &blob);
+        assert!(
+            s.starts_with("fitted for other full-scale ranges")
+                && s.contains("accel.lsb_per_unit")
+                && s.contains("417.7, 65.5, 120 LSB")
+                && s.contains("±8 g, ±500 deg/s, ±2 G"),
+            "{s}"
+        );
+        let s = refusal_of(&imu_proto::CalProblem::OtherPart, &blob);
+        assert!(
+            s.ends_with("accel.part and mag.part are MPU-6050 and QMC5883L"),
+            "{s}"
+        );
+        // Nothing to add to a corrupt blob's reason.
+        let s = refusal_of(&imu_proto::CalProblem::OtherRanges, b"junk");
+        assert_eq!(s, cal_problem(&imu_proto::CalProblem::OtherRanges));
+        let p = imu_proto::CalProblem::Implausible {
+            key: imu_cal::device::Key::MagSoftIronDeterminant as u8,
+            axis: None,
+            value: -1.0,
+            lo: 0.042875,
+            hi: 27.0,
+        };
+        assert_eq!(
+            cal_problem(&p),
+            "mag.soft_iron determinant = −1 is outside 0.04287–27"
         );
     }
 
