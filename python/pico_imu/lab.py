@@ -292,7 +292,8 @@ class Calibration:
     misalignments dimensionless; the soft-iron matrix dimensionless), ``residual_rms`` and
     ``noise_floor`` (in ``unit``: what the model leaves and what the data's own noise would),
     ``adequate``, ``verdict``, ``missing`` (the effect the diagnosis names), ``explanation``,
-    ``steps`` and ``stop`` of the walk. :meth:`to_dict` is ``imu-lab calibrate --json``'s object;
+    ``steps`` and ``stop`` of the walk, ``implausible`` (``None`` when the model is within the
+    parts' datasheet bounds, else why :meth:`save` and an upload refuse it). :meth:`to_dict` is ``imu-lab calibrate --json``'s object;
     :meth:`save` writes the TOML calibration file the CLI and the device read."""
 
     def __init__(self, native):
@@ -312,6 +313,7 @@ class Calibration:
         self.explanation: str = diag["explanation"]
         self.steps: List[dict] = d.get("steps") or []
         self.stop: Optional[str] = d.get("stop")
+        self.implausible: Optional[str] = d.get("implausible")
 
     def to_dict(self) -> dict:
         """The JSON object ``imu-lab calibrate --json`` prints."""

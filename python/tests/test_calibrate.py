@@ -46,6 +46,7 @@ def test_to_dict_and_save_are_the_clis(rng, tmp_path, auto):
     same(c.to_dict(), c_json)
     assert c.sensor == "mag" and c.unit == "µT" and c.model == c_json["model"]
     assert c.residual_rms == c_json["residual_rms"] and c.adequate == c_json["diagnosis"]["adequate"]
+    assert c.implausible is None and c_json["implausible"] is None
     if auto:
         assert len(c.steps) == len(c_json["steps"]) and c.stop == c_json["stop"]
         assert c._repr_html_().count("<tr>") == len(c.steps) + 1 if c.steps else True
@@ -66,6 +67,8 @@ def test_an_implausible_calibration_is_refused_naming_key_axis_value_and_bound(r
     p = sphere(rng, tmp_path, hard=hard)
     c = pico_imu.calibrate("mag", pico_imu.read_csv(p), model=["hard_iron"])
     assert c.params["hard_iron"][axis] == pytest.approx(hard[axis], rel=0.05)
+    # the session says so before anything is saved, as the CLI's report does
+    assert c.implausible is not None and f"mag.hard_iron[{axis}]" in c.implausible
     out = tmp_path / "cal.toml"
     with pytest.raises(ValueError, match=rf"mag\.hard_iron.*\[{axis}\].*refused, not written|refused, not written.*mag\.hard_iron.*\[{axis}\]"):
         c.save(out)

@@ -4,6 +4,7 @@
 //! run of crates/imu-cal/tests/data (provenance there).
 use std::path::{Path, PathBuf};
 
+use imu_cal::device::plausible::Num;
 use serde_json::Value;
 
 mod common;
@@ -496,4 +497,61 @@ fn calibrate_out_refuses_an_implausible_file_and_leaves_it_unchanged() {
         ],
     );
     assert_eq!(std::fs::read_to_string(&out).unwrap(), before);
+}
+
+/// The report judges the fitted model against the datasheet bounds before anything is written:
+/// an adequate fit of an accelerometer whose scale no MPU-6050 has (a drawn 1.15–1.90 or
+/// 0.50–0.85 on a drawn axis: a wrong range or unit) is called NOT PLAUSIBLE with the key,
+/// axis, value and bound, in the text and in the JSON; a scale within ±3 % is within them.
+#[test]
+fn the_report_judges_the_model_against_the_datasheet_bounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let axis = random_below(3) as usize;
+    let k = random_below(115);
+    let bad = if k < 75 {
+        1.15 + k as f64 / 100.0
+    } else {
+        0.5 + (k - 75) as f64 / 100.0
+    };
+    for (scale, plausible) in [(bad, false), (1.0 + (k % 5) as f64 / 100.0 - 0.02, true)] {
+        let mut s = [1.0; 3];
+        s[axis] = scale;
+        let arg = format!("{},{},{}", s[0], s[1], s[2]);
+        let csv = dir.path().join("poses.csv");
+        let csv = csv.to_str().unwrap();
+        run_ok([
+            "simulate",
+            "--trajectory",
+            "calibration",
+            "--rate",
+            "100",
+            "--samples",
+            "20000",
+            "--accel-scale",
+            &arg,
+            "-o",
+            csv,
+        ]);
+        let text = String::from_utf8(run_ok(["calibrate", "accel", csv]).stdout).unwrap();
+        let v = stdout_json(&run_ok(["calibrate", "accel", csv, "--json"]));
+        let fitted = v["params"]["scale"][axis].as_f64().unwrap();
+        assert!(
+            (fitted - scale).abs() < 0.01,
+            "scale {scale}: fitted {fitted}"
+        );
+        if plausible {
+            assert!(
+                text.contains("plausibility: within the parts' datasheet bounds"),
+                "{text}"
+            );
+            assert!(v["implausible"].is_null(), "{v}");
+        } else {
+            let want = format!("accel.scale[{axis}] = {} is outside 0.91–1.09", Num(fitted));
+            assert!(
+                text.contains(&format!("plausibility: NOT PLAUSIBLE, {want}")),
+                "{text}"
+            );
+            assert_eq!(v["implausible"], want.as_str());
+        }
+    }
 }

@@ -86,6 +86,9 @@ struct JsonOut<'a> {
     n_residuals: usize,
     excluded: JsonExcluded<'a>,
     notes: &'a [String],
+    /// The fitted model against the parts' datasheet bounds: `null` within them, else why
+    /// `--out` and an upload would refuse it (or why it cannot be judged).
+    implausible: Option<String>,
     diagnosis: JsonDiagnosis<'a>,
     /// The step the diagnosis proposes from this model (what `--auto` would add next).
     step: Option<JsonNext<'a>>,
@@ -123,6 +126,10 @@ pub fn json_out(l: &Loaded, run: &Outcome) -> String {
             outliers: m.outliers,
         },
         notes: &l.notes,
+        implausible: match super::plausibility(l, run) {
+            Ok(why) => why,
+            Err(why) => Some(why),
+        },
         diagnosis: JsonDiagnosis {
             verdict: m.verdict,
             adequate: m.adequate(),

@@ -260,15 +260,33 @@ fn model_text(p: &dyn Problem, r: &Report, heading: &str) -> String {
 pub fn text_report(l: &Loaded, run: &Outcome) -> String {
     let p = l.data.problem();
     let mut s = header(l);
-    let Some(stop) = run.stop else {
-        return s + &model_text(p, &run.report, "model");
-    };
-    s += &format!(
-        "walk from model {}: diagnose → add the named effect → refit\n{}stop: {stop}.\n",
-        names(run.start.effects()),
-        super::steps::table(&run.steps, "s²/σ²", "residual RMS")
-    );
-    s + &model_text(p, &run.report, "final model")
+    match run.stop {
+        None => s += &model_text(p, &run.report, "model"),
+        Some(stop) => {
+            s += &format!(
+                "walk from model {}: diagnose → add the named effect → refit\n{}stop: {stop}.\n",
+                names(run.start.effects()),
+                super::steps::table(&run.steps, "s²/σ²", "residual RMS")
+            );
+            s += &model_text(p, &run.report, "final model");
+        }
+    }
+    s + &plausibility_line(l, run)
+}
+
+/// The fitted model against the parts' datasheet bounds, one line: an adequate fit of an
+/// impossible part (a wrong range or unit) is still refused by `--out` and by an upload.
+fn plausibility_line(l: &Loaded, run: &Outcome) -> String {
+    match imu_cal::session::plausibility(l, run) {
+        Ok(None) => "plausibility: within the parts' datasheet bounds (docs/calibration.md, \
+                     \"Plausibility\")\n"
+            .into(),
+        Ok(Some(why)) => format!(
+            "plausibility: NOT PLAUSIBLE, {why}: a wrong range or unit? --out and an upload \
+             refuse it\n"
+        ),
+        Err(why) => format!("plausibility: {why}\n"),
+    }
 }
 
 /// A self-contained HTML page: the text report and the figure.
