@@ -182,8 +182,9 @@ class Fit:
     physics: Dict[str, str]
     """Effect name → its physical mechanism (the model's effects and the missing one)."""
     table: Dict[str, npt.NDArray[np.float64]]
-    """Per τ: ``tau_s`` (s), ``dev``/``lo``/``hi``/``model`` (unit), ``residual`` (CI
-    half-widths), ``z``, ``edf``, ``edf_model``."""
+    """Per τ: ``tau_s`` (s), ``dev``/``lo``/``hi``/``model``/``model_sigma`` (unit; the last the
+    model's 1σ from its parameters), ``residual`` (CI half-widths), ``z``, ``edf``,
+    ``edf_model``."""
     steps: List[Step]
     stop: Optional[str]
     def term(self, effect: str) -> Term: ...

@@ -92,7 +92,8 @@ class Fit:
         self.verdict: str = native.verdict()
         self.table: Dict[str, np.ndarray] = {
             k: np.array([np.nan if r[k] is None else r[k] for r in d["adev"]], dtype=float)
-            for k in ("tau_s", "dev", "lo", "hi", "model", "residual", "z", "edf", "edf_model")
+            for k in ("tau_s", "dev", "lo", "hi", "model", "model_sigma", "residual", "z", "edf",
+                      "edf_model")
         }
         self.steps: List[Step] = [Step(**s) for s in d["steps"]]
         self.stop: Optional[str] = d["stop"]

@@ -420,6 +420,49 @@ impl Fit {
         self.param_index.len()
     }
 
+    /// 1σ of the model's Allan deviation at point `i`, propagated from the free parameters'
+    /// covariance (`param_cov`: a coefficient's derivative is its basis at the point, a
+    /// non-linear parameter's a central difference) plus each known term's own σ (estimated
+    /// outside the Allan fit, independent of it): δσ = δ(σ²)/(2σ). NaN when the model's
+    /// variance is not positive.
+    pub fn model_dev_sigma(&self, i: usize) -> f64 {
+        let avar = self.model_avar[i];
+        if !(avar > 0.0) {
+            return f64::NAN;
+        }
+        let tau = self.points[i].tau;
+        let g: Vec<f64> = self
+            .param_index
+            .iter()
+            .map(|&(k, j)| {
+                let t = &self.terms[k];
+                if j == 0 {
+                    return self.per_term_basis[k][i];
+                }
+                let mut tt = t.clone();
+                let x = t.theta[j - 1];
+                let h = (x.abs() * 1e-6).max(1e-12);
+                tt.theta[j - 1] = x + h;
+                let up = tt.avar(tau, &self.ctx);
+                tt.theta[j - 1] = x - h;
+                let down = tt.avar(tau, &self.ctx);
+                (up - down) / (2.0 * h)
+            })
+            .collect();
+        let mut var = 0.0;
+        for (a, ga) in g.iter().enumerate() {
+            for (b, gb) in g.iter().enumerate() {
+                var += ga * self.param_cov[(a, b)] * gb;
+            }
+        }
+        for (k, t) in self.terms.iter().enumerate() {
+            if t.known && t.coef_sigma.is_finite() {
+                var += (self.per_term_basis[k][i] * t.coef_sigma).powi(2);
+            }
+        }
+        var.max(0.0).sqrt() / (2.0 * avar.sqrt())
+    }
+
     /// This term's share of the model variance at each point.
     pub fn term_avar(&self, k: usize) -> Vec<f64> {
         let t = &self.terms[k];

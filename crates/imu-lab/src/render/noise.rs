@@ -164,27 +164,30 @@ pub fn html_table(rows: &[ParamRow]) -> String {
     s + "</table>\n"
 }
 
-/// A per-τ table: τ, measured σ, bounds, model, residual, z.
+/// A per-τ table: τ, measured σ and its 68.3 % bounds, the model and its 1σ (all in the
+/// data's unit, named in the σ column's head), residual, EDF.
 pub fn tau_table(fit: &Fit, a: &Assessment, unit: &str) -> String {
     let mut s = format!(
-        "  {:>10}  {:>11}  {:>11}  {:>11}  {:>11}  {:>7}  {:>6}\n",
+        "  {:>10}  {:>13}  {:>13}  {:>13}  {:>13}  {:>13}  {:>7}  {:>6}\n",
         "τ [s]",
         format!("σ [{unit}]"),
-        "lo",
-        "hi",
-        "model",
+        format!("lo [{unit}]"),
+        format!("hi [{unit}]"),
+        format!("model [{unit}]"),
+        format!("± 1σ [{unit}]"),
         "r",
         "edf"
     );
     for (i, p) in fit.points.iter().enumerate() {
         let _ = writeln!(
             s,
-            "  {:>10}  {:>11.4e}  {:>11.4e}  {:>11.4e}  {:>11.4e}  {:>7.2}{} {:>6}",
+            "  {:>10}  {:>13.4e}  {:>13.4e}  {:>13.4e}  {:>13.4e}  {:>13.2e}  {:>7.2}{} {:>6}",
             sig(p.tau, 4),
             p.dev,
             p.lo,
             p.hi,
             fit.model_avar[i].max(0.0).sqrt(),
+            fit.model_dev_sigma(i),
             a.residuals[i],
             match a.standing(i) {
                 Standing::Failing => "!",

@@ -41,6 +41,8 @@ pub struct JsonPoint {
     pub lo: f64,
     pub hi: f64,
     pub model: f64,
+    /// 1σ of `model` from the parameters' covariance (null where the model's variance is 0).
+    pub model_sigma: f64,
     pub residual: f64,
     pub z: f64,
     pub edf: f64,
@@ -245,6 +247,7 @@ impl Session {
                     lo: p.lo,
                     hi: p.hi,
                     model: f.model_avar[i].max(0.0).sqrt(),
+                    model_sigma: f.model_dev_sigma(i),
                     residual: last.model.assessment.residuals[i],
                     z: last.model.assessment.z[i],
                     edf: p.edf,
