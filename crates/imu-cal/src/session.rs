@@ -608,17 +608,22 @@ pub fn run(loaded: &Loaded, o: &Options) -> Result<Outcome, String> {
 /// the last model's parameters, refused — naming the key, axis, value and bound — unless the
 /// device can hold it within the parts' datasheet bounds and its unit is the file's. Returns
 /// the new TOML text.
-/// The fitted model against the parts' datasheet bounds (docs/calibration.md,
-/// "Plausibility"): `Ok(None)` within them, `Ok(Some(why))` outside (what `--out` and an
-/// upload would refuse, in the file's words), `Err` when this fit's unit is not the
-/// calibration file's (nothing to judge it by).
-pub fn plausibility(loaded: &Loaded, run: &Outcome) -> Result<Option<String>, String> {
+/// The unit the calibration file holds this fit's sensor in, and the fit's own.
+fn file_units(loaded: &Loaded) -> (&'static str, &str) {
     let sensor = match loaded.data {
         Data::Accel(_) => Sensor::Accel,
         Data::Gyro(_) | Data::GyroRot(_) => Sensor::Gyro,
         Data::Mag(_) => Sensor::Mag,
     };
-    let (contract, unit) = (sensor.contract_unit(), loaded.data.unit());
+    (sensor.contract_unit(), loaded.data.unit())
+}
+
+/// The fitted model against the parts' datasheet bounds (docs/calibration.md,
+/// "Plausibility"): `Ok(None)` within them, `Ok(Some(why))` outside (what `--out` and an
+/// upload would refuse, in the file's words), `Err` when this fit's unit is not the
+/// calibration file's (nothing to judge it by).
+pub fn plausibility(loaded: &Loaded, run: &Outcome) -> Result<Option<String>, String> {
+    let (contract, unit) = file_units(loaded);
     if unit != contract {
         return Err(format!(
             "not judged: the datasheet bounds are in {contract}, this fit is in {unit}"
@@ -635,12 +640,7 @@ pub fn update_file(
     loaded: &Loaded,
     run: &Outcome,
 ) -> Result<String, String> {
-    let sensor = match loaded.data {
-        Data::Accel(_) => Sensor::Accel,
-        Data::Gyro(_) | Data::GyroRot(_) => Sensor::Gyro,
-        Data::Mag(_) => Sensor::Mag,
-    };
-    let (contract, unit) = (sensor.contract_unit(), loaded.data.unit());
+    let (contract, unit) = file_units(loaded);
     if unit != contract {
         return Err(format!(
             "the calibration file holds {contract}, but this fit is in {unit}; convert the \

@@ -209,10 +209,11 @@ fn refusal(args: &[&str]) -> (Option<i32>, String) {
 }
 
 /// What the lab cannot do honestly is refused with exit code 1 and a message naming the option
-/// or key and the value: a negative rate (was "unexpected argument '-1'"), a record too long to build in memory (was an allocation failure and
-/// an abort), fewer blocks than an uncertainty needs (was silently raised to 4), a heading
-/// evaluated with a calibration the device would refuse (was evaluated), and a theory file
-/// that cannot be written (was found only after the record was written).
+/// or key and the value: a negative rate (was "unexpected argument '-1'"), a record too long to
+/// build in memory (was an allocation failure and an abort), fewer blocks than an uncertainty
+/// needs (was silently raised to 4), a heading evaluated with a calibration the device would
+/// refuse (was evaluated), and a theory file that cannot be written (was found only after the
+/// record was written).
 #[test]
 fn the_refusals_name_what_and_where() {
     let dir = tempfile::tempdir().unwrap();
@@ -222,56 +223,41 @@ fn the_refusals_name_what_and_where() {
     f.accel.scale[1] = 1.9;
     std::fs::write(&bad, f.to_toml()).unwrap();
     let out = dir.path().join("o.csv").display().to_string();
-    let cases: [(Vec<&str>, &str); 5] = [
+    let bad = bad.display().to_string();
+    // Arguments split at spaces, with REST, BAD and OUT standing for the files' paths.
+    let cases = [
         // A negative number after a space is the option's value (clap took it for a flag).
         (
-            vec![
-                "simulate",
-                "--samples",
-                "100",
-                "--white",
-                "1",
-                "--rate",
-                "-100",
-            ],
+            "simulate --samples 100 --white 1 --rate -100",
             "--rate -100 Hz: a sample rate must be between",
         ),
         (
-            vec![
-                "simulate",
-                "--samples",
-                "100000000000000",
-                "--white",
-                "1",
-                "-o",
-                &out,
-            ],
+            "simulate --samples 100000000000000 --white 1 -o OUT",
             "--samples 100000000000000: at most 268435456",
         ),
         (
-            vec!["calibrate", "gyro", &rest, "--blocks", "2"],
+            "calibrate gyro REST --blocks 2",
             "--blocks 2: at least 4 blocks",
         ),
         (
-            vec!["heading", &rest, "--cal", bad.to_str().unwrap()],
+            "heading REST --cal BAD",
             "refused: accel.scale[1] = 1.9 is outside 0.91–1.09",
         ),
         (
-            vec![
-                "simulate",
-                "--samples",
-                "100",
-                "--white",
-                "1",
-                "-o",
-                &out,
-                "--theory",
-                "/",
-            ],
+            "simulate --samples 100 --white 1 -o OUT --theory /",
             "creating /",
         ),
     ];
-    for (args, want) in cases {
+    for (line, want) in cases {
+        let args: Vec<&str> = line
+            .split_whitespace()
+            .map(|a| match a {
+                "REST" => rest.as_str(),
+                "BAD" => bad.as_str(),
+                "OUT" => out.as_str(),
+                a => a,
+            })
+            .collect();
         let (code, err) = refusal(&args);
         assert_eq!(code, Some(1), "{args:?}: {err}");
         assert!(err.contains(want), "{args:?}: {err}");
