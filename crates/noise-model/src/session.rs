@@ -258,6 +258,50 @@ pub fn names(effects: &[Effect]) -> String {
         .join(" + ")
 }
 
+/// Readings a temperature column may hold, °C: beyond them no IMU operates (and a value there
+/// is a wrong unit or a corrupt field, which would outweigh every other reading).
+pub const TEMP_RANGE_C: (f64, f64) = (-100.0, 200.0);
+
+/// The temperature column `t` beside `n` samples, ready for the lab: missing readings (NaN)
+/// filled by linear interpolation between the nearest readings on either side (the nearest one
+/// at the ends), `None` when none is there; an infinite reading or one outside
+/// [`TEMP_RANGE_C`] is refused naming its sample. (Passed with its NaN, one missing reading
+/// made every temperature statistic NaN and the lab dropped the column.)
+pub fn temperature(t: &[f64], n: usize, label: &str) -> Result<Option<Vec<f64>>, String> {
+    if t.len() != n {
+        return Err(format!(
+            "{label}: {} temperature readings for {n} samples",
+            t.len()
+        ));
+    }
+    let (lo, hi) = TEMP_RANGE_C;
+    if let Some((i, v)) = t
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !v.is_nan() && !(lo..=hi).contains(*v))
+    {
+        return Err(format!(
+            "{label}: temperature sample {i} = {v} °C is outside {lo}…{hi} °C, where no IMU \
+             operates (a wrong unit or a corrupt field)"
+        ));
+    }
+    let known: Vec<usize> = (0..n).filter(|&i| !t[i].is_nan()).collect();
+    let (Some(&first), Some(&last)) = (known.first(), known.last()) else {
+        return Ok(None);
+    };
+    let mut out = t.to_vec();
+    out[..first].fill(t[first]);
+    out[last + 1..].fill(t[last]);
+    for w in known.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        for (i, o) in out.iter_mut().enumerate().take(b).skip(a + 1) {
+            let f = (i - a) as f64 / (b - a) as f64;
+            *o = t[a] + f * (t[b] - t[a]);
+        }
+    }
+    Ok(Some(out))
+}
+
 /// The session: the lab of `input` (its overlapping Allan deviation at octave τ as the fit's
 /// points), the start model fitted and the walk from it, each model diagnosed, and the
 /// recalibration period when a tolerance is given. Errors name the option or the data.
@@ -274,11 +318,16 @@ pub fn run(input: &Input, o: &Options) -> Result<Session, String> {
     let rows = deviation_segments(&segs, tau0, Stat::Oadev, &TauSet::Octave)
         .map_err(|e| format!("{}: {e}", input.label))?;
     let (points, skipped) = Point::from_rows(&rows);
+    let temp = input
+        .temp
+        .map(|t| temperature(t, input.y.len(), input.label))
+        .transpose()?
+        .flatten();
     let lab = NoiseLab::new(Record {
         y: input.y,
         tau0,
         segments: nominal_segments(input.segments, input.timing),
-        temp: input.temp,
+        temp: temp.as_deref(),
         timing: input.timing.cloned(),
         points: points.clone(),
         user_effects: o.user.clone(),
@@ -573,6 +622,83 @@ mod tests {
             assert_eq!(units.len(), s.last().model.fit.terms.len());
             assert!(units.iter().all(|u| !u[0].1.is_empty()));
         }
+    }
+
+    /// Missing temperature readings are filled between their neighbours (the nearest at the
+    /// ends); none at all is no column; an infinite or impossible one is refused by sample.
+    #[test]
+    fn missing_temperatures_are_interpolated_and_impossible_ones_refused() {
+        let nan = f64::NAN;
+        let t = [nan, 20.0, nan, nan, 23.0, nan];
+        assert_eq!(
+            temperature(&t, 6, "x").unwrap().unwrap(),
+            [20.0, 20.0, 21.0, 22.0, 23.0, 23.0]
+        );
+        assert_eq!(temperature(&[nan; 4], 4, "x").unwrap(), None);
+        for (v, want) in [
+            (f64::INFINITY, "x: temperature sample 2 = inf °C is outside"),
+            (
+                1e6,
+                "x: temperature sample 2 = 1000000 °C is outside -100…200 °C",
+            ),
+        ] {
+            let e = temperature(&[20.0, 21.0, v], 3, "x").unwrap_err();
+            assert!(e.starts_with(want), "{e}");
+        }
+        assert!(temperature(&[20.0], 2, "x").is_err());
+    }
+
+    /// A temperature coefficient is found the same with readings missing at random (a CSV's
+    /// empty fields): one missing reading used to drop the column.
+    #[test]
+    fn a_temperature_coefficient_survives_missing_readings() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(7, |d| d.subsec_nanos() as u64);
+        let n = 30_000;
+        let coef = 0.005 + (key % 10) as f64 * 1e-3;
+        let temp: Vec<f64> = (0..n)
+            .map(|i| 20.0 + 15.0 * (1.0 - (-(i as f64) / 8_000.0).exp()))
+            .collect();
+        let noise = white(n, key, 0.02);
+        let y: Vec<f64> = (0..n).map(|i| noise[i] + coef * (temp[i] - 20.0)).collect();
+        let segs = [Range { start: 0, end: n }];
+        let o = Options {
+            terms: vec!["white".into(), "temperature".into()],
+            ..Options::default()
+        };
+        let coef_of = |t: &[f64]| {
+            let s = run(
+                &Input {
+                    temp: Some(t),
+                    ..input(&y, &segs)
+                },
+                &o,
+            )
+            .unwrap();
+            let t = s
+                .last()
+                .model
+                .fit
+                .term(&Effect::Temperature)
+                .cloned()
+                .unwrap();
+            (t.amplitude(), t.amplitude_sigma(), t.detected)
+        };
+        let full = coef_of(&temp);
+        let mut holed = temp.clone();
+        let mut g = crate::test_noise(key ^ 0x55);
+        for _ in 0..(1 + key % 300) {
+            let i = ((g().abs() * 1e6) as usize) % n;
+            holed[i] = f64::NAN;
+        }
+        holed[0] = f64::NAN;
+        let with_holes = coef_of(&holed);
+        assert!(full.2 && with_holes.2, "key {key}: {full:?} {with_holes:?}");
+        assert!(
+            (full.0 - coef).abs() < 4.0 * full.1 && (with_holes.0 - full.0).abs() < 0.5 * full.1,
+            "key {key}: {coef} against {full:?} and, with holes, {with_holes:?}"
+        );
     }
 
     #[test]
