@@ -255,12 +255,14 @@ def fit(y, rate: Optional[float] = None, unit: Optional[str] = None, terms: Sequ
         if column is None:
             raise ValueError("column: give the column of the recording to fit (e.g. column='gx')")
         data = rec[column]
+        # Times given beside a recording replace its own, and their rate with them.
+        if rate is None and t is None:
+            rate = rec.rate_hz
         t = rec.t if t is None else t
         gap_before = rec.columns.get("gap_before")
         if temp is None:
             temp = rec.columns.get("temp")
         unit = rec.units.get(column, "") if unit is None else unit
-        rate = rate if rate is not None else rec.rate_hz
     else:
         data = y
     x = _as_samples(data, "y")
@@ -283,6 +285,12 @@ def fit(y, rate: Optional[float] = None, unit: Optional[str] = None, terms: Sequ
 #: The contract's unit of each sensor column (the calibration file holds these).
 _CONTRACT_UNITS = {"ax": "m/s²", "ay": "m/s²", "az": "m/s²", "gx": "deg/s", "gy": "deg/s",
                    "gz": "deg/s", "mx": "µT", "my": "µT", "mz": "µT", "temp": "°C"}
+
+
+def _g(x: Optional[float], digits: int) -> str:
+    """``x`` with ``digits`` significant digits; "n/a" where the JSON had none (a NaN, e.g. no
+    noise floor from a single pose)."""
+    return "n/a" if x is None else f"{x:.{digits}g}"
 
 
 class Calibration:
@@ -338,13 +346,14 @@ class Calibration:
 
     def __repr__(self) -> str:
         return (f"<Calibration {self.sensor} [{self.unit}]: {' + '.join(self.model)}; residual "
-                f"{self.residual_rms:.3g} {self.unit} against a noise floor of {self.noise_floor:.3g} "
-                f"{self.unit}; {'adequate' if self.adequate else 'not adequate'}>")
+                f"{_g(self.residual_rms, 3)} {self.unit} against a noise floor of "
+                f"{_g(self.noise_floor, 3)} {self.unit}; "
+                f"{'adequate' if self.adequate else 'not adequate'}>")
 
     def _repr_html_(self) -> str:
         e = html.escape
         out = [f"<p><b>{e(self.sensor)}</b> [{e(self.unit)}]: {e(' + '.join(self.model))}; residual "
-               f"RMS {self.residual_rms:.4g} {e(self.unit)}, noise floor {self.noise_floor:.4g} "
+               f"RMS {_g(self.residual_rms, 4)} {e(self.unit)}, noise floor {_g(self.noise_floor, 4)} "
                f"{e(self.unit)}; {'ADEQUATE' if self.adequate else 'NOT ADEQUATE'}</p>"]
         if self.steps:
             rows = "".join(

@@ -55,7 +55,10 @@ impl CsvChunks {
 
     fn read_chunk(&mut self) -> PyResult<(usize, Vec<Vec<f64>>, Vec<u64>)> {
         let start = self.rows;
-        let mut cols: Vec<Vec<f64>> = vec![Vec::with_capacity(self.chunk); self.names.len()];
+        // Reserved up to 65 536 rows, grown beyond as rows come: `rows` is a most, and a huge
+        // one (10¹²) reserved at once aborted the interpreter.
+        let mut cols: Vec<Vec<f64>> =
+            vec![Vec::with_capacity(self.chunk.min(1 << 16)); self.names.len()];
         let mut gaps = Vec::new();
         while cols[0].len() < self.chunk {
             let Some((row, line)) = self.next_row()? else {

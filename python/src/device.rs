@@ -636,6 +636,38 @@ pub fn write_record_csv(
             }
         }
     }
+    // Every value checked before the file is created: what the reader would refuse, or what
+    // the writer would change, is refused here by column and row (was written, truncating the
+    // file first, and found by the reader or not at all).
+    for (name, c) in COLUMNS.iter().zip(&cols) {
+        let Some(c) = c else { continue };
+        let bad = |k: usize, why: &str| {
+            Err(value_error(format!(
+                "Recording.to_csv: column {name} row {k} = {}: {why}",
+                c[k]
+            )))
+        };
+        for k in 0..n {
+            let v = c[k];
+            match *name {
+                "t" if !v.is_finite() => return bad(k, "not a time"),
+                "t" if k > 0 && v < c[k - 1] => return bad(k, "before the row above it"),
+                "gap_before" if !(v.is_nan() || (0.0..1e15).contains(&v) && v.fract() == 0.0) => {
+                    return bad(k, "not a count of missing samples (a whole number ≥ 0)")
+                }
+                _ if v.is_infinite() => {
+                    return bad(
+                        k,
+                        "not a value (a missing one is NaN, written as an empty field)",
+                    )
+                }
+                _ if v.abs() > f64::from(f32::MAX) => {
+                    return bad(k, "beyond the file's single precision")
+                }
+                _ => {}
+            }
+        }
+    }
     let file = File::create(path).map_err(|e| PyOSError::new_err(format!("{path}: {e}")))?;
     py.detach(|| {
         guarded("Recording.to_csv", || {

@@ -105,3 +105,20 @@ def test_bad_inputs_are_named(rng, tmp_path):
         pico_imu.calibrate("accel", acc, rate=100.0, window=0.0)
     with pytest.raises(ValueError, match=r"column mx missing"):
         pico_imu.calibrate("mag", acc, rate=100.0)
+
+
+def test_a_calibration_the_data_do_not_determine_shows_and_is_not_saved(rng, tmp_path):
+    # one pose (the board never turned): offset and scale have no finite σ; a column of exact
+    # zeros has no noise floor either (shown as n/a, where repr raised a TypeError)
+    n = int(rng.integers(2_000, 6_000))
+    g = rng.normal(0, 0.01, (3, n)) + np.array([[0.1], [-0.2], [9.8]])
+    c = pico_imu.calibrate("accel", {"ax": g[0], "ay": g[1], "az": g[2]}, rate=100.0)
+    assert not c.adequate and repr(c) and c._repr_html_()
+    z = np.zeros(n)
+    zeros = pico_imu.calibrate("accel", {"ax": z, "ay": z, "az": z}, rate=100.0)
+    assert "n/a" in repr(zeros) and "n/a" in zeros._repr_html_()
+    assert c.implausible is not None and "do not determine" in c.implausible
+    out = tmp_path / "cal.toml"
+    with pytest.raises(ValueError, match="refused, not written: the data do not determine offset.x"):
+        c.save(out)
+    assert not out.exists()

@@ -164,6 +164,16 @@ def test_bad_inputs_are_named(rng, tmp_path):
             pico_imu.fit(y, rate=rate)
     with pytest.raises(ValueError, match="rate: give the sample rate"):
         pico_imu.fit(y)
+    # a rate that contradicts the stamps (here 10×) is refused, not fitted off by √10
+    t = np.arange(len(y)) / 100.0
+    with pytest.raises(ValueError, match=r"rate=1000: disagrees with t, whose spacing is 0\.01 s \(100 Hz\)"):
+        pico_imu.fit(y, rate=1000.0, t=t)
+    assert pico_imu.fit(y, t=t).rate_hz == pytest.approx(100.0)
+    # a temperature no IMU reads is refused by sample
+    temp = np.full(len(y), 25.0)
+    temp[i] = 1e6
+    with pytest.raises(ValueError, match=rf"temperature sample {i} = 1000000 °C is outside"):
+        pico_imu.fit(y, rate=100.0, temp=temp)
     with pytest.raises(ValueError, match=rf"temp: {len(y) - 1} values for {len(y)} samples"):
         pico_imu.fit(y, rate=100.0, temp=np.zeros(len(y) - 1))
     with pytest.raises(ValueError, match="column: give the column"):

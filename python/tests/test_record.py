@@ -85,3 +85,27 @@ def test_table_plot_draws_the_rows_with_their_bounds(rng):
     highs = np.array([s[1][1] for s in segs])
     np.testing.assert_allclose(lows, table.lo[ok], rtol=1e-12)
     np.testing.assert_allclose(highs, table.hi[ok], rtol=1e-12)
+
+
+def test_to_csv_refuses_what_it_cannot_write_by_column_and_row(rng, tmp_path):
+    n = int(rng.integers(200, 2_000))
+    t = np.arange(n) / 100.0
+    cols = {c: rng.normal(0, 1, n) for c in ("ax", "ay", "az", "gx", "gy", "gz", "mx", "my", "mz")}
+    cols["gap_before"] = np.zeros(n)
+    p = tmp_path / "rec.csv"
+    write(p, t, cols)
+    rec = pico_imu.read_csv(p)
+    out = tmp_path / "out.csv"
+    rec.to_csv(out)
+    np.testing.assert_allclose(pico_imu.read_csv(out)["gx"], cols["gx"], rtol=1e-6)
+    good = out.read_text()
+    k = int(rng.integers(1, n))
+    for col, value, why in (("gx", np.inf, "not a value"), ("mz", 1e300, "beyond the file's single precision"),
+                            ("gap_before", -3.0, "not a count"), ("gap_before", 0.5, "not a count"),
+                            ("t", -1.0, "before the row above it"), ("t", np.nan, "not a time")):
+        bad = pico_imu.read_csv(p)
+        bad.columns[col] = bad.columns[col].copy()
+        bad.columns[col][k] = value
+        with pytest.raises(ValueError, match=rf"column {col} row {k} = .*: {why}"):
+            bad.to_csv(out)
+        assert out.read_text() == good, f"{col}: the file was touched"

@@ -161,14 +161,20 @@ impl TauSet {
                 if *k == 0 {
                     return Err(AllanError::BadTauSet("0 points per octave"));
                 }
-                let mut i = 0u32;
+                // From each m straight to the first i whose m is larger (2^(i/k) ≥ m + ½): at
+                // most one step per distinct m, however many points per octave (stepping every
+                // i, 10⁹/octave never ended and held every duplicate in memory first).
+                let k = f64::from(*k);
+                let mut i = 0f64;
                 loop {
-                    let m = 2f64.powf(i as f64 / *k as f64).round() as u64;
+                    let m = 2f64.powf(i / k).round() as u64;
                     if m > max_m {
                         break;
                     }
-                    out.push(m);
-                    i += 1;
+                    if out.last() != Some(&m) {
+                        out.push(m);
+                    }
+                    i = (k * (m as f64 + 0.5).log2()).ceil().max(i + 1.0);
                 }
             }
             TauSet::List(ms) => {
@@ -742,6 +748,37 @@ fn edf_for(stat: Stat, alpha: i32, m: f64, np: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `N/octave` is every distinct round(2^(i/N)) up to the largest m, as stepping i one by
+    /// one gives (drawn N and largest m), and a huge N is every m, at once.
+    #[test]
+    fn per_octave_points_are_the_distinct_rounded_powers() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.subsec_nanos());
+        for j in 0..40u32 {
+            let k = 1 + (key.wrapping_mul(j + 1) >> 3) % 200;
+            let max_m = 1 + u64::from(key.wrapping_add(j * 7919) % 100_000);
+            let mut want = Vec::new();
+            let mut i = 0u32;
+            loop {
+                let m = 2f64.powf(f64::from(i) / f64::from(k)).round() as u64;
+                if m > max_m {
+                    break;
+                }
+                want.push(m);
+                i += 1;
+            }
+            want.dedup();
+            assert_eq!(
+                TauSet::PerOctave(k).ms(max_m).unwrap(),
+                want,
+                "key {key}: {k}/octave to {max_m}"
+            );
+        }
+        let all: Vec<u64> = (1..=5000).collect();
+        assert_eq!(TauSet::PerOctave(u32::MAX).ms(5000).unwrap(), all);
+    }
 
     #[test]
     fn term_counts_match_the_sums() {

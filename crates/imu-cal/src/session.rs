@@ -608,6 +608,21 @@ pub fn run(loaded: &Loaded, o: &Options) -> Result<Outcome, String> {
 /// the last model's parameters, refused — naming the key, axis, value and bound — unless the
 /// device can hold it within the parts' datasheet bounds and its unit is the file's. Returns
 /// the new TOML text.
+/// The fitted parameters the data do not determine at all (no finite σ; given ones such as
+/// the reference temperature aside): a calibration file must not carry their values, which
+/// are the solver's starting point, not a measurement.
+fn undetermined(loaded: &Loaded, run: &Outcome) -> Vec<String> {
+    let p = loaded.data.problem();
+    let f = &run.report.model.fitted;
+    f.params
+        .named_values()
+        .into_iter()
+        .zip(f.sigma.values())
+        .filter(|((name, _), s)| !s.is_finite() && p.plausible_range(name, &f.params).is_some())
+        .map(|((name, _), _)| name)
+        .collect()
+}
+
 /// The unit the calibration file holds this fit's sensor in, and the fit's own.
 fn file_units(loaded: &Loaded) -> (&'static str, &str) {
     let sensor = match loaded.data {
@@ -626,7 +641,15 @@ pub fn plausibility(loaded: &Loaded, run: &Outcome) -> Result<Option<String>, St
     let (contract, unit) = file_units(loaded);
     if unit != contract {
         return Err(format!(
-            "not judged: the datasheet bounds are in {contract}, this fit is in {unit}"
+            "not judged in {unit}: the bounds are in the calibration file's unit (convert with \
+             --scale)"
+        ));
+    }
+    let undetermined = undetermined(loaded, run);
+    if !undetermined.is_empty() {
+        return Err(format!(
+            "not judged: the data do not determine {}",
+            undetermined.join(", ")
         ));
     }
     let mut file = CalFile::default();
@@ -645,6 +668,14 @@ pub fn update_file(
         return Err(format!(
             "the calibration file holds {contract}, but this fit is in {unit}; convert the \
              columns with --scale"
+        ));
+    }
+    let undetermined = undetermined(loaded, run);
+    if !undetermined.is_empty() {
+        return Err(format!(
+            "refused, not written: the data do not determine {} (no finite σ); record the \
+             poses or turns that excite them, or fit fewer parameters",
+            undetermined.join(", ")
         ));
     }
     let mut file = match existing {
