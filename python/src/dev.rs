@@ -47,7 +47,9 @@ pub(crate) fn allan_error(e: AllanError) -> PyErr {
         AllanError::TooShort { samples, needed } => value_error(format!(
             "data has {samples} samples, at least {needed} are needed"
         )),
-        AllanError::BadTau0(t) => value_error(format!("sample period {t} s is not positive")),
+        AllanError::BadTau0(t) => value_error(format!(
+            "sample period {t} s (the rate's inverse) is not a positive finite number"
+        )),
         AllanError::BadTauSet(why) => value_error(format!("taus: {why}")),
         AllanError::Unsupported(why) => value_error(why.to_string()),
     }

@@ -408,6 +408,23 @@ fn keep(v: &[f64], flagged: &[bool]) -> Vec<f64> {
 /// The options checked and the data prepared for the fit: constants against the physics,
 /// sentinels and gaps excluded, static poses detected, blocks or moves formed.
 pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
+    if let Some((i, e)) = o
+        .model
+        .iter()
+        .enumerate()
+        .find(|(i, e)| o.model[..*i].contains(e))
+    {
+        return Err(format!(
+            "{} {}: {} is given twice (entry {i})",
+            o.flag("--model", "model"),
+            o.model
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join(","),
+            e.name()
+        ));
+    }
     if !(1..=20).contains(&o.max_steps) {
         return Err(format!(
             "{} {}: give 1 to 20",
@@ -546,10 +563,22 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                     held.len()
                 ));
             }
-            let m = (0..c[0].len())
+            let m: Vec<_> = (0..c[0].len())
                 .filter(|&i| !s.flagged[i] && !held[i])
                 .map(|i| Vector3::new(c[0][i], c[1][i], c[2][i]))
                 .collect();
+            if m.len() < 20 && held.len() >= 20 && m.len() * 10 < held.len() {
+                // Counted once per held value, a stuck part leaves a handful: say why.
+                return Err(format!(
+                    "{}: {} of {} rows hold the same reading as the row before them, {} distinct \
+                     readings are left (at least 20 are needed): a stuck magnetometer, or the \
+                     wrong columns",
+                    input.shown,
+                    held.iter().filter(|&&h| h).count(),
+                    held.len(),
+                    m.len()
+                ));
+            }
             Loaded {
                 data: Data::Mag(MagProblem::with_unit(m, f, &unit).map_err(e)?),
                 sentinels: s,

@@ -224,7 +224,13 @@ fn the_refusals_name_what_and_where() {
     std::fs::write(&bad, f.to_toml()).unwrap();
     let out = dir.path().join("o.csv").display().to_string();
     let bad = bad.display().to_string();
-    // Arguments split at spaces, with REST, BAD and OUT standing for the files' paths.
+    let stuck = dir.path().join("stuck.csv");
+    let rows: String = (0..3000)
+        .map(|i| format!("{:.2},12.5,-3.25,40.5\n", f64::from(i) / 100.0))
+        .collect();
+    std::fs::write(&stuck, format!("t,mx,my,mz\n{rows}")).unwrap();
+    let stuck = stuck.display().to_string();
+    // Arguments split at spaces, with REST, BAD, STUCK and OUT standing for the files' paths.
     let cases = [
         // A negative number after a space is the option's value (clap took it for a flag).
         (
@@ -247,6 +253,19 @@ fn the_refusals_name_what_and_where() {
             "simulate --samples 100 --white 1 -o OUT --theory /",
             "creating /",
         ),
+        // A stuck part: named as such (was "1 magnetometer samples", "0 usable τ points").
+        (
+            "calibrate mag STUCK",
+            "2999 of 3000 rows hold the same reading as the row before them, 1 distinct",
+        ),
+        (
+            "calibrate mag STUCK --model hard_iron,soft_iron,hard_iron",
+            "--model hard_iron,soft_iron,hard_iron: hard_iron is given twice (entry 2)",
+        ),
+        (
+            "fit STUCK --column mx",
+            "all 3000 samples are 12.5: a constant column has no noise to fit",
+        ),
     ];
     for (line, want) in cases {
         let args: Vec<&str> = line
@@ -254,6 +273,7 @@ fn the_refusals_name_what_and_where() {
             .map(|a| match a {
                 "REST" => rest.as_str(),
                 "BAD" => bad.as_str(),
+                "STUCK" => stuck.as_str(),
                 "OUT" => out.as_str(),
                 a => a,
             })

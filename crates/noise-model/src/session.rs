@@ -314,6 +314,16 @@ pub fn run(input: &Input, o: &Options) -> Result<Session, String> {
         ));
     }
     let tau0 = 1.0 / input.rate_hz;
+    if let Some(&v) = input.y.first() {
+        if input.y.iter().all(|&x| x == v) {
+            return Err(format!(
+                "{}: all {} samples are {v}: a constant column has no noise to fit (a stuck \
+                 sensor, or the wrong column)",
+                input.label,
+                input.y.len()
+            ));
+        }
+    }
     let segs: Vec<&[f64]> = slices(input.y, input.segments, input.label)?;
     let rows = deviation_segments(&segs, tau0, Stat::Oadev, &TauSet::Octave)
         .map_err(|e| format!("{}: {e}", input.label))?;
@@ -703,6 +713,17 @@ mod tests {
 
     #[test]
     fn options_and_segments_are_refused_by_name() {
+        let flat = vec![0.25; 4000];
+        let whole = [Range {
+            start: 0,
+            end: flat.len(),
+        }];
+        let e = run(&input(&flat, &whole), &Options::default()).unwrap_err();
+        assert_eq!(
+            e,
+            "test: all 4000 samples are 0.25: a constant column has no noise to fit (a stuck \
+             sensor, or the wrong column)"
+        );
         let y = white(3000, 5, 0.01);
         let segs = [Range {
             start: 0,
