@@ -149,8 +149,9 @@ def deviation(data, rate: float, stat: str = "oadev", taus="octave", data_type: 
     if isinstance(taus, str):
         d = _native.deviation(x, float(rate), stat, data_type, taus=taus)
     else:
-        ms = np.asarray(taus)
-        if ms.ndim != 1 or ms.size == 0 or not np.all(ms == np.round(ms)) or np.any(ms < 1):
+        ms = np.asarray(taus, dtype=float)
+        if (ms.ndim != 1 or ms.size == 0 or not np.all(np.isfinite(ms)) or not np.all(ms == np.round(ms))
+                or np.any(ms < 1) or np.any(ms > 2.0**62)):
             raise ValueError("taus: give a name or a non-empty sequence of whole m ≥ 1 (samples)")
         d = _native.deviation(x, float(rate), stat, data_type, ms=[int(v) for v in ms])
     return Table._of(stat, unit, d)

@@ -103,6 +103,14 @@ pub fn deviation<'py>(
             .map_err(allan_error)
         })
     })?;
+    if rows.is_empty() {
+        // As `imu-lab adev`: an empty table would read as a result.
+        return Err(value_error(format!(
+            "taus: no averaging time fits the {} samples ({} needs at least two terms at each τ)",
+            x.len(),
+            stat.name()
+        )));
+    }
     rows_dict(py, &rows)
 }
 

@@ -40,19 +40,20 @@ impl Stream {
         })
     }
 
-    /// Feeds a chunk of whole counts (any numeric array; each value must be an integer within
-    /// ±2^31). The GIL is released while the chunk is summed.
+    /// Feeds a chunk of whole counts (any numeric array; each value must be an integer of the
+    /// engine's i32, −2^31 … 2^31 − 1). The GIL is released while the chunk is summed.
     fn push(&mut self, py: Python<'_>, chunk: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
         let mut owned = Vec::new();
         let y = crate::dev::contiguous(&chunk, &mut owned);
         // Checked before any sample enters the engine: a refused chunk leaves it unchanged.
         if let Some(i) = y
             .iter()
-            .position(|v| !(v.fract() == 0.0 && v.abs() <= i32::MAX as f64))
+            .position(|v| !(v.fract() == 0.0 && (i32::MIN as f64..=i32::MAX as f64).contains(v)))
         {
             let total = self.engine.samples() + i as u64;
             return Err(value_error(format!(
-                "chunk[{i}] (sample {total} of the stream) is {}, not a whole count within ±2^31; \
+                "chunk[{i}] (sample {total} of the stream) is {}, not a whole count from −2^31 to \
+                 2^31 − 1; \
                  the streaming engine takes raw counts (convert with scale=)",
                 y[i]
             )));

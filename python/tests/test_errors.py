@@ -46,6 +46,14 @@ def test_bad_arguments_are_named():
         pico_imu.deviation([1.0, 2.0], rate=1.0)
     with pytest.raises(ValueError, match="whole m"):
         pico_imu.deviation(y, rate=1.0, taus=[1.5])
+    for m in (np.inf, 1e30):
+        with pytest.raises(ValueError, match="whole m"):
+            pico_imu.deviation(y, rate=1.0, taus=[m])
+    # a τ beyond the record is an error, not an empty table
+    with pytest.raises(ValueError, match=rf"taus: no averaging time fits the {len(y)} samples"):
+        pico_imu.deviation(y, rate=1.0, taus=[len(y)])
+    # 10⁹ points per octave is every m, at once (was out of memory)
+    assert len(pico_imu.deviation(y[:200], rate=1.0, taus="1000000000/octave", stat="adev").m) > 0
     with pytest.raises(ValueError, match="N in N/octave"):
         pico_imu.deviation(y, rate=1.0, taus="x/octave")
 
@@ -59,7 +67,12 @@ def test_the_stream_refuses_what_is_not_a_count_and_keeps_its_state():
         s.push([np.nan])
     with pytest.raises(ValueError, match=r"chunk\[1\]"):
         s.push([1.0, 2.0**40])
+    for beyond in (2.0**31, -(2.0**31) - 1):
+        with pytest.raises(ValueError, match=r"chunk\[0\].*not a whole count from −2\^31 to 2\^31 − 1"):
+            s.push([beyond])
     assert s.samples == 50
+    s.push([-(2.0**31), 2.0**31 - 1])  # the engine's i32 extremes are counts
+    assert s.samples == 52
     with pytest.raises(ValueError, match="rate=0"):
         pico_imu.Stream(rate=0.0)
     with pytest.raises(ValueError, match="scale=-1"):

@@ -173,9 +173,18 @@ fn real_socket_rules_and_exports_equal_the_cli() {
     assert_eq!(token.len(), 32);
     assert_eq!(info["lab"]["columns"], serde_json::json!(["gx"]));
 
-    // a write without the token: 403
+    // a write without the token: 403; with it twice, whatever the other: 403
     let (st, _) = post(a, "", "/api/lab/select", r#"{"column":"gx"}"#);
     assert_eq!(st, 403);
+    for second in ["wrong", token.as_str()] {
+        let (st, _) = post(
+            a,
+            &format!("{token}\r\nX-Imu-Lab-Token: {second}"),
+            "/api/lab/select",
+            r#"{"column":"gx"}"#,
+        );
+        assert_eq!(st, 403, "a second token {second:?}");
+    }
     let (st, v0) = post(a, &token, "/api/lab/select", r#"{"column":"gx"}"#);
     assert_eq!(st, 200, "key {key}: {v0}");
     let v0: Value = serde_json::from_str(&v0).unwrap();

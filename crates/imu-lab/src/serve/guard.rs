@@ -78,8 +78,10 @@ pub async fn check(State(s): State<Shared>, req: Request, next: Next) -> Respons
         {
             return error(StatusCode::FORBIDDEN, "a cross-site write: refused");
         }
-        let token = h.get(TOKEN_HEADER).map(|v| v.as_bytes());
-        if token != Some(s.token.as_bytes()) {
+        // exactly one token, the page's (with two, which one counted depended on their order)
+        let mut tokens = h.get_all(TOKEN_HEADER).iter();
+        let token = tokens.next().map(|v| v.as_bytes());
+        if token != Some(s.token.as_bytes()) || tokens.next().is_some() {
             return error(
                 StatusCode::FORBIDDEN,
                 "a write without the page's token (X-Imu-Lab-Token, from /api/info): refused",
