@@ -39,6 +39,8 @@ def _as_data(data) -> np.ndarray:
 def tau_ms(n_phase: int, rate: float, taus="octave") -> np.ndarray:
     """The averaging factors m (whole samples) AllanTools uses for ``taus`` on a record of
     ``n_phase`` phase points sampled at ``rate`` Hz: sorted, unique, 1 ≤ m < n_phase."""
+    if isinstance(rate, (str, bytes)) or not np.isscalar(rate) or not np.isreal(rate):
+        raise TypeError(f"rate={rate!r}: the sample rate must be a number of Hz")
     if not (rate > 0 and np.isfinite(rate)):
         raise ValueError(f"rate={rate}: the sample rate must be a positive finite number of Hz")
     if taus is None or (isinstance(taus, list) and len(taus) == 0):

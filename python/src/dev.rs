@@ -29,12 +29,24 @@ fn is_phase(data_type: &str) -> PyResult<bool> {
 
 /// The sample period 1/rate, checked.
 pub(crate) fn tau0_of(rate: f64) -> PyResult<f64> {
-    if rate > 0.0 && rate.is_finite() {
+    // A positive rate whose inverse is not finite (1e-310 Hz) is no rate either.
+    if rate > 0.0 && rate.is_finite() && (1.0 / rate).is_finite() {
         Ok(1.0 / rate)
     } else {
         Err(value_error(format!(
-            "rate={rate}: the sample rate must be a positive finite number of Hz"
+            "rate={}: the sample rate must be a positive finite number of Hz",
+            short_num(rate)
         )))
+    }
+}
+
+/// `x` as Python would print it for the ordinary sizes, in scientific form beyond them
+/// (`1e-310`, not 310 digits).
+pub(crate) fn short_num(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-4..1e16).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 

@@ -10,6 +10,9 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::{guarded, value_error};
 
+/// Largest magnitude of a value read (as `imu-lab`'s `VALUE_MAX`).
+const VALUE_MAX: f64 = 1e100;
+
 /// Reads a recording that follows the contract (docs: README, "The lab"): a dict with
 /// `columns` (name → float array, in the contract's unit), `units` (name → unit), `t` (s, or
 /// None), `rate_hz` (from the median spacing of `t`, or None without `t`), `segments`
@@ -54,6 +57,16 @@ pub fn read_csv<'py>(
             {
                 for (c, v) in cols.iter_mut().zip(&buf) {
                     c.push(*v);
+                }
+            }
+            // As `imu-lab`'s reader: a value no sensor reads is a corrupt field or a wrong unit
+            // (squared in a deviation it would overflow).
+            for (n, c) in names.iter().zip(&cols) {
+                if let Some((i, v)) = c.iter().enumerate().find(|(_, v)| v.abs() > VALUE_MAX) {
+                    return Err(value_error(format!(
+                        "{path}: column {n:?}, data row {}: {v:e}: no sensor reads that much",
+                        i + 1
+                    )));
                 }
             }
             let col = |n: &str| names.iter().position(|x| x == n).map(|i| &cols[i]);

@@ -23,6 +23,8 @@ def test_bad_arguments_are_named():
     y = np.arange(100.0)
     with pytest.raises(ValueError, match="rate=0"):
         allantools.adev(y, rate=0.0)
+    with pytest.raises(TypeError, match="rate='1000': the sample rate must be a number of Hz"):
+        allantools.oadev(y, "1000")
     with pytest.raises(ValueError, match="rate=-1"):
         pico_imu.deviation(y, rate=-1.0)
     with pytest.raises(ValueError, match="data_type='phas'"):
@@ -75,6 +77,8 @@ def test_the_stream_refuses_what_is_not_a_count_and_keeps_its_state():
     assert s.samples == 52
     with pytest.raises(ValueError, match="rate=0"):
         pico_imu.Stream(rate=0.0)
+    with pytest.raises(ValueError, match="rate=1e-310: the sample rate"):
+        pico_imu.Stream(rate=1e-310)
     with pytest.raises(ValueError, match="scale=-1"):
         pico_imu.Stream(rate=1.0, scale=-1.0)
     with pytest.raises(ValueError, match="stat=\"adev\""):
@@ -92,6 +96,11 @@ def test_files(tmp_path):
     q.write_text("a,b\n1,2\n")
     with pytest.raises(ValueError, match="no contract column"):
         pico_imu.read_csv(q)
+    # a value no sensor reads, as imu-lab's reader refuses it
+    r = tmp_path / "huge.csv"
+    r.write_text("t,gx\n0.0,1.0\n0.01,1e300\n0.02,1.0\n")
+    with pytest.raises(ValueError, match=r'huge.csv: column "gx", data row 2: 1e300: no sensor reads that much'):
+        pico_imu.read_csv(r)
 
 
 def test_a_panic_arrives_as_a_runtime_error():

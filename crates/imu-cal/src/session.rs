@@ -5,6 +5,7 @@
 //! the calibration file's section updated with the device's plausibility checks
 //! ([`update_file`]). The CLI (`imu-lab calibrate`) and the Python package
 //! (`pico_imu.calibrate`) are thin callers of [`prepare`] and [`run`].
+use crate::device::plausible::Num;
 use std::ops::Range;
 
 use model_lab::{walk, Stop};
@@ -298,7 +299,10 @@ fn gravity(o: &Options, unit: &str) -> Result<f64, String> {
     };
     if !(g.is_finite() && (lo..=hi).contains(&g)) {
         return Err(format!(
-            "{flag} {g} {unit}: gravity must be between {lo} and {hi} {unit}{}",
+            "{flag} {} {unit}: gravity must be between {} and {} {unit}{}",
+            Num(g),
+            Num(lo),
+            Num(hi),
             if unit == "m/s²" {
                 " (Earth's surface gravity is 9.76–9.84 m/s²)"
             } else {
@@ -322,9 +326,12 @@ fn field(o: &Options, unit: &str) -> Result<Option<f64>, String> {
     };
     if !(f.is_finite() && (lo..=hi).contains(&f)) {
         return Err(format!(
-            "{} {f} {unit}: the field magnitude must be between {lo} and {hi} {unit} \
+            "{} {} {unit}: the field magnitude must be between {} and {} {unit} \
              (Earth's field is 22–67 µT)",
-            o.flag("--field", "field")
+            o.flag("--field", "field"),
+            Num(f),
+            Num(lo),
+            Num(hi)
         ));
     }
     Ok(Some(f))
@@ -347,7 +354,12 @@ fn static_detect(o: &Options) -> Result<StaticDetect, String> {
         ),
     ] {
         if !(v.is_finite() && (lo..=hi).contains(&v)) {
-            return Err(format!("{name} {v}: must be between {lo} and {hi}"));
+            return Err(format!(
+                "{name} {}: must be between {} and {}",
+                Num(v),
+                Num(lo),
+                Num(hi)
+            ));
         }
     }
     Ok(StaticDetect {

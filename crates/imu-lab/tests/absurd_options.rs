@@ -258,6 +258,11 @@ fn the_refusals_name_what_and_where() {
             "calibrate mag STUCK",
             "2999 of 3000 rows hold the same reading as the row before them, 1 distinct",
         ),
+        // An absurd value in short form (was 301 digits).
+        (
+            "calibrate accel REST --g 1e300",
+            "--g 1e300 m/s²: gravity must be between 9.7 and 9.9 m/s²",
+        ),
         (
             "calibrate mag STUCK --model hard_iron,soft_iron,hard_iron",
             "--model hard_iron,soft_iron,hard_iron: hard_iron is given twice (entry 2)",
