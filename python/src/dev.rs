@@ -40,13 +40,23 @@ pub(crate) fn tau0_of(rate: f64) -> PyResult<f64> {
     }
 }
 
-/// `x` as Python would print it for the ordinary sizes, in scientific form beyond them
-/// (`1e-310`, not 310 digits).
+/// `x` for a message: 6 significant digits, trailing zeros dropped (0.009999999999999787 →
+/// 0.01), in scientific form beyond the ordinary sizes (`1e-310`, not 310 digits).
 pub(crate) fn short_num(x: f64) -> String {
     if x != 0.0 && x.is_finite() && !(1e-4..1e16).contains(&x.abs()) {
-        format!("{x:e}")
+        return format!("{x:e}");
+    }
+    let e = if x == 0.0 || !x.is_finite() {
+        0
     } else {
-        format!("{x}")
+        x.abs().log10().floor() as i32
+    };
+    let decimals = (5 - e).max(0) as usize;
+    let s = format!("{x:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
     }
 }
 

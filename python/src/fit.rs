@@ -85,22 +85,6 @@ fn first_bad(a: &[f64]) -> Option<usize> {
 /// segments), `temp` (°C, NaN where missing) beside each sample; `terms`, `add`, `auto`,
 /// `max_steps`, `tolerance` (in `unit`) as the CLI's flags; `effects` a list of (TOML text,
 /// name shown in messages) of user effects. Bad data and options raise `ValueError` naming them.
-/// `x` to 6 significant digits, trailing zeros dropped (0.009999999999999787 → 0.01).
-fn short(x: f64) -> String {
-    let e = if x == 0.0 {
-        0
-    } else {
-        x.abs().log10().floor() as i32
-    };
-    let decimals = (5 - e).max(0) as usize;
-    let s = format!("{x:.decimals$}");
-    if s.contains('.') {
-        s.trim_end_matches('0').trim_end_matches('.').to_string()
-    } else {
-        s
-    }
-}
-
 #[pyfunction]
 #[pyo3(signature = (y, rate=None, unit="", column="y", t=None, gap_before=None, temp=None,
     terms=Vec::new(), add=Vec::new(), effects=Vec::new(), auto=false, max_steps=6, tolerance=None))]
@@ -159,10 +143,11 @@ pub fn fit(
                     let agree = (r / from_t - 1.0).abs() <= 0.01;
                     if !agree {
                         return Err(value_error(format!(
-                            "rate={r}: disagrees with t, whose spacing is {} s ({} Hz); give \
+                            "rate={}: disagrees with t, whose spacing is {} s ({} Hz); give \
                              one of them, or both agreeing within 1 %",
-                            short(tm.period_s),
-                            short(from_t)
+                            crate::dev::short_num(r),
+                            crate::dev::short_num(tm.period_s),
+                            crate::dev::short_num(from_t)
                         )));
                     }
                     r

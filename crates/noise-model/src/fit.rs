@@ -424,7 +424,7 @@ impl Fit {
     /// covariance (`param_cov`: a coefficient's derivative is its basis at the point, a
     /// non-linear parameter's a central difference) plus each known term's own σ (estimated
     /// outside the Allan fit, independent of it): δσ = δ(σ²)/(2σ). NaN when the model's
-    /// variance is not positive.
+    /// variance is not positive or an uncertainty it rests on is not finite.
     pub fn model_dev_sigma(&self, i: usize) -> f64 {
         let avar = self.model_avar[i];
         if !(avar > 0.0) {
@@ -456,9 +456,15 @@ impl Fit {
             }
         }
         for (k, t) in self.terms.iter().enumerate() {
-            if t.known && t.coef_sigma.is_finite() {
+            // A known term in the model whose σ is not finite leaves the model's σ unknown.
+            if t.known && (t.coef_sigma.is_finite() || t.coef > 0.0) {
                 var += (self.per_term_basis[k][i] * t.coef_sigma).powi(2);
             }
+        }
+        // A covariance with NaN in it gives NaN here, which must stay NaN: `f64::max` would
+        // turn it into 0, a model reported as exactly known.
+        if !var.is_finite() {
+            return f64::NAN;
         }
         var.max(0.0).sqrt() / (2.0 * avar.sqrt())
     }

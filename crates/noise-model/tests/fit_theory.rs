@@ -265,6 +265,10 @@ fn the_models_sigma_per_tau_is_the_parameters_propagated() {
             p.tau
         );
     }
+    // A covariance that is not finite leaves the model's σ unknown, never 0.
+    let mut broken = f.clone();
+    broken.param_cov[(0, 0)] = f64::NAN;
+    assert!(broken.model_dev_sigma(0).is_nan());
 
     // White + Markov (σ, τ_c): the propagation against a Monte-Carlo of the parameters.
     let (sigma, tau_c) = (4e-3, 0.5 * (1.0 + (key % 13) as f64 / 10.0));
