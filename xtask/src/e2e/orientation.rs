@@ -226,12 +226,17 @@ pub fn orientation(args: &super::E2eArgs) -> Result<()> {
             before.count()
         ));
     }
-    if (after.count() as f64) < 0.95 * 200.0 * (2.0 * period - restart_s - SETTLE_S) {
+    // (Never converged after the upload, the bound below would be −∞ and pass.)
+    if !restart_s.is_finite() {
+        r.fail("pass 2: the filter never converged after the upload".into());
+    } else if (after.count() as f64) < 0.95 * 200.0 * (2.0 * period - restart_s - SETTLE_S) {
         r.fail(format!("pass 2: {} estimates only", after.count()));
     }
+    // Each goal met only by a number within it: a NaN error fails it.
+    let within = |x: f64, goal: f64| x <= goal;
     for (k, what) in [(0, "still"), (1, "moving")] {
         let rms = after.rms(Some(k));
-        if rms[0] > ROLL_PITCH_GOAL_DEG || rms[1] > ROLL_PITCH_GOAL_DEG {
+        if !(within(rms[0], ROLL_PITCH_GOAL_DEG) && within(rms[1], ROLL_PITCH_GOAL_DEG)) {
             r.fail(format!(
                 "calibrated, {what}: roll {:.3}° / pitch {:.3}° rms over {ROLL_PITCH_GOAL_DEG}°",
                 rms[0], rms[1]
@@ -239,13 +244,13 @@ pub fn orientation(args: &super::E2eArgs) -> Result<()> {
         }
     }
     let h = after.rms(None)[2];
-    if h > HEADING_GOAL_DEG {
+    if !within(h, HEADING_GOAL_DEG) {
         r.fail(format!(
             "calibrated: heading {h:.3}° rms over {HEADING_GOAL_DEG}°"
         ));
     }
     let h0 = before.rms(None)[2];
-    if h0 < UNCALIBRATED_AT_LEAST_DEG {
+    if !within(UNCALIBRATED_AT_LEAST_DEG, h0) {
         r.fail(format!(
             "identity calibration on a hard-iron part: heading {h0:.3}° rms, expected at least {UNCALIBRATED_AT_LEAST_DEG}°"
         ));
