@@ -27,10 +27,22 @@ use crate::render::session_report::{report_html, report_title};
 /// Samples the page's curves are drawn with (per decade of τ).
 const CURVE_PER_DECADE: usize = 12;
 
-/// The lab: the recording it works on (none yet in live mode) and the current column's state.
+/// The lab: the recording it works on (none yet in live mode), the current column's state
+/// (held by a write for the whole of its fit, so that edits follow one another), and what the
+/// last completed write published: reads take that, so a page asking for the view or an export
+/// while a fit runs gets the current one at once instead of waiting for the fit.
 pub struct Lab {
     file: Mutex<Option<InputArgs>>,
     state: Mutex<Option<Column>>,
+    published: std::sync::Mutex<Option<Published>>,
+}
+
+/// The view and the session behind it, as the last completed write left them.
+struct Published {
+    view: Value,
+    session: Arc<Session>,
+    file: PathBuf,
+    column: String,
 }
 
 /// One column's samples, as the session wants them.
@@ -56,7 +68,7 @@ struct Column {
     terms: Option<Vec<String>>,
     /// The `imu-lab fit` options after the file and column that give this session.
     command: Vec<String>,
-    session: Session,
+    session: Arc<Session>,
     steps: Vec<StepRow>,
 }
 
@@ -144,6 +156,7 @@ impl Lab {
         Ok(Lab {
             file: Mutex::new(Some(args)),
             state: Mutex::new(None),
+            published: std::sync::Mutex::new(None),
         })
     }
 
@@ -152,6 +165,7 @@ impl Lab {
         Lab {
             file: Mutex::new(None),
             state: Mutex::new(None),
+            published: std::sync::Mutex::new(None),
         }
     }
 
@@ -165,8 +179,35 @@ impl Lab {
             ));
         }
         *self.file.lock().await = Some(args);
-        *self.state.lock().await = None;
+        let mut state = self.state.lock().await;
+        *state = None;
+        *self.published() = None;
         Ok(())
+    }
+
+    /// The state's lock, as a write holds it while its fit runs (for the tests).
+    #[cfg(test)]
+    pub(super) async fn hold(&self) -> impl Sized + '_ {
+        self.state.lock().await
+    }
+
+    fn published(&self) -> std::sync::MutexGuard<'_, Option<Published>> {
+        // Only ever replaced whole: a panic elsewhere cannot leave it half-written.
+        self.published
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// `c` is the lab's state now: its view is what reads get from here on.
+    fn publish(&self, c: &Column) -> Response {
+        let view = view_of(c);
+        *self.published() = Some(Published {
+            view: view.clone(),
+            session: c.session.clone(),
+            file: c.file.clone(),
+            column: c.data.column.clone(),
+        });
+        Json(view).into_response()
     }
 
     /// The recording's name and columns (null without one).
@@ -286,9 +327,8 @@ fn row_of(step: &noise_model::Step<Effect>) -> StepRow {
 
 /// GET /api/lab: the current view (null before a column is chosen).
 pub async fn view(State(s): State<Shared>) -> Response {
-    let g = s.lab.state.lock().await;
-    match g.as_ref() {
-        Some(c) => Json(view_of(c)).into_response(),
+    match s.lab.published().as_ref() {
+        Some(p) => Json(p.view.clone()).into_response(),
         None => Json(Value::Null).into_response(),
     }
 }
@@ -321,12 +361,12 @@ pub async fn select(State(s): State<Shared>, bytes: Bytes) -> Response {
                 file: file.file,
                 terms: None,
                 command: vec![],
-                session,
+                session: Arc::new(session),
                 steps: vec![],
             };
-            let v = view_of(&c);
+            let r = s.lab.publish(&c);
             *g = Some(c);
-            Json(v).into_response()
+            r
         }
         Err((st, e)) => error(st, &e),
     }
@@ -457,8 +497,8 @@ pub async fn edit(State(s): State<Shared>, bytes: Bytes) -> Response {
     };
     c.steps.push(row);
     c.command = command;
-    c.session = session;
-    Json(view_of(c)).into_response()
+    c.session = Arc::new(session);
+    s.lab.publish(c)
 }
 
 /// POST /api/lab/auto {}: the automatic walk from the current model.
@@ -483,8 +523,8 @@ pub async fn auto(State(s): State<Shared>, bytes: Bytes) -> Response {
     c.steps.extend(session.steps.iter().map(row_of));
     c.terms = Some(names_of(&session));
     c.command = command;
-    c.session = session;
-    Json(view_of(c)).into_response()
+    c.session = Arc::new(session);
+    s.lab.publish(c)
 }
 
 /// POST /api/lab/reset {}: back to the default start model, the step table emptied.
@@ -501,8 +541,8 @@ pub async fn reset(State(s): State<Shared>, bytes: Bytes) -> Response {
             c.terms = None;
             c.command = vec![];
             c.steps.clear();
-            c.session = session;
-            Json(view_of(c)).into_response()
+            c.session = Arc::new(session);
+            s.lab.publish(c)
         }
         Err((st, e)) => error(st, &e),
     }
@@ -520,12 +560,16 @@ fn download(body: String, ty: &'static str, name: &str) -> Response {
 
 /// GET /api/lab/export.json: the session's JSON, as `imu-lab fit … --json` prints it.
 pub async fn export_json(State(s): State<Shared>) -> Response {
-    let g = s.lab.state.lock().await;
-    match g.as_ref() {
-        Some(c) => download(
-            c.session.json_string() + "\n",
+    let p = s
+        .lab
+        .published()
+        .as_ref()
+        .map(|p| (p.session.clone(), p.column.clone()));
+    match p {
+        Some((session, column)) => download(
+            session.json_string() + "\n",
             "application/json",
-            &format!("fit-{}.json", c.data.column),
+            &format!("fit-{column}.json"),
         ),
         None => error(StatusCode::CONFLICT, "choose a column first"),
     }
@@ -533,14 +577,19 @@ pub async fn export_json(State(s): State<Shared>) -> Response {
 
 /// GET /api/lab/report.html: the session's report, as `imu-lab fit … --report` writes it.
 pub async fn export_report(State(s): State<Shared>) -> Response {
-    let g = s.lab.state.lock().await;
-    match g.as_ref() {
-        Some(c) => {
-            let title = report_title(&c.session, &c.file);
+    // The session is shared: the report is rendered without holding the lock.
+    let p = s
+        .lab
+        .published()
+        .as_ref()
+        .map(|p| (p.session.clone(), p.file.clone(), p.column.clone()));
+    match p {
+        Some((session, file, column)) => {
+            let title = report_title(&session, &file);
             download(
-                report_html(&c.session, &title, &c.file.display().to_string()),
+                report_html(&session, &title, &file.display().to_string()),
                 "text/html; charset=utf-8",
-                &format!("report-{}.html", c.data.column),
+                &format!("report-{column}.html"),
             )
         }
         None => error(StatusCode::CONFLICT, "choose a column first"),

@@ -381,3 +381,69 @@ async fn edits_grow_the_step_table_and_exports_follow_the_session() {
         "reset does not give the start model back"
     );
 }
+
+/// A read while a write holds the lab (a fit of seconds) answers at once with the view the
+/// last write published, and the exports with its session; the write's own result follows.
+#[tokio::test]
+async fn reads_do_not_wait_for_a_running_fit() {
+    let (f, key) = recording(3000);
+    let state = Arc::new(AppState {
+        listen: HOST.parse().unwrap(),
+        token: TOKEN.into(),
+        lab: noise::Lab::open(crate::input::InputArgs::for_file(f.path())).unwrap(),
+        live: None,
+    });
+    let app = router(state.clone());
+    let (st, v0) = send(
+        &app,
+        post("/api/lab/select")
+            .body(r#"{"column":"gx"}"#.into())
+            .unwrap(),
+    )
+    .await;
+    assert_eq!(st, StatusCode::OK, "key {key}: {v0}");
+    let v0: Value = serde_json::from_str(&v0).unwrap();
+    // What a running fit does to the lab: hold its state.
+    let held = state.lab.hold().await;
+    let within = |path: &'static str| {
+        let app = app.clone();
+        async move {
+            tokio::time::timeout(std::time::Duration::from_secs(20), send(&app, get(path)))
+                .await
+                .unwrap_or_else(|_| panic!("key {key}: GET {path} waited for the fit"))
+        }
+    };
+    let (st, view) = within("/api/lab").await;
+    assert_eq!(st, StatusCode::OK);
+    assert!(serde_json::from_str::<Value>(&view).unwrap() == v0);
+    let (st, exported) = within("/api/lab/export.json").await;
+    assert_eq!(st, StatusCode::OK);
+    assert!(serde_json::from_str::<Value>(&exported).unwrap() == v0["fit"]);
+    let (st, html) = within("/api/lab/report.html").await;
+    assert_eq!(st, StatusCode::OK);
+    assert!(html.contains("gx ["), "key {key}");
+    // A write waits for the one before it, then answers with its own result.
+    let edit = {
+        let app = app.clone();
+        tokio::spawn(async move {
+            send(
+                &app,
+                post("/api/lab/edit")
+                    .body(r#"{"add":"markov"}"#.into())
+                    .unwrap(),
+            )
+            .await
+        })
+    };
+    tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    assert!(
+        !edit.is_finished(),
+        "an edit did not wait for the fit before it"
+    );
+    drop(held);
+    let (st, v1) = edit.await.unwrap();
+    assert_eq!(st, StatusCode::OK, "key {key}: {v1}");
+    let v1: Value = serde_json::from_str(&v1).unwrap();
+    assert!(serde_json::from_str::<Value>(&lab_view(&app).await).unwrap() == v1);
+    assert_eq!(v1["steps"].as_array().unwrap().len(), 1);
+}
