@@ -79,7 +79,8 @@ fn seconds_of(what: &str, s: f64) -> PyResult<Duration> {
         Ok(Duration::from_secs_f64(s))
     } else {
         Err(value_error(format!(
-            "{what}={s}: a positive finite number of seconds"
+            "{what}={}: a positive number of seconds below 1e9",
+            crate::dev::short_num(s)
         )))
     }
 }

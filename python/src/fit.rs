@@ -162,7 +162,8 @@ pub fn fit(
             };
             if !(rate_hz > 0.0 && rate_hz.is_finite()) {
                 return Err(value_error(format!(
-                    "rate={rate_hz}: the sample rate must be a positive finite number of Hz"
+                    "rate={}: the sample rate must be a positive finite number of Hz",
+                    crate::dev::short_num(rate_hz)
                 )));
             }
             let segments = match &tm {

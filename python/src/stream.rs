@@ -30,7 +30,8 @@ impl Stream {
         let tau0 = tau0_of(rate)?;
         if !(scale > 0.0 && scale.is_finite()) {
             return Err(value_error(format!(
-                "scale={scale}: the value of one count must be a positive finite number"
+                "scale={}: the value of one count must be a positive finite number",
+                crate::dev::short_num(scale)
             )));
         }
         Ok(Stream {

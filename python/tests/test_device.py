@@ -394,6 +394,7 @@ def test_a_dead_port_or_wrong_address_is_an_oserror_naming_it(tmp_path):
     ("tcp:127.0.0.1:5000", 0.0, "timeout=0"),
     ("tcp:127.0.0.1:5000", float("nan"), "timeout=NaN"),
     ("tcp:127.0.0.1:5000", -1.0, "timeout=-1"),
+    ("tcp:127.0.0.1:5000", 1e300, "timeout=1e300: a positive number of seconds below 1e9$"),
 ])
 def test_bad_arguments_to_open_are_valueerrors(port, timeout, says):
     with pytest.raises(ValueError, match=says):

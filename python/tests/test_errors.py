@@ -81,6 +81,8 @@ def test_the_stream_refuses_what_is_not_a_count_and_keeps_its_state():
         pico_imu.Stream(rate=1e-310)
     with pytest.raises(ValueError, match="scale=-1"):
         pico_imu.Stream(rate=1.0, scale=-1.0)
+    with pytest.raises(ValueError, match="scale=-1e-310: the value"):
+        pico_imu.Stream(rate=1.0, scale=-1e-310)
     with pytest.raises(ValueError, match="stat=\"adev\""):
         s.table("adev")
 
