@@ -210,6 +210,25 @@ pub struct NoiseLab<'a> {
     pub periodogram_df: f64,
 }
 
+/// Whether `t` is `y` up to a scale and an offset (|correlation| = 1 to within rounding): the
+/// temperature column beside the temperature column itself.
+fn affine_copy(y: &[f64], t: &[f64]) -> bool {
+    let n = y.len() as f64;
+    if y.len() != t.len() || y.len() < 2 {
+        return false;
+    }
+    let (my, mt) = (y.iter().sum::<f64>() / n, t.iter().sum::<f64>() / n);
+    let (mut syy, mut stt, mut syt) = (0.0, 0.0, 0.0);
+    for (a, b) in y.iter().zip(t) {
+        let (dy, dt) = (a - my, b - mt);
+        syy += dy * dy;
+        stt += dt * dt;
+        syt += dy * dt;
+    }
+    // 1 − r² is the fraction of y's variance a regression on t leaves; rounding leaves ≈ 1e-16.
+    syy > 0.0 && stt > 0.0 && 1.0 - syt * syt / (syy * stt) < 1e-10
+}
+
 /// The step between neighbouring values if the samples sit on a lattice (integer counts times a
 /// scale), else None. Looks at up to 2^17 values spread over the record.
 pub fn lattice(y: &[f64]) -> Option<f64> {
@@ -283,8 +302,10 @@ impl<'a> NoiseLab<'a> {
                 }
                 m *= 2;
             }
-            // A constant temperature column carries no information.
-            if v.iter().any(|p| p.1 > 0.0) {
+            // A constant temperature column carries no information, and one that is the data
+            // itself (the column analysed is the temperature, up to a unit or an offset) is no
+            // regressor for it: the fit would explain the data by itself.
+            if v.iter().any(|p| p.1 > 0.0) && !affine_copy(record.y, t) {
                 ctx.temp_avar = Some(v);
                 ctx.temp_profile = Some(std::sync::Arc::new(profiles));
             }

@@ -711,6 +711,48 @@ mod tests {
         );
     }
 
+    /// The temperature column analysed beside itself (or a copy in other units) is no
+    /// regressor: the session is the one without a temperature column. (Passed, the walk
+    /// regressed the column on itself, coefficient 1.000 per °C, and χ²/dof rose 70-fold.)
+    #[test]
+    fn the_temperature_column_is_no_regressor_for_itself() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(11, |d| d.subsec_nanos() as u64);
+        let n = 20_000 + (key % 10_000) as usize;
+        let tc = 2_000.0 + (key % 7_000) as f64;
+        let noise = white(n, key, 0.01 + (key % 5) as f64 * 0.01);
+        // A warming board read by a quantising sensor: a transient, the noise, 1/340 °C steps.
+        let y: Vec<f64> = (0..n)
+            .map(|i| {
+                let v = 25.0 + 8.0 * (1.0 - (-(i as f64) / tc).exp()) + noise[i];
+                (v * 340.0).round() / 340.0
+            })
+            .collect();
+        let fahrenheit: Vec<f64> = y.iter().map(|c| c * 1.8 + 32.0).collect();
+        let segs = [Range { start: 0, end: n }];
+        let o = Options {
+            auto: true,
+            ..Options::default()
+        };
+        let alone = run(&input(&y, &segs), &o).unwrap().json_string();
+        for t in [&y, &fahrenheit] {
+            let beside = run(
+                &Input {
+                    temp: Some(t),
+                    ..input(&y, &segs)
+                },
+                &o,
+            )
+            .unwrap()
+            .json_string();
+            assert!(
+                beside == alone,
+                "key {key}: with itself as the temperature the session differs"
+            );
+        }
+    }
+
     #[test]
     fn options_and_segments_are_refused_by_name() {
         let flat = vec![0.25; 4000];
