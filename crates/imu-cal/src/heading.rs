@@ -153,13 +153,50 @@ pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
         let complete = rows[j].t - t0 >= window - 1.5 * step;
         match (ok && complete, tilt_compensated(rows[j].accel, rows[j].mag)) {
             (true, Some(a1)) if a1.pitch.abs() <= max_pitch => {
-                out.push(angle_diff(a1.heading, a0.heading) - gyro);
+                // Both sides wrapped: a window may turn further than ±180°.
+                out.push(angle_diff(angle_diff(a1.heading, a0.heading) - gyro, 0.0));
             }
             _ => {}
         }
         i = j + 1;
     }
     out
+}
+
+/// Why [`gyro_consistency`] found no window in `rows`: the record shorter than a window, gaps
+/// in the rows' times (a spacing beyond 1.5× the median, as host stamps of a bursty link have),
+/// or rows tilted beyond `max_pitch` or without a heading; each counted.
+pub fn no_window_reason(rows: &[Row], window: f64, max_pitch: f64) -> String {
+    let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+        return "no rows".into();
+    };
+    let span = last.t - first.t;
+    if span < window {
+        return format!("the recording ({span:.3} s) is shorter than one {window} s window");
+    }
+    let mut dts: Vec<f64> = rows.windows(2).map(|w| w[1].t - w[0].t).collect();
+    dts.sort_by(f64::total_cmp);
+    let step = dts[dts.len() / 2];
+    let gaps = rows
+        .windows(2)
+        .filter(|w| {
+            let dt = w[1].t - w[0].t;
+            dt > 1.5 * step || dt <= 0.0
+        })
+        .count();
+    let tilted = rows
+        .iter()
+        .filter(|r| !tilt_compensated(r.accel, r.mag).is_some_and(|a| a.pitch.abs() <= max_pitch))
+        .count();
+    format!(
+        "every {window} s window holds a gap in the rows' times or a row left out: {gaps} of {} \
+         spacings are beyond 1.5× the median {:.3} ms (or not increasing: times stamped on \
+         arrival, not on the sensor's clock?), {tilted} of {} rows are beyond ±{max_pitch}° of \
+         pitch or have no heading; a shorter --window may find some",
+        rows.len() - 1,
+        step * 1e3,
+        rows.len()
+    )
 }
 
 /// A calibration file's accelerometer and magnetometer corrections in the recording's units
@@ -280,17 +317,27 @@ mod tests {
 
     /// A level turn at 30°/s: an exact field gives zero inconsistency; a hard iron along x
     /// (a heading error that changes with the heading) gives a large one.
+    /// A turn of any rate and a window of any length: the heading's change wraps at ±180°, the
+    /// gyro's integral does not, so the error is wrapped (a window that turned 240° read 120°
+    /// against the gyro's 240°: an exact field was off by 360°).
     #[test]
     fn consistency_sees_a_hard_iron_and_not_an_exact_field() {
-        let rows = |hard: [f64; 3]| -> Vec<Row> {
-            (0..12_000)
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(3, |d| d.subsec_nanos());
+        let rate = (30 + key % 90) as f64 * if key % 2 == 0 { 1.0 } else { -1.0 };
+        // Each window turns 30°–330°, past ±180° half the time.
+        let turn = (30 + key / 7 % 301) as f64;
+        let window = turn / rate.abs();
+        let rows = |rate: f64, hard: [f64; 3]| -> Vec<Row> {
+            (0..24_000)
                 .map(|i| {
                     let t = i as f64 * 1e-3;
-                    let (a, m) = reading(10.0, -5.0, 30.0 * t);
-                    // Level-ish turn about the world's vertical: body rates of ψ̇ = 30°/s.
+                    let (a, m) = reading(10.0, -5.0, rate * t);
+                    // Level-ish turn about the world's vertical: body rates of ψ̇ = rate.
                     let (sf, cf) = 10f64.to_radians().sin_cos();
                     let (st, ct) = (-5f64).to_radians().sin_cos();
-                    let w = [-30.0 * st, 30.0 * sf * ct, 30.0 * cf * ct];
+                    let w = [-rate * st, rate * sf * ct, rate * cf * ct];
                     Row {
                         t,
                         accel: a,
@@ -300,13 +347,55 @@ mod tests {
                 })
                 .collect()
         };
-        let good = gyro_consistency(&rows([0.0; 3]), 2.0, 70.0);
-        assert_eq!(good.len(), 5); // windows of 2 s and a step: five in 12 s
+        let good = gyro_consistency(&rows(rate, [0.0; 3]), window, 70.0);
+        // windows of `window` s and a step each
+        let expected = (24.0 / (window + 1e-3)).floor() as usize;
+        assert!(
+            good.len() + 1 >= expected && good.len() <= expected,
+            "key {key}: {} windows of {window} s in 24 s",
+            good.len()
+        );
         let r = rms(&good, 1).unwrap();
-        assert!(r.rms < 0.05, "{good:?}");
-        let bad = gyro_consistency(&rows([15.0, 0.0, 0.0]), 2.0, 70.0);
+        assert!(r.rms < 0.05, "key {key}: {rate}°/s, {window} s: {good:?}");
+        // 60° windows: the hard iron's error differs between their ends (over a whole turn, or
+        // half a turn across its axis, it would not).
+        let bad = gyro_consistency(&rows(30.0, [15.0, 0.0, 0.0]), 2.0, 70.0);
         let r = rms(&bad, 1).unwrap();
         assert!(r.rms > 10.0, "{bad:?}");
+    }
+
+    /// Rows stamped in bursts (a host's arrival times) give no window, and the reason says
+    /// how many spacings are gaps; a record shorter than a window says that.
+    #[test]
+    fn no_window_is_explained() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(5, |d| d.subsec_nanos() as usize);
+        let every = 20 + key % 50;
+        let mut t = 0.0;
+        let rows: Vec<Row> = (0..6_000)
+            .map(|i| {
+                // a burst every `every` rows: one spacing of 8 ms among 1 ms ones
+                t += if i > 0 && i % every == 0 { 8e-3 } else { 1e-3 };
+                let (a, m) = reading(3.0, -2.0, 20.0 * t);
+                Row {
+                    t,
+                    accel: a,
+                    gyro: [0.0; 3],
+                    mag: m,
+                }
+            })
+            .collect();
+        assert!(gyro_consistency(&rows, 2.0, 70.0).is_empty());
+        let why = no_window_reason(&rows, 2.0, 70.0);
+        let gaps = (1..6_000).filter(|i| i % every == 0).count();
+        assert!(
+            why.contains(&format!(
+                "{gaps} of 5999 spacings are beyond 1.5× the median 1.000 ms"
+            )) && why.contains("0 of 6000 rows"),
+            "key {key}: {why}"
+        );
+        assert!(no_window_reason(&rows[..100], 2.0, 70.0).contains("shorter than one 2 s window"));
     }
 
     /// A level-ish turn read through a hard and soft iron drawn at random: before, the heading

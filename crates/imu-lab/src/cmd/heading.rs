@@ -17,7 +17,9 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use imu_cal::file::CalFile;
-use imu_cal::heading::{angle_diff, before_after, rms, tilt_compensated, Correction, Rms, Row};
+use imu_cal::heading::{
+    angle_diff, before_after, no_window_reason, rms, tilt_compensated, Correction, Rms, Row,
+};
 
 use crate::input::{self, InputArgs};
 
@@ -260,6 +262,10 @@ pub fn run(a: Args) -> Result<()> {
     println!("consistency with the gyro (heading change over {w} s windows minus the gyro's; blind to an error that is the same at every attitude):");
     println!("  identity calibration:   {}", show(c0));
     println!("  {}:   {}", a.cal.display(), show(c1));
+    if c0.is_none() || c1.is_none() {
+        let rows = if c0.is_none() { &raw } else { &fitted };
+        println!("  (no values: {})", no_window_reason(rows, w, a.max_pitch));
+    }
     if truth.is_none() {
         if let (Some(b), Some(f)) = (c0, c1) {
             println!("heading inconsistency before → after calibration: {:.2} → {:.2}° rms (no truth given)", b.rms, f.rms);
