@@ -325,7 +325,7 @@ mod tests {
         let key = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(3, |d| d.subsec_nanos());
-        let rate = (30 + key % 90) as f64 * if key % 2 == 0 { 1.0 } else { -1.0 };
+        let rate = (30 + key % 90) as f64 * if key.is_multiple_of(2) { 1.0 } else { -1.0 };
         // Each window turns 30°–330°, past ±180° half the time.
         let turn = (30 + key / 7 % 301) as f64;
         let window = turn / rate.abs();
@@ -374,9 +374,13 @@ mod tests {
         let every = 20 + key % 50;
         let mut t = 0.0;
         let rows: Vec<Row> = (0..6_000)
-            .map(|i| {
+            .map(|i: usize| {
                 // a burst every `every` rows: one spacing of 8 ms among 1 ms ones
-                t += if i > 0 && i % every == 0 { 8e-3 } else { 1e-3 };
+                t += if i > 0 && i.is_multiple_of(every) {
+                    8e-3
+                } else {
+                    1e-3
+                };
                 let (a, m) = reading(3.0, -2.0, 20.0 * t);
                 Row {
                     t,
@@ -388,7 +392,9 @@ mod tests {
             .collect();
         assert!(gyro_consistency(&rows, 2.0, 70.0).is_empty());
         let why = no_window_reason(&rows, 2.0, 70.0);
-        let gaps = (1..6_000).filter(|i| i % every == 0).count();
+        let gaps = (1..6_000)
+            .filter(|i: &usize| i.is_multiple_of(every))
+            .count();
         assert!(
             why.contains(&format!(
                 "{gaps} of 5999 spacings are beyond 1.5× the median 1.000 ms"
