@@ -541,6 +541,15 @@ pub fn find_steps(
         let l = g.blocks.size;
         let coarse = seg.start + (b as u64 + 1) * l;
         let at = refine_step(base, y, coarse, l);
+        // The refinement reads the samples, not the residual: near a step the model has, it
+        // can land on that step's instant again, and a second step there is the same column
+        // (its size split between them: a staircase at one instant). Nothing new is there.
+        if signals
+            .iter()
+            .any(|s| matches!(s, Signal::Step { at: a } if (a - at as f64).abs() < 1.0))
+        {
+            break;
+        }
         // size and σ at the GLS scale with the others
         let mut sigs = signals.clone();
         sigs.push(Signal::Step { at: at as f64 });
