@@ -322,3 +322,63 @@ fn kalibr_export_gives_each_density_with_its_uncertainty() {
     );
     assert_eq!(value("update_rate:"), 100.0, "{text}");
 }
+
+/// The real gyro with its gz stuck for 30 s (rows 10000–12999 one value) and one stamp
+/// duplicated (two segments): the stretch is named as a stuck reading, the verdict is not
+/// adequate, and no two bias steps share an instant. (Before, the change-point search put three
+/// steps at 99.48 s, each the same column, χ²/dof 1.09 → 11.7 → 2.5, and ended adequate.)
+#[test]
+fn a_stuck_stretch_is_named_and_makes_no_staircase() {
+    let text = std::fs::read_to_string(static_449s()).unwrap();
+    let rows: Vec<&str> = text.lines().skip(5).collect();
+    let gz: Vec<i64> = rows
+        .iter()
+        .map(|r| r.rsplit(',').next().unwrap().trim().parse().unwrap())
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("stuck.csv");
+    let mut out = String::from("t,gz\n");
+    for (i, v) in gz.iter().enumerate() {
+        let v = if (10_000..13_000).contains(&i) {
+            gz[10_000]
+        } else {
+            *v
+        };
+        // the stamp of row 2000 repeats row 1999's
+        let t = if i == 2_000 { 1_999 } else { i } as f64 * 0.01;
+        out.push_str(&format!("{t:.2},{v}\n"));
+    }
+    std::fs::write(&path, out).unwrap();
+    let p = path.to_str().unwrap();
+    let o = run_ok([
+        "fit",
+        p,
+        "--column",
+        "gz",
+        "--scale",
+        "0.0076336",
+        "--unit",
+        "deg/s",
+        "--auto",
+        "--json",
+    ]);
+    let v = stdout_json(&o);
+    assert_eq!(v["diagnosis"]["adequate"], false, "{}", v["diagnosis"]);
+    let evidence = v["diagnosis"].to_string();
+    assert!(
+        evidence.contains("samples 10000–12999") && evidence.contains("stuck reading"),
+        "{evidence}"
+    );
+    let mut at: Vec<f64> = v["terms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|t| t["effect"] == "bias_step")
+        .map(|t| t["params"]["time_s"].as_f64().unwrap())
+        .collect();
+    at.sort_by(f64::total_cmp);
+    assert!(
+        at.windows(2).all(|w| w[1] - w[0] > 0.02),
+        "steps at one instant: {at:?}"
+    );
+}

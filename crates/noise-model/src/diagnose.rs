@@ -171,6 +171,8 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
             t.describe()
         ));
     }
+    let defects = lab.defect_texts();
+    evidence.extend(defects.iter().cloned());
     evidence.extend(m.findings.iter().map(|f| f.text.clone()));
     evidence.extend(residual_evidence(&m.fit, &m.assessment));
     evidence.extend(tradeoffs(&m.fit));
@@ -197,6 +199,24 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
         });
     }
     let explanation = match best {
+        _ if !defects.is_empty() && (best.is_none() || m.assessment.adequate) => format!(
+            "The record holds a defect no noise model describes: {}. {}",
+            defects.join("; "),
+            if m.assessment.adequate {
+                format!(
+                    "The Allan curve alone passes (χ²/dof = {:.2}, {}), which is what such a \
+                     defect does: the model is not adequate while it is in the data.",
+                    m.fit.chi2_dof(),
+                    fmt_p(m.assessment.p_value)
+                )
+            } else {
+                format!(
+                    "The model does not describe the measurement (χ²/dof = {:.2}), and no \
+                     effect of the vocabulary explains the misfit significantly.",
+                    m.fit.chi2_dof()
+                )
+            }
+        ),
         Some(c) => {
             let e = &c.edit.add[0];
             let others: Vec<String> = candidates
@@ -311,7 +331,7 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
     };
     Ok(Diagnosis {
         // the one criterion decides: a time-domain finding it refuses is said, not a veto
-        adequate: best.is_none() && m.assessment.adequate,
+        adequate: best.is_none() && m.assessment.adequate && defects.is_empty(),
         missing: best.map(|c| c.edit.add[0].clone()),
         replaces: best.map(|c| c.edit.remove.clone()).unwrap_or_default(),
         tau_range: misfit_range(&m.assessment),

@@ -208,6 +208,9 @@ pub struct NoiseLab<'a> {
     pub lines: Vec<Line>,
     /// Frequency resolution of the whole-record periodogram [Hz].
     pub periodogram_df: f64,
+    /// Stuck stretches and glitches in the samples ([`crate::defects`]): while there are any,
+    /// no model is adequate.
+    pub defects: crate::defects::Defects,
 }
 
 /// Whether `t` is `y` up to a scale and an offset (|correlation| = 1 to within rounding): the
@@ -334,6 +337,8 @@ impl<'a> NoiseLab<'a> {
             .map(|p| find_lines(&p))
             .unwrap_or_default();
         let periodogram_df = 1.0 / (tau0 * seg_y.len().next_power_of_two() as f64);
+        let lengths: Vec<usize> = record.segments.iter().map(|s| s.1 as usize).collect();
+        let defects = crate::defects::find(record.y, &lengths);
         Ok(NoiseLab {
             record,
             meas,
@@ -341,7 +346,74 @@ impl<'a> NoiseLab<'a> {
             lsb,
             lines,
             periodogram_df,
+            defects,
         })
+    }
+
+    /// The nominal time [s] of sample `k` of the concatenated data.
+    fn time_of(&self, k: usize) -> f64 {
+        let mut off = 0usize;
+        for &(start, len) in &self.record.segments {
+            if k < off + len as usize {
+                return (start as usize + k - off) as f64 * self.record.tau0;
+            }
+            off += len as usize;
+        }
+        k as f64 * self.record.tau0
+    }
+
+    /// The data defects in words, one line each.
+    pub fn defect_texts(&self) -> Vec<String> {
+        let d = &self.defects;
+        let mut out: Vec<String> = d
+            .stuck
+            .iter()
+            .map(|&(k, len, _)| {
+                let (a, b) = (self.time_of(k), self.time_of(k + len - 1));
+                format!(
+                    "samples {k}–{} (t = {:.3}–{:.3} s, {:.3} s) hold one value, where the \
+                     record's noise repeats a value only a few samples in a row: a stuck \
+                     reading (a frozen sensor or bus), whose Allan statistics are not the \
+                     sensor's noise; cut the stretch out, or split the record there, and fit again",
+                    k + len - 1,
+                    a,
+                    b,
+                    b - a + self.record.tau0
+                )
+            })
+            .collect();
+        if !d.glitches.is_empty() {
+            out.push(format!(
+                "{} far off {} neighbours' mean: {}; a glitch (a bus error, a knock) adds the \
+                 variance of white noise at every τ, so the fit reads it as noise; remove {} \
+                 and fit again",
+                if d.glitches.len() == 1 {
+                    "a sample is"
+                } else {
+                    "samples are"
+                },
+                if d.glitches.len() == 1 {
+                    "its"
+                } else {
+                    "their"
+                },
+                d.glitches
+                    .iter()
+                    .map(|&(k, z)| format!(
+                        "sample {k} (t = {:.3} s) by {} robust σ of the second difference",
+                        self.time_of(k),
+                        if z < 1e6 {
+                            format!("{z:.0}")
+                        } else {
+                            format!("{z:.1e}")
+                        }
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if d.glitches.len() == 1 { "it" } else { "them" }
+            ));
+        }
+        out
     }
 
     fn longest_segment(&self) -> &[f64] {
@@ -490,7 +562,7 @@ impl<'a> NoiseLab<'a> {
         }
         let assessment = assess(&fit);
         let findings = self.findings(&specs, &fit);
-        let adequate = assessment.adequate && findings.is_empty();
+        let adequate = assessment.adequate && findings.is_empty() && self.defects.is_empty();
         let neg2ll = crate::assess::neg2_loglik(&fit);
         let signals: Vec<Signal> = specs.iter().flat_map(|s| self.signals_of(s)).collect();
         let neg2ll_time = nonstat::neg2_loglik(
@@ -752,6 +824,9 @@ impl model_lab::Lab for NoiseLab<'_> {
     /// Adequate when the Allan test passes and no candidate is admissible: a time-domain finding
     /// the criterion refuses (its refit does not lower it) is reported, not a veto.
     fn settled(&self, m: &Model, refused: &[Candidate<Effect, Model>]) -> bool {
-        m.adequate || (m.assessment.adequate && !refused.iter().any(|c| c.admissible))
+        m.adequate
+            || (m.assessment.adequate
+                && !refused.iter().any(|c| c.admissible)
+                && self.defects.is_empty())
     }
 }

@@ -27,6 +27,7 @@
 
 pub mod assess;
 pub mod cov;
+pub mod defects;
 pub mod diagnose;
 pub mod diff_profile;
 pub mod effect;

@@ -753,6 +753,51 @@ mod tests {
         }
     }
 
+    /// A glitch or a stuck stretch in white noise: the Allan fit alone passes them (a spike
+    /// reads as white noise), the session does not: not adequate, the defect named with its
+    /// sample; the same noise without it is adequate.
+    #[test]
+    fn a_glitch_or_a_stuck_stretch_is_not_adequate() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(13, |d| d.subsec_nanos() as u64);
+        let n = 10_000 + (key % 20_000) as usize;
+        let sigma = 0.01 + (key % 7) as f64 * 0.01;
+        let clean = white(n, key, sigma);
+        let segs = [Range { start: 0, end: n }];
+        let o = Options {
+            auto: true,
+            ..Options::default()
+        };
+        let verdict = |y: &[f64]| {
+            let s = run(&input(y, &segs), &o).unwrap();
+            let d = &s.last().diagnosis;
+            (d.adequate, d.evidence.join("\n"))
+        };
+        assert!(
+            verdict(&clean).0,
+            "key {key}: clean white noise not adequate"
+        );
+        let mut spiked = clean.clone();
+        let at = 1 + (key as usize / 3) % (n - 2);
+        spiked[at] += sigma * 10f64.powf(1.5 + (key % 50) as f64 / 10.0);
+        let (ok, why) = verdict(&spiked);
+        assert!(
+            !ok && why.contains(&format!("sample {at} (t = ")),
+            "key {key}: a spike at {at}: {why}"
+        );
+        let mut stuck = clean.clone();
+        let len = 200 + (key as usize / 7) % 2_000;
+        let from = (key as usize / 11) % (n - len);
+        let v = stuck[from];
+        stuck[from..from + len].fill(v);
+        let (ok, why) = verdict(&stuck);
+        assert!(
+            !ok && why.contains(&format!("samples {from}–{}", from + len - 1)),
+            "key {key}: stuck {from}+{len}: {why}"
+        );
+    }
+
     #[test]
     fn options_and_segments_are_refused_by_name() {
         let flat = vec![0.25; 4000];
