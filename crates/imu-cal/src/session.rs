@@ -408,6 +408,29 @@ fn held_rows(c: &[Vec<f64>; 3]) -> Vec<bool> {
     }
 }
 
+/// Rows repeating one reading at least this many times in a row are a stuck magnetometer, not
+/// a slower one held between its samples (a hold repeats a reading a few times: the QMC5883L's
+/// 200 Hz read at 1 kHz five).
+const STUCK_ROWS: usize = 64;
+
+/// The runs of at least [`STUCK_ROWS`] identical rows: (first row, length).
+fn stuck_runs(c: &[Vec<f64>; 3]) -> Vec<(usize, usize)> {
+    let n = c[0].len();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < n {
+        let mut j = i + 1;
+        while j < n && (0..3).all(|a| c[a][j] == c[a][i]) {
+            j += 1;
+        }
+        if j - i >= STUCK_ROWS {
+            out.push((i, j - i));
+        }
+        i = j;
+    }
+    out
+}
+
 /// Keep the samples not flagged.
 fn keep(v: &[f64], flagged: &[bool]) -> Vec<f64> {
     v.iter()
@@ -566,6 +589,29 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
             let f = field(o, &unit)?;
             let s = sentinel::find([&c[0], &c[1], &c[2]], &unit, Part::for_sensor("mag"));
             let held = held_rows(&c);
+            let mut out = vec![false; c[0].len()];
+            let stuck = stuck_runs(&c);
+            if !stuck.is_empty() && stuck.iter().map(|r| r.1).sum::<usize>() < c[0].len() {
+                // Left out whole: one held value kept would weigh like any other reading, and
+                // a part stuck for a third of the record had its noise floor read as 0.
+                for &(from, len) in &stuck {
+                    out[from..from + len].fill(true);
+                }
+                notes.push(format!(
+                    "left out as a stuck magnetometer (one reading repeated {STUCK_ROWS} rows or \
+                     more): {}",
+                    stuck
+                        .iter()
+                        .map(|&(from, len)| format!(
+                            "rows {}–{} ({len} rows)",
+                            from + 1,
+                            from + len
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+            let held: Vec<bool> = held.iter().zip(&out).map(|(h, o)| *h && !o).collect();
             if held.iter().filter(|&&h| h).count() > 0 {
                 notes.push(format!(
                     "{} of {} rows repeat the row before them exactly: the record holds a slower \
@@ -576,7 +622,7 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                 ));
             }
             let m: Vec<_> = (0..c[0].len())
-                .filter(|&i| !s.flagged[i] && !held[i])
+                .filter(|&i| !s.flagged[i] && !held[i] && !out[i])
                 .map(|i| Vector3::new(c[0][i], c[1][i], c[2][i]))
                 .collect();
             if m.len() < 20 && held.len() >= 20 && m.len() * 10 < held.len() {

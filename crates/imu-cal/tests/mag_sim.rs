@@ -470,3 +470,69 @@ fn short_controls_are_adequate_at_the_stated_rate() {
     // About 0.2 expected; four or more has a probability below 1e-4 at that rate.
     assert!(alarms.len() < 4, "key {key}: {alarms:#?}");
 }
+
+/// A magnetometer stuck for a stretch (one reading repeated, 64 rows to a third of the record,
+/// anywhere) is left out whole and named: the fit is the one without the stretch. (Kept, the
+/// stuck rows set the noise floor to 0 and the moving data were excluded as outliers: hard
+/// iron 11 µT off.)
+#[test]
+fn a_stuck_stretch_is_left_out_and_named() {
+    use imu_cal::session::{self, Column, Input, Options, Sensor};
+    let key = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(21, |d| d.subsec_nanos() as u64);
+    let h = Vector3::new(-3.0, 12.0, 7.5);
+    let m = sphere_data(key, Matrix3::identity(), h);
+    let n = m.len();
+    let len = 64 + (key as usize / 5) % (n / 3);
+    let from = (key as usize / 13) % (n - len);
+    let fit = |m: &[Vector3<f64>]| {
+        let cols: Vec<Vec<f64>> = (0..3).map(|k| m.iter().map(|v| v[k]).collect()).collect();
+        let segments = [std::ops::Range {
+            start: 0,
+            end: m.len(),
+        }];
+        let input = Input {
+            columns: ["mx", "my", "mz"]
+                .iter()
+                .zip(&cols)
+                .map(|(name, values)| Column {
+                    name,
+                    unit: "µT",
+                    values,
+                })
+                .collect(),
+            rate_hz: 100.0,
+            segments: &segments,
+            shown: "test",
+        };
+        let o = Options {
+            model: vec![Effect::HardIron],
+            ..Options::new(Sensor::Mag)
+        };
+        let loaded = session::prepare(&input, &o).unwrap();
+        let out = session::run(&loaded, &o).unwrap();
+        let p = &out.report.model.fitted;
+        (
+            p.params.hard_iron.unwrap(),
+            p.sigma.hard_iron.unwrap(),
+            loaded.notes.join("; "),
+        )
+    };
+    let mut stuck = m.clone();
+    let v = stuck[from];
+    stuck[from..from + len].fill(v);
+    let kept: Vec<Vector3<f64>> = m[..from].iter().chain(&m[from + len..]).copied().collect();
+    let (a, sa, notes) = fit(&stuck);
+    let (b, _, _) = fit(&kept);
+    assert!(
+        notes.contains(&format!("rows {}–{} ({len} rows)", from + 1, from + len)),
+        "key {key}: {notes}"
+    );
+    for k in 0..3 {
+        assert!(
+            (a[k] - b[k]).abs() < 1e-9 && (a[k] - h[k]).abs() < 5.0 * sa[k] + 0.05,
+            "key {key}: stuck {from}+{len}: {a:?} ± {sa:?}, without the stretch {b:?}, truth {h:?}"
+        );
+    }
+}
