@@ -384,7 +384,7 @@ impl<'a> NoiseLab<'a> {
             .collect();
         if !d.glitches.is_empty() {
             out.push(format!(
-                "{} far off {} neighbours' mean: {}; a glitch (a bus error, a knock) adds the \
+                "{} far off {} neighbours: {}; a glitch (a bus error, a knock) adds the \
                  variance of white noise at every τ, so the fit reads it as noise; remove {} \
                  and fit again",
                 if d.glitches.len() == 1 {
@@ -400,7 +400,7 @@ impl<'a> NoiseLab<'a> {
                 d.glitches
                     .iter()
                     .map(|&(k, z)| format!(
-                        "sample {k} (t = {:.3} s) by {} robust σ of the second difference",
+                        "sample {k} (t = {:.3} s) by {} robust σ of the sample-to-sample change",
                         self.time_of(k),
                         if z < 1e6 {
                             format!("{z:.0}")
