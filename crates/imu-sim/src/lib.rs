@@ -706,10 +706,12 @@ impl SimConfig {
 }
 
 impl Analysed {
-    /// The lab's input (one uninterrupted segment), with the timestamps' analysis when given.
+    /// The lab's input (one uninterrupted segment), with the timestamps' analysis when given;
+    /// its readings name the gyro's unit, deg/s, that `imu-lab simulate` writes a rate in.
     pub fn record(&self, timing: Option<noise_model::Timing>) -> noise_model::Record<'_> {
         noise_model::Record {
             y: &self.y,
+            unit: "deg/s",
             tau0: self.tau0,
             segments: vec![(0, self.y.len() as u64)],
             temp: self.temp.as_deref(),

@@ -59,6 +59,8 @@ pub use imu_proto::csv::Timing;
 pub struct Record<'a> {
     /// The rate samples of every segment, concatenated in time order.
     pub y: &'a [f64],
+    /// Their unit (`deg/s`, `m/s²`, …), for the readings.
+    pub unit: &'a str,
     /// Sample period [s].
     pub tau0: f64,
     /// Segments (first sample's index counted as if there were no gaps, length).
@@ -614,11 +616,12 @@ impl<'a> NoiseLab<'a> {
                 },
                 p_value: st.p_value,
                 text: format!(
-                    "a bias step of {:+.4e} ± {:.1e} at t ≈ {} (change-point test on the time \
-                     series, likelihood ratio {:.0}, p = {:.1e} after the search over positions \
-                     and scales)",
+                    "a bias step of {:+.4e} ± {:.1e} {} at t ≈ {} (change-point test on the \
+                     time series, likelihood ratio {:.0}, p = {:.1e} after the search over \
+                     positions and scales)",
                     st.size,
                     st.sigma,
+                    self.record.unit,
                     fmt_s(t),
                     st.lr,
                     st.p_value
@@ -643,10 +646,10 @@ impl<'a> NoiseLab<'a> {
                         spec: TermSpec::new(Effect::Temperature),
                         p_value: p,
                         text: format!(
-                            "the bias follows the temperature column: {:+.4e} ± {:.1e} per °C \
+                            "the bias follows the temperature column: {:+.4e} ± {:.1e} {}/°C \
                              (GLS on the time series with the noise model's covariance, \
                              likelihood ratio {:.1}, p = {:.1e})",
-                            e.value, e.sigma, e.lr, p
+                            e.value, e.sigma, self.record.unit, e.lr, p
                         ),
                     });
                 }
@@ -680,11 +683,12 @@ impl<'a> NoiseLab<'a> {
                             p_value: p,
                             text: format!(
                                 "a warm-up transient: the bias approaches its final value \
-                                 exponentially, amplitude {:+.4e} ± {:.1e}, time constant ≈ {} \
-                                 (no temperature column; likelihood ratio {:.1}, p = {:.1e} after \
-                                 the search over time constants)",
+                                 exponentially, amplitude {:+.4e} ± {:.1e} {}, time constant \
+                                 ≈ {} (no temperature column; likelihood ratio {:.1}, p = {:.1e} \
+                                 after the search over time constants)",
                                 e.value,
                                 e.sigma,
+                                self.record.unit,
                                 fmt_s(tw),
                                 e.lr,
                                 p
@@ -761,11 +765,12 @@ impl<'a> NoiseLab<'a> {
             spec,
             p_value: p,
             text: format!(
-                "a smooth drift of the bias, {:.4e} rms over the record: a ramp and {} cosine \
+                "a smooth drift of the bias, {:.4e} {} rms over the record: a ramp and {} cosine \
                  component{} of the record's length (the shortest period {}); no step, \
                  exponential or temperature describes it (likelihood ratio {:.1} on {} degrees \
                  of freedom beyond the ramp, p = {:.1e} after the search over orders)",
                 a,
+                self.record.unit,
                 j,
                 if j == 1 { "" } else { "s" },
                 fmt_s(2.0 * record / j as f64),

@@ -335,6 +335,7 @@ pub fn run(input: &Input, o: &Options) -> Result<Session, String> {
         .flatten();
     let lab = NoiseLab::new(Record {
         y: input.y,
+        unit: input.unit,
         tau0,
         segments: nominal_segments(input.segments, input.timing),
         temp: temp.as_deref(),
@@ -462,7 +463,7 @@ fn fit_and_walk(
             before,
             after: summary(lab, &next),
             p_value: f64::NAN,
-            reading: reading(&next.fit, e),
+            reading: reading(&next.fit, e, lab.record.unit),
             reason: String::new(),
         });
         models.push(next);
@@ -796,6 +797,42 @@ mod tests {
             !ok && why.contains(&format!("samples {from}–{}", from + len - 1)),
             "key {key}: stuck {from}+{len}: {why}"
         );
+    }
+
+    /// A reading carries its amplitude's unit and 1σ, in the walk's steps, the findings and
+    /// the JSON terms (they printed "a bias step of -1.1489e-1 at t = 100 s").
+    #[test]
+    fn readings_carry_their_unit_and_uncertainty() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(17, |d| d.subsec_nanos() as u64);
+        let n = 20_000;
+        let at = 5_000 + (key % 10_000) as usize;
+        let mut y = white(n, key, 0.02);
+        y[at..].iter_mut().for_each(|v| *v += 0.05);
+        let segs = [Range { start: 0, end: n }];
+        let s = run(
+            &Input {
+                unit: "m/s²",
+                ..input(&y, &segs)
+            },
+            &Options {
+                auto: true,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let reading = &s.steps[0].reading;
+        assert!(
+            reading.starts_with("a bias step of +")
+                && reading.contains(" ± ")
+                && reading.contains(" m/s² at t = "),
+            "key {key}: {reading}"
+        );
+        let j = s.json_string();
+        assert!(j.contains(" m/s² at t = "), "key {key}: {j}");
+        let first = &s.stages[0].diagnosis.evidence.join("\n");
+        assert!(first.contains(" m/s² at t ≈ "), "key {key}: {first}");
     }
 
     #[test]

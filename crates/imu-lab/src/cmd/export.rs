@@ -76,6 +76,7 @@ fn analyse(input: &InputArgs, column: &str) -> Result<Axis> {
     let (pts, _) = Point::from_rows(&rows);
     let lab = NoiseLab::new(Record {
         y,
+        unit: &unit,
         tau0: 1.0 / rec.rate_hz,
         segments: vec![(0, y.len() as u64)],
         temp: None,

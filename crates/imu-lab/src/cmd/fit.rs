@@ -366,6 +366,7 @@ mod tests {
         let (pts, _) = Point::from_rows(&rows);
         let lab = NoiseLab::new(Record {
             y: &y,
+            unit: "deg/s",
             tau0: 1.0 / rate,
             segments: vec![(0, y.len() as u64)],
             temp: None,

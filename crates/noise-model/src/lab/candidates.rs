@@ -511,7 +511,7 @@ impl<'a> NoiseLab<'a> {
         let reading = edit
             .add
             .iter()
-            .map(|e| reading(&m.fit, e))
+            .map(|e| reading(&m.fit, e, self.record.unit))
             .collect::<Vec<_>>()
             .join("; ");
         Candidate {

@@ -17,12 +17,28 @@ pub(super) fn fmt_s(t: f64) -> String {
     }
 }
 
-/// The physical reading of an effect as fitted.
-pub fn reading(fit: &Fit, e: &Effect) -> String {
+/// The physical reading of an effect as fitted, its amplitude with its 1σ and its unit (the
+/// column's `unit`).
+pub fn reading(fit: &Fit, e: &Effect, unit: &str) -> String {
     let Some(t) = fit.terms.iter().rev().find(|t| t.effect == *e) else {
         return String::new();
     };
     let th = t.theta0().unwrap_or(f64::NAN);
+    // "+1.2345e-2 ± 3.1e-3 deg/s": the amplitude as the parameter table gives it
+    let amp = |signed: bool| {
+        let u = t.effect.amp_unit(unit, fit.ctx.temp_avar.is_none());
+        let (a, s) = (t.amplitude(), t.amplitude_sigma());
+        let sigma = if s.is_finite() {
+            format!(" ± {s:.1e}")
+        } else {
+            String::new()
+        };
+        if signed {
+            format!("{a:+.4e}{sigma} {u}")
+        } else {
+            format!("{a:.4e}{sigma} {u}")
+        }
+    };
     let two_pi = 2.0 * std::f64::consts::PI;
     match e {
         Effect::Markov => format!(
@@ -33,8 +49,8 @@ pub fn reading(fit: &Fit, e: &Effect) -> String {
             1.0 / (two_pi * th)
         ),
         Effect::Sinusoid => format!(
-            "a sinusoid of {:.3e} at {:.4} Hz (period {}); σ has nulls at τ = k/f",
-            t.amplitude(),
+            "a sinusoid of {} at {:.4} Hz (period {}); σ has nulls at τ = k/f",
+            amp(false),
             th,
             fmt_s(1.0 / th)
         ),
@@ -74,41 +90,38 @@ pub fn reading(fit: &Fit, e: &Effect) -> String {
             fmt_s(th * fit.tau0)
         ),
         Effect::BiasStep => format!(
-            "a bias step of {:+.4e} at t = {} — a non-stationarity of this record, not noise",
-            t.amplitude(),
+            "a bias step of {} at t = {} — a non-stationarity of this record, not noise",
+            amp(true),
             fmt_s(th)
         ),
         Effect::Temperature => {
             if fit.ctx.temp_avar.is_some() {
-                format!(
-                    "the bias follows the temperature with {:+.4e} per °C",
-                    t.amplitude()
-                )
+                format!("the bias follows the temperature with {}", amp(true))
             } else {
                 format!(
-                    "a warm-up transient of {:+.4e} with time constant {}",
-                    t.amplitude(),
+                    "a warm-up transient of {} with time constant {}",
+                    amp(true),
                     fmt_s(th)
                 )
             }
         }
         Effect::Resonance => format!(
-            "a resonance at f0 = {:.3} Hz, ζ = {:.3}, σ = {:.3e} — a mount or structural mode \
+            "a resonance at f0 = {:.3} Hz, ζ = {:.3}, σ = {} — a mount or structural mode \
              (band ≈ {:.2} Hz wide in the PSD)",
             th,
             t.theta.get(1).copied().unwrap_or(f64::NAN),
-            t.amplitude(),
+            amp(false),
             2.0 * t.theta.get(1).copied().unwrap_or(f64::NAN) * th
         ),
-        Effect::Resolution => format!("rounding to the data's LSB of {:.4e}", t.amplitude()),
+        Effect::Resolution => format!("rounding to the data's LSB of {}", amp(false)),
         Effect::Drift { .. } => format!(
-            "a smooth drift of the bias, {:.4e} rms over the record (a ramp and {} cosine \
+            "a smooth drift of the bias, {} rms over the record (a ramp and {} cosine \
              component{} of the record's length) — a non-stationarity of this record, not noise",
-            t.amplitude(),
+            amp(false),
             t.theta.len().saturating_sub(1),
             if t.theta.len() == 2 { "" } else { "s" }
         ),
-        e => format!("{} = {:.4e}", e.amp_name(), t.amplitude()),
+        e => format!("{} = {}", e.amp_name(), amp(false)),
     }
 }
 

@@ -126,8 +126,8 @@ pub fn num(v: f64) -> Value {
     serde_json::Number::from_f64(v).map_or(Value::Null, Value::Number)
 }
 
-/// The terms of `f` with their estimates.
-pub fn json_terms(f: &Fit) -> Vec<JsonTerm> {
+/// The terms of `f` with their estimates; `unit` is the column's.
+pub fn json_terms(f: &Fit, unit: &str) -> Vec<JsonTerm> {
     f.terms
         .iter()
         .enumerate()
@@ -154,7 +154,7 @@ pub fn json_terms(f: &Fit) -> Vec<JsonTerm> {
                 upper_bound: ub,
                 known: t.known,
                 tau_range_s: tau_range(f, k).map(|(a, b)| [a, b]),
-                reading: reading(f, &t.effect),
+                reading: reading(f, &t.effect, unit),
             }
         })
         .collect()
@@ -213,7 +213,7 @@ impl Session {
             unit: self.unit.clone(),
             rate_hz: self.rate_hz,
             samples: self.samples,
-            terms: json_terms(f),
+            terms: json_terms(f, &self.unit),
             chi2_dof: f.chi2_dof(),
             dof: f.dof,
             p_value: last.model.assessment.p_value,
