@@ -483,7 +483,8 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
         }
     }
     let segments = input.segments;
-    let e = |e: crate::error::CalError| e.to_string();
+    // The data's own errors name the recording.
+    let e = |e: crate::error::CalError| format!("{}: {e}", input.shown);
     let mut notes = Vec::new();
     Ok(match o.sensor {
         Sensor::Gyro if rotation => {

@@ -382,3 +382,34 @@ fn a_stuck_stretch_is_named_and_makes_no_staircase() {
         "steps at one instant: {at:?}"
     );
 }
+
+/// A recording too short for the lab is refused naming the file (the calibration said "input:
+/// 8 magnetometer samples", the noise fit "fit of quantization + …: 4 usable τ points").
+#[test]
+fn a_record_too_short_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = dir.path().join("short.csv");
+    let rows: String = (0..8)
+        .map(|i| {
+            let a = f64::from(i);
+            format!("{:.2},{},{},{}\n", a / 100.0, 20.0 + a, -3.0 * a, 40.0 - a)
+        })
+        .collect();
+    std::fs::write(&short, format!("t,mx,my,mz\n{rows}")).unwrap();
+    let tiny = dir.path().join("tiny.csv");
+    let rows: String = (0..20)
+        .map(|i| format!("{:.2},{}\n", f64::from(i) / 100.0, (i * 7919) % 13))
+        .collect();
+    std::fs::write(&tiny, format!("t,gz\n{rows}")).unwrap();
+    let (short, tiny) = (short.display().to_string(), tiny.display().to_string());
+    let e = run_err(["calibrate", "mag", &short]);
+    assert!(
+        e.contains(&format!("{short}: input: 8 magnetometer samples")),
+        "{e}"
+    );
+    let e = run_err(["fit", &tiny, "--column", "gz"]);
+    assert!(
+        e.contains(&format!("{tiny}: column \"gz\": fit of ")) && e.contains("usable τ points"),
+        "{e}"
+    );
+}

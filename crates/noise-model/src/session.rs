@@ -344,7 +344,7 @@ pub fn run(input: &Input, o: &Options) -> Result<Session, String> {
         user_effects: o.user.clone(),
     })
     .map_err(|e| format!("{}: {e}", input.label))?;
-    let (models, mut steps, stop) = fit_and_walk(o, &lab)?;
+    let (models, mut steps, stop) = fit_and_walk(o, &lab, input.label)?;
     let stages = analyse(&lab, input, models)?;
     // the step records say what the diagnosis says of each model
     for (i, s) in steps.iter_mut().enumerate() {
@@ -401,9 +401,12 @@ fn slices<'a>(
 /// with `auto`, else one step per `add`. Returns the models, the steps between them and, for
 /// `auto`, why the walk stopped.
 #[allow(clippy::type_complexity)]
+/// The start model fitted and, with `auto`, the walk from it; a fit that fails names the
+/// record (`label`) and the model.
 fn fit_and_walk(
     o: &Options,
     lab: &NoiseLab,
+    label: &str,
 ) -> Result<(Vec<Model>, Vec<Step<Effect>>, Option<Stop>), String> {
     let f = o.flags;
     let base: Vec<TermSpec> = if o.terms.is_empty() {
@@ -428,12 +431,12 @@ fn fit_and_walk(
     }
     let start = lab.fit(&base).map_err(|e| {
         format!(
-            "fit of {}: {e}",
+            "{label}: fit of {}: {e}",
             names(&base.iter().map(|s| s.effect.clone()).collect::<Vec<_>>())
         )
     })?;
     if o.auto {
-        let w = crate::walk(lab, start, o.max_steps).map_err(|e| format!("{e}"))?;
+        let w = crate::walk(lab, start, o.max_steps).map_err(|e| format!("{label}: {e}"))?;
         return Ok((w.models, w.steps, Some(w.stop)));
     }
     let mut models: Vec<Model> = vec![start];
@@ -447,7 +450,7 @@ fn fit_and_walk(
         specs.push(TermSpec::new(e.clone()));
         let next = lab
             .fit(&specs)
-            .map_err(|err| format!("fit with {e}: {err}"))?;
+            .map_err(|err| format!("{label}: fit with {e}: {err}"))?;
         let before = summary(lab, prev);
         steps.push(Step {
             edit: Edit {

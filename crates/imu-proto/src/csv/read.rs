@@ -233,7 +233,15 @@ impl<R: Read> Reader<R> {
             Ok(true) => {}
             Err(e) => {
                 let line = e.position().map(|p| p.line() as usize + self.skip_lines);
-                return Err(self.error(line, format!("malformed CSV: {e}")));
+                // The line is named once, by `error`: the csv crate's text repeats it.
+                let what = match e.kind() {
+                    csv::ErrorKind::UnequalLengths {
+                        expected_len, len, ..
+                    } => format!("{len} fields where the rows before have {expected_len}"),
+                    csv::ErrorKind::Utf8 { .. } => "not UTF-8 text".to_string(),
+                    _ => format!("malformed CSV: {e}"),
+                };
+                return Err(self.error(line, what));
             }
         }
         self.line = self
@@ -316,6 +324,16 @@ mod tests {
             rows.push(buf.clone());
         }
         Ok(rows)
+    }
+
+    /// A row short of fields names its line once and the counts (the csv crate's text
+    /// repeated the line: "line 106: … record 105 (line: 106, byte: 3972): …").
+    #[test]
+    fn a_short_row_names_its_line_once() {
+        let e = read_all("t,gx,gy\n0,1,2\n0.01,3\n", &ReadOptions::default(), &["gx"]).unwrap_err();
+        assert_eq!(e.line, Some(3));
+        assert_eq!(e.message, "2 fields where the rows before have 3", "{e}");
+        assert_eq!(e.to_string().matches('3').count(), 2, "{e}");
     }
 
     #[test]
