@@ -237,7 +237,10 @@ impl<R: Read> Reader<R> {
                 let what = match e.kind() {
                     csv::ErrorKind::UnequalLengths {
                         expected_len, len, ..
-                    } => format!("{len} fields where the rows before have {expected_len}"),
+                    } => format!(
+                        "{len} field{} where the rows before have {expected_len}",
+                        if *len == 1 { "" } else { "s" }
+                    ),
                     csv::ErrorKind::Utf8 { .. } => "not UTF-8 text".to_string(),
                     _ => format!("malformed CSV: {e}"),
                 };
