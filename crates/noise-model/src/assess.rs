@@ -67,6 +67,19 @@ pub struct Assessment {
     pub adequate: bool,
 }
 
+impl Assessment {
+    /// The largest |z| of the points (NaN if one is NaN: not a number that passes).
+    pub fn largest_z(&self) -> f64 {
+        self.z.iter().fold(0.0, |m: f64, z| {
+            if m.is_nan() || z.is_nan() {
+                f64::NAN
+            } else {
+                m.max(z.abs())
+            }
+        })
+    }
+}
+
 /// Where one point of an assessment stands, worst first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Standing {

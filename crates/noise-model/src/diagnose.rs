@@ -187,11 +187,13 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
             explanation: format!(
                 "The model describes the measurement: χ²/dof = {:.2} ({} with {} dof, from the \
                  estimates' own covariance), no τ where it leaves the confidence interval \
-                 significantly (all |z| ≤ {:.1}), and no step, temperature dependence, warm-up or \
-                 drift in the time series. No effect is missing.",
+                 significantly (largest |z| = {:.1}, below the threshold {:.1}), and no step, \
+                 temperature dependence, warm-up or drift in the time series. No effect is \
+                 missing.",
                 m.fit.chi2_dof(),
                 fmt_p(m.assessment.p_value),
                 m.fit.dof,
+                m.assessment.largest_z(),
                 m.assessment.threshold
             ),
             evidence,

@@ -234,6 +234,34 @@ fn affine_copy(y: &[f64], t: &[f64]) -> bool {
     syy > 0.0 && stt > 0.0 && 1.0 - syt * syt / (syy * stt) < 1e-10
 }
 
+/// The 1σ of a parameter scanned on a log grid, from its likelihood-ratio profile (θ, LR): half
+/// the width of the interval where the LR is within 1 of its largest, `lr` at `best` (χ²₁'s
+/// 68.3 %), interpolated in log θ between grid points; a side that never falls by 1 ends at the
+/// grid's end. NaN without two points.
+fn profile_sigma(profile: &[(f64, f64)], best: f64, lr: f64) -> f64 {
+    let Some(b) = profile.iter().position(|p| p.0 == best) else {
+        return f64::NAN;
+    };
+    if profile.len() < 2 {
+        return f64::NAN;
+    }
+    let target = lr - 1.0;
+    let cross = |i: usize, j: usize| {
+        // between grid points i (below the target) and j (above it)
+        let (a, b) = (profile[i], profile[j]);
+        let f = ((target - a.1) / (b.1 - a.1)).clamp(0.0, 1.0);
+        (a.0.ln() + f * (b.0.ln() - a.0.ln())).exp()
+    };
+    let lo = (1..=b)
+        .rev()
+        .find(|&i| profile[i - 1].1 < target)
+        .map_or(profile[0].0, |i| cross(i - 1, i));
+    let hi = (b..profile.len() - 1)
+        .find(|&i| profile[i + 1].1 < target)
+        .map_or(profile[profile.len() - 1].0, |i| cross(i + 1, i));
+    (hi - lo) / 2.0
+}
+
 /// The step between neighbouring values if the samples sit on a lattice (integer counts times a
 /// scale), else None. Looks at up to 2^17 values spread over the record.
 pub fn lattice(y: &[f64]) -> Option<f64> {
@@ -658,6 +686,7 @@ impl<'a> NoiseLab<'a> {
                 let record = self.record.y.len() as f64 * self.record.tau0;
                 let mut best: Option<(f64, nonstat::Estimate)> = None;
                 let grid = 24;
+                let mut profile = Vec::with_capacity(grid);
                 for i in 0..grid {
                     let tw = record / 300.0 * (900.0f64).powf(i as f64 / (grid - 1) as f64);
                     let mut sig = signals.clone();
@@ -666,11 +695,52 @@ impl<'a> NoiseLab<'a> {
                     });
                     let est = nonstat::estimate(&gls, &comps, &sig);
                     let e = est.last().expect("warm-up").clone();
+                    profile.push((tw, e.lr));
                     if e.lr.is_finite() && best.as_ref().is_none_or(|b| e.lr > b.1.lr) {
                         best = Some((tw, e));
                     }
                 }
+                // The grid's step (×1.34) misfits a strong exponential, and a drift's cosines
+                // then fit it better: the best time constant is refined between its neighbours
+                // by golden section on the likelihood ratio (log τ).
+                if let Some(b) = best
+                    .as_ref()
+                    .and_then(|b| profile.iter().position(|p| p.0 == b.0))
+                {
+                    let warm = |tw: f64| {
+                        let mut sig = signals.clone();
+                        sig.push(Signal::WarmUp {
+                            kappa: tw / self.record.tau0,
+                        });
+                        nonstat::estimate(&gls, &comps, &sig)
+                            .last()
+                            .expect("warm-up")
+                            .clone()
+                    };
+                    let (mut lo, mut hi) = (
+                        profile[b.saturating_sub(1)].0.ln(),
+                        profile[(b + 1).min(grid - 1)].0.ln(),
+                    );
+                    let g = (5f64.sqrt() - 1.0) / 2.0;
+                    for _ in 0..16 {
+                        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+                        let (e1, e2) = (warm(x1.exp()), warm(x2.exp()));
+                        for (x, e) in [(x1, e1.clone()), (x2, e2.clone())] {
+                            profile.push((x.exp(), e.lr));
+                            if e.lr.is_finite() && best.as_ref().is_none_or(|b| e.lr > b.1.lr) {
+                                best = Some((x.exp(), e));
+                            }
+                        }
+                        if e1.lr > e2.lr {
+                            hi = x2;
+                        } else {
+                            lo = x1;
+                        }
+                    }
+                    profile.sort_by(|a, b| a.0.total_cmp(&b.0));
+                }
                 if let Some((tw, e)) = best {
+                    let tw_sigma = profile_sigma(&profile, tw, e.lr);
                     let p = (chi2_sf(e.lr, 1.0) * grid as f64).min(1.0);
                     if p < P_SIGNAL {
                         out.push(Finding {
@@ -678,18 +748,20 @@ impl<'a> NoiseLab<'a> {
                             spec: TermSpec {
                                 theta: Some(vec![tw]),
                                 theta_fixed: true,
+                                theta_sigma: Some(vec![tw_sigma]),
                                 ..TermSpec::new(Effect::Temperature)
                             },
                             p_value: p,
                             text: format!(
                                 "a warm-up transient: the bias approaches its final value \
                                  exponentially, amplitude {:+.4e} ± {:.1e} {}, time constant \
-                                 ≈ {} (no temperature column; likelihood ratio {:.1}, p = {:.1e} \
-                                 after the search over time constants)",
+                                 {} ± {} (no temperature column; likelihood ratio {:.1}, p = \
+                                 {:.1e} after the search over time constants)",
                                 e.value,
                                 e.sigma,
                                 self.record.unit,
                                 fmt_s(tw),
+                                fmt_s(tw_sigma),
                                 e.lr,
                                 p
                             ),

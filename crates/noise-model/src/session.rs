@@ -551,9 +551,10 @@ pub fn verdict(fit: &Fit, a: &Assessment, adequate: bool) -> String {
     }
     if a.adequate {
         format!(
-            "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (all |z| ≤ {:.1}).",
+            "ADEQUATE — χ²/dof = {}, global p = {}, and no τ where the model leaves the 68.3 % interval significantly (largest |z| = {:.1}, below the threshold {:.1}).",
             sig(fit.chi2_dof(), 3),
             sig(a.p_value, 2),
+            a.largest_z(),
             a.threshold
         )
     } else {
@@ -635,6 +636,21 @@ mod tests {
             let units = s.param_units();
             assert_eq!(units.len(), s.last().model.fit.terms.len());
             assert!(units.iter().all(|u| !u[0].1.is_empty()));
+            // the verdict gives the largest |z|, not the threshold as if it were one
+            let a = &s.last().model.assessment;
+            let largest = a.z.iter().map(|z| z.abs()).fold(0.0, f64::max);
+            assert!(largest > 0.0 && largest < a.threshold);
+            assert!(
+                s.verdict().contains(&format!(
+                    "largest |z| = {largest:.1}, below the threshold {:.1}",
+                    a.threshold
+                )),
+                "{}",
+                s.verdict()
+            );
+            let mut nan = a.clone();
+            nan.z[1] = f64::NAN;
+            assert!(nan.largest_z().is_nan());
         }
     }
 
@@ -836,6 +852,46 @@ mod tests {
         assert!(j.contains(" m/s² at t = "), "key {key}: {j}");
         let first = &s.stages[0].diagnosis.evidence.join("\n");
         assert!(first.contains(" m/s² at t ≈ "), "key {key}: {first}");
+    }
+
+    /// A warm-up's time constant comes with its 1σ, from the likelihood profile over the
+    /// scanned time constants (it had none), and covers the truth. (The walk names some
+    /// exponentials a drift instead: six draws, at least one warm-up.)
+    #[test]
+    fn a_warm_up_time_constant_has_its_uncertainty() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(19, |d| d.subsec_nanos() as u64);
+        let mut named = 0;
+        for draw in 0..6u64 {
+            let k = key.wrapping_add(draw * 7_919);
+            let n = 30_000;
+            let tw = 10.0 + (k % 50) as f64;
+            let a = 0.5 + (k / 50 % 15) as f64 * 0.1;
+            let noise = white(n, k, 0.01);
+            let y: Vec<f64> = (0..n)
+                .map(|i| noise[i] + a * (-(i as f64) / 100.0 / tw).exp())
+                .collect();
+            let segs = [Range { start: 0, end: n }];
+            let s = run(
+                &input(&y, &segs),
+                &Options {
+                    auto: true,
+                    ..Options::default()
+                },
+            )
+            .unwrap();
+            let Some(t) = s.last().model.fit.term(&Effect::Temperature).cloned() else {
+                continue;
+            };
+            named += 1;
+            let (got, sigma) = (t.theta[0], t.theta_sigma[0]);
+            assert!(
+                sigma > 0.0 && sigma < 0.5 * tw && (got - tw).abs() < 4.0 * sigma,
+                "key {k}: {tw} s against {got} ± {sigma} s"
+            );
+        }
+        assert!(named > 0, "key {key}: no warm-up named in six");
     }
 
     #[test]

@@ -99,9 +99,13 @@ pub fn reading(fit: &Fit, e: &Effect, unit: &str) -> String {
                 format!("the bias follows the temperature with {}", amp(true))
             } else {
                 format!(
-                    "a warm-up transient of {} with time constant {}",
+                    "a warm-up transient of {} with time constant {}{}",
                     amp(true),
-                    fmt_s(th)
+                    fmt_s(th),
+                    t.theta_sigma
+                        .first()
+                        .filter(|s| s.is_finite())
+                        .map_or(String::new(), |s| format!(" ± {}", fmt_s(*s)))
                 )
             }
         }
