@@ -43,14 +43,17 @@ const RUN_RATIO: usize = 8;
 const P_RUN: f64 = 1e-9;
 /// Glitch threshold, robust σ of the first difference.
 const GLITCH_SIGMA: f64 = 12.0;
+/// A glitch on a lattice is more than this many LSB off both its neighbours.
+const GLITCH_LSB: f64 = 4.0;
 /// Glitches listed at most (a record with more has heavy-tailed noise, not glitches).
 const MAX_GLITCHES: usize = 3;
 
-/// The defects of `y`, whose `lengths` are its segments' (differences never span two).
-pub fn find(y: &[f64], lengths: &[usize]) -> Defects {
+/// The defects of `y`, whose `lengths` are its segments' (differences never span two), its
+/// values on a lattice of `lsb` when they are.
+pub fn find(y: &[f64], lengths: &[usize], lsb: Option<f64>) -> Defects {
     Defects {
         stuck: stuck_runs(y, lengths),
-        glitches: glitches(y, lengths),
+        glitches: glitches(y, lengths, lsb),
     }
 }
 
@@ -107,7 +110,7 @@ fn stuck_runs(y: &[f64], lengths: &[usize]) -> Vec<(usize, usize, f64)> {
     }
 }
 
-fn glitches(y: &[f64], lengths: &[usize]) -> Vec<(usize, f64)> {
+fn glitches(y: &[f64], lengths: &[usize], lsb: Option<f64>) -> Vec<(usize, f64)> {
     // first differences within each segment, and each inner sample's spike size: the smaller
     // of its distances to its two neighbours when it lies beyond both on one side (a step has
     // one neighbour on each level, so none)
@@ -141,8 +144,13 @@ fn glitches(y: &[f64], lengths: &[usize]) -> Vec<(usize, f64)> {
         // a constant signal: no scale to judge by
         return Vec::new();
     }
+    // On a lattice coarser than the noise most samples sit on one level and a lone step of an
+    // LSB or two off it is the noise itself (σ = LSB/4 puts 5 % of the samples there): a
+    // glitch is more than GLITCH_LSB of them.
+    let least = lsb.map_or(0.0, |l| GLITCH_LSB * l);
     let mut out: Vec<(usize, f64)> = spike
         .iter()
+        .filter(|s| s.1 > least)
         .map(|&(i, v)| (i, v / sigma))
         .filter(|&(_, z)| z > GLITCH_SIGMA)
         .collect();
@@ -225,13 +233,22 @@ mod tests {
                 .enumerate()
                 .map(|(i, v)| if i >= at { v + size } else { *v })
                 .collect();
-            for (what, y) in [
-                ("white", &clean),
-                ("walk", &walk),
-                ("low-pass", &lp),
-                ("stepped", &stepped),
+            // the same noise rounded to an LSB of 3–6 σ: most samples on one level, lone
+            // excursions of an LSB
+            let coarse_lsb = sigma * (3.0 + 3.0 * u());
+            let coarse: Vec<f64> = clean
+                .iter()
+                .map(|v| (v / coarse_lsb).round() * coarse_lsb)
+                .collect();
+            let lattice = (lsb > 0.0).then_some(lsb);
+            for (what, y, l) in [
+                ("white", &clean, lattice),
+                ("walk", &walk, None),
+                ("low-pass", &lp, None),
+                ("stepped", &stepped, lattice),
+                ("coarse", &coarse, Some(coarse_lsb)),
             ] {
-                let d = find(y, &[y.len()]);
+                let d = find(y, &[y.len()], l);
                 assert!(
                     d.is_empty(),
                     "key {key} round {round}: {what} noise gave {d:?}"
@@ -249,7 +266,7 @@ mod tests {
             let mut y = clean.clone();
             let v = y[at];
             y[at..at + len].fill(v);
-            let d = find(&y, &[n]);
+            let d = find(&y, &[n], lattice);
             assert_eq!(d.stuck.len(), 1, "key {key} round {round}: {d:?}");
             let (s, l, _) = d.stuck[0];
             // the run may take in neighbours that happen to equal the stuck value
@@ -267,7 +284,7 @@ mod tests {
             for &i in &at {
                 y[i] += sigma * (30.0 + u() * 1e4) * if u() < 0.5 { 1.0 } else { -1.0 };
             }
-            let d = find(&y, &[n]);
+            let d = find(&y, &[n], lattice);
             let mut got: Vec<usize> = d.glitches.iter().map(|g| g.0).collect();
             got.sort();
             assert_eq!(got, at, "key {key} round {round}: {d:?}");
@@ -280,7 +297,7 @@ mod tests {
     fn segments_are_kept_apart() {
         let mut z = noise(4_000, key(), 0.05, 0.0);
         z[1_999] += 1e3;
-        assert!(find(&z, &[2_000, 2_000]).glitches.is_empty());
-        assert_eq!(find(&z, &[4_000]).glitches.len(), 1);
+        assert!(find(&z, &[2_000, 2_000], None).glitches.is_empty());
+        assert_eq!(find(&z, &[4_000], None).glitches.len(), 1);
     }
 }

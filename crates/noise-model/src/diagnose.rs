@@ -171,6 +171,15 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
             t.describe()
         ));
     }
+    if let Some((lsb, dev)) = lab.below_lsb() {
+        evidence.push(format!(
+            "the noise is below the data's LSB ({lsb:.4e}): the shortest τ's σ = {dev:.4e} is under \
+             LSB/√12 = {:.4e}, so most samples sit on one level and rounding is not noise of its \
+             own; the white term describes the rounded values, and the sensor's noise under them \
+             is not resolved (a finer range or more bits would show it)",
+            lsb / 12f64.sqrt()
+        ));
+    }
     let defects = lab.defect_texts();
     evidence.extend(defects.iter().cloned());
     evidence.extend(m.findings.iter().map(|f| f.text.clone()));

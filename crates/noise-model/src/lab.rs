@@ -368,7 +368,7 @@ impl<'a> NoiseLab<'a> {
             .unwrap_or_default();
         let periodogram_df = 1.0 / (tau0 * seg_y.len().next_power_of_two() as f64);
         let lengths: Vec<usize> = record.segments.iter().map(|s| s.1 as usize).collect();
-        let defects = crate::defects::find(record.y, &lengths);
+        let defects = crate::defects::find(record.y, &lengths, lsb);
         Ok(NoiseLab {
             record,
             meas,
@@ -464,9 +464,11 @@ impl<'a> NoiseLab<'a> {
     /// decimals) is left out; the walk still adds it if it lowers the criterion.
     pub fn default_specs(&self) -> Vec<TermSpec> {
         let mut v: Vec<TermSpec> = DEFAULT_TERMS.iter().cloned().map(TermSpec::new).collect();
-        if let (Some(s), Some(p)) = (self.resolution_spec(), self.meas.points.first()) {
-            let lsb = self.lsb.unwrap_or(0.0);
-            let share = lsb * lsb / 12.0 / p.m.max(1) as f64 / (p.dev * p.dev);
+        if let (Some(s), Some(p), Some(share)) = (
+            self.resolution_spec(),
+            self.meas.points.first(),
+            self.resolution_share(),
+        ) {
             if share >= (2.0 / p.edf).sqrt() {
                 v.push(s);
             }
@@ -474,7 +476,29 @@ impl<'a> NoiseLab<'a> {
         v
     }
 
+    /// The share of the shortest τ's measured Allan variance that rounding to the lattice
+    /// would make as noise of its own, LSB²/12/m over σ̂² (None without a lattice).
+    fn resolution_share(&self) -> Option<f64> {
+        let (lsb, p) = (self.lsb?, self.meas.points.first()?);
+        Some(lsb * lsb / 12.0 / p.m.max(1) as f64 / (p.dev * p.dev))
+    }
+
+    /// The noise below the lattice: rounding is noise of its own, LSB²/12 independent of the
+    /// signal, only while the signal's noise spans a few LSB (Widrow's condition, σ ≳ LSB/2).
+    /// Below that the record is mostly one level and the rounding error is minus the signal:
+    /// the rounded samples are still independent, their variance far below LSB²/12 (σ = LSB/5
+    /// keeps 1.2 % of the samples off zero), and a known LSB²/12 floor put every point below
+    /// the model (χ²/dof 332). The lattice is then no term: the white noise describes the
+    /// rounded values. Some((LSB, the shortest τ's σ̂)) when its share would pass one half.
+    pub fn below_lsb(&self) -> Option<(f64, f64)> {
+        let share = self.resolution_share()?;
+        (share > 0.5).then(|| (self.lsb.unwrap_or(0.0), self.meas.points[0].dev))
+    }
+
     fn resolution_spec(&self) -> Option<TermSpec> {
+        if self.below_lsb().is_some() {
+            return None;
+        }
         let lsb = self.lsb?;
         Some(TermSpec {
             known: Some(Known {

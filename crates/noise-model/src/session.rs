@@ -894,6 +894,46 @@ mod tests {
         assert!(named > 0, "key {key}: no warm-up named in six");
     }
 
+    /// White noise rounded to an LSB of 3–6 σ (most samples on one level) is described by the
+    /// white term, adequate, with the evidence saying the noise is below the LSB (a known
+    /// LSB²/12 floor put every point below the model, χ²/dof 332) and no lone excursion called
+    /// a glitch; rounded to an LSB of 0.6–1 σ the lattice is the known resolution term as before.
+    #[test]
+    fn noise_below_the_lsb_is_white_and_said() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(23, |d| d.subsec_nanos() as u64);
+        let sigma = 0.05;
+        let clean = white(20_000, key, sigma);
+        let segs = [Range {
+            start: 0,
+            end: clean.len(),
+        }];
+        let o = Options {
+            auto: true,
+            ..Options::default()
+        };
+        for (k, coarse) in [
+            (3.0 + (key % 30) as f64 / 10.0, true),
+            (0.6 + (key % 5) as f64 / 10.0, false),
+        ] {
+            let lsb = k * sigma;
+            let y: Vec<f64> = clean.iter().map(|v| (v / lsb).round() * lsb).collect();
+            let s = run(&input(&y, &segs), &o).unwrap();
+            let d = &s.last().diagnosis;
+            let said = d
+                .evidence
+                .iter()
+                .any(|e| e.contains("below the data's LSB"));
+            let has_res = s.last().model.fit.term(&Effect::Resolution).is_some();
+            assert_eq!(said, coarse, "key {key}: LSB {k} σ: {:?}", d.evidence);
+            assert_eq!(has_res, !coarse, "key {key}: LSB {k} σ");
+            if coarse {
+                assert!(d.adequate, "key {key}: LSB {k} σ: {}", d.explanation);
+            }
+        }
+    }
+
     #[test]
     fn options_and_segments_are_refused_by_name() {
         let flat = vec![0.25; 4000];
