@@ -408,27 +408,35 @@ fn held_rows(c: &[Vec<f64>; 3]) -> Vec<bool> {
     }
 }
 
-/// Rows repeating one reading at least this many times in a row are a stuck magnetometer, not
-/// a slower one held between its samples (a hold repeats a reading a few times: the QMC5883L's
-/// 200 Hz read at 1 kHz five).
+/// Rows repeating one reading at least this many times in a row, and [`STUCK_HOLDS`] times the
+/// record's median run, are a stuck magnetometer, not a slower one held between its samples (a
+/// hold repeats each reading about as often: the QMC5883L's 200 Hz read at 1 kHz five times,
+/// the HMC5883L's 15 Hz at 1 kHz 67).
 const STUCK_ROWS: usize = 64;
+/// How many median runs a stuck run is at least.
+const STUCK_HOLDS: usize = 8;
 
-/// The runs of at least [`STUCK_ROWS`] identical rows: (first row, length).
+/// The stuck runs of identical rows: (first row, length).
 fn stuck_runs(c: &[Vec<f64>; 3]) -> Vec<(usize, usize)> {
     let n = c[0].len();
-    let mut out = Vec::new();
+    let mut runs = Vec::new();
     let mut i = 0;
     while i < n {
         let mut j = i + 1;
         while j < n && (0..3).all(|a| c[a][j] == c[a][i]) {
             j += 1;
         }
-        if j - i >= STUCK_ROWS {
-            out.push((i, j - i));
-        }
+        runs.push((i, j - i));
         i = j;
     }
-    out
+    let mut lengths: Vec<usize> = runs.iter().map(|r| r.1).collect();
+    lengths.sort_unstable();
+    let Some(&median) = lengths.get(lengths.len() / 2) else {
+        return Vec::new();
+    };
+    let least = STUCK_ROWS.max(STUCK_HOLDS * median);
+    runs.retain(|r| r.1 >= least);
+    runs
 }
 
 /// Keep the samples not flagged.
@@ -600,7 +608,7 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                 }
                 notes.push(format!(
                     "left out as a stuck magnetometer (one reading repeated {STUCK_ROWS} rows or \
-                     more): {}",
+                     more, and {STUCK_HOLDS} times the record's median run): {}",
                     stuck
                         .iter()
                         .map(|&(from, len)| format!(

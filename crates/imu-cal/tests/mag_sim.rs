@@ -536,3 +536,63 @@ fn a_stuck_stretch_is_left_out_and_named() {
         );
     }
 }
+
+/// A slower magnetometer held between its samples (each reading repeated 50–120 rows, as an
+/// HMC5883L at 15 Hz in a 1 kHz record) is no stuck part: nothing is left out, and the fit is
+/// the one of its distinct readings.
+#[test]
+fn a_held_slow_magnetometer_is_not_stuck() {
+    use imu_cal::session::{self, Column, Input, Options, Sensor};
+    let key = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(29, |d| d.subsec_nanos() as u64);
+    let h = Vector3::new(4.0, -9.0, 2.5);
+    let m = sphere_data(key, Matrix3::identity(), h);
+    let hold = 50 + (key as usize / 3) % 70;
+    // the first reading held for part of a period only, as a record that starts between samples
+    let first = 1 + (key as usize / 7) % hold;
+    let mut rows: Vec<Vector3<f64>> = vec![m[0]; first];
+    for v in &m[1..600] {
+        rows.extend(std::iter::repeat_n(*v, hold));
+    }
+    let cols: Vec<Vec<f64>> = (0..3)
+        .map(|k| rows.iter().map(|v| v[k]).collect())
+        .collect();
+    let segments = [std::ops::Range {
+        start: 0,
+        end: rows.len(),
+    }];
+    let input = Input {
+        columns: ["mx", "my", "mz"]
+            .iter()
+            .zip(&cols)
+            .map(|(name, values)| Column {
+                name,
+                unit: "µT",
+                values,
+            })
+            .collect(),
+        rate_hz: 1000.0,
+        segments: &segments,
+        shown: "held",
+    };
+    let o = Options {
+        model: vec![Effect::HardIron],
+        ..Options::new(Sensor::Mag)
+    };
+    let loaded = session::prepare(&input, &o).unwrap();
+    let notes = loaded.notes.join("; ");
+    assert!(
+        !notes.contains("stuck") && notes.contains("zero-order hold"),
+        "key {key}: hold {hold}: {notes}"
+    );
+    let out = session::run(&loaded, &o).unwrap();
+    let p = &out.report.model.fitted;
+    let (hi, hs) = (p.params.hard_iron.unwrap(), p.sigma.hard_iron.unwrap());
+    for k in 0..3 {
+        assert!(
+            (hi[k] - h[k]).abs() < 5.0 * hs[k] + 0.05,
+            "key {key}: {hi:?} ± {hs:?} against {h:?}"
+        );
+    }
+}
