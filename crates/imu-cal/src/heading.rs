@@ -112,12 +112,12 @@ pub struct Row {
 /// turns (hard and soft iron do); what it cannot: an error that is the same at every attitude
 /// (a declination, a turned mounting) — that needs a truth.
 pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
-    let mut dts: Vec<f64> = rows.windows(2).map(|w| w[1].t - w[0].t).collect();
-    if dts.is_empty() || !(window > 0.0) {
+    let Some(step) = median_spacing(rows) else {
+        return Vec::new();
+    };
+    if !(window > 0.0) {
         return Vec::new();
     }
-    dts.sort_by(f64::total_cmp);
-    let step = dts[dts.len() / 2];
     let mut out = Vec::new();
     let mut i = 0;
     while i < rows.len() {
@@ -132,7 +132,7 @@ pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
         while j + 1 < rows.len() && rows[j + 1].t - t0 <= window {
             let (r, n) = (&rows[j], &rows[j + 1]);
             let dt = n.t - r.t;
-            if dt > 1.5 * step || dt <= 0.0 {
+            if is_gap(dt, step) {
                 ok = false;
                 break;
             }
@@ -163,6 +163,18 @@ pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
     out
 }
 
+/// The median spacing of the rows' times (None with fewer than two rows).
+fn median_spacing(rows: &[Row]) -> Option<f64> {
+    let mut dts: Vec<f64> = rows.windows(2).map(|w| w[1].t - w[0].t).collect();
+    dts.sort_by(f64::total_cmp);
+    dts.get(dts.len() / 2).copied()
+}
+
+/// A spacing no window spans: beyond 1.5× the median `step`, or not increasing.
+fn is_gap(dt: f64, step: f64) -> bool {
+    dt > 1.5 * step || dt <= 0.0
+}
+
 /// Why [`gyro_consistency`] found no window in `rows`: the record shorter than a window, gaps
 /// in the rows' times (a spacing beyond 1.5× the median, as host stamps of a bursty link have),
 /// or rows tilted beyond `max_pitch` or without a heading; each counted.
@@ -171,18 +183,12 @@ pub fn no_window_reason(rows: &[Row], window: f64, max_pitch: f64) -> String {
         return "no rows".into();
     };
     let span = last.t - first.t;
-    if span < window {
+    let Some(step) = median_spacing(rows).filter(|_| span >= window) else {
         return format!("the recording ({span:.3} s) is shorter than one {window} s window");
-    }
-    let mut dts: Vec<f64> = rows.windows(2).map(|w| w[1].t - w[0].t).collect();
-    dts.sort_by(f64::total_cmp);
-    let step = dts[dts.len() / 2];
+    };
     let gaps = rows
         .windows(2)
-        .filter(|w| {
-            let dt = w[1].t - w[0].t;
-            dt > 1.5 * step || dt <= 0.0
-        })
+        .filter(|w| is_gap(w[1].t - w[0].t, step))
         .count();
     let tilted = rows
         .iter()

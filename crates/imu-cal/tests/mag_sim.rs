@@ -471,90 +471,10 @@ fn short_controls_are_adequate_at_the_stated_rate() {
     assert!(alarms.len() < 4, "key {key}: {alarms:#?}");
 }
 
-/// A magnetometer stuck for a stretch (one reading repeated, 64 rows to a third of the record,
-/// anywhere) is left out whole and named: the fit is the one without the stretch. (Kept, the
-/// stuck rows set the noise floor to 0 and the moving data were excluded as outliers: hard
-/// iron 11 µT off.)
-#[test]
-fn a_stuck_stretch_is_left_out_and_named() {
+/// The calibration session on magnetometer rows (µT at `rate_hz`), as `imu-lab calibrate mag`
+/// runs it with the hard-iron model: its hard iron, their 1σ, and the notes on the input.
+fn session_hard_iron(rows: &[Vector3<f64>], rate_hz: f64) -> ([f64; 3], [f64; 3], String) {
     use imu_cal::session::{self, Column, Input, Options, Sensor};
-    let key = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(21, |d| d.subsec_nanos() as u64);
-    let h = Vector3::new(-3.0, 12.0, 7.5);
-    let m = sphere_data(key, Matrix3::identity(), h);
-    let n = m.len();
-    let len = 64 + (key as usize / 5) % (n / 3);
-    let from = (key as usize / 13) % (n - len);
-    let fit = |m: &[Vector3<f64>]| {
-        let cols: Vec<Vec<f64>> = (0..3).map(|k| m.iter().map(|v| v[k]).collect()).collect();
-        let segments = [std::ops::Range {
-            start: 0,
-            end: m.len(),
-        }];
-        let input = Input {
-            columns: ["mx", "my", "mz"]
-                .iter()
-                .zip(&cols)
-                .map(|(name, values)| Column {
-                    name,
-                    unit: "µT",
-                    values,
-                })
-                .collect(),
-            rate_hz: 100.0,
-            segments: &segments,
-            shown: "test",
-        };
-        let o = Options {
-            model: vec![Effect::HardIron],
-            ..Options::new(Sensor::Mag)
-        };
-        let loaded = session::prepare(&input, &o).unwrap();
-        let out = session::run(&loaded, &o).unwrap();
-        let p = &out.report.model.fitted;
-        (
-            p.params.hard_iron.unwrap(),
-            p.sigma.hard_iron.unwrap(),
-            loaded.notes.join("; "),
-        )
-    };
-    let mut stuck = m.clone();
-    let v = stuck[from];
-    stuck[from..from + len].fill(v);
-    let kept: Vec<Vector3<f64>> = m[..from].iter().chain(&m[from + len..]).copied().collect();
-    let (a, sa, notes) = fit(&stuck);
-    let (b, _, _) = fit(&kept);
-    assert!(
-        notes.contains(&format!("rows {}–{} ({len} rows)", from + 1, from + len)),
-        "key {key}: {notes}"
-    );
-    for k in 0..3 {
-        assert!(
-            (a[k] - b[k]).abs() < 1e-9 && (a[k] - h[k]).abs() < 5.0 * sa[k] + 0.05,
-            "key {key}: stuck {from}+{len}: {a:?} ± {sa:?}, without the stretch {b:?}, truth {h:?}"
-        );
-    }
-}
-
-/// A slower magnetometer held between its samples (each reading repeated 50–120 rows, as an
-/// HMC5883L at 15 Hz in a 1 kHz record) is no stuck part: nothing is left out, and the fit is
-/// the one of its distinct readings.
-#[test]
-fn a_held_slow_magnetometer_is_not_stuck() {
-    use imu_cal::session::{self, Column, Input, Options, Sensor};
-    let key = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(29, |d| d.subsec_nanos() as u64);
-    let h = Vector3::new(4.0, -9.0, 2.5);
-    let m = sphere_data(key, Matrix3::identity(), h);
-    let hold = 50 + (key as usize / 3) % 70;
-    // the first reading held for part of a period only, as a record that starts between samples
-    let first = 1 + (key as usize / 7) % hold;
-    let mut rows: Vec<Vector3<f64>> = vec![m[0]; first];
-    for v in &m[1..600] {
-        rows.extend(std::iter::repeat_n(*v, hold));
-    }
     let cols: Vec<Vec<f64>> = (0..3)
         .map(|k| rows.iter().map(|v| v[k]).collect())
         .collect();
@@ -572,23 +492,78 @@ fn a_held_slow_magnetometer_is_not_stuck() {
                 values,
             })
             .collect(),
-        rate_hz: 1000.0,
+        rate_hz,
         segments: &segments,
-        shown: "held",
+        shown: "test",
     };
     let o = Options {
         model: vec![Effect::HardIron],
         ..Options::new(Sensor::Mag)
     };
     let loaded = session::prepare(&input, &o).unwrap();
-    let notes = loaded.notes.join("; ");
+    let out = session::run(&loaded, &o).unwrap();
+    let p = &out.report.model.fitted;
+    (
+        p.params.hard_iron.unwrap(),
+        p.sigma.hard_iron.unwrap(),
+        loaded.notes.join("; "),
+    )
+}
+
+/// A magnetometer stuck for a stretch (one reading repeated, 64 rows to a third of the record,
+/// anywhere) is left out whole and named: the fit is the one without the stretch. (Kept, the
+/// stuck rows set the noise floor to 0 and the moving data were excluded as outliers: hard
+/// iron 11 µT off.)
+#[test]
+fn a_stuck_stretch_is_left_out_and_named() {
+    let key = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(21, |d| d.subsec_nanos() as u64);
+    let h = Vector3::new(-3.0, 12.0, 7.5);
+    let m = sphere_data(key, Matrix3::identity(), h);
+    let n = m.len();
+    let len = 64 + (key as usize / 5) % (n / 3);
+    let from = (key as usize / 13) % (n - len);
+    let mut stuck = m.clone();
+    let v = stuck[from];
+    stuck[from..from + len].fill(v);
+    let kept: Vec<Vector3<f64>> = m[..from].iter().chain(&m[from + len..]).copied().collect();
+    let (a, sa, notes) = session_hard_iron(&stuck, 100.0);
+    let (b, _, _) = session_hard_iron(&kept, 100.0);
+    assert!(
+        notes.contains(&format!("rows {}–{} ({len} rows)", from + 1, from + len)),
+        "key {key}: {notes}"
+    );
+    for k in 0..3 {
+        assert!(
+            (a[k] - b[k]).abs() < 1e-9 && (a[k] - h[k]).abs() < 5.0 * sa[k] + 0.05,
+            "key {key}: stuck {from}+{len}: {a:?} ± {sa:?}, without the stretch {b:?}, truth {h:?}"
+        );
+    }
+}
+
+/// A slower magnetometer held between its samples (each reading repeated 50–120 rows, as an
+/// HMC5883L at 15 Hz in a 1 kHz record) is no stuck part: nothing is left out, and the fit is
+/// the one of its distinct readings.
+#[test]
+fn a_held_slow_magnetometer_is_not_stuck() {
+    let key = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(29, |d| d.subsec_nanos() as u64);
+    let h = Vector3::new(4.0, -9.0, 2.5);
+    let m = sphere_data(key, Matrix3::identity(), h);
+    let hold = 50 + (key as usize / 3) % 70;
+    // the first reading held for part of a period only, as a record that starts between samples
+    let first = 1 + (key as usize / 7) % hold;
+    let mut rows: Vec<Vector3<f64>> = vec![m[0]; first];
+    for v in &m[1..600] {
+        rows.extend(std::iter::repeat_n(*v, hold));
+    }
+    let (hi, hs, notes) = session_hard_iron(&rows, 1000.0);
     assert!(
         !notes.contains("stuck") && notes.contains("zero-order hold"),
         "key {key}: hold {hold}: {notes}"
     );
-    let out = session::run(&loaded, &o).unwrap();
-    let p = &out.report.model.fitted;
-    let (hi, hs) = (p.params.hard_iron.unwrap(), p.sigma.hard_iron.unwrap());
     for k in 0..3 {
         assert!(
             (hi[k] - h[k]).abs() < 5.0 * hs[k] + 0.05,

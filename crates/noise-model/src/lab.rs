@@ -746,19 +746,28 @@ impl<'a> NoiseLab<'a> {
                         profile[(b + 1).min(grid - 1)].0.ln(),
                     );
                     let g = (5f64.sqrt() - 1.0) / 2.0;
-                    for _ in 0..16 {
-                        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-                        let (e1, e2) = (warm(x1.exp()), warm(x2.exp()));
-                        for (x, e) in [(x1, e1.clone()), (x2, e2.clone())] {
-                            profile.push((x.exp(), e.lr));
-                            if e.lr.is_finite() && best.as_ref().is_none_or(|b| e.lr > b.1.lr) {
-                                best = Some((x.exp(), e));
-                            }
+                    let mut seen = |x: f64, e: nonstat::Estimate| {
+                        profile.push((x.exp(), e.lr));
+                        let lr = e.lr;
+                        if lr.is_finite() && best.as_ref().is_none_or(|b| lr > b.1.lr) {
+                            best = Some((x.exp(), e));
                         }
-                        if e1.lr > e2.lr {
+                        lr
+                    };
+                    // one new evaluation a step: the surviving inner point is kept
+                    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+                    let (mut f1, mut f2) = (seen(x1, warm(x1.exp())), seen(x2, warm(x2.exp())));
+                    for _ in 0..16 {
+                        if f1 > f2 {
                             hi = x2;
+                            (x2, f2) = (x1, f1);
+                            x1 = hi - g * (hi - lo);
+                            f1 = seen(x1, warm(x1.exp()));
                         } else {
                             lo = x1;
+                            (x1, f1) = (x2, f2);
+                            x2 = lo + g * (hi - lo);
+                            f2 = seen(x2, warm(x2.exp()));
                         }
                     }
                     profile.sort_by(|a, b| a.0.total_cmp(&b.0));
