@@ -257,10 +257,12 @@ def calibrate(
     saturation: Optional[float] = None,
     blocks: int = 50,
     max_steps: int = 4,
+    part: Optional[str] = None,
 ) -> Calibration:
     """The calibration lab on ``accel``/``gyro``/``mag`` columns (m/s², deg/s, µT unless
     ``units`` says otherwise; ``rate`` Hz; ``g``, ``field`` in the columns' unit; ``window``,
-    ``min_static`` s; ``saturation`` deg/s): ``imu-lab calibrate``'s session."""
+    ``min_static`` s; ``saturation`` deg/s; ``part`` the recording's part, e.g. ``"HMC5883L"``):
+    ``imu-lab calibrate``'s session."""
 
 @dataclass
 class DeviceTable(Table):

@@ -371,7 +371,7 @@ def calibrate(sensor: str, samples, model: Sequence[str] = (), auto: bool = Fals
               rate: Optional[float] = None, units: Optional[Dict[str, str]] = None,
               g: Optional[float] = None, field: Optional[float] = None, window: float = 1.0,
               threshold_k: float = 6.0, min_static: float = 1.5, saturation: Optional[float] = None,
-              blocks: int = 50, max_steps: int = 4) -> Calibration:
+              blocks: int = 50, max_steps: int = 4, part: Optional[str] = None) -> Calibration:
     """Calibrates ``sensor`` (``"accel"``, ``"gyro"``, ``"mag"``) as ``imu-lab calibrate`` does
     and returns a :class:`Calibration`.
 
@@ -381,8 +381,10 @@ def calibrate(sensor: str, samples, model: Sequence[str] = (), auto: bool = Fals
     offset,scale | bias | hard_iron); ``auto``: walk diagnose → add → refit (at most
     ``max_steps``). ``g`` and ``field`` in the columns' unit; ``window`` and ``min_static`` in
     s; ``threshold_k`` a multiple of the at-rest variance; ``saturation`` in deg/s; ``blocks``
-    for the gyro at rest. Bad data (a non-finite sample with its row) and options raise
-    ``ValueError`` naming them."""
+    for the gyro at rest. ``part``: the part the recording was made with (``"QMC5883L"`` or
+    ``"HMC5883L"`` for the magnetometer, ``"MPU-6050"`` otherwise; default: the firmware's),
+    whose datasheet bounds judge the fit and which ``save`` writes into the file. Bad data (a
+    non-finite sample with its row) and options raise ``ValueError`` naming them."""
     from . import Recording, _as_samples
 
     if isinstance(samples, Recording):
@@ -416,10 +418,12 @@ def calibrate(sensor: str, samples, model: Sequence[str] = (), auto: bool = Fals
     for name, v in (("blocks", blocks), ("max_steps", max_steps)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise ValueError(f"{name}={v!r}: give a whole number")
+    if part is not None and not isinstance(part, str):
+        raise ValueError(f"part={part!r}: give the part's name, e.g. part='HMC5883L'")
     units_of = {k: u.get(k, _CONTRACT_UNITS.get(k, "")) for k in arrays}
     native = _native.calibrate(sensor, arrays, units_of, float(rate), segments, list(model),
                                None if g is None else float(g), None if field is None else float(field),
                                float(window), float(threshold_k), float(min_static),
                                None if saturation is None else float(saturation), int(blocks),
-                               bool(auto), int(max_steps))
+                               bool(auto), int(max_steps), part)
     return Calibration(native)

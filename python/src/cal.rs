@@ -46,7 +46,7 @@ impl NativeCalibration {
 #[pyfunction]
 #[pyo3(signature = (sensor, columns, units, rate, segments, model=Vec::new(), g=None, field=None,
     window=1.0, threshold_k=6.0, min_static=1.5, saturation=None, blocks=50, auto=false,
-    max_steps=4))]
+    max_steps=4, part=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn calibrate(
     py: Python<'_>,
@@ -65,6 +65,7 @@ pub fn calibrate(
     blocks: usize,
     auto: bool,
     max_steps: usize,
+    part: Option<String>,
 ) -> PyResult<NativeCalibration> {
     let sensor = Sensor::parse(sensor).ok_or_else(|| {
         value_error(format!(
@@ -100,6 +101,10 @@ pub fn calibrate(
                 auto,
                 max_steps,
                 cli: false,
+                mag_part: match &part {
+                    Some(name) => session::stated_part(sensor, name, "part=").map_err(value_error)?,
+                    None => None,
+                },
             };
             let n = cols.first().map_or(0, |c| c.2.len());
             if let Some(c) = cols.iter().find(|c| c.2.len() != n) {

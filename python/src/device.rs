@@ -187,7 +187,7 @@ fn calibration_dict<'py>(
             fitted.set_item("mag", f.mag.name())?;
             fitted.set_item("accel_range_g", f.ranges.accel_g)?;
             fitted.set_item("gyro_range_dps", f.ranges.gyro_dps)?;
-            fitted.set_item("mag_range_gauss", f.ranges.mag_gauss)?;
+            fitted.set_item("mag_range_gauss", f.ranges.mag_gauss())?;
             d.set_item("fitted_for", fitted)?;
         }
     }

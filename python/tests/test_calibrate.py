@@ -122,3 +122,28 @@ def test_a_calibration_the_data_do_not_determine_shows_and_is_not_saved(rng, tmp
     with pytest.raises(ValueError, match="refused, not written: the data do not determine offset.x"):
         c.save(out)
     assert not out.exists()
+
+
+def test_the_recordings_part_judges_the_fit_and_is_saved(rng, tmp_path):
+    # hard iron between the HMC5883L's ±0.88 G bound (18 µT) and its ±1.3 G one (60 µT) on a
+    # random axis: within the bounds at its power-on gain, as the CLI's --part says too
+    axis = int(rng.integers(0, 3))
+    hard = rng.uniform(-10, 10, 3)
+    hard[axis] = rng.choice([-1, 1]) * rng.uniform(25, 55)
+    p = sphere(rng, tmp_path, hard=hard)
+    rec = pico_imu.read_csv(p)
+    c = pico_imu.calibrate("mag", rec, model=["hard_iron"], part="hmc5883l")
+    c_json = cli(p, "--model", "hard_iron", "--part", "HMC5883L")
+    same(c.to_dict(), c_json)
+    assert c.to_dict()["judged_part"] == "HMC5883L" and c.implausible is None
+    out = tmp_path / "cal.toml"
+    c.save(out)
+    text = out.read_text()
+    assert 'part = "HMC5883L"' in text and "lsb_per_unit = 10.9" in text
+    # without it the firmware's part is judged, and said to be assumed
+    d = pico_imu.calibrate("mag", rec, model=["hard_iron"])
+    assert d.to_dict()["judged_part"].startswith("QMC5883L (assumed")
+    with pytest.raises(ValueError, match=r"part= BMI160.*QMC5883L, HMC5883L"):
+        pico_imu.calibrate("mag", rec, part="BMI160")
+    with pytest.raises(ValueError, match=r"part="):
+        pico_imu.calibrate("mag", rec, part=5883)

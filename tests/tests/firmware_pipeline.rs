@@ -885,6 +885,17 @@ fn the_device_refuses_calibrations_for_other_ranges_or_beyond_the_physical_bound
         dev.cal_status().fault,
         Some(CalFault::Rejected(CalProblem::OtherRanges))
     );
+    // Fitted for an HMC5883L (a part the lab knows, not the one this firmware drives): refused
+    // as fitted for another part.
+    let mut f = CalFile::default();
+    f.set_mag_part(imu_cal::device::MagPart::Hmc5883l);
+    let blob = imu_cal::device::encode_blob(&f.to_device().unwrap(), &mut buf)
+        .unwrap()
+        .to_vec();
+    assert_eq!(
+        upload(&mut dev, &blob),
+        (false, refused(CalProblem::OtherPart))
+    );
     // A correction recording no parts (a zero accelerometer scale, assembled without them):
     // refused as not fitted for the firmware's parts.
     let zero = imu_cal::device::Affine::from_float(
@@ -989,16 +1000,18 @@ fn a_version_2_blob_in_flash_loads_or_is_refused_with_the_reason() {
     let v2 = |f: &CalFile| {
         let cal = f.to_device_unchecked().unwrap();
         let mut buf = [0u8; imu_cal::device::MAX_BLOB_LEN];
-        let v3 = imu_cal::device::encode_blob(&cal, &mut buf).unwrap();
-        let n = u16::from_le_bytes([v3[6], v3[7]]) as usize;
-        let payload = &v3[8..8 + n];
-        let some = n - (1 + 2 + 4 + 12);
-        assert_eq!(&payload[some..some + 7], &[1, 0, 0, 4, 250, 1, 2]);
+        let v4 = imu_cal::device::encode_blob(&cal, &mut buf).unwrap();
+        let n = u16::from_le_bytes([v4[6], v4[7]]) as usize;
+        let payload = &v4[8..8 + n];
+        // Some, the two parts, the ranges ±4 g, ±250 deg/s, ±200 µT (varints), then the
+        // sensitivities: version 2 keeps the Some and the sensitivities.
+        let some = n - (1 + 2 + 5 + 12);
+        assert_eq!(&payload[some..some + 8], &[1, 0, 0, 4, 250, 1, 200, 1]);
         let mut b = b"PCAL".to_vec();
         b.extend_from_slice(&2u16.to_le_bytes());
-        b.extend_from_slice(&((n - 6) as u16).to_le_bytes());
+        b.extend_from_slice(&((n - 7) as u16).to_le_bytes());
         b.extend_from_slice(&payload[..=some]);
-        b.extend_from_slice(&payload[some + 7..]);
+        b.extend_from_slice(&payload[some + 8..]);
         let crc = crc32(&b);
         b.extend_from_slice(&crc.to_le_bytes());
         b

@@ -82,7 +82,8 @@
 //! The `Calibration` holds the three corrections and what they were fitted for ([`Fitted`]:
 //! the parts, their full-scale ranges and the sensitivities), which [`plausible`] checks the
 //! corrections against (the parts' datasheet bounds, docs/calibration.md "Plausibility").
-//! Version 2 (no parts) is still read; see [`BLOB_VERSION`].
+//! Versions 2 (no parts) and 3 (the magnetometer range in gauss) are still read; see
+//! [`BLOB_VERSION`].
 
 // Fixed 3×3 index arithmetic reads closer to the equations than iterator chains.
 #![allow(clippy::needless_range_loop)]

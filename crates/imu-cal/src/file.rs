@@ -26,7 +26,7 @@
 //! scale = [1.0, 1.0, 1.0]  # optional (gyro_rot)
 //! misalignment_deg = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # optional (gyro_rot)
 //! [mag]                    # m_cal = soft_iron·(m − hard_iron)
-//! part = "QMC5883L"        # optional, this default
+//! part = "QMC5883L"        # optional, this default; or "HMC5883L" (GN = 1: 10.9 LSB per µT)
 //! lsb_per_unit = 120.0     # LSB per µT (QMC5883 ±2 G: 12000 LSB/G)
 //! hard_iron = [0.0, 0.0, 0.0]   # µT
 //! soft_iron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
@@ -99,7 +99,7 @@ fn unit_scale() -> [f64; 3] {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MagSection {
-    /// The part (`"QMC5883L"`); absent: the default.
+    /// The part (`"QMC5883L"` or `"HMC5883L"`); absent: the firmware's, the QMC5883L.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub part: Option<MagPart>,
     /// Raw LSB per µT.
@@ -213,6 +213,20 @@ impl CalFile {
             other => return Err(CalError::Input(format!("unknown sensor '{other}'"))),
         }
         Ok(())
+    }
+
+    /// Name the magnetometer part; a sensitivity that is none of its ranges' becomes the one
+    /// of its power-on range ([`MagPart::default_lsb_per_ut`]).
+    pub fn set_mag_part(&mut self, part: MagPart) {
+        self.mag.part = Some(part);
+        let l = self.mag.lsb_per_unit * 100.0;
+        if !part
+            .ranges()
+            .iter()
+            .any(|(_, nominal)| (l / nominal - 1.0).abs() <= plausible::LSB_MATCH)
+        {
+            self.mag.lsb_per_unit = part.default_lsb_per_ut();
+        }
     }
 
     /// The parts the file is for: its `part` keys, or the defaults (MPU-6050, QMC5883L) where

@@ -76,9 +76,10 @@ impl Part {
 
     /// Physical units per count for every range setting, in `unit` (None: unit not known).
     fn units_per_count(self, unit: &str) -> Option<Vec<f64>> {
-        // LSB per gauss of the HMC5883L gain settings; QMC5883L: 12000 (2 G), 3000 (8 G).
-        let hmc = [1370.0, 1090.0, 820.0, 660.0, 440.0, 390.0, 330.0, 230.0];
-        let qmc = [12000.0, 3000.0];
+        // The sensitivities of every range setting: the datasheet tables of
+        // `device::plausible` (LSB per gauss, per g, per deg/s).
+        use crate::device::plausible::{ImuPart, MagPart};
+        let lsb = |table: &[(u16, f64)]| table.iter().map(|(_, l)| *l).collect::<Vec<f64>>();
         let gauss_per_unit = match unit {
             "G" | "gauss" | "Gs" => Some(1.0),
             "µT" | "uT" | "microtesla" => Some(0.01),
@@ -102,10 +103,10 @@ impl Part {
             per_unit.map(|k| lsb_per.iter().map(|l| 1.0 / (l * k)).collect())
         };
         match self {
-            Part::Hmc5883l => per(&hmc, gauss_per_unit),
-            Part::Qmc5883l => per(&qmc, gauss_per_unit),
-            Part::Mpu6050Accel => per(&[16384.0, 8192.0, 4096.0, 2048.0], g_per_unit),
-            Part::Mpu6050Gyro => per(&[131.0, 65.5, 32.8, 16.4], dps_per_unit),
+            Part::Hmc5883l => per(&lsb(MagPart::Hmc5883l.ranges()), gauss_per_unit),
+            Part::Qmc5883l => per(&lsb(MagPart::Qmc5883l.ranges()), gauss_per_unit),
+            Part::Mpu6050Accel => per(&lsb(&ImuPart::Mpu6050.accel_ranges()), g_per_unit),
+            Part::Mpu6050Gyro => per(&lsb(&ImuPart::Mpu6050.gyro_ranges()), dps_per_unit),
         }
     }
 }

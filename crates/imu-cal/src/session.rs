@@ -5,7 +5,7 @@
 //! the calibration file's section updated with the device's plausibility checks
 //! ([`update_file`]). The CLI (`imu-lab calibrate`) and the Python package
 //! (`pico_imu.calibrate`) are thin callers of [`prepare`] and [`run`].
-use crate::device::plausible::Num;
+use crate::device::plausible::{MagPart, Num};
 use std::ops::Range;
 
 use model_lab::{walk, Stop};
@@ -94,6 +94,9 @@ pub struct Options {
     /// Name the options as the CLI's flags (`--g`, `--threshold-k`) or as Python's keywords
     /// (`g`, `threshold_k`) in messages.
     pub cli: bool,
+    /// The magnetometer part the recording was made with; `None`: the calibration file's, or
+    /// the firmware's QMC5883L for a new file.
+    pub mag_part: Option<MagPart>,
 }
 
 impl Options {
@@ -111,6 +114,7 @@ impl Options {
             blocks: 50,
             auto: false,
             max_steps: 4,
+            mag_part: None,
             cli: true,
         }
     }
@@ -231,6 +235,8 @@ pub struct Loaded {
     pub sentinels: Sentinels,
     /// Other notes on the input (gaps, missing temperature, …).
     pub notes: Vec<String>,
+    /// The magnetometer part the recording was made with, when stated ([`Options::mag_part`]).
+    pub mag_part: Option<MagPart>,
 }
 
 /// What a run produced: the report on the last model, and for `auto` the walk that led to it.
@@ -541,6 +547,7 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                 ),
                 sentinels,
                 notes,
+                mag_part: o.mag_part,
             }
         }
         Sensor::Accel => {
@@ -559,6 +566,7 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                 data: Data::Accel(AccelProblem::with_unit(poses, g, &unit)),
                 sentinels: s,
                 notes,
+                mag_part: o.mag_part,
             }
         }
         Sensor::Gyro => {
@@ -591,6 +599,7 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                 ),
                 sentinels: s,
                 notes,
+                mag_part: o.mag_part,
             }
         }
         Sensor::Mag => {
@@ -650,6 +659,7 @@ pub fn prepare(input: &Input, o: &Options) -> Result<Loaded, String> {
                 data: Data::Mag(MagProblem::with_unit(m, f, &unit).map_err(e)?),
                 sentinels: s,
                 notes,
+                mag_part: o.mag_part,
             }
         }
     })
@@ -700,10 +710,6 @@ pub fn run(loaded: &Loaded, o: &Options) -> Result<Outcome, String> {
     outcome(loaded.data.problem(), &model, o.auto, o.max_steps)
 }
 
-/// The calibration file `existing` (TOML text, or a new file) with this run's section set to
-/// the last model's parameters, refused — naming the key, axis, value and bound — unless the
-/// device can hold it within the parts' datasheet bounds and its unit is the file's. Returns
-/// the new TOML text.
 /// The fitted parameters the data do not determine at all (no finite σ; given ones such as
 /// the reference temperature aside): a calibration file must not carry their values, which
 /// are the solver's starting point, not a measurement.
@@ -749,11 +755,55 @@ pub fn plausibility(loaded: &Loaded, run: &Outcome) -> Result<Option<String>, St
         ));
     }
     let mut file = CalFile::default();
+    if let Some(part) = loaded.mag_part {
+        file.set_mag_part(part);
+    }
     file.set(loaded.data.section(), &run.report.model.fitted.params)
         .map_err(|e| e.to_string())?;
     Ok(file.to_device().err().map(|e| e.to_string()))
 }
 
+/// The part a recording was made with, as stated by the user (`flag`: the option's name in
+/// messages): a magnetometer this lab has the datasheet of, or the MPU-6050 for the
+/// accelerometer and gyroscope (the only one: `None`, nothing to record).
+pub fn stated_part(sensor: Sensor, name: &str, flag: &str) -> Result<Option<MagPart>, String> {
+    let imu = crate::device::ImuPart::Mpu6050.name();
+    match sensor {
+        Sensor::Mag => MagPart::from_name(name).map(Some).ok_or_else(|| {
+            let known: Vec<&str> = MagPart::ALL.iter().map(|p| p.name()).collect();
+            format!(
+                "{flag} {name}: not a magnetometer this lab knows the datasheet of ({})",
+                known.join(", ")
+            )
+        }),
+        _ if name.trim().eq_ignore_ascii_case(imu) => Ok(None),
+        _ => Err(format!(
+            "{flag} {name}: not an accelerometer/gyroscope this lab knows the datasheet of ({imu})"
+        )),
+    }
+}
+
+/// The part a fit is judged for, in words: the MPU-6050 for the accelerometer and gyroscope;
+/// for the magnetometer the part stated for the recording, or else the firmware's (said to be
+/// assumed).
+pub fn judged_part(loaded: &Loaded) -> String {
+    let (imu, mag) = CalFile::default().parts();
+    match (&loaded.data, loaded.mag_part) {
+        (Data::Mag(_), Some(part)) => part.name().to_string(),
+        (Data::Mag(_), None) => format!(
+            "{} (assumed, the firmware's part: state the recording's part to judge another)",
+            mag.name()
+        ),
+        _ => imu.name().to_string(),
+    }
+}
+
+/// The calibration file `existing` (TOML text, or a new file) with this run's section set to
+/// the last model's parameters, refused — naming the key, axis, value and bound — unless the
+/// device can hold it within the parts' datasheet bounds and its unit is the file's. Returns
+/// the new TOML text.
+/// A magnetometer part stated for the recording ([`Loaded::mag_part`]) is written as the
+/// file's `mag.part`.
 pub fn update_file(
     existing: Option<&str>,
     loaded: &Loaded,
@@ -778,6 +828,9 @@ pub fn update_file(
         Some(text) => CalFile::from_toml(text).map_err(|e| e.to_string())?,
         None => CalFile::default(),
     };
+    if let Some(part) = loaded.mag_part {
+        file.set_mag_part(part);
+    }
     file.set(loaded.data.section(), &run.report.model.fitted.params)
         .map_err(|e| e.to_string())?;
     // The device must be able to hold it, within the parts' datasheet bounds.

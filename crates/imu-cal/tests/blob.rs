@@ -66,7 +66,7 @@ fn errors_name_the_fault() {
     let mut b = blob.clone();
     b[0] = b'X';
     assert!(matches!(decode_blob(&b), Err(BlobError::BadMagic { .. })));
-    for v in [1u8, 4] {
+    for v in [1u8, 5] {
         let mut b = blob.clone();
         b[4] = v;
         assert_eq!(

@@ -333,7 +333,7 @@ fn the_quoted_refusals_name_key_axis_value_and_bound() {
             }
             (Ok(cal), None) => {
                 let r = cal.fitted_for().unwrap().ranges;
-                assert_eq!((r.gyro_dps, r.mag_gauss), (500, 8));
+                assert_eq!((r.gyro_dps, r.mag_ut), (500, 800));
             }
             other => panic!("{gyro}, {mag}: {other:?}"),
         }
@@ -373,9 +373,9 @@ fn a_file_without_parts_loads_as_the_default_parts() {
         (
             fitted.ranges.accel_g,
             fitted.ranges.gyro_dps,
-            fitted.ranges.mag_gauss
+            fitted.ranges.mag_ut
         ),
-        (4, 250, 2)
+        (4, 250, 200)
     );
     f.set("gyro", &imu_cal::lab::Params::default()).unwrap();
     assert!(f.to_toml().contains("part = \"QMC5883L\""));
@@ -461,4 +461,86 @@ fn the_documented_bounds_are_the_code_bounds() {
     ))
     .unwrap();
     assert!(!fw.contains("0.91–1.09") && fw.contains("calibration.md#plausibility"));
+}
+
+/// A version-3 blob (the magnetometer's range in gauss) reads as the same ranges as the
+/// version-4 blob of the same file, at either QMC5883L range.
+#[test]
+fn a_version_3_blob_reads_its_magnetometer_range_in_gauss() {
+    for lsb in [120.0, 30.0] {
+        let mut f = CalFile::default();
+        f.mag.lsb_per_unit = lsb;
+        f.mag.hard_iron = [-20.0, 5.0, 12.0];
+        let cal = f.to_device().unwrap();
+        let mut buf = [0u8; MAX_BLOB_LEN];
+        let v4 = encode_blob(&cal, &mut buf).unwrap().to_vec();
+        let ut = cal.fitted_for().unwrap().ranges.mag_ut;
+        // The payload ends with the range's varint and the three f32 sensitivities.
+        let payload = &v4[8..v4.len() - 4];
+        let tail = payload.len() - 12;
+        let varint = [(ut & 0x7f) as u8 | 0x80, (ut >> 7) as u8];
+        assert_eq!(&payload[tail - 2..tail], &varint, "{ut} µT");
+        let mut p3 = payload[..tail - 2].to_vec();
+        p3.push((ut / 100) as u8);
+        p3.extend_from_slice(&payload[tail..]);
+        let mut b = BLOB_MAGIC.to_vec();
+        b.extend_from_slice(&3u16.to_le_bytes());
+        b.extend_from_slice(&(p3.len() as u16).to_le_bytes());
+        b.extend_from_slice(&p3);
+        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&b);
+        b.extend_from_slice(&crc.to_le_bytes());
+        let back = decode_blob(&b).unwrap();
+        assert_eq!(back.fitted_for(), cal.fitted_for(), "{lsb} LSB per µT");
+        assert_eq!(
+            back.fitted_for().unwrap().ranges.mag_gauss(),
+            f64::from(ut) / 100.0
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+    /// An HMC5883L file converts at each of its eight gain settings, records the part and the
+    /// range, survives its TOML, and is judged by that range's bounds: a hard iron just inside
+    /// `range − F_max` passes and just outside is refused naming the key.
+    #[test]
+    fn an_hmc5883l_file_is_judged_at_its_own_range(gain in 0usize..8, axis in 0usize..3, inside in 0.05f64..0.95) {
+        let part = MagPart::Hmc5883l;
+        let (range_ut, lsb_per_gauss) = part.ranges()[gain];
+        let mut f = CalFile::default();
+        f.mag.lsb_per_unit = 120.0;
+        f.set_mag_part(part);
+        // A QMC5883L sensitivity is none of the HMC5883L's: the power-on gain's (1090 LSB/G).
+        prop_assert_eq!(f.mag.lsb_per_unit, 10.9);
+        f.mag.lsb_per_unit = lsb_per_gauss / 100.0;
+        f.set_mag_part(part);
+        prop_assert_eq!(f.mag.lsb_per_unit, lsb_per_gauss / 100.0);
+        let back = CalFile::from_toml(&f.to_toml()).unwrap();
+        prop_assert!(f.to_toml().contains("part = \"HMC5883L\""));
+        prop_assert_eq!(back.parts(), (ImuPart::Mpu6050, part));
+        let bound = f64::from(range_ut) - F_MAX_UT;
+        let mut ok = back.clone();
+        ok.mag.hard_iron[axis] = inside * bound;
+        let cal = ok.to_device().unwrap();
+        let fitted = cal.fitted_for().unwrap();
+        prop_assert_eq!((fitted.mag, fitted.ranges.mag_ut), (part, range_ut));
+        let mut bad = back;
+        bad.mag.hard_iron[axis] = -(1.0 + inside) * bound;
+        match bad.to_device() {
+            Err(BlobError::Implausible(r)) => {
+                prop_assert_eq!(r.key, Key::MagHardIron);
+                prop_assert_eq!(r.axis, Some(axis as u8));
+            }
+            other => prop_assert!(false, "{:?}", other),
+        }
+    }
+}
+
+/// Part names as the calibration file and `--part` write them, in any case.
+#[test]
+fn magnetometer_parts_are_found_by_name() {
+    for p in MagPart::ALL {
+        assert_eq!(MagPart::from_name(&p.name().to_lowercase()), Some(p));
+    }
+    assert_eq!(MagPart::from_name("HMC5983"), None);
 }

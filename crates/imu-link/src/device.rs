@@ -174,7 +174,7 @@ fn refusal_of(p: &CalProblem, blob: &[u8]) -> String {
             Num(f64::from(f.lsb_per_unit[2])),
             f.ranges.accel_g,
             f.ranges.gyro_dps,
-            f.ranges.mag_gauss
+            Num(f.ranges.mag_gauss())
         ),
         (CalProblem::OtherPart, Some(f)) => format!(
             "{why}: the file's accel.part and mag.part are {} and {}",

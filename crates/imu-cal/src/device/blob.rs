@@ -7,10 +7,11 @@ use super::{Affine, BlobError, Calibration, GyroCorrection};
 
 /// Magic bytes at the start of every calibration blob.
 pub const BLOB_MAGIC: [u8; 4] = *b"PCAL";
-/// The blob format version this build writes. Version 3 records the parts and ranges
-/// ([`Fitted`]); version 2 (sensitivities only) is still read, its parts taken to be the
-/// MPU-6050 and QMC5883L, the only ones a version-2 host wrote blobs for.
-pub const BLOB_VERSION: u16 = 3;
+/// The blob format version this build writes. Version 4 records the parts and ranges
+/// ([`Fitted`]), the magnetometer's range in µT; version 3 (the same, that range in gauss) and
+/// version 2 (sensitivities only) are still read, a version 2's parts taken to be the MPU-6050
+/// and QMC5883L, the only ones a version-2 host wrote blobs for.
+pub const BLOB_VERSION: u16 = 4;
 /// The oldest version read.
 const OLDEST_READ: u16 = 2;
 /// Upper bound of an encoded blob (header + worst-case postcard varints + CRC).
@@ -82,8 +83,17 @@ pub fn decode_blob(bytes: &[u8]) -> Result<Calibration, BlobError> {
         return Err(BlobError::CrcMismatch { stored, computed });
     }
     let payload = &bytes[8..8 + n];
-    let cal = if version == BLOB_VERSION {
-        let cal: Calibration = whole(payload)?;
+    let cal = if version >= 3 {
+        let mut cal: Calibration = whole(payload)?;
+        if version == 3 {
+            if let Some(f) = cal.fitted.as_mut() {
+                f.ranges.mag_ut = f
+                    .ranges
+                    .mag_ut
+                    .checked_mul(100)
+                    .ok_or(BlobError::Malformed)?;
+            }
+        }
         // The recorded ranges must be the ones the sensitivities give.
         if let Some(f) = cal.fitted_for() {
             let again =

@@ -20,12 +20,17 @@ pub enum ImuPart {
     Mpu6050,
 }
 
-/// The magnetometer part a calibration was fitted for.
+/// The magnetometer part a calibration was fitted for. The firmware drives the QMC5883L; the
+/// lab also fits recordings of the HMC5883L (a file then names it, and a device refuses it as
+/// fitted for another part). New parts are appended: the blob stores the variant's index.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum MagPart {
     /// QST QMC5883L (datasheet rev C).
     #[serde(rename = "QMC5883L")]
     Qmc5883l,
+    /// Honeywell HMC5883L (datasheet form 900405 rev E).
+    #[serde(rename = "HMC5883L")]
+    Hmc5883l,
 }
 
 impl ImuPart {
@@ -52,26 +57,65 @@ impl ImuPart {
 }
 
 impl MagPart {
+    /// Every magnetometer part, in the order of their blob index.
+    pub const ALL: [MagPart; 2] = [MagPart::Qmc5883l, MagPart::Hmc5883l];
+
     /// The part's name as written in the calibration file.
     pub const fn name(self) -> &'static str {
         match self {
             MagPart::Qmc5883l => "QMC5883L",
+            MagPart::Hmc5883l => "HMC5883L",
         }
     }
-    /// Field ranges (gauss) and nominal sensitivities (LSB/G) (QMC5883L datasheet rev C,
-    /// specifications: RNG = ±2 G, ±8 G).
-    pub const fn ranges(self) -> [(u16, f64); 2] {
-        [(2, 12000.0), (8, 3000.0)]
+    /// The part named `name` (as in the calibration file, any case).
+    pub fn from_name(name: &str) -> Option<MagPart> {
+        MagPart::ALL
+            .into_iter()
+            .find(|p| p.name().eq_ignore_ascii_case(name.trim()))
+    }
+    /// Field ranges (µT) and nominal sensitivities (LSB/G): QMC5883L datasheet rev C,
+    /// specifications (RNG = ±2 G, ±8 G); HMC5883L datasheet rev E, table 9 (GN = 0…7:
+    /// ±0.88 G … ±8.1 G).
+    pub const fn ranges(self) -> &'static [(u16, f64)] {
+        match self {
+            MagPart::Qmc5883l => &[(200, 12000.0), (800, 3000.0)],
+            MagPart::Hmc5883l => &[
+                (88, 1370.0),
+                (130, 1090.0),
+                (190, 820.0),
+                (250, 660.0),
+                (400, 440.0),
+                (470, 390.0),
+                (560, 330.0),
+                (810, 230.0),
+            ],
+        }
+    }
+    /// The sensitivity (LSB per µT) at the part's power-on range (QMC5883L: ±2 G; HMC5883L:
+    /// GN = 1, ±1.3 G).
+    pub fn default_lsb_per_ut(self) -> f64 {
+        let i = match self {
+            MagPart::Qmc5883l => 0,
+            MagPart::Hmc5883l => 1,
+        };
+        self.ranges()[i].1 / 100.0
     }
 }
 
 /// The full-scale ranges a calibration was fitted for: accelerometer ±g, gyroscope ±deg/s,
-/// magnetometer ±gauss.
+/// magnetometer ±µT (blob version 4; version 3 stored gauss).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Ranges {
     pub accel_g: u16,
     pub gyro_dps: u16,
-    pub mag_gauss: u16,
+    pub mag_ut: u16,
+}
+
+impl Ranges {
+    /// The magnetometer's range in gauss, as the datasheets state it.
+    pub fn mag_gauss(&self) -> f64 {
+        f64::from(self.mag_ut) / 100.0
+    }
 }
 
 /// What a calibration was fitted for: the parts, their ranges and the sensitivities (LSB per
@@ -108,15 +152,15 @@ impl Fitted {
             range_of(f64::from(a) * G0, &imu.accel_ranges()).ok_or(no(Key::AccelLsbPerUnit, a))?;
         let gyro_dps =
             range_of(f64::from(g), &imu.gyro_ranges()).ok_or(no(Key::GyroLsbPerUnit, g))?;
-        let mag_gauss =
-            range_of(f64::from(m) * 100.0, &mag.ranges()).ok_or(no(Key::MagLsbPerUnit, m))?;
+        let mag_ut =
+            range_of(f64::from(m) * 100.0, mag.ranges()).ok_or(no(Key::MagLsbPerUnit, m))?;
         Ok(Fitted {
             imu,
             mag,
             ranges: Ranges {
                 accel_g,
                 gyro_dps,
-                mag_gauss,
+                mag_ut,
             },
             lsb_per_unit,
             parts_assumed: false,
@@ -125,7 +169,7 @@ impl Fitted {
 
     /// The magnetometer's full scale, µT.
     pub fn mag_range_ut(&self) -> f64 {
-        f64::from(self.ranges.mag_gauss) * 100.0
+        f64::from(self.ranges.mag_ut)
     }
 }
 
@@ -794,36 +838,45 @@ pub fn bounds_table() -> std::string::String {
             bound(b.lo, b.hi, b.key.unit())
         );
     }
-    let part = MagPart::Qmc5883l;
-    let [(r2, _), (r8, _)] = part.ranges();
-    let (g2, c) = mag_bounds(f64::from(r2) * 100.0);
-    let (g8, _) = mag_bounds(f64::from(r8) * 100.0);
+    let (_, c) = mag_bounds(F_MAX_UT);
     let _ = writeln!(
         s,
         "| `mag.soft_iron` (condition number) | — | — (conditioning) | — | — | {} |",
         bound(c.0, c.1, "")
     );
-    let _ = writeln!(
-        s,
-        "| `mag.soft_iron` (singular values) | — | field range ±{r2} G / ±{r8} G | QMC5883L datasheet rev C, specifications | F_max = {} µT | {} at ±{r2} G, {} at ±{r8} G |",
-        Num(F_MAX_UT),
-        bound(g2.0, g2.1, ""),
-        bound(g8.0, g8.1, "")
-    );
-    let cube = |g: (f64, f64)| (g.0 * g.0 * g.0, g.1 * g.1 * g.1);
-    let (d2, d8) = (cube(g2), cube(g8));
-    let _ = writeln!(
-        s,
-        "| `mag.soft_iron` (determinant) | — | — (a right-handed frame: no axis flipped or swapped) | — | the gains' bounds cubed | {} at ±{r2} G, {} at ±{r8} G |",
-        bound(d2.0, d2.1, ""),
-        bound(d8.0, d8.1, "")
-    );
-    let _ = writeln!(
-        s,
-        "| `mag.hard_iron` | [0]–[2] | field range ±{r2} G / ±{r8} G | QMC5883L datasheet rev C, specifications | range − F_max·‖row of S⁻¹‖ | {} at ±{r2} G, {} at ±{r8} G (S = I) |",
-        bound(-(f64::from(r2) * 100.0 - F_MAX_UT), f64::from(r2) * 100.0 - F_MAX_UT, " µT"),
-        bound(-(f64::from(r8) * 100.0 - F_MAX_UT), f64::from(r8) * 100.0 - F_MAX_UT, " µT"),
-    );
+    // Each magnetometer part at its narrowest and widest range.
+    for part in MagPart::ALL {
+        let r = part.ranges();
+        let (lo, hi) = (f64::from(r[0].0), f64::from(r[r.len() - 1].0));
+        let (glo, ghi) = (mag_bounds(lo).0, mag_bounds(hi).0);
+        let (name, source) = match part {
+            MagPart::Qmc5883l => ("QMC5883L", "QMC5883L datasheet rev C, specifications"),
+            MagPart::Hmc5883l => ("HMC5883L", "HMC5883L datasheet rev E, table 9"),
+        };
+        let gauss = |ut: f64| Num(ut / 100.0);
+        let (rl, rh) = (gauss(lo), gauss(hi));
+        let _ = writeln!(
+            s,
+            "| `mag.soft_iron` (singular values) | — | {name} field range ±{rl} G … ±{rh} G | {source} | F_max = {} µT | {} at ±{rl} G, {} at ±{rh} G |",
+            Num(F_MAX_UT),
+            bound(glo.0, glo.1, ""),
+            bound(ghi.0, ghi.1, "")
+        );
+        let cube = |g: (f64, f64)| (g.0 * g.0 * g.0, g.1 * g.1 * g.1);
+        let (dl, dh) = (cube(glo), cube(ghi));
+        let _ = writeln!(
+            s,
+            "| `mag.soft_iron` (determinant) | — | {name}: a right-handed frame (no axis flipped or swapped) | — | the gains' bounds cubed | {} at ±{rl} G, {} at ±{rh} G |",
+            bound(dl.0, dl.1, ""),
+            bound(dh.0, dh.1, "")
+        );
+        let _ = writeln!(
+            s,
+            "| `mag.hard_iron` | [0]–[2] | {name} field range ±{rl} G … ±{rh} G | {source} | range − F_max·‖row of S⁻¹‖ | {} at ±{rl} G, {} at ±{rh} G (S = I) |",
+            bound(-(lo - F_MAX_UT), lo - F_MAX_UT, " µT"),
+            bound(-(hi - F_MAX_UT), hi - F_MAX_UT, " µT"),
+        );
+    }
     s
 }
 

@@ -89,6 +89,8 @@ struct JsonOut<'a> {
     /// The fitted model against the parts' datasheet bounds: `null` within them, else why
     /// `--out` and an upload would refuse it (or why it cannot be judged).
     implausible: Option<String>,
+    /// The part the plausibility was judged for (the magnetometer's says when it was assumed).
+    judged_part: String,
     diagnosis: JsonDiagnosis<'a>,
     /// The step the diagnosis proposes from this model (what `--auto` would add next).
     step: Option<JsonNext<'a>>,
@@ -130,6 +132,7 @@ pub fn json_out(l: &Loaded, run: &Outcome) -> String {
             Ok(why) => why,
             Err(why) => Some(why),
         },
+        judged_part: super::judged_part(l),
         diagnosis: JsonDiagnosis {
             verdict: m.verdict,
             adequate: m.adequate(),
@@ -213,6 +216,7 @@ mod tests {
             data: Data::Mag(p),
             sentinels: Sentinels::default(),
             notes: vec![],
+            mag_part: None,
         };
         let v: serde_json::Value = serde_json::from_str(&json_out(&l, &r)).unwrap();
         let keys: Vec<&str> = v.as_object().unwrap().keys().map(|k| k.as_str()).collect();

@@ -81,9 +81,23 @@ pub struct Args {
     /// Write (or update this sensor's section of) a TOML calibration file.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// The part the recording was made with: MPU-6050 (accel, gyro); QMC5883L or HMC5883L
+    /// (mag). The plausibility bounds are that part's, and `--out` writes it as the file's
+    /// `part` (and its power-on sensitivity unless the file's is one of its ranges). Default:
+    /// the file's, else the firmware's parts (MPU-6050, QMC5883L).
+    #[arg(long)]
+    pub part: Option<String>,
 }
 
 use crate::calibration::Loaded;
+
+fn sensor(a: &Args) -> Sensor {
+    match a.sensor {
+        SensorArg::Accel => Sensor::Accel,
+        SensorArg::Gyro => Sensor::Gyro,
+        SensorArg::Mag => Sensor::Mag,
+    }
+}
 
 /// The session's options from the flags.
 fn options(a: &Args) -> Result<session::Options> {
@@ -94,11 +108,7 @@ fn options(a: &Args) -> Result<session::Options> {
         .map(|s| Effect::parse(s))
         .collect::<Result<_, _>>()?;
     Ok(session::Options {
-        sensor: match a.sensor {
-            SensorArg::Accel => Sensor::Accel,
-            SensorArg::Gyro => Sensor::Gyro,
-            SensorArg::Mag => Sensor::Mag,
-        },
+        sensor: sensor(a),
         model,
         g: a.g,
         field: a.field,
@@ -110,6 +120,12 @@ fn options(a: &Args) -> Result<session::Options> {
         auto: a.auto,
         max_steps: a.max_steps,
         cli: true,
+        mag_part: match &a.part {
+            Some(name) => {
+                session::stated_part(sensor(a), name, "--part").map_err(|e| anyhow!(e))?
+            }
+            None => None,
+        },
     })
 }
 

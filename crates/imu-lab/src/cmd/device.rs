@@ -379,7 +379,7 @@ fn print_cal(cal: &imu_cal::device::Calibration) {
             f.ranges.accel_g,
             f.ranges.gyro_dps,
             f.mag.name(),
-            f.ranges.mag_gauss,
+            imu_cal::device::plausible::Num(f.ranges.mag_gauss()),
             if f.parts_assumed {
                 " (parts not recorded in this version-2 blob: taken to be the firmware's)"
             } else {

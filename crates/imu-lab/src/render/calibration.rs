@@ -277,13 +277,15 @@ pub fn text_report(l: &Loaded, run: &Outcome) -> String {
 /// The fitted model against the parts' datasheet bounds, one line: an adequate fit of an
 /// impossible part (a wrong range or unit) is still refused by `--out` and by an upload.
 fn plausibility_line(l: &Loaded, run: &Outcome) -> String {
+    let parts = imu_cal::session::judged_part(l);
     match imu_cal::session::plausibility(l, run) {
-        Ok(None) => "plausibility: within the parts' datasheet bounds (docs/calibration.md, \
-                     \"Plausibility\")\n"
-            .into(),
+        Ok(None) => format!(
+            "plausibility: within the datasheet bounds of the {parts} (docs/calibration.md, \
+             \"Plausibility\")\n"
+        ),
         Ok(Some(why)) => format!(
-            "plausibility: NOT PLAUSIBLE, {why}: a wrong range or unit? --out and an upload \
-             refuse it\n"
+            "plausibility: NOT PLAUSIBLE for the {parts}, {why}: a wrong part, range or unit? \
+             --out and an upload refuse it\n"
         ),
         Err(why) => format!("plausibility: {why}\n"),
     }

@@ -604,6 +604,7 @@ pub async fn fit(State(s): State<Shared>, bytes: Bytes) -> Response {
             data: cal::Data::Accel(problem),
             sentinels: imu_cal::sentinel::Sentinels::default(),
             notes: vec!["poses captured on the page (each the mean of a still hold)".into()],
+            mag_part: None,
         };
         let run = cal::run(&loaded, &o)?;
         let residuals = run.report.model.fitted.residuals.clone();

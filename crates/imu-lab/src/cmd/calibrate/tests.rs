@@ -29,6 +29,7 @@ fn args(file: &std::path::Path, sensor: SensorArg, model: &[&str]) -> Args {
         plot: None,
         report: None,
         out: None,
+        part: None,
     }
 }
 
