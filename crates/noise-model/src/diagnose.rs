@@ -209,8 +209,19 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
             candidates,
         });
     }
+    // A defect with no effect to name is the explanation; with one, the effect is named and the
+    // defect said beside it (the model cannot be adequate while the defect is in the data).
+    let defect_note = if defects.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " The record also holds a defect no noise model describes, so the model cannot be \
+             adequate while it is in the data: {}.",
+            defects.join("; ")
+        )
+    };
     let explanation = match best {
-        _ if !defects.is_empty() && (best.is_none() || m.assessment.adequate) => format!(
+        _ if !defects.is_empty() && best.is_none() => format!(
             "The record holds a defect no noise model describes: {}. {}",
             defects.join("; "),
             if m.assessment.adequate {
@@ -238,7 +249,7 @@ pub fn diagnose(lab: &NoiseLab, m: &Model) -> Result<Diagnosis, FitError> {
                 .collect();
             format!(
                 "{}The model misses {} effect{}: {}. With it χ²/dof goes {:.2} → {:.2} ({}; other \
-                 candidates: {}) and the model is {}. Signature: {}. Physics: {}",
+                 candidates: {}) and the model is {}. Signature: {}. Physics: {}{defect_note}",
                 if m.assessment.adequate && m.findings.is_empty() {
                     "The goodness-of-fit test alone passes, but a specific alternative fits \
                      significantly better. "

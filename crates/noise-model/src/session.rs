@@ -818,6 +818,66 @@ mod tests {
         );
     }
 
+    /// A glitch beside a real bias step (0.7–1.1 σ, where the Allan curve alone often passes):
+    /// the diagnosis that names the step says so in its explanation, with the defect beside it
+    /// (it explained the defect alone while naming the step); the walk adds the step and ends
+    /// not adequate, the glitch named.
+    #[test]
+    fn a_defect_beside_a_missing_effect_names_both() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(29, |d| d.subsec_nanos() as u64);
+        let (n, sigma) = (20_000, 0.02);
+        let mut y = white(n, key, sigma);
+        let at = 2_000 + (key as usize / 5) % 16_000;
+        y[at..]
+            .iter_mut()
+            .for_each(|v| *v += sigma * (0.7 + (key % 41) as f64 / 100.0));
+        let g = (at + 1_000 + (key as usize / 13) % 10_000) % (n - 2) + 1;
+        y[g] += sigma * (30.0 + (key % 200) as f64);
+        let segs = [Range { start: 0, end: n }];
+        let s = run(
+            &input(&y, &segs),
+            &Options {
+                auto: true,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        for st in &s.stages {
+            let d = &st.diagnosis;
+            match &d.missing {
+                Some(e) => assert!(
+                    d.explanation.starts_with("The model misses")
+                        || d.explanation
+                            .contains("fits significantly better. The model misses"),
+                    "key {key}: names {e} but explains: {}",
+                    d.explanation
+                ),
+                None => assert!(
+                    d.explanation.starts_with("The record holds a defect"),
+                    "key {key}: {}",
+                    d.explanation
+                ),
+            }
+            assert!(
+                d.explanation.contains(&format!("sample {g} (t = ")),
+                "key {key}: the glitch at {g} unnamed: {}",
+                d.explanation
+            );
+        }
+        let last = &s.last().diagnosis;
+        assert!(!last.adequate, "key {key}");
+        assert!(
+            s.last()
+                .model
+                .specs
+                .iter()
+                .any(|t| t.effect.to_string().starts_with("bias_step")),
+            "key {key}: the step at {at} not in the final model"
+        );
+    }
+
     /// A reading carries its amplitude's unit and 1σ, in the walk's steps, the findings and
     /// the JSON terms (they printed "a bias step of -1.1489e-1 at t = 100 s").
     #[test]
