@@ -592,6 +592,19 @@ mod tests {
         (0..n).map(|_| sigma * g()).collect()
     }
 
+    /// `--auto`'s walk on one gap-free segment of `y` (100 Hz, deg/s).
+    fn walk(y: &[f64]) -> Session {
+        let segs = [Range {
+            start: 0,
+            end: y.len(),
+        }];
+        let o = Options {
+            auto: true,
+            ..Options::default()
+        };
+        run(&input(y, &segs), &o).unwrap()
+    }
+
     fn input<'a>(y: &'a [f64], segments: &'a [Range<usize>]) -> Input<'a> {
         Input {
             column: "gx",
@@ -835,15 +848,7 @@ mod tests {
             .for_each(|v| *v += sigma * (0.7 + (key % 41) as f64 / 100.0));
         let g = (at + 1_000 + (key as usize / 13) % 10_000) % (n - 2) + 1;
         y[g] += sigma * (30.0 + (key % 200) as f64);
-        let segs = [Range { start: 0, end: n }];
-        let s = run(
-            &input(&y, &segs),
-            &Options {
-                auto: true,
-                ..Options::default()
-            },
-        )
-        .unwrap();
+        let s = walk(&y);
         for st in &s.stages {
             let d = &st.diagnosis;
             match &d.missing {
@@ -932,15 +937,7 @@ mod tests {
             let y: Vec<f64> = (0..n)
                 .map(|i| noise[i] + a * (-(i as f64) / 100.0 / tw).exp())
                 .collect();
-            let segs = [Range { start: 0, end: n }];
-            let s = run(
-                &input(&y, &segs),
-                &Options {
-                    auto: true,
-                    ..Options::default()
-                },
-            )
-            .unwrap();
+            let s = walk(&y);
             let Some(t) = s.last().model.fit.term(&Effect::Temperature).cloned() else {
                 continue;
             };
