@@ -883,6 +883,44 @@ mod tests {
         );
     }
 
+    /// White noise with one bias step (1.5–3.9 σ, anywhere) at the key's realisation: the walks
+    /// that named a step and then an effect after it, by key.
+    fn step_walks(keys: impl Iterator<Item = u64>) -> Vec<(u64, Vec<String>)> {
+        keys.map(|key| {
+            let (n, sigma) = (30_000, 0.02);
+            let mut y = white(n, key, sigma);
+            let at = 3_000 + (key as usize * 7919) % 24_000;
+            y[at..]
+                .iter_mut()
+                .for_each(|v| *v += sigma * (1.5 + (key % 25) as f64 / 10.0));
+            let s = walk(&y);
+            let added = s.steps.iter().map(|st| st.edit.to_string()).collect();
+            (key, added)
+        })
+        .filter(|(_, added): &(u64, Vec<String>)| added.len() > 1)
+        .collect()
+    }
+
+    /// After the right step nothing more is named for white noise, where the old time-domain
+    /// test credited a Markov candidate with what the refit's other terms gained (a random walk
+    /// the current model carried dropped to zero beside it): the three realisations of the
+    /// sweep below where it named one (keys 23, 24 and 28), each of which it did.
+    #[test]
+    fn after_the_right_step_white_noise_needs_nothing_more() {
+        let extra = step_walks([23, 24, 28].into_iter());
+        assert!(extra.is_empty(), "{extra:?}");
+    }
+
+    /// The sweep: 40 realisations, at most 2 walks name anything after the step (the old rule
+    /// named a Markov process or a filter in 4: keys 23, 24, 28 and 39; now only 39). About three
+    /// minutes in release: `cargo test --release -p noise-model --lib -- --ignored step_sweep`.
+    #[test]
+    #[ignore]
+    fn step_sweep() {
+        let extra = step_walks(0..40);
+        assert!(extra.len() <= 2, "{} of 40: {extra:?}", extra.len());
+    }
+
     /// A reading carries its amplitude's unit and 1σ, in the walk's steps, the findings and
     /// the JSON terms (they printed "a bias step of -1.1489e-1 at t = 100 s").
     #[test]

@@ -288,7 +288,7 @@ impl<'a> NoiseLab<'a> {
         // filter in place of the white noise it shapes) is tested as if it spent one: a
         // change of the likelihood by a hair is no evidence, however many points agree.
         let lr_p = |delta: f64| chi2_sf(delta.max(0.0) / s, extra.max(1) as f64);
-        let d_time = self.time_lr(cur, &m, &edit.add);
+        let d_time = self.time_lr(cur, &m, &edit);
         let p = (2.0 * lr_p(cur.neg2ll - m.neg2ll).min(lr_p(d_time))).min(1.0);
         let mut c = self.candidate(cur, m, edit, p, false, why);
         let added_present = c.edit.add.iter().all(|e| {
@@ -412,14 +412,22 @@ impl<'a> NoiseLab<'a> {
         }
     }
 
-    /// The time-domain likelihood ratio of a candidate against the current model: the block
-    /// differences' −2ℓ of the current model minus that of the candidate, with the added
-    /// stochastic term's amplitude (and non-linear parameter) re-estimated on the block differences
-    /// themselves (profile likelihood; the other terms stay at their Allan fit). Terms that live
-    /// below the block scale (filters) are left to the Allan points.
-    fn time_lr(&self, cur: &Model, m: &Model, added: &[Effect]) -> f64 {
+    /// The time-domain likelihood ratio of a candidate that adds one stochastic term: the block
+    /// differences' −2ℓ of the candidate's other terms (at its Allan refit), or of the current
+    /// model where that is less, minus that of the candidate, with the added term's amplitude
+    /// (and non-linear parameter) re-estimated on the block differences themselves (profile
+    /// likelihood). The other terms are the candidate's: the refit moves them too (a random
+    /// walk the current model carried drops to zero beside a Markov process), and what the time
+    /// domain gains from that move is no evidence for the added term — the current model's walk
+    /// was the Allan fit's, not the time domain's. Terms that live below the block scale (filters) are left to the
+    /// Allan points: their ratio is what they add at the block scale at their Allan amplitude.
+    /// An edit that replaces terms (a filter in place of the white noise it shapes), adds
+    /// several, or adds a signal is tested on the whole change from the current model.
+    fn time_lr(&self, cur: &Model, m: &Model, edit: &Edit<Effect>) -> f64 {
         let base = cur.neg2ll_time - m.neg2ll_time;
-        let [e] = added else { return base };
+        let ([e], true) = (edit.add.as_slice(), edit.remove.is_empty()) else {
+            return base;
+        };
         let Some(k) = m.fit.terms.iter().rposition(|t| t.effect == *e) else {
             return base;
         };
@@ -429,9 +437,6 @@ impl<'a> NoiseLab<'a> {
         }
         let gls = nonstat::gls_scale(&self.blocks);
         let block_tau = gls.size as f64 * self.record.tau0;
-        if tau_range(&m.fit, k).is_none_or(|(_, hi)| hi < 2.0 * block_tau) {
-            return base;
-        }
         let signals: Vec<Signal> = m.specs.iter().flat_map(|s| self.signals_of(s)).collect();
         let others: Vec<crate::cov::Component> = m
             .fit
@@ -449,6 +454,15 @@ impl<'a> NoiseLab<'a> {
                 _ => None,
             })
             .collect();
+        // the nested model the ratio is taken against: the candidate without the added term, or
+        // the current model where that is likelier (the refit may have handed the added term
+        // another's part — a Markov process of τ_c below a sample standing in for the white
+        // noise — and the candidate without it then lacks that part)
+        let without = nonstat::neg2_loglik(&gls, &others, &signals).min(cur.neg2ll_time);
+        let own = without - m.neg2ll_time;
+        if tau_range(&m.fit, k).is_none_or(|(_, hi)| hi < 2.0 * block_tau) {
+            return own;
+        }
         let eval = |theta: &[f64], c: f64| -> f64 {
             let Ok(crate::effect::Basis::Stochastic { structure, factor }) =
                 e.basis(theta, &m.fit.ctx)
@@ -474,7 +488,7 @@ impl<'a> NoiseLab<'a> {
             if b > 0.0 && mv > 0.0 {
                 mv / b
             } else {
-                return base;
+                return own;
             }
         };
         let thetas: Vec<Vec<f64>> = if t.theta.is_empty() {
@@ -496,7 +510,7 @@ impl<'a> NoiseLab<'a> {
                 crate::fit::golden_min(|x| eval(th, x.exp()), (c0 / 1e3).ln(), (c0 * 1e3).ln(), 30);
             best = best.min(fm);
         }
-        base.max(cur.neg2ll_time - best)
+        own.max(without - best)
     }
 
     fn candidate(
