@@ -419,10 +419,11 @@ impl<'a> NoiseLab<'a> {
     /// likelihood). The other terms are the candidate's: the refit moves them too (a random
     /// walk the current model carried drops to zero beside a Markov process), and what the time
     /// domain gains from that move is no evidence for the added term — the current model's walk
-    /// was the Allan fit's, not the time domain's. Terms that live below the block scale (filters) are left to the
-    /// Allan points: their ratio is what they add at the block scale at their Allan amplitude.
-    /// An edit that replaces terms (a filter in place of the white noise it shapes), adds
-    /// several, or adds a signal is tested on the whole change from the current model.
+    /// was the Allan fit's, not the time domain's. Terms that live below the block scale
+    /// (filters) are left to the Allan points: their ratio is what they add at the block scale
+    /// at their Allan amplitude. An edit that replaces terms (a filter in place of the white
+    /// noise it shapes), adds several, or adds a signal is tested on the whole change from the
+    /// current model.
     fn time_lr(&self, cur: &Model, m: &Model, edit: &Edit<Effect>) -> f64 {
         let base = cur.neg2ll_time - m.neg2ll_time;
         let ([e], true) = (edit.add.as_slice(), edit.remove.is_empty()) else {
