@@ -216,14 +216,16 @@ impl CalFile {
     }
 
     /// Name the magnetometer part; a sensitivity that is none of its ranges' becomes the one
-    /// of its power-on range ([`MagPart::default_lsb_per_ut`]).
+    /// of its power-on range ([`MagPart::default_lsb_per_ut`]). One that is not a number stays,
+    /// for [`CalFile::to_device`] to refuse by name.
     pub fn set_mag_part(&mut self, part: MagPart) {
         self.mag.part = Some(part);
         let l = self.mag.lsb_per_unit * 100.0;
-        if !part
-            .ranges()
-            .iter()
-            .any(|(_, nominal)| (l / nominal - 1.0).abs() <= plausible::LSB_MATCH)
+        if l.is_finite()
+            && !part
+                .ranges()
+                .iter()
+                .any(|(_, nominal)| (l / nominal - 1.0).abs() <= plausible::LSB_MATCH)
         {
             self.mag.lsb_per_unit = part.default_lsb_per_ut();
         }

@@ -544,3 +544,21 @@ fn magnetometer_parts_are_found_by_name() {
     }
     assert_eq!(MagPart::from_name("HMC5983"), None);
 }
+
+/// Naming the part keeps a sensitivity that is not a number, so that the conversion refuses it
+/// by its key instead of a default standing in for it.
+#[test]
+fn naming_the_part_keeps_a_non_finite_sensitivity_for_the_refusal() {
+    for bad in [f64::NAN, f64::INFINITY] {
+        let mut f = CalFile::default();
+        f.mag.lsb_per_unit = bad;
+        f.set_mag_part(MagPart::Hmc5883l);
+        assert!(matches!(
+            f.to_device(),
+            Err(BlobError::NoRange {
+                key: Key::MagLsbPerUnit,
+                ..
+            })
+        ));
+    }
+}

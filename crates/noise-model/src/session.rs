@@ -797,13 +797,8 @@ mod tests {
         let n = 10_000 + (key % 20_000) as usize;
         let sigma = 0.01 + (key % 7) as f64 * 0.01;
         let clean = white(n, key, sigma);
-        let segs = [Range { start: 0, end: n }];
-        let o = Options {
-            auto: true,
-            ..Options::default()
-        };
         let verdict = |y: &[f64]| {
-            let s = run(&input(y, &segs), &o).unwrap();
+            let s = walk(y);
             let d = &s.last().diagnosis;
             (d.adequate, d.evidence.join("\n"))
         };
@@ -1008,21 +1003,13 @@ mod tests {
             .map_or(23, |d| d.subsec_nanos() as u64);
         let sigma = 0.05;
         let clean = white(20_000, key, sigma);
-        let segs = [Range {
-            start: 0,
-            end: clean.len(),
-        }];
-        let o = Options {
-            auto: true,
-            ..Options::default()
-        };
         for (k, coarse) in [
             (3.0 + (key % 30) as f64 / 10.0, true),
             (0.6 + (key % 5) as f64 / 10.0, false),
         ] {
             let lsb = k * sigma;
             let y: Vec<f64> = clean.iter().map(|v| (v / lsb).round() * lsb).collect();
-            let s = run(&input(&y, &segs), &o).unwrap();
+            let s = walk(&y);
             let d = &s.last().diagnosis;
             let said = d
                 .evidence
