@@ -112,6 +112,26 @@ pub struct Row {
 /// turns (hard and soft iron do); what it cannot: an error that is the same at every attitude
 /// (a declination, a turned mounting) — that needs a truth.
 pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
+    check_windows(rows, window, max_pitch)
+        .into_iter()
+        .map(|w| w.0)
+        .collect()
+}
+
+/// The heading change the gyro integrates over each window [`gyro_consistency`] counts,
+/// degrees, one value a window: how far the board turned while it was judged. The check sees
+/// a heading error only where the heading changes: on a board that hardly turned, hard iron
+/// and a good calibration read alike.
+pub fn gyro_turns(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
+    check_windows(rows, window, max_pitch)
+        .into_iter()
+        .map(|w| w.1)
+        .collect()
+}
+
+/// Each counted window of [`gyro_consistency`]: its inconsistency and the gyro's heading
+/// change, degrees.
+fn check_windows(rows: &[Row], window: f64, max_pitch: f64) -> Vec<(f64, f64)> {
     let Some(step) = median_spacing(rows) else {
         return Vec::new();
     };
@@ -154,7 +174,10 @@ pub fn gyro_consistency(rows: &[Row], window: f64, max_pitch: f64) -> Vec<f64> {
         match (ok && complete, tilt_compensated(rows[j].accel, rows[j].mag)) {
             (true, Some(a1)) if a1.pitch.abs() <= max_pitch => {
                 // Both sides wrapped: a window may turn further than ±180°.
-                out.push(angle_diff(angle_diff(a1.heading, a0.heading) - gyro, 0.0));
+                out.push((
+                    angle_diff(angle_diff(a1.heading, a0.heading) - gyro, 0.0),
+                    gyro,
+                ));
             }
             _ => {}
         }
@@ -251,22 +274,46 @@ impl Correction {
     }
 }
 
+/// Below this rms turn a window (degrees, the gyro's), the consistency check says little: a
+/// hard iron of a few µT in a 50 µT field turns the heading by a few degrees, and its change
+/// over a window is that times the turn in radians, under the gyro's noise when the turn is
+/// small.
+pub const LITTLE_TURN_DEG: f64 = 10.0;
+
+/// What [`before_after`] finds, each an rms in degrees with its uncertainty (one value a
+/// window), `None` when no window counts.
+#[derive(Debug, Clone, Copy)]
+pub struct BeforeAfter {
+    /// The heading's inconsistency with the gyro, the raw columns as recorded (the identity).
+    pub before: Option<Rms>,
+    /// The same through the calibration.
+    pub after: Option<Rms>,
+    /// The heading change the gyro integrates over each window ([`gyro_turns`]), the
+    /// calibration's gyro bias taken out: how much the check could see.
+    pub turned: Option<Rms>,
+}
+
+impl BeforeAfter {
+    /// The board turned less than [`LITTLE_TURN_DEG`] rms a window: the check is weak.
+    pub fn little_turn(&self) -> bool {
+        self.turned.is_some_and(|t| t.rms < LITTLE_TURN_DEG)
+    }
+}
+
 /// What a calibration buys in heading on one raw recording, without a truth: the heading's
 /// consistency with the gyro ([`gyro_consistency`], windows of `window` s, rows beyond
-/// `max_pitch` left out) with the raw columns as recorded (`before`, the identity) and through
-/// `cal` (`after`); each an rms in degrees with its uncertainty (one value a window), `None`
-/// when no window counts.
-pub fn before_after(
-    rows: &[Row],
-    cal: &Correction,
-    window: f64,
-    max_pitch: f64,
-) -> (Option<Rms>, Option<Rms>) {
+/// `max_pitch` left out) with the raw columns as recorded and through `cal`, and how far the
+/// board turned in those windows.
+pub fn before_after(rows: &[Row], cal: &Correction, window: f64, max_pitch: f64) -> BeforeAfter {
     let fitted: Vec<Row> = rows.iter().map(|r| cal.apply(r)).collect();
-    (
-        rms(&gyro_consistency(rows, window, max_pitch), 1),
-        rms(&gyro_consistency(&fitted, window, max_pitch), 1),
-    )
+    let (judged, turns): (Vec<f64>, Vec<f64>) = check_windows(&fitted, window, max_pitch)
+        .into_iter()
+        .unzip();
+    BeforeAfter {
+        before: rms(&gyro_consistency(rows, window, max_pitch), 1),
+        after: rms(&judged, 1),
+        turned: rms(&turns, 1),
+    }
 }
 
 #[cfg(test)]
@@ -410,8 +457,10 @@ mod tests {
         assert!(no_window_reason(&rows[..100], 2.0, 70.0).contains("shorter than one 2 s window"));
     }
 
-    /// A level-ish turn read through a hard and soft iron drawn at random: before, the heading
-    /// disagrees with the gyro by degrees; after the file that undoes them, not at all.
+    /// A level-ish turn read through a hard and soft iron drawn at random, by a gyro with a
+    /// bias the file knows: before, the heading disagrees with the gyro by degrees; after the
+    /// file that undoes them, not at all; and the turn the check saw is the turn made (the
+    /// bias out), "little" when the board turns slowly.
     #[test]
     fn before_after_a_calibration_that_undoes_the_iron() {
         let mut s = std::time::SystemTime::now()
@@ -432,21 +481,24 @@ mod tests {
             [0.02, 1.0 - 0.1 * u(), 0.0],
             [0.0, 0.0, 1.0],
         ];
-        let rows: Vec<Row> = (0..12_000)
-            .map(|i| {
-                let t = i as f64 * 1e-3;
-                let (a, m) = reading(0.0, 0.0, 30.0 * t);
-                let read =
-                    [0, 1, 2].map(|k| (0..3).map(|j| soft[k][j] * m[j]).sum::<f64>() + hard[k]);
-                Row {
-                    t,
-                    accel: a,
-                    gyro: [0.0, 0.0, -30.0],
-                    mag: read,
-                }
-            })
-            .collect();
-        // the file's correction: S⁻¹ (soft iron inverted) and the hard iron
+        let bias = 2.0 * u() - 1.0;
+        let rows = |rate: f64| -> Vec<Row> {
+            (0..12_000)
+                .map(|i| {
+                    let t = i as f64 * 1e-3;
+                    let (a, m) = reading(0.0, 0.0, rate * t);
+                    let read =
+                        [0, 1, 2].map(|k| (0..3).map(|j| soft[k][j] * m[j]).sum::<f64>() + hard[k]);
+                    Row {
+                        t,
+                        accel: a,
+                        gyro: [0.0, 0.0, -rate + bias],
+                        mag: read,
+                    }
+                })
+                .collect()
+        };
+        // the file's correction: S⁻¹ (soft iron inverted), the hard iron and the gyro's bias
         let inv = nalgebra::Matrix3::from_fn(|i, j| soft[i][j])
             .try_inverse()
             .unwrap();
@@ -456,13 +508,23 @@ mod tests {
                 [0.0; 3],
             ),
             mag: ([0, 1, 2].map(|i| [0, 1, 2].map(|j| inv[(i, j)])), hard),
-            gyro_bias: [0.0; 3],
+            gyro_bias: [0.0, 0.0, bias],
         };
-        let (b, a) = before_after(&rows, &cal, 2.0, 70.0);
-        let (b, a) = (b.unwrap(), a.unwrap());
+        let r = before_after(&rows(30.0), &cal, 2.0, 70.0);
+        let (b, a, turned) = (r.before.unwrap(), r.after.unwrap(), r.turned.unwrap());
         assert!(b.rms > 5.0, "key {key}: {b:?}");
         assert!(a.rms < 0.05, "key {key}: {a:?}");
         assert_eq!(a.n, 5);
+        // 30°/s for 2 s a window (each window 1 ms short of it: its rows' span)
+        assert!((turned.rms - 60.0).abs() < 0.05, "key {key}: {turned:?}");
+        assert_eq!(turned.n, 5);
+        assert!(!r.little_turn());
+        let slow = before_after(&rows(3.0), &cal, 2.0, 70.0);
+        let t = slow.turned.unwrap();
+        assert!(
+            (t.rms - 6.0).abs() < 0.01 && slow.little_turn(),
+            "key {key}: {t:?}"
+        );
     }
 
     #[test]

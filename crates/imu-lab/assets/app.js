@@ -768,6 +768,15 @@ function renderVerify(v) {
     `(${v.check_window_s} s windows): before (raw) ${one(v.before)} → after (the uploaded calibration) ${one(v.after)}` +
     (v.calibrated_again ? ` — the stream did not return to calibrated values: ${v.calibrated_again}` : "");
   p.className = v.before && v.after && v.after.rms_deg < v.before.rms_deg ? "ok" : "bad";
+  // how far the board turned in the windows judged: the check sees a heading error only where
+  // the heading changes
+  const turn = document.createElement("p");
+  turn.id = "verify-turn";
+  turn.textContent = v.turned
+    ? `The board turned ${fmt(v.turned.rms_deg, 3)} ± ${fmt(v.turned.sigma_deg, 2)}° rms a window (the gyro's heading change)` +
+      (v.little_turn ? `: under ${v.little_turn_deg}°, the check says little — turn the board through all headings and record again.` : ".")
+    : "";
+  turn.className = v.little_turn ? "bad" : "";
   // the magnitudes on the sphere: |B| around the field, |a| around g, raw and corrected
   const m = v.magnitudes;
   const spread = (r, unit) => (r ? `${fmt(r.rms, 3)} ± ${fmt(r.sigma, 2)} ${unit} rms (max ${fmt(r.max, 3)} ${unit})` : "—");
@@ -779,8 +788,9 @@ function renderVerify(v) {
     `(uncertainties from blocks of ${m.block_windows} windows). The corrected points below, with the circle of ` +
     `${fmt(m.field_ut, 4)} µT.`;
   q.className = m.mag_before && m.mag_after && m.mag_after.rms < m.mag_before.rms ? "ok" : "bad";
-  div.replaceChildren(p, q);
+  div.replaceChildren(p, turn, q);
   div.dataset.before = v.before ? String(v.before.rms_deg) : "";
+  div.dataset.turned = v.turned ? String(v.turned.rms_deg) : "";
   div.dataset.after = v.after ? String(v.after.rms_deg) : "";
   div.dataset.windows = v.after ? String(v.after.windows) : "0";
   const num = (r) => (r ? String(r.rms) : "");

@@ -19,6 +19,7 @@ use anyhow::{bail, Context, Result};
 use imu_cal::file::CalFile;
 use imu_cal::heading::{
     angle_diff, before_after, no_window_reason, rms, tilt_compensated, Correction, Rms, Row,
+    LITTLE_TURN_DEG,
 };
 
 use crate::input::{self, InputArgs};
@@ -258,13 +259,28 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let w = a.window;
-    let (c0, c1) = before_after(&raw, &corr, w, a.max_pitch);
+    let judged = before_after(&raw, &corr, w, a.max_pitch);
+    let (c0, c1) = (judged.before, judged.after);
     println!("consistency with the gyro (heading change over {w} s windows minus the gyro's; blind to an error that is the same at every attitude):");
     println!("  identity calibration:   {}", show(c0));
     println!("  {}:   {}", a.cal.display(), show(c1));
     if c0.is_none() || c1.is_none() {
         let rows = if c0.is_none() { &raw } else { &fitted };
         println!("  (no values: {})", no_window_reason(rows, w, a.max_pitch));
+    }
+    if let Some(t) = judged.turned {
+        println!(
+            "  the board turned {:.2} ± {:.2}° rms a window (the gyro's heading change, its bias out){}",
+            t.rms,
+            t.sigma,
+            if judged.little_turn() {
+                format!(": under {LITTLE_TURN_DEG}°, the check says little (a few µT of hard iron \
+                         move the heading by less than the gyro's noise); turn the board through \
+                         all headings")
+            } else {
+                String::new()
+            }
+        );
     }
     if truth.is_none() {
         if let (Some(b), Some(f)) = (c0, c1) {

@@ -140,7 +140,7 @@ pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
         (heading, Magnitudes::of(&rows, &cal, uploaded.field))
     })
     .await;
-    let ((before, after), magnitudes) = match judged {
+    let (heading, magnitudes) = match judged {
         Ok(x) => x,
         Err(e) => return error(StatusCode::INTERNAL_SERVER_ERROR, &e.to_string()),
     };
@@ -150,8 +150,11 @@ pub async fn stop(State(s): State<Shared>, bytes: Bytes) -> Response {
         "windows": n,
         "check_window_s": CHECK_WINDOW_S,
         "max_pitch_deg": MAX_PITCH_DEG,
-        "before": rms_json(before),
-        "after": rms_json(after),
+        "before": rms_json(heading.before),
+        "after": rms_json(heading.after),
+        "turned": rms_json(heading.turned),
+        "little_turn": heading.little_turn(),
+        "little_turn_deg": imu_cal::heading::LITTLE_TURN_DEG,
         "magnitudes": magnitudes.json(),
         "calibrated_again": back.as_ref().err(),
     });
