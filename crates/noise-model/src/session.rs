@@ -904,6 +904,24 @@ mod tests {
         .collect()
     }
 
+    /// After the right step no filter is named in place of white noise for what its refit
+    /// moved elsewhere: the swap's time-domain ratio was taken on the whole change from the
+    /// current model (a random walk and the step's estimate moved with the refit), 12.4 where
+    /// the Allan points gave 2.1, and a low-pass or a moving average was named at keys 98 and
+    /// 103. Those keys and two at random.
+    #[test]
+    fn no_filter_is_named_for_what_the_refit_moved() {
+        let key = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(31, |d| d.subsec_nanos() as u64);
+        let keys = [98, 103, 200 + key % 1000, 1200 + key % 997];
+        let swaps: Vec<_> = step_walks(keys.into_iter())
+            .into_iter()
+            .filter(|(_, added)| added.iter().any(|a| a.contains("− white")))
+            .collect();
+        assert!(swaps.is_empty(), "{swaps:?}");
+    }
+
     /// After the right step nothing more is named for white noise, where the old time-domain
     /// test credited a Markov candidate with what the refit's other terms gained (a random walk
     /// the current model carried dropped to zero beside it): the three realisations of the
